@@ -1,0 +1,1 @@
+"""Team agents: tabular team Q-learning and a factored deep Q-network."""

@@ -1,0 +1,121 @@
+"""The physics of the model: node layouts, channel gains and AF rates.
+
+This is the one implementation of SPEC sections 1, 3 and 4.  The environment,
+the exact optimum, the tabular learners' lookup tables and the tests all call
+these functions, so they cannot disagree about a rate.
+
+Shapes: ``...`` is any batch shape (worlds, configurations); ``N`` UAVs; the
+four fixed nodes are ordered ``(PT, PR, S, E)``.  Positions are in cell units.
+
+Example:
+    >>> import torch
+    >>> from uavrl.envs.config import make_config
+    >>> cfg = make_config("paper", grid=(6, 6))
+    >>> nodes = fixed_layout(cfg, torch.float64)
+    >>> contrib = relay_contributions(link_gains(cell_xyz(cfg, torch.float64), nodes, cfg), cfg)
+    >>> contrib.shape  # per cell: (relay contribution to PU, sensing contribution to SE)
+    torch.Size([36, 2])
+"""
+from __future__ import annotations
+
+import torch
+
+from .config import RELAYING, ModelConfig
+
+PT, PR, S, E = range(4)
+
+
+def fixed_layout(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor | None:
+    """The ``[4, 3]`` node positions of a fixed layout, or ``None`` for ``layout=random``."""
+    L1, L2 = cfg.grid
+    h = cfg.height
+    if cfg.layout == "line":
+        rows = [(0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)]
+    elif cfg.layout == "reference_code":
+        rows = [(0.0, 5.0, 0.0), (10.0, 5.0, 0.0), (-5.0, 5.0, 10.0), (15.0, 5.0, 10.0)]
+    else:
+        return None
+    return torch.tensor(rows, dtype=dtype, device=device)
+
+
+def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor:
+    """``[C, 3]`` centre of every cell at UAV altitude, in cell index order ``c = y * L1 + x``."""
+    L1, L2 = cfg.grid
+    c = torch.arange(L1 * L2, device=device)
+    return torch.stack([(c % L1).to(dtype), (c // L1).to(dtype), torch.full((L1 * L2,), cfg.height, dtype=dtype, device=device)], -1)
+
+
+def link_gains(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig, fading: torch.Tensor | None = None) -> torch.Tensor:
+    """``|h|^2 = g0 d^-alpha X`` from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``: ``[..., N, 4]``.
+
+    ``d`` is the 3-D distance in metres (cells times ``cell_size``); ``fading``
+    is the ``[..., N, 4]`` power gain ``X`` (Exp(1) for Rayleigh), 1 when omitted.
+    """
+    d = torch.linalg.vector_norm(uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3), dim=-1) * cfg.cell_size
+    gain = cfg.g0 * d.pow(-cfg.alpha)
+    return gain if fading is None else gain * fading
+
+
+def relay_contributions(gains: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
+    """Per UAV, what it adds inside the log when relaying for PU and when sensing for SE: ``[..., N, 2]``.
+
+    ``af``: ``g1 g2 / (1 + g1 + g2)`` with ``g1 = P_src |h_src,j|^2 / sigma^2`` and
+    ``g2 = P_U |h_j,dst|^2 / sigma^2`` (SPEC section 4).  ``reference_code``:
+    ``A / (1 + A)`` with ``A = reference_gain |h_a,j|^2 |h_j,b|^2`` (SPEC section 8).
+    """
+    src = gains[..., [PT, S]]
+    dst = gains[..., [PR, E]]
+    if cfg.rate_model == "reference_code":
+        a = cfg.reference_gain * src * dst
+        return a / (1 + a)
+    p_src = torch.tensor([cfg.p_pt, cfg.p_s], dtype=gains.dtype, device=gains.device)
+    g1 = src * (p_src / cfg.noise)
+    g2 = dst * (cfg.p_u / cfg.noise)
+    return g1 * g2 / (1 + g1 + g2)
+
+
+def direct_terms(nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
+    """``[..., 2]`` direct-link SNRs ``(PT->PR, S->E)``; zeros unless ``direct_links``."""
+    if not cfg.direct_links:
+        return nodes.new_zeros(nodes.shape[:-2] + (2,))
+    gains = link_gains(nodes[..., [PT, S], :], nodes[..., [PR, E], :], cfg)  # [..., 2, 2]
+    p_src = torch.tensor([cfg.p_pt, cfg.p_s], dtype=nodes.dtype, device=nodes.device)
+    return torch.diagonal(gains, dim1=-2, dim2=-1) * p_src / cfg.noise
+
+
+def rates(contributions: torch.Tensor, tasks: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(R_PU, R_SE)`` in bit/s/Hz of configurations, each of shape ``[...]``.
+
+    ``contributions`` ``[..., N, 2]`` come from :func:`relay_contributions` at
+    the UAVs' cells, ``tasks`` ``[..., N]`` (0 sensing, 1 relaying), ``direct``
+    ``[..., 2]`` from :func:`direct_terms`.
+    """
+    relaying = tasks == RELAYING
+    zero = contributions.new_zeros(())
+    sum_pu = direct[..., 0] + torch.where(relaying, contributions[..., 0], zero).sum(-1)
+    sum_se = direct[..., 1] + torch.where(relaying, zero, contributions[..., 1]).sum(-1)
+    scale = 1.0 if cfg.rate_model == "reference_code" else 0.5
+    r_pu = scale * torch.log2(1 + sum_pu)
+    r_se = scale * torch.log2(1 + sum_se)
+    any_relay = relaying.any(-1)
+    if cfg.rate_model == "reference_code":
+        # the authors' code pays neither network unless both tasks are staffed
+        both = any_relay & ~relaying.all(-1)
+        return torch.where(both, r_pu, zero), torch.where(both, r_se, zero)
+    if cfg.lease_rule:
+        r_se = torch.where(any_relay, r_se, zero)
+    return r_pu, r_se
+
+
+def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
+    """Eq. 7: weighted change of both rates.  Works on tensors and on plain floats (numba)."""
+    return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
+
+
+def best_so_far_reward(total, best):
+    """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
+
+    Written with arithmetic only so it serves tensors and numba-compiled scalars alike.
+    """
+    diff = total - best
+    return diff * (1 + 9 * (diff > 0))

@@ -1,0 +1,155 @@
+"""The model's options (SPEC sections 1-8), their presets and their validation.
+
+A :class:`ModelConfig` is an immutable description of one UAV spectrum-sharing
+model: the grid, the UAVs, the channel, the rate formulas, the reward and the
+episode rules.  Every part of uavrl (environment, optimum, learners) reads its
+numbers from here.
+
+Example:
+    >>> cfg = make_config("paper", grid=(6, 6), num_uavs=2)
+    >>> cfg.num_cells, cfg.altitude
+    (36, 6.0)
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
+NUM_ACTIONS = len(ACTION_NAMES)
+SENSING, RELAYING = 0, 1
+NODE_NAMES = ("PT", "PR", "S", "E")
+
+LAYOUTS = ("line", "random", "reference_code")
+FADINGS = ("none", "rayleigh")
+REWARDS = ("delta", "best_so_far")
+RATE_MODELS = ("af", "reference_code")
+INIT_TASKS = ("random", "sensing", "relaying")
+RESET_POSITIONS = ("random", "keep")
+PRESETS = ("paper", "reference_code")
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """One model of SPEC.md.  Lengths are in cells unless the name says metres.
+
+    ``altitude`` of ``None`` means the paper's ``h = L1`` cells.  ``rate_model``
+    ``"af"`` is the normalised amplify-and-forward form of SPEC section 4;
+    ``"reference_code"`` is the authors' published formula (SPEC section 8),
+    where ``reference_gain`` replaces the power products.
+    """
+
+    grid: tuple[int, int] = (6, 6)
+    num_uavs: int = 2
+    max_steps: int = 100
+    layout: str = "line"
+    cell_size: float = 10.0
+    altitude: float | None = None
+    alpha: float = 2.0
+    g0: float = 1.0
+    fading: str = "none"
+    p_pt: float = 0.01
+    p_s: float = 0.02
+    p_u: float = 0.02
+    noise: float = 1e-9
+    direct_links: bool = False
+    lease_rule: bool = True
+    rate_model: str = "af"
+    reference_gain: float = 200.0
+    reward: str = "delta"
+    beta1: float = 1.0
+    beta2: float = 1.0
+    init_tasks: str = "random"
+    reset_positions: str = "random"
+    state_includes_tasks: bool = False
+    preset: str = field(default="paper", compare=False)
+
+    def __post_init__(self):
+        grid = tuple(int(g) for g in self.grid) if _is_pair(self.grid) else None
+        if grid is None or min(grid) < 1:
+            raise ValueError(f"grid={self.grid!r} is invalid: give two integers L1, L2 >= 1, e.g. grid=(6, 6)")
+        object.__setattr__(self, "grid", grid)
+        cells = grid[0] * grid[1]
+        if not 1 <= int(self.num_uavs) <= cells:
+            raise ValueError(
+                f"num_uavs={self.num_uavs} is invalid: a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
+            )
+        if int(self.max_steps) < 1:
+            raise ValueError(f"max_steps={self.max_steps} is invalid: an episode needs at least 1 step")
+        _choice("layout", self.layout, LAYOUTS)
+        _choice("fading", self.fading, FADINGS)
+        _choice("reward", self.reward, REWARDS)
+        _choice("rate_model", self.rate_model, RATE_MODELS)
+        _choice("init_tasks", self.init_tasks, INIT_TASKS)
+        _choice("reset_positions", self.reset_positions, RESET_POSITIONS)
+        for name in ("p_pt", "p_s", "p_u", "noise", "cell_size", "g0", "alpha", "reference_gain"):
+            value = getattr(self, name)
+            if not float(value) > 0:
+                raise ValueError(f"{name}={value} is invalid: it must be a positive number")
+        if self.direct_links and self.rate_model == "reference_code":
+            raise ValueError("direct_links=True is invalid with rate_model='reference_code': the authors' formula has no direct link")
+        if self.altitude is not None and not float(self.altitude) > 0:
+            raise ValueError(f"altitude={self.altitude} is invalid: give a positive height in cells, or None for h = L1")
+
+    @property
+    def num_cells(self) -> int:
+        return self.grid[0] * self.grid[1]
+
+    @property
+    def height(self) -> float:
+        """UAV altitude in cells: the paper's ``h = L1`` unless set."""
+        return float(self.grid[0] if self.altitude is None else self.altitude)
+
+    @property
+    def num_joint_actions(self) -> int:
+        return NUM_ACTIONS**self.num_uavs
+
+    @property
+    def num_states(self) -> int:
+        """Size of the tabular state space (SPEC section 6), a Python int of any size."""
+        base = 2 * self.num_cells if self.state_includes_tasks else self.num_cells
+        return base**self.num_uavs
+
+    @property
+    def has_state_index(self) -> bool:
+        return self.num_states <= 2**63 - 1
+
+    def replace(self, **changes) -> "ModelConfig":
+        return dataclasses.replace(self, **changes)
+
+
+_PRESETS = {
+    "paper": {},
+    "reference_code": dict(
+        layout="reference_code",
+        cell_size=1.0,
+        altitude=10.0,
+        alpha=4.0,
+        g0=2.0,
+        rate_model="reference_code",
+        reward="best_so_far",
+        init_tasks="sensing",
+    ),
+}
+OPTION_NAMES = tuple(f.name for f in dataclasses.fields(ModelConfig) if f.name != "preset")
+
+
+def make_config(preset: str = "paper", **overrides) -> ModelConfig:
+    """A :class:`ModelConfig` from a preset name plus option overrides."""
+    _choice("preset", preset, PRESETS)
+    unknown = sorted(set(overrides) - set(OPTION_NAMES))
+    if unknown:
+        raise ValueError(f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}")
+    return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name}={value!r} is invalid: allowed values are {', '.join(map(repr, allowed))}")
+
+
+def _is_pair(value) -> bool:
+    try:
+        return len(value) == 2 and all(int(v) == v for v in value)
+    except (TypeError, ValueError):
+        return False
