@@ -99,12 +99,17 @@ class UAVSpectrumEnv(EnvBase):
                 raise ValueError(
                     f"grid={cfg.grid} is invalid for layout={cfg.layout!r}: a node sits on a UAV cell at UAV altitude (zero distance); use a smaller grid or layout='line'"
                 )
-        # per-world state, all tensors
-        self._nodes = (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(B, 4, 3).clone()
-        self._cell_gains = torch.zeros(B, C, 4, dtype=f64, device=dev)
-        self._cell_contrib = torch.zeros(B, C, 2, dtype=f64, device=dev)
-        self._cell_features = torch.zeros(B, C + 1, 2, dtype=torch.float32, device=dev)
-        self._direct = torch.zeros(B, 2, dtype=f64, device=dev)
+        # per-cell tables of the layout: one shared row for a fixed layout, one per world for random ones
+        Bt = 1 if layout is not None else B
+        self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
+        self._cell_mask = torch.cat([self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1)  # [C, 6]
+        self._nodes = (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(Bt, 4, 3).clone()
+        self._cell_gains = torch.zeros(Bt, C, 4, dtype=f64, device=dev)
+        self._cell_contrib = torch.zeros(Bt, C, 2, dtype=f64, device=dev)
+        self._cell_obs = torch.zeros(Bt, C, 12, dtype=torch.float32, device=dev)
+        self._node_obs = torch.zeros(Bt, 12, dtype=torch.float32, device=dev)
+        self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
+        self._world = torch.arange(B, device=dev).unsqueeze(-1)
         self._pos = torch.zeros(B, N, dtype=torch.long, device=dev)
         self._tasks = torch.zeros(B, N, dtype=torch.long, device=dev)
         self._r = torch.zeros(B, 2, dtype=f64, device=dev)
@@ -114,7 +119,7 @@ class UAVSpectrumEnv(EnvBase):
         self._counters = torch.zeros(B, dtype=torch.long, device=dev)
         self._keys = streams.world_keys(0, B, dev)
         if layout is not None:
-            self._set_layout(torch.ones(B, dtype=torch.bool, device=dev))
+            self._set_layout(torch.ones(1, dtype=torch.bool, device=dev))
         self._make_specs()
         self.set_seed(seed)
 
@@ -170,16 +175,28 @@ class UAVSpectrumEnv(EnvBase):
 
     # ---------------------------------------------------------------- layout
     def _set_layout(self, mask: torch.Tensor):
-        """Recompute the per-cell channels of the worlds in ``mask`` from ``self._nodes``."""
-        gains = link_gains(self._cell_xyz, self._nodes, self.cfg)  # [B, C, 4]
-        contrib = relay_contributions(gains, self.cfg)
-        top = contrib.amax(1, keepdim=True)
-        features = torch.cat([(contrib / top).float(), contrib.new_full((contrib.shape[0], 1, 2), -1.0).float()], 1)
+        """Recompute the per-cell tables of the worlds in ``mask`` from ``self._nodes``."""
+        cfg, C = self.cfg, self.cfg.num_cells
+        gains = link_gains(self._cell_xyz, self._nodes, cfg)  # [Bt, C, 4]
+        contrib = relay_contributions(gains, cfg)
+        # observation of a UAV in cell c: its (x, y), then the contributions (scaled by the best cell's)
+        # at c and at the cells its four moves reach, -1 where a move leaves the grid
+        scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((contrib.shape[0], 1, 2), -1.0)], 1)
+        local = scaled[:, torch.cat([torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1)]
+        obs = torch.cat([(self._cell_xy / self._grid_scale).unsqueeze(0).expand(len(mask), -1, -1), local.flatten(2)], -1).float()
+        node_obs = (self._nodes / self._node_scale).flatten(1).float()
         m = mask[:, None, None]
         self._cell_gains = torch.where(m, gains, self._cell_gains)
         self._cell_contrib = torch.where(m, contrib, self._cell_contrib)
-        self._cell_features = torch.where(m, features, self._cell_features)
-        self._direct = torch.where(mask[:, None], direct_terms(self._nodes, self.cfg), self._direct)
+        self._cell_obs = torch.where(m, obs, self._cell_obs)
+        self._node_obs = torch.where(mask[:, None], node_obs, self._node_obs)
+        self._direct = torch.where(mask[:, None], direct_terms(self._nodes, cfg), self._direct)
+
+    def _per_cell(self, table: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
+        """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[B, ...]``."""
+        if table.shape[0] == 1:
+            return table[0][cells]
+        return table[self._world.view(-1, *([1] * (cells.dim() - 1))), cells]
 
     def _sample_layout(self, mask: torch.Tensor):
         """``layout=random``: nodes uniform in the grid widened by half a grid per side (SPEC section 1).
@@ -194,7 +211,7 @@ class UAVSpectrumEnv(EnvBase):
         lo = torch.tensor([-L1 / 2, -L2 / 2], dtype=torch.float64, device=self.device)
         span = torch.tensor([2.0 * L1, 2.0 * L2], dtype=torch.float64, device=self.device)
         min_sep = 0.6 * math.hypot(L1, L2)
-        nodes = self._nodes.clone()
+        nodes = self._nodes.clone()  # [B, 4, 3]
         for pair, z in ((0, 0.0), (1, h)):  # (PT, PR) on the ground, (S, E) at UAV altitude
             pending = mask.clone()
             rnd = 0
@@ -216,29 +233,22 @@ class UAVSpectrumEnv(EnvBase):
     # -------------------------------------------------------------- dynamics
     def _observe(self, moves: torch.Tensor, switches: torch.Tensor) -> TensorDict:
         B, N = self.num_worlds, self.num_uavs
-        L1 = self.cfg.grid[0]
         pos, tasks = self._pos, self._tasks
-        xy = torch.stack([pos % L1, pos // L1], -1)  # [B, N, 2]
-        xy_norm = (xy / self._grid_scale).float()
-        task_f = tasks.float().unsqueeze(-1)
-        own = torch.cat([xy_norm, task_f], -1)  # [B, N, 3]
-        nbrs = self._neighbours[pos]  # [B, N, 4]
-        cells = torch.cat([pos.unsqueeze(-1), torch.where(nbrs < 0, self.cfg.num_cells, nbrs)], -1)  # [B, N, 5]
-        local = torch.gather(self._cell_features, 1, cells.view(B, 5 * N, 1).expand(B, 5 * N, 2)).view(B, N, 10)
-        nodes = (self._nodes / self._node_scale).float().view(B, 1, 12)
-        others = own[:, self._others].reshape(B, N, 3 * (N - 1))
-        observation = torch.cat([own, local, others, nodes.expand(B, N, 12)], -1)
-        mask = torch.cat([nbrs >= 0, nbrs.new_ones(B, N, 2, dtype=torch.bool)], -1)
-        state = torch.cat([own, local[..., :2]], -1).view(B, 5 * N)
-        r_pu, r_se = self._r.float().unbind(-1)
+        cell_obs = self._per_cell(self._cell_obs, pos)  # [B, N, 12]
+        task_f = tasks.unsqueeze(-1).float()
+        xyt = torch.cat([cell_obs[..., :2], task_f], -1)
+        nodes = self._node_obs.unsqueeze(1).expand(B, N, 12)
+        observation = torch.cat([cell_obs[..., :2], task_f, cell_obs[..., 2:], xyt[:, self._others].flatten(2), nodes], -1)
+        state = torch.cat([xyt, cell_obs[..., 2:4]], -1).flatten(1)
+        r = self._r.float()
         out = {
-            "agents": TensorDict({"observation": observation, "action_mask": mask}, batch_size=(B, N), device=self.device),
-            "state": torch.cat([state, nodes.view(B, 12)], -1),
-            "positions": xy,
+            "agents": TensorDict({"observation": observation, "action_mask": self._cell_mask[pos]}, batch_size=(B, N), device=self.device),
+            "state": torch.cat([state, nodes[:, 0]], -1),
+            "positions": self._cell_xy[pos],
             "tasks": tasks.clone(),
-            "r_pu": r_pu,
-            "r_se": r_se,
-            "utility": r_pu + r_se,
+            "r_pu": r[:, 0],
+            "r_se": r[:, 1],
+            "utility": r.sum(-1),
             "moves": moves,
             "task_switches": switches,
         }
@@ -249,14 +259,13 @@ class UAVSpectrumEnv(EnvBase):
 
     def _current_rates(self) -> torch.Tensor:
         """``[B, 2]`` (R_PU, R_SE) of the current configuration, drawing fresh fading if enabled."""
-        idx = self._pos.unsqueeze(-1)
         if self.cfg.fading == "none":
-            contrib = torch.gather(self._cell_contrib, 1, idx.expand(-1, -1, 2))
+            contrib = self._per_cell(self._cell_contrib, self._pos)
         else:
-            gains = torch.gather(self._cell_gains, 1, idx.expand(-1, -1, 4))
+            gains = self._per_cell(self._cell_gains, self._pos)
             u = streams.uniform(self._keys, self._counters, _FADING, 4 * self.num_uavs).view_as(gains)
             contrib = relay_contributions(gains * -torch.log1p(-u), self.cfg)  # Exp(1) power gain per link
-        return torch.stack(rates(contrib, self._tasks, self._direct, self.cfg), -1)
+        return torch.stack(rates(contrib, self._tasks, self._direct.expand(self.num_worlds, 2), self.cfg), -1)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B, N, C, cfg = self.num_worlds, self.num_uavs, self.cfg.num_cells, self.cfg
@@ -360,9 +369,8 @@ class UAVSpectrumEnv(EnvBase):
                 f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected [B={self.num_worlds}, ..., N={self.num_uavs}, 2] and [B, ..., N]"
             )
         cells = self.cells_of(positions)
-        flat = cells.reshape(self.num_worlds, -1, 1).expand(-1, -1, 2)
-        contrib = torch.gather(self._cell_contrib, 1, flat).view(*cells.shape, 2)
-        direct = self._direct.view(self.num_worlds, *([1] * (cells.dim() - 2)), 2)
+        contrib = self._per_cell(self._cell_contrib, cells)
+        direct = self.direct.view(self.num_worlds, *([1] * (cells.dim() - 2)), 2)
         r_pu, r_se = rates(contrib, tasks, direct, self.cfg)
         return r_pu, r_se, r_pu + r_se
 
@@ -373,7 +381,7 @@ class UAVSpectrumEnv(EnvBase):
         deterministic (mean) channels.  See :func:`uavrl.envs.optimum.optimum`.
         """
         self._require_layout()
-        u, cells, tasks = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+        u, cells, tasks = exact_optimum(self.cell_contributions, self.direct, self.cfg, method=method)
         L1 = self.cfg.grid[0]
         return u, torch.stack([cells % L1, cells // L1], -1), tasks
 
@@ -389,11 +397,12 @@ class UAVSpectrumEnv(EnvBase):
     @property
     def cell_contributions(self) -> torch.Tensor:
         """``[B, C, 2]`` per-cell relay (PU) and sensing (SE) contributions, deterministic channels."""
-        return self._cell_contrib
+        return self._cell_contrib.expand(self.num_worlds, -1, -1)
 
     @property
     def direct(self) -> torch.Tensor:
-        return self._direct
+        """``[B, 2]`` direct-link SNRs (PT->PR, S->E)."""
+        return self._direct.expand(self.num_worlds, -1)
 
     @property
     def neighbours(self) -> torch.Tensor:
