@@ -56,6 +56,8 @@ class UAVSpectrumEnv(EnvBase):
         seed: seed of world 0.
         device: where the worlds live.
         max_steps: episode length ``T``.
+        config: a complete :class:`~uavrl.envs.config.ModelConfig`; replaces
+            ``grid``, ``num_uavs``, ``preset``, ``max_steps`` and the overrides.
         **overrides: any :class:`~uavrl.envs.config.ModelConfig` option
             (``layout``, ``fading``, ``reward``, powers, ...).
 
@@ -69,8 +71,10 @@ class UAVSpectrumEnv(EnvBase):
 
     batch_locked = True
 
-    def __init__(self, batch_size=1, grid=(6, 6), num_uavs=2, preset="paper", seed=0, device="cpu", max_steps=100, **overrides):
-        cfg = overrides.pop("config", None) or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
+    def __init__(self, batch_size=1, grid=(6, 6), num_uavs=2, preset="paper", seed=0, device="cpu", max_steps=100, *, config: ModelConfig | None = None, **overrides):
+        if config is not None and overrides:
+            raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
+        cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
         B = _check_batch_size(batch_size)
         super().__init__(device=device, batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
