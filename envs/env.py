@@ -425,13 +425,16 @@ def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
     return torch.stack([(j // NUM_ACTIONS**i) % NUM_ACTIONS for i in range(num_uavs)], -1)
 
 
-def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``."""
+def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
+    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the grid)."""
     actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
-    nbrs = neighbours[cells]  # [..., N, 4]
-    moved = torch.gather(nbrs.unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4), -1, actions.clamp(max=3).unsqueeze(-1).expand(*cells.shape[:-1], -1, -1).unsqueeze(-1)).squeeze(-1)
-    target = torch.where(actions < 4, moved, cells.unsqueeze(-2))  # [..., A, N]
-    on_grid = (target >= 0).all(-1)
+    moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
+    moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
+    return torch.where(actions < 4, moved, cells.unsqueeze(-2))
+
+
+def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
+    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells distinct."""
+    target = joint_targets(cells, neighbours, num_uavs)
     ordered = target.sort(-1).values
-    distinct = (ordered[..., 1:] != ordered[..., :-1]).all(-1)
-    return on_grid & distinct
+    return (target >= 0).all(-1) & (ordered[..., 1:] != ordered[..., :-1]).all(-1)
