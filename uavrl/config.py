@@ -1,0 +1,47 @@
+"""Where the Hydra configs live and how a Hydra config becomes a model config."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from uavrl.envs import ModelConfig, make_config
+
+
+def config_dir() -> str:
+    """Absolute path of the Hydra configs: the installed ``uavrl.configs`` package, else the checkout's ``configs/``."""
+    try:
+        import uavrl.configs as packaged
+
+        here = Path(packaged.__file__).resolve().parent
+        if (here / "config.yaml").exists():
+            return str(here)
+    except ImportError:
+        pass
+    return str(Path(__file__).resolve().parent.parent / "configs")
+
+
+def model_config(cfg: DictConfig) -> ModelConfig:
+    """The :class:`ModelConfig` of a run: ``cfg.env`` options (null: the preset's value), episode length ``cfg.train.steps_per_episode``."""
+    options = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if v is not None}
+    options.pop("name", None)
+    preset = options.pop("preset", "paper")
+    if "grid" in options:
+        options["grid"] = tuple(options["grid"])
+    return make_config(preset, max_steps=int(cfg.train.steps_per_episode), **options)
+
+
+def flat_hparams(cfg: DictConfig) -> dict:
+    """Scalar hyper-parameters with dotted names (TensorBoard's hparams reject nesting)."""
+    out = {}
+
+    def walk(node, prefix):
+        for key, value in node.items():
+            name = f"{prefix}{key}"
+            if isinstance(value, dict):
+                walk(value, name + ".")
+            else:
+                out[name] = value if isinstance(value, (int, float, str, bool)) else str(value)
+
+    walk(OmegaConf.to_container(cfg, resolve=True), "")
+    return out
