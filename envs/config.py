@@ -13,6 +13,8 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass, field
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
@@ -70,12 +72,14 @@ class ModelConfig:
             raise ValueError(f"grid={self.grid!r} is invalid: give two integers L1, L2 >= 1, e.g. grid=(6, 6)")
         object.__setattr__(self, "grid", grid)
         cells = grid[0] * grid[1]
-        if not 1 <= int(self.num_uavs) <= cells:
+        if not _is_int(self.num_uavs) or not 1 <= self.num_uavs <= cells:
             raise ValueError(
-                f"num_uavs={self.num_uavs} is invalid: a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
+                f"num_uavs={self.num_uavs!r} is invalid: a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
             )
-        if int(self.max_steps) < 1:
-            raise ValueError(f"max_steps={self.max_steps} is invalid: an episode needs at least 1 step")
+        if not _is_int(self.max_steps) or self.max_steps < 1:
+            raise ValueError(f"max_steps={self.max_steps!r} is invalid: an episode needs a whole number of steps >= 1")
+        object.__setattr__(self, "num_uavs", int(self.num_uavs))
+        object.__setattr__(self, "max_steps", int(self.max_steps))
         _choice("layout", self.layout, LAYOUTS)
         _choice("fading", self.fading, FADINGS)
         _choice("reward", self.reward, REWARDS)
@@ -84,12 +88,16 @@ class ModelConfig:
         _choice("reset_positions", self.reset_positions, RESET_POSITIONS)
         for name in ("p_pt", "p_s", "p_u", "noise", "cell_size", "g0", "alpha", "reference_gain"):
             value = getattr(self, name)
-            if not float(value) > 0:
-                raise ValueError(f"{name}={value} is invalid: it must be a positive number")
+            if not (_is_real(value) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value!r} is invalid: it must be a finite positive number")
+        for name in ("beta1", "beta2"):
+            value = getattr(self, name)
+            if not (_is_real(value) and math.isfinite(value)):
+                raise ValueError(f"{name}={value!r} is invalid: it must be a finite number")
         if self.direct_links and self.rate_model == "reference_code":
             raise ValueError("direct_links=True is invalid with rate_model='reference_code': the authors' formula has no direct link")
-        if self.altitude is not None and not float(self.altitude) > 0:
-            raise ValueError(f"altitude={self.altitude} is invalid: give a positive height in cells, or None for h = L1")
+        if self.altitude is not None and not (_is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0):
+            raise ValueError(f"altitude={self.altitude!r} is invalid: give a finite positive height in cells, or None for h = L1")
 
     @property
     def num_cells(self) -> int:
@@ -146,6 +154,14 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
 def _choice(name, value, allowed):
     if value not in allowed:
         raise ValueError(f"{name}={value!r} is invalid: allowed values are {', '.join(map(repr, allowed))}")
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def _is_pair(value) -> bool:
