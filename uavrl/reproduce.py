@@ -1,0 +1,203 @@
+"""Reproduce the paper: ``python -m uavrl.reproduce table2`` and ``python -m uavrl.reproduce figures``.
+
+``table2`` runs the paper's protocol (Table II: 2 UAVs, per grid 10 runs x 200
+episodes of 120 to 30,000 steps) with the compiled tabular learner and prints
+the table beside the paper's timings, with the final greedy optimality.
+``figures`` draws Figs. 3-5 for 6x6 (mean over runs, min-max band) as PNG from
+the per-episode data that ``table2`` saved (it runs the 6x6 protocol first if
+there is none).  Both also write the curves to TensorBoard.
+
+Overrides (Hydra): ``grids=[6] runs=3 episodes=50 seed=1 out_dir=reproduction``.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import hydra
+import torch
+from omegaconf import DictConfig
+from tqdm import tqdm
+
+from uavrl.agents.tabular import TabularPolicy, TeamQLearner
+from uavrl.config import config_dir
+from uavrl.envs import make_config
+from uavrl.evaluation import episode_metrics, evaluate
+from uavrl.io import save_json, save_text, save_torch
+from uavrl.logger import RunLogger
+
+# Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
+PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
+PAPER_SECONDS = {2: 0.102628, 3: 0.762713, 4: 2.425558, 5: 8.757846, 6: 49.007077, 8: 146.936207, 10: 291.176670}
+METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
+COMMANDS = ("table2", "figures")
+
+
+def run_grid(size: int, cfg: DictConfig, logger: RunLogger | None = None) -> dict:
+    """The protocol on a ``size x size`` grid: per-episode metrics ``[episodes, runs]``, timing, optimality."""
+    steps = int(cfg.steps or PAPER_STEPS.get(size) or 0)
+    if steps < 1:
+        raise ValueError(f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<steps per episode>")
+    model = make_config("paper", grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps)
+    built = time.perf_counter()
+    learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
+    u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
+    history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
+    started = time.perf_counter()
+    for episode in range(int(cfg.episodes)):
+        out = learner.run_episode()
+        per_run = episode_metrics(out["r_pu"], out["r_se"], out["task_switches"], out["moves"], u_star)
+        for k in METRICS:
+            history[k][episode] = per_run[k]
+        if logger is not None:
+            logger.log({f"train/{k}": per_run[k].mean().item() for k in METRICS}, (episode + 1) * steps)
+    learn_seconds = time.perf_counter() - started
+    evaluations = [evaluate(TabularPolicy(q, model), model, num_starts=int(cfg.eval_starts)) for q in learner.q]
+    return {
+        "grid": size,
+        "states": model.num_states,
+        "q_size": model.num_states * model.num_joint_actions,
+        "steps_per_episode": steps,
+        "episodes": int(cfg.episodes),
+        "runs": int(cfg.runs),
+        "setup_seconds": started - built,
+        "learn_seconds": learn_seconds,
+        "seconds_per_episode": learn_seconds / (int(cfg.episodes) * int(cfg.runs)),
+        "team_steps_per_second": int(cfg.episodes) * int(cfg.runs) * steps / learn_seconds,
+        "optimality": sum(e["eval/optimality"] for e in evaluations) / len(evaluations),
+        "optimality_min": min(e["eval/optimality_min"] for e in evaluations),
+        "history": history,
+    }
+
+
+def table2_markdown(rows: list[dict], wall: float) -> str:
+    lines = [
+        "| grid | states | Q size | steps/episode | paper s/episode | ours s/episode | speedup | paper total | ours total | greedy U/U* (min) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        paper = PAPER_SECONDS.get(r["grid"])
+        ours_total = r["learn_seconds"] + r["setup_seconds"]
+        paper_total = paper * r["episodes"] * r["runs"] if paper else None
+        speedup = f"{paper / r['seconds_per_episode']:,.0f}x" if paper else "-"
+        lines.append(
+            f"| {r['grid']}x{r['grid']} | {r['states']:,} | {r['q_size']:,} | {r['steps_per_episode']:,} | "
+            f"{paper if paper else '-'} | {r['seconds_per_episode']:.2e} | {speedup} | "
+            f"{_duration(paper_total) if paper_total else '-'} | {ours_total:.2f} s | {r['optimality']:.4f} ({r['optimality_min']:.4f}) |"
+        )
+    lines.append(f"\nWhole table: {wall:.1f} s wall ({sum(r['episodes'] * r['runs'] * r['steps_per_episode'] for r in rows):,} team steps with learning).")
+    return "\n".join(lines) + "\n"
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.1f} {unit}"
+    return f"{seconds:.0f} s"
+
+
+def findings(history: dict, grid: int) -> list[str]:
+    """The paper's claims about Figs. 3-5, checked on the first and last 10% of episodes."""
+    n = max(1, history["sum_utility"].shape[0] // 10)
+
+    def change(key):
+        h = history[key].mean(1)
+        return h[:n].mean().item(), h[-n:].mean().item()
+
+    claims = [("sum utility per episode rises", "sum_utility", +1), ("task switches fall", "task_switches", -1), ("moves fall", "moves", -1), ("steps to 90% of U* fall", "steps_to_90", -1)]
+    out = []
+    for text, key, sign in claims:
+        first, last = change(key)
+        holds = (last - first) * sign > 0
+        out.append(f"{grid}x{grid}: {text}: {'holds' if holds else 'does not hold'} (first {n} episodes {first:.4g}, last {n} {last:.4g})")
+    return out
+
+
+def table2(cfg: DictConfig) -> list[dict]:
+    out_dir = Path(cfg.out_dir)
+    logger_root = out_dir / "tensorboard"
+    rows = []
+    started = time.perf_counter()
+    for size in tqdm([int(g) for g in cfg.grids], desc="Table II", unit="grid", disable=not cfg.progress):
+        logger = RunLogger(logger_root / f"grid{size}x{size}")
+        rows.append(run_grid(size, cfg, logger))
+        logger.close()
+    wall = time.perf_counter() - started
+    table = table2_markdown(rows, wall)
+    notes = [line for r in rows for line in findings(r["history"], r["grid"])]
+    print(table)
+    print("\n".join(notes))
+    save_text(table + "\n" + "\n".join(f"- {n}" for n in notes) + "\n", out_dir / "table2.md")
+    save_json([{k: v for k, v in r.items() if k != "history"} | {"wall_seconds_whole_table": wall} for r in rows], out_dir / "table2.json")
+    for r in rows:
+        save_torch({"history": r["history"], "grid": r["grid"], "runs": r["runs"], "episodes": r["episodes"]}, out_dir / f"history_{r['grid']}x{r['grid']}.pt")
+    return rows
+
+
+def figures(cfg: DictConfig) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    size = int(cfg.figure_grid)
+    out_dir = Path(cfg.out_dir)
+    path = out_dir / f"history_{size}x{size}.pt"
+    if not path.exists():
+        cfg.grids = [size]
+        table2(cfg)
+    history = torch.load(path, weights_only=False)["history"]
+    episodes = torch.arange(1, history["sum_utility"].shape[0] + 1)
+
+    def band(ax, key, label, color):
+        h = history[key]
+        ax.plot(episodes, h.mean(1), color=color, label=label)
+        ax.fill_between(episodes, h.amin(1), h.amax(1), color=color, alpha=0.2, linewidth=0)
+
+    specs = [
+        ("fig3_sum_utility.png", "Fig. 3: summation throughput per episode", "sum over steps (bit/s/Hz)", [("sum_utility", "both networks (U)", "C0"), ("sum_r_pu", "primary (R_PU)", "C1"), ("sum_r_se", "emergency (R_SE)", "C2")]),
+        ("fig4_switches_moves.png", "Fig. 4: task switches and moves per episode", "count (all UAVs, all steps)", [("task_switches", "task switches", "C3"), ("moves", "moves", "C4")]),
+        ("fig5_steps_to_90.png", "Fig. 5: steps until U first reaches 90% of U*", "steps", [("steps_to_90", "steps to 90% of U*", "C5")]),
+    ]
+    written = []
+    for name, title, ylabel, curves in specs:
+        fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+        for key, label, color in curves:
+            band(ax, key, label, color)
+        ax.set(title=f"{title} ({size}x{size}, 2 UAVs, mean over {history['sum_utility'].shape[1]} runs, band min-max)", xlabel="episode", ylabel=ylabel)
+        ax.title.set_fontsize(9)
+        ax.grid(alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(out_dir / name)
+        plt.close(fig)
+        written.append(out_dir / name)
+    print("\n".join(str(p) for p in written))
+    return written
+
+
+@hydra.main(config_path=config_dir(), config_name="reproduce", version_base=None)
+def main(cfg: DictConfig) -> None:
+    import numba
+
+    torch.set_num_threads(int(cfg.num_threads))
+    numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
+    try:
+        (table2 if cfg.command == "table2" else figures)(cfg)
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+def cli() -> None:
+    """``python -m uavrl.reproduce table2|figures [overrides]``: the command word becomes ``command=``."""
+    if len(sys.argv) > 1 and "=" not in sys.argv[1] and not sys.argv[1].startswith("-"):
+        command = sys.argv.pop(1)
+        if command not in COMMANDS:
+            raise SystemExit(f"error: unknown command {command!r}: use one of {', '.join(COMMANDS)}")
+        sys.argv.append(f"command={command}")
+    main()
+
+
+if __name__ == "__main__":
+    cli()
