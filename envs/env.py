@@ -20,7 +20,7 @@ from .optimum import optimum as exact_optimum
 # (dx, dy) of the four moves: up, down, left, right (SPEC section 2)
 MOVES = ((0, -1), (0, 1), (-1, 0), (1, 0))
 # purposes of the per-world random streams
-_POSITIONS, _TASKS, _FADING, _LAYOUT = 1, 2, 3, 16
+_POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
 
 
 def _check_batch_size(batch_size) -> int:
@@ -263,13 +263,16 @@ class UAVSpectrumEnv(EnvBase):
 
     def _current_rates(self) -> torch.Tensor:
         """``[B, 2]`` (R_PU, R_SE) of the current configuration, drawing fresh fading if enabled."""
+        direct = self._direct.expand(self.num_worlds, 2)
         if self.cfg.fading == "none":
             contrib = self._per_cell(self._cell_contrib, self._pos)
         else:
             gains = self._per_cell(self._cell_gains, self._pos)
             u = streams.uniform(self._keys, self._counters, _FADING, 4 * self.num_uavs).view_as(gains)
             contrib = relay_contributions(gains * -torch.log1p(-u), self.cfg)  # Exp(1) power gain per link
-        return torch.stack(rates(contrib, self._tasks, self._direct.expand(self.num_worlds, 2), self.cfg), -1)
+            if self.cfg.direct_links:  # the direct links PT->PR and S->E fade too
+                direct = direct * -torch.log1p(-streams.uniform(self._keys, self._counters, _FADING_DIRECT, 2))
+        return torch.stack(rates(contrib, self._tasks, direct, self.cfg), -1)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B, N, C, cfg = self.num_worlds, self.num_uavs, self.cfg.num_cells, self.cfg

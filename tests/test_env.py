@@ -507,6 +507,32 @@ def test_rayleigh_power_gain_is_exp1(measured):
     assert abs(lag.item()) < 0.03
 
 
+def test_rayleigh_fades_direct_links():
+    """SPEC 3 "every link": with direct links on, PT->PR and S->E get their own Exp(1) draws.
+
+    The UAV hops are silenced (P_U = 1e-30 W makes their contributions < 1e-20), so
+    2^(2R) - 1 = k X with k = P |h|^2 / sigma^2 of the direct link (d = L1 and 2 L1 cells).
+    """
+    L1, noise = 2, 1e-9
+    p_pt, p_s = 1e-7, 4e-7  # k = 1e-7 / 20^2 / 1e-9 = 0.25 and 4e-7 / 40^2 / 1e-9 = 0.25
+    env = UAVSpectrumEnv(batch_size=1024, grid=(L1, 1), num_uavs=2, fading="rayleigh", direct_links=True, seed=77,
+                         p_pt=p_pt, p_s=p_s, p_u=1e-30, noise=noise, max_steps=10**6)
+    k_pu, k_se = p_pt / (L1 * 10.0) ** 2 / noise, p_s / (2 * L1 * 10.0) ** 2 / noise
+    td = env.reset()
+    xs = {"r_pu": [], "r_se": []}
+    for _ in range(40):
+        td = step_with(env, td, [[5, 4]] * 1024)
+        for key, k in (("r_pu", k_pu), ("r_se", k_se)):
+            xs[key].append((torch.exp2(2 * td["next", key].double()) - 1) / k)
+        td = step_mdp(td)
+    pu, se = torch.cat(xs["r_pu"]), torch.cat(xs["r_se"])
+    for x in (pu, se):  # n = 40,960: sd(mean) = 0.005
+        assert x.mean().item() == pytest.approx(1.0, abs=0.04) and x.var().item() == pytest.approx(1.0, abs=0.2)
+        assert (x > 1).double().mean().item() == pytest.approx(math.exp(-1), abs=0.02)
+    assert abs(torch.corrcoef(torch.stack([pu, se]))[0, 1].item()) < 0.04
+    assert env.direct[0].tolist() == pytest.approx([k_pu, k_se], rel=1e-12)  # the deterministic (mean) values
+
+
 def test_fading_none_is_deterministic_and_utility_ignores_fading():
     env = UAVSpectrumEnv(batch_size=8, grid=(4, 4), num_uavs=2, fading="rayleigh", seed=1)
     td = env.reset()
