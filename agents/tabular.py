@@ -60,7 +60,7 @@ def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
     A = cfg.num_joint_actions
     positions = cfg.num_cells**cfg.num_uavs
     configs = positions * 2**cfg.num_uavs
-    return num_tables * cfg.num_states * A * 8 + positions * A * (4 + 1 + 1) + configs * (8 + 8 + 8)
+    return num_tables * cfg.num_states * A * 8 + positions * A * (4 + 4 + 1 + 1) + configs * (8 + 8 + 8)
 
 
 class TabularModel:
@@ -69,8 +69,8 @@ class TabularModel:
     Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
     the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
     ``r_pu[k]``, ``r_se[k]``, ``row[k]`` (the Q row: the env's ``state_index``),
-    ``valid[p, j]``, ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``,
-    ``switches[t, j]``.
+    ``valid[p, j]`` (and the same as lists: ``valid_actions[p, :num_valid[p]]``),
+    ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``, ``switches[t, j]``.
     """
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
@@ -116,6 +116,8 @@ class TabularModel:
             self.r_pu[k], self.r_se[k] = r_pu[0], r_se[0]
             digits = 2 * cells[:, None, :] + tasks[None] if cfg.state_includes_tasks else cells[:, None, :].expand(-1, 2**N, -1)
             self.row[k] = (digits * row_place).sum(-1).reshape(-1)
+        self.num_valid = self.valid.sum(-1).int()
+        self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).int()
         self.u_star = env.optimum()[0].item()
 
     def configuration_ids(self, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
@@ -133,62 +135,47 @@ _delta = numba.njit(delta_reward)
 
 
 @numba.njit(cache=True, inline="always")
-def _nth_true(row, n):
-    """Index of the ``n``-th (0-based) True in ``row``."""
-    for j in range(row.shape[0]):
-        if row[j]:
-            if n == 0:
-                return j
-            n -= 1
-    return -1
-
-
-@numba.njit(cache=True, inline="always")
-def _choose(q_row, valid_row, u, epsilon):
-    """Epsilon-greedy valid joint action from one uniform ``u``.
+def _choose(q_row, actions, n_valid, u, epsilon):
+    """Epsilon-greedy action among the ``n_valid`` valid joint ``actions`` (ascending) from one uniform ``u``.
 
     ``u < epsilon`` explores, and then ``u / epsilon`` is a fresh uniform that
     picks the valid action; otherwise ``(u - epsilon) / (1 - epsilon)`` picks
     among the tied best ones.
     """
     if u < epsilon:
-        n_valid = 0
-        for j in range(valid_row.shape[0]):
-            n_valid += valid_row[j]
-        return _nth_true(valid_row, int(u / epsilon * n_valid))
+        return actions[int(u / epsilon * n_valid)]
     best, ties, best_j = -np.inf, 0, -1
-    for j in range(q_row.shape[0]):
-        if valid_row[j]:
-            if q_row[j] > best:
-                best, ties, best_j = q_row[j], 1, j
-            elif q_row[j] == best:
-                ties += 1
+    for i in range(n_valid):
+        value = q_row[actions[i]]
+        if value > best:
+            best, ties, best_j = value, 1, actions[i]
+        elif value == best:
+            ties += 1
     if ties == 1:
         return best_j
     n = int((u - epsilon) / (1 - epsilon) * ties)
-    for j in range(best_j, q_row.shape[0]):
-        if valid_row[j] and q_row[j] == best:
+    for i in range(n_valid):
+        if q_row[actions[i]] == best:
             if n == 0:
-                return j
+                return actions[i]
             n -= 1
     return -1
 
 
 @numba.njit(cache=True, inline="always")
-def _max_valid(q_row, valid_row):
+def _max_valid(q_row, actions, n_valid):
     best = -np.inf
-    for j in range(q_row.shape[0]):
-        if valid_row[j] and q_row[j] > best:
-            best = q_row[j]
+    for i in range(n_valid):
+        best = max(best, q_row[actions[i]])
     return best
 
 
 @numba.njit(cache=True)
-def _world_step(q, w, cfg_k, u, r_pu_t, r_se_t, row_t, valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2):
+def _world_step(q, w, cfg_k, u, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2):
     """Choose and apply one world's action; return (s, j, target, new configuration)."""
     p, t = cfg_k // T2, cfg_k % T2
     s = row_t[cfg_k]
-    j = _choose(q[s], valid[p], u, epsilon)
+    j = _choose(q[s], valid[p], n_valid[p], u, epsilon)
     p2, t2 = next_cells[p, j], next_tasks[t, j]
     k2 = p2 * T2 + t2
     r_pu, r_se = r_pu_t[k2], r_se_t[k2]
@@ -198,12 +185,12 @@ def _world_step(q, w, cfg_k, u, r_pu_t, r_se_t, row_t, valid, next_cells, next_t
     else:
         reward = _delta(r_pu, r_se, prev[w, 0], prev[w, 1], beta1, beta2)
     prev[w, 0], prev[w, 1] = r_pu, r_se
-    target = reward + gamma * _max_valid(q[row_t[k2]], valid[p2])
+    target = reward + gamma * _max_valid(q[row_t[k2]], valid[p2], n_valid[p2])
     return s, j, target, k2
 
 
 @numba.njit(cache=True, parallel=True)
-def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
+def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
     """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves, switches)."""
     R, T = uniforms.shape[0], uniforms.shape[1]
     T2 = next_tasks.shape[0]
@@ -213,7 +200,7 @@ def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, next_cells, 
         k = k0[r]
         prev[r, 0], prev[r, 1] = r_pu_t[k], r_se_t[k]
         for step in range(T):
-            s, j, target, k2 = _world_step(q[r], r, k, uniforms[r, step], r_pu_t, r_se_t, row_t, valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
+            s, j, target, k2 = _world_step(q[r], r, k, uniforms[r, step], r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
             q[r, s, j] = (1 - alpha) * q[r, s, j] + alpha * target
             out[r, step, 0], out[r, step, 1] = prev[r, 0], prev[r, 1]
             out[r, step, 2] = moves_t[k // T2, j]
@@ -223,7 +210,7 @@ def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, next_cells, 
 
 
 @numba.njit(cache=True)
-def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
+def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
     """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc)."""
     R, T = uniforms.shape[0], uniforms.shape[1]
     T2 = next_tasks.shape[0]
@@ -241,7 +228,7 @@ def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, next_cells, n
     for step in range(T):
         for w in range(R):
             k = k0[w]
-            s_w[w], j_w[w], target_w[w], k0[w] = _world_step(qt, w, k, uniforms[w, step], r_pu_t, r_se_t, row_t, valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
+            s_w[w], j_w[w], target_w[w], k0[w] = _world_step(qt, w, k, uniforms[w, step], r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
             out[w, step, 0], out[w, step, 1] = prev[w, 0], prev[w, 1]
             out[w, step, 2] = moves_t[k // T2, j_w[w]]
             out[w, step, 3] = switches_t[k % T2, j_w[w]]
@@ -323,7 +310,7 @@ class TeamQLearner:
         out = np.empty((self.runs, cfg.max_steps, 4))
         k = k0.numpy().copy()
         kernel = _episode_shared if self.shared_table else _episode_per_run
-        kernel(self.q.numpy(), k, u.numpy(), m.r_pu.numpy(), m.r_se.numpy(), m.row.numpy(), m.valid.numpy(), m.next_cells.numpy(), m.next_tasks.numpy(), m.moves.numpy(), m.switches.numpy(), self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", out)
+        kernel(self.q.numpy(), k, u.numpy(), m.r_pu.numpy(), m.r_se.numpy(), m.row.numpy(), m.valid_actions.numpy(), m.num_valid.numpy(), m.next_cells.numpy(), m.next_tasks.numpy(), m.moves.numpy(), m.switches.numpy(), self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", out)
         self._configuration = torch.from_numpy(k)
         return torch.from_numpy(out)
 
