@@ -384,10 +384,11 @@ def _choose_batched(q_rows, valid_rows, u, epsilon):
 
 # ----------------------------------------------------------------------------- TorchRL policy
 class TabularPolicy(TensorDictModuleBase):
-    """Greedy joint action from a Q table ``[S, 6^N]``, as a TorchRL policy.
+    """Greedy valid joint action from a Q table ``[S, 6^N]``, as a TorchRL policy.
 
     Reads ``state_index`` and ``positions``; writes ``("agents", "action")``.
-    Among equal values it takes the lowest joint action, so it is deterministic.
+    Ties are broken uniformly at random (SPEC section 6) from the policy's own
+    generator seeded ``seed``, so a rollout is reproducible.
 
     Example:
         >>> from uavrl.envs import UAVSpectrumEnv
@@ -400,22 +401,23 @@ class TabularPolicy(TensorDictModuleBase):
     in_keys = ["state_index", "positions"]
     out_keys = [("agents", "action")]
 
-    def __init__(self, q: torch.Tensor, cfg: ModelConfig):
+    def __init__(self, q: torch.Tensor, cfg: ModelConfig, seed: int = 0):
         super().__init__()
         self.cfg = cfg
         env = UAVSpectrumEnv(batch_size=1, config=cfg, device=q.device)
-        C, N = cfg.num_cells, cfg.num_uavs
         self.register_buffer("q", q)
         self.register_buffer("neighbours", env.neighbours)
-        self.register_buffer("actions", decode_joint_actions(N, q.device))
-        self.register_buffer("place", torch.tensor([C**i for i in range(N)], device=q.device))
+        self.register_buffer("actions", decode_joint_actions(cfg.num_uavs, q.device))
+        self.generator = torch.Generator(device=q.device).manual_seed(seed)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         positions = td.get("positions").to(self.q.device)
         cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
         valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
         values = self.q[td.get("state_index").to(self.q.device)].masked_fill(~valid, -math.inf)
-        td.set(("agents", "action"), self.actions[values.argmax(-1)].to(td.device or self.q.device))
+        ties = values == values.amax(-1, keepdim=True)
+        pick = torch.rand(ties.shape, generator=self.generator, device=self.q.device).masked_fill(~ties, -1.0).argmax(-1)
+        td.set(("agents", "action"), self.actions[pick].to(td.device or self.q.device))
         return td
 
 
