@@ -94,17 +94,25 @@ def rates(contributions: torch.Tensor, tasks: torch.Tensor, direct: torch.Tensor
     zero = contributions.new_zeros(())
     sum_pu = direct[..., 0] + torch.where(relaying, contributions[..., 0], zero).sum(-1)
     sum_se = direct[..., 1] + torch.where(relaying, zero, contributions[..., 1]).sum(-1)
-    scale = 1.0 if cfg.rate_model == "reference_code" else 0.5
-    r_pu = scale * torch.log2(1 + sum_pu)
-    r_se = scale * torch.log2(1 + sum_se)
-    any_relay = relaying.any(-1)
+    r = rates_from_sums(torch.stack([sum_pu, sum_se], -1), relaying.sum(-1), tasks.shape[-1], cfg)
+    return r[..., 0], r[..., 1]
+
+
+def rates_from_sums(sums: torch.Tensor, num_relaying: torch.Tensor, num_uavs: int, cfg: ModelConfig) -> torch.Tensor:
+    """``[..., 2]`` (R_PU, R_SE) from the sums inside the two logs ``[..., 2]`` and the number of relaying UAVs ``[...]``.
+
+    The sums hold the direct terms plus the contributions of the relaying (PU) and
+    sensing (SE) UAVs; this applies the 1/2 factor (``af``), the lease rule and the
+    authors' "both tasks staffed" rule.
+    """
+    r = torch.log2(1 + sums)  # a fresh tensor: the rules below edit it in place
     if cfg.rate_model == "reference_code":
         # the authors' code pays neither network unless both tasks are staffed
-        both = any_relay & ~relaying.all(-1)
-        return torch.where(both, r_pu, zero), torch.where(both, r_se, zero)
+        return r.masked_fill_(((num_relaying == 0) | (num_relaying == num_uavs)).unsqueeze(-1), 0.0)
+    r.mul_(0.5)
     if cfg.lease_rule:
-        r_se = torch.where(any_relay, r_se, zero)
-    return r_pu, r_se
+        r.select(-1, 1).masked_fill_(num_relaying == 0, 0.0)
+    return r
 
 
 def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):

@@ -13,7 +13,7 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from . import streams
-from .channel import best_so_far_reward, delta_reward, direct_terms, fixed_layout, link_gains, rates, relay_contributions
+from .channel import best_so_far_reward, delta_reward, direct_terms, fixed_layout, link_gains, rates, rates_from_sums, relay_contributions
 from .config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig, make_config
 from .optimum import optimum as exact_optimum
 
@@ -28,6 +28,22 @@ def _check_batch_size(batch_size) -> int:
     if isinstance(batch_size, (list, tuple, torch.Size)) and len(batch_size) != 1 or not isinstance(size, int) or size < 1:
         raise ValueError(f"batch_size={batch_size!r} is invalid: give the number of worlds B >= 1 (an int or [B])")
     return size
+
+
+class _WorldsState:
+    """The mutable per-world state, kept outside the ``nn.Module`` (whose ``__setattr__`` costs ~6 us a step per tensor).
+
+    ``code`` ``[B, N]`` is ``2 * cell + task`` of every UAV; ``r`` ``[B, 2]`` the current
+    (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (``best_so_far``);
+    ``steps`` the episode clock; ``started`` whether a world has been reset;
+    ``keys`` and ``counters`` the per-world random streams.
+    """
+
+    __slots__ = ("code", "r", "best", "steps", "started", "counters", "keys")
+
+    def __init__(self, **tensors):
+        for name, value in tensors.items():
+            setattr(self, name, value)
 
 
 class UAVSpectrumEnv(EnvBase):
@@ -91,7 +107,6 @@ class UAVSpectrumEnv(EnvBase):
             nbrs.append(torch.where(inside, ny * L1 + nx, -1))
         self._neighbours = torch.stack(nbrs, -1)  # [C, 4]
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
-        self._others = (torch.arange(N, device=dev)[:, None] + torch.arange(1, N, device=dev)) % N  # [N, N-1]
         base = 2 * C if cfg.state_includes_tasks else C
         self._state_weights = torch.tensor([base**i for i in range(N)], device=dev) if cfg.has_state_index else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
@@ -103,25 +118,43 @@ class UAVSpectrumEnv(EnvBase):
                 raise ValueError(
                     f"grid={cfg.grid} is invalid for layout={cfg.layout!r}: a node sits on a UAV cell at UAV altitude (zero distance); use a smaller grid or layout='line'"
                 )
-        # per-cell tables of the layout: one shared row for a fixed layout, one per world for random ones
-        Bt = 1 if layout is not None else B
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
         self._cell_mask = torch.cat([self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1)  # [C, 6]
+        # A UAV's cell and task are one code 2 c + task, so a step is a few lookups in per-code tables.
+        # _code_next[6 code + a]: the code after action a alone (a move off the grid stays)
+        code = torch.arange(2 * C, device=dev)
+        code_cell, code_task = code >> 1, code & 1
+        nbr = self._neighbours[code_cell]
+        moved = torch.where(nbr >= 0, 2 * nbr + code_task[:, None], code[:, None])
+        self._code_next = torch.cat([moved, 2 * code_cell[:, None], 2 * code_cell[:, None] + 1], -1).flatten()
+        self._code_xy = self._cell_xy[code_cell]  # [2C, 2]
+        self._code_mask = self._cell_mask[code_cell]  # [2C, 6]
+        self._code_cell, self._code_task = code_cell, code_task
+        self._code_xyt = torch.cat([self._code_xy / self._grid_scale, code_task[:, None]], -1).float()  # [2C, 3] as observed
+        self._cell_offset = torch.arange(B, device=dev).unsqueeze(-1) * C  # world w's cells as w C + c (clash counts)
+        # per-code tables of the layout: one shared row for a fixed layout, one per world for random ones
+        Bt = 1 if layout is not None else B
+        self._code_offset = None if Bt == 1 else torch.arange(B, device=dev).unsqueeze(-1) * (2 * C)
         self._nodes = (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(Bt, 4, 3).clone()
-        self._cell_gains = torch.zeros(Bt, C, 4, dtype=f64, device=dev)
+        self._cell_gains = torch.zeros(Bt, C, 4, dtype=f64, device=dev) if cfg.fading != "none" else None
         self._cell_contrib = torch.zeros(Bt, C, 2, dtype=f64, device=dev)
-        self._cell_obs = torch.zeros(Bt, C, 12, dtype=torch.float32, device=dev)
+        self._code_obs = torch.zeros(Bt, 2 * C, 13, dtype=torch.float32, device=dev)  # own (x, y, task) and contributions
+        self._code_rate = torch.zeros(Bt, 2 * C, 3, dtype=f64, device=dev)  # what a UAV adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, 12, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
-        self._pos = torch.zeros(B, N, dtype=torch.long, device=dev)
-        self._tasks = torch.zeros(B, N, dtype=torch.long, device=dev)
-        self._r = torch.zeros(B, 2, dtype=f64, device=dev)
-        self._best = torch.zeros(B, dtype=f64, device=dev)
-        self._steps = torch.zeros(B, dtype=torch.long, device=dev)
-        self._started = torch.zeros(B, dtype=torch.bool, device=dev)
-        self._counters = torch.zeros(B, dtype=torch.long, device=dev)
-        self._keys = streams.world_keys(0, B, dev)
+        # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
+        self._pairs = N == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16
+        self._pair_obs = self._pair_state = self._pair_rates = None
+        self._s = _WorldsState(
+            code=torch.zeros(B, N, dtype=torch.long, device=dev),
+            r=torch.zeros(B, 2, dtype=f64, device=dev),
+            best=torch.zeros(B, dtype=f64, device=dev),
+            steps=torch.zeros(B, dtype=torch.long, device=dev),
+            started=torch.zeros(B, dtype=torch.bool, device=dev),
+            counters=torch.zeros(B, dtype=torch.long, device=dev),
+            keys=streams.world_keys(0, B, dev),
+        )
         if layout is not None:
             self._set_layout(torch.ones(1, dtype=torch.bool, device=dev))
         self._make_specs()
@@ -173,9 +206,9 @@ class UAVSpectrumEnv(EnvBase):
     # --------------------------------------------------------------- seeding
     def _set_seed(self, seed: int | None):
         seed = 0 if seed is None else int(seed)
-        self._keys = streams.world_keys(seed, self.num_worlds, self.device)
-        self._counters.zero_()
-        self._started.zero_()
+        self._s.keys = streams.world_keys(seed, self.num_worlds, self.device)
+        self._s.counters.zero_()
+        self._s.started.zero_()
 
     # ---------------------------------------------------------------- layout
     def _set_layout(self, mask: torch.Tensor):
@@ -189,12 +222,22 @@ class UAVSpectrumEnv(EnvBase):
         local = scaled[:, torch.cat([torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1)]
         obs = torch.cat([(self._cell_xy / self._grid_scale).unsqueeze(0).expand(len(mask), -1, -1), local.flatten(2)], -1).float()
         node_obs = (self._nodes / self._node_scale).flatten(1).float()
+        # per code 2 c + task: the observation's own block (x, y, task, 10 contributions) and the rate terms
+        cc, task = self._code_cell, self._code_task
+        code_obs = torch.cat([obs[:, cc, :2], task.to(obs.dtype)[None, :, None].expand(len(mask), -1, 1), obs[:, cc, 2:]], -1)
+        relay = (task == RELAYING)[None, :]
+        zero = contrib.new_zeros(())
+        code_rate = torch.stack([torch.where(relay, contrib[:, cc, 0], zero), torch.where(relay, zero, contrib[:, cc, 1]), relay.to(contrib.dtype).expand(len(mask), -1)], -1)
         m = mask[:, None, None]
-        self._cell_gains = torch.where(m, gains, self._cell_gains)
+        if self._cell_gains is not None:
+            self._cell_gains = torch.where(m, gains, self._cell_gains)
         self._cell_contrib = torch.where(m, contrib, self._cell_contrib)
-        self._cell_obs = torch.where(m, obs, self._cell_obs)
+        self._code_obs = torch.where(m, code_obs, self._code_obs)
+        self._code_rate = torch.where(m, code_rate, self._code_rate)
         self._node_obs = torch.where(mask[:, None], node_obs, self._node_obs)
         self._direct = torch.where(mask[:, None], direct_terms(self._nodes, cfg), self._direct)
+        if self._pairs:
+            self._set_pair_tables()
 
     def _per_cell(self, table: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
         """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[B, ...]``."""
@@ -220,7 +263,7 @@ class UAVSpectrumEnv(EnvBase):
             pending = mask.clone()
             rnd = 0
             while bool(pending.any()):
-                u = streams.uniform(self._keys, self._counters, _LAYOUT + 2 * rnd + pair, 4)
+                u = streams.uniform(self._s.keys, self._s.counters, _LAYOUT + 2 * rnd + pair, 4)
                 xy = lo + span * u.view(-1, 2, 2)
                 ok = torch.linalg.vector_norm(xy[:, 0] - xy[:, 1], dim=-1) >= min_sep
                 if z > 0:
@@ -235,21 +278,79 @@ class UAVSpectrumEnv(EnvBase):
         self._set_layout(mask)
 
     # -------------------------------------------------------------- dynamics
-    def _observe(self, moves: torch.Tensor, switches: torch.Tensor) -> TensorDict:
-        B, N = self.num_worlds, self.num_uavs
-        pos, tasks = self._pos, self._tasks
-        cell_obs = self._per_cell(self._cell_obs, pos)  # [B, N, 12]
-        task_f = tasks.unsqueeze(-1).float()
-        xyt = torch.cat([cell_obs[..., :2], task_f], -1)
-        nodes = self._node_obs.unsqueeze(1).expand(B, N, 12)
-        observation = torch.cat([cell_obs[..., :2], task_f, cell_obs[..., 2:], xyt[:, self._others].flatten(2), nodes], -1)
-        state = torch.cat([xyt, cell_obs[..., 2:4]], -1).flatten(1)
-        r = self._r.float()
+    @property
+    def _pos(self) -> torch.Tensor:
+        """``[B, N]`` cell of every UAV."""
+        return self._s.code >> 1
+
+    @property
+    def _tasks(self) -> torch.Tensor:
+        """``[B, N]`` task of every UAV (0 sensing, 1 relaying)."""
+        return self._s.code & 1
+
+    def _code_rows(self, table: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
+        """Rows ``[B, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[B, N]`` (one gather)."""
+        if self._code_offset is not None:
+            code = code + self._code_offset
+        return table.view(-1, table.shape[-1]).index_select(0, code.view(-1)).view(*code.shape, table.shape[-1])
+
+    def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed layout)."""
+        W, N = code.shape
+        own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
+        nodes = self._node_obs.unsqueeze(1).expand(W, N, 12)
+        parts = [own]
+        if N == 2:  # the other UAV's (x, y, task)
+            parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
+        elif N > 2:
+            # the others' (x, y, task), for UAV i in the order i+1, ..., i+N-1 (mod N): a window over the codes twice
+            xyt = self._code_xyt.index_select(0, torch.cat([code, code], 1).view(-1))  # [2 W N, 3]
+            parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
+        observation = torch.cat([*parts, nodes], -1)
+        state = torch.cat([own[..., :5].reshape(W, 5 * N), nodes[:, 0]], -1)
+        return observation, state
+
+    def _sum_rates(self, code: torch.Tensor) -> torch.Tensor:
+        """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations, from the per-code rate terms."""
+        rows = self._code_rows(self._code_rate, code)  # [W, N, 3]: terms of sum PU, sum SE, relaying count
+        terms = rows[:, 0]
+        for i in range(1, code.shape[1]):  # N - 1 adds: a reduction over a tiny dim costs ~10x more
+            terms = terms + rows[:, i]
+        sums = terms[:, :2] + self._direct if self.cfg.direct_links else terms[:, :2]
+        return rates_from_sums(sums, terms[:, 2], code.shape[1], self.cfg)
+
+    def _set_pair_tables(self):
+        """Two UAVs and a fixed layout: cache the observation, state and rates of every pair of codes.
+
+        Row ``a * 2C + b`` holds what :meth:`_assemble` and :meth:`_sum_rates` give for
+        UAV 0 at code ``a`` and UAV 1 at code ``b`` (UAV 1's observation is row
+        ``b * 2C + a``), so a step needs one gather per output instead of ~15 ops.
+        """
+        K = 2 * self.cfg.num_cells
+        code = torch.arange(K, device=self.device)
+        pairs = torch.stack([code.repeat_interleave(K), code.repeat(K)], -1)  # [K^2, 2]
+        observation, state = self._assemble(pairs)
+        self._pair_obs, self._pair_state, self._pair_rates = observation[:, 0].contiguous(), state, self._sum_rates(pairs)
+
+    def _observe(self, code: torch.Tensor, cells: torch.Tensor, moves: torch.Tensor, switches: torch.Tensor) -> TensorDict:
+        B, N, dev = self.num_worlds, self.num_uavs, self.device
+        if self._pair_obs is not None:
+            pair = torch.add(code.flip(-1), code, alpha=2 * self.cfg.num_cells)  # [B, 2]: rows (a, b) and (b, a)
+            observation = self._pair_obs.index_select(0, pair.view(-1)).view(B, N, -1)
+            state = self._pair_state.index_select(0, pair[:, 0])
+        else:
+            observation, state = self._assemble(code)
+        flat = code.view(-1)
+        r = self._s.r.float()
         out = {
-            "agents": TensorDict({"observation": observation, "action_mask": self._cell_mask[pos]}, batch_size=(B, N), device=self.device),
-            "state": torch.cat([state, nodes[:, 0]], -1),
-            "positions": self._cell_xy[pos],
-            "tasks": tasks.clone(),
+            "agents": TensorDict._new_unsafe(
+                {"observation": observation, "action_mask": self._code_mask.index_select(0, flat).view(B, N, NUM_ACTIONS)},
+                batch_size=torch.Size((B, N)),
+                device=dev,
+            ),
+            "state": state,
+            "positions": self._code_xy.index_select(0, flat).view(B, N, 2),
+            "tasks": code & 1,
             "r_pu": r[:, 0],
             "r_se": r[:, 1],
             "utility": r.sum(-1),
@@ -257,65 +358,84 @@ class UAVSpectrumEnv(EnvBase):
             "task_switches": switches,
         }
         if self._state_weights is not None:
-            digits = 2 * pos + tasks if self.cfg.state_includes_tasks else pos
-            out["state_index"] = (digits * self._state_weights).sum(-1)
-        return TensorDict(out, batch_size=self.batch_size, device=self.device)
-
-    def _current_rates(self) -> torch.Tensor:
-        """``[B, 2]`` (R_PU, R_SE) of the current configuration, drawing fresh fading if enabled."""
-        direct = self._direct.expand(self.num_worlds, 2)
-        if self.cfg.fading == "none":
-            contrib = self._per_cell(self._cell_contrib, self._pos)
-        else:
-            gains = self._per_cell(self._cell_gains, self._pos)
-            u = streams.uniform(self._keys, self._counters, _FADING, 4 * self.num_uavs).view_as(gains)
-            contrib = relay_contributions(gains * -torch.log1p(-u), self.cfg)  # Exp(1) power gain per link
-            if self.cfg.direct_links:  # the direct links PT->PR and S->E fade too
-                direct = direct * -torch.log1p(-streams.uniform(self._keys, self._counters, _FADING_DIRECT, 2))
-        return torch.stack(rates(contrib, self._tasks, direct, self.cfg), -1)
-
-    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        B, N, C, cfg = self.num_worlds, self.num_uavs, self.cfg.num_cells, self.cfg
-        mask = tensordict.get("_reset", None) if tensordict is not None else None
-        mask = torch.ones(B, dtype=torch.bool, device=self.device) if mask is None else mask.reshape(B).to(self.device)
-        self._counters += mask
-        if cfg.layout == "random":
-            self._sample_layout(mask)
-        fresh = mask & ~self._started if cfg.reset_positions == "keep" else mask
-        # distinct cells: the N smallest of C random keys; tasks per init_tasks
-        cells = streams.random_bits(self._keys, self._counters, _POSITIONS, C).topk(N, dim=-1, largest=False).indices
-        if cfg.init_tasks == "random":
-            tasks = streams.random_bits(self._keys, self._counters, _TASKS, N) & 1
-        else:
-            tasks = torch.full((B, N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=self.device)
-        self._pos = torch.where(fresh[:, None], cells, self._pos)
-        self._tasks = torch.where(fresh[:, None], tasks, self._tasks)
-        self._started |= mask
-        self._steps = torch.where(mask, 0, self._steps)
-        self._best = torch.where(mask, 0.0, self._best)
-        self._r = torch.where(mask[:, None], self._current_rates(), self._r)
-        zeros = torch.zeros(B, dtype=torch.long, device=self.device)
-        out = self._observe(zeros, zeros)
-        done = torch.zeros(B, 1, dtype=torch.bool, device=self.device)
-        out.update({"done": done, "terminated": done.clone(), "truncated": done.clone()})
+            digits = code if self.cfg.state_includes_tasks else cells
+            base = 2 * self.cfg.num_cells if self.cfg.state_includes_tasks else self.cfg.num_cells
+            index = digits[:, N - 1]
+            for i in range(N - 2, -1, -1):  # Horner: d_0 + base (d_1 + base (...)); sums over tiny dims are slow
+                index = torch.add(digits[:, i], index, alpha=base)
+            out["state_index"] = index.clone() if N == 1 else index
         return out
 
-    def _resolve_moves(self, action: torch.Tensor) -> torch.Tensor:
-        """Target cells of a joint action, made valid as SPEC section 2 decides.
+    def _current_rates(self, code: torch.Tensor) -> torch.Tensor:
+        """``[B, 2]`` (R_PU, R_SE) of the configuration ``code``, drawing fresh fading if enabled."""
+        cfg = self.cfg
+        if cfg.fading == "none":
+            if self._pair_rates is not None:
+                return self._pair_rates.index_select(0, torch.add(code[:, 1], code[:, 0], alpha=2 * cfg.num_cells))
+            return self._sum_rates(code)
+        cells, direct = code >> 1, self._direct.expand(self.num_worlds, 2)
+        gains = self._per_cell(self._cell_gains, cells)
+        u = streams.uniform(self._s.keys, self._s.counters, _FADING, 4 * self.num_uavs).view_as(gains)
+        contrib = relay_contributions(gains * -torch.log1p(-u), cfg)  # Exp(1) power gain per link
+        if cfg.direct_links:  # the direct links PT->PR and S->E fade too
+            direct = direct * -torch.log1p(-streams.uniform(self._s.keys, self._s.counters, _FADING_DIRECT, 2))
+        return torch.stack(rates(contrib, code & 1, direct, cfg), -1)
 
-        Off-grid moves stay; then, until all targets differ, every moving UAV whose
-        target another UAV also targets (a mover or a stayer) is cancelled.
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        B, N, C, cfg, dev = self.num_worlds, self.num_uavs, self.cfg.num_cells, self.cfg, self.device
+        mask = tensordict.get("_reset", None) if tensordict is not None else None
+        mask = torch.ones(B, dtype=torch.bool, device=dev) if mask is None else mask.reshape(B).to(dev)
+        self._s.counters += mask
+        if cfg.layout == "random":
+            self._sample_layout(mask)
+        fresh = mask & ~self._s.started if cfg.reset_positions == "keep" else mask
+        # distinct cells: the N smallest of C random keys; tasks per init_tasks
+        cells = streams.random_bits(self._s.keys, self._s.counters, _POSITIONS, C).topk(N, dim=-1, largest=False).indices
+        if cfg.init_tasks == "random":
+            tasks = streams.random_bits(self._s.keys, self._s.counters, _TASKS, N) & 1
+        else:
+            tasks = torch.full((B, N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=dev)
+        self._s.code = torch.where(fresh[:, None], 2 * cells + tasks, self._s.code)
+        self._s.started |= mask
+        self._s.steps = torch.where(mask, 0, self._s.steps)
+        self._s.best = torch.where(mask, 0.0, self._s.best)
+        self._s.r = torch.where(mask[:, None], self._current_rates(self._s.code), self._s.r)
+        zeros = torch.zeros(B, dtype=torch.long, device=dev)
+        out = self._observe(self._s.code, self._s.code >> 1, zeros, zeros.clone())
+        done = torch.zeros(B, 1, dtype=torch.bool, device=dev)
+        out.update({"done": done, "terminated": done.clone(), "truncated": done.clone()})
+        return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=dev)
+
+    def _resolve_moves(self, cells: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """Target cells made valid as SPEC section 2 decides (off-grid moves already stay).
+
+        Until all targets differ, every UAV whose target another UAV also targets
+        (a mover or a stayer) goes back to its cell; for a stayer that changes
+        nothing.  Each round cancels at least one mover, and one cancelled in
+        round k > 1 was blocked by one cancelled in round k - 1, which began with
+        two UAVs (a stayer or a second mover): N - 1 rounds always suffice.
         """
-        pos = self._pos
-        target = torch.gather(self._neighbours[pos], -1, action.clamp(max=3).unsqueeze(-1)).squeeze(-1)
-        target = torch.where((action < 4) & (target >= 0), target, pos)
-        eye = torch.eye(self.num_uavs, dtype=torch.bool, device=self.device)
-        for _ in range(self.num_uavs):
-            clash = ((target.unsqueeze(-1) == target.unsqueeze(-2)) & ~eye).any(-1) & (target != pos)
-            if not bool(clash.any()):
+        N = self.num_uavs
+        if N == 2:  # one round, no sync
+            return torch.where(target[:, :1] == target[:, 1:], cells, target)
+        clash = self._clashes(target)
+        target = torch.where(clash, cells, target)
+        # later rounds: only worlds where a UAV went back can clash again (usually a few)
+        active = clash.any(-1).nonzero().squeeze(-1)
+        for _ in range(N - 2):
+            if len(active) == 0:
                 break
-            target = torch.where(clash, pos, target)
+            sub_target, sub_cells = target[active], cells[active]
+            clash = self._clashes(sub_target)
+            target[active] = torch.where(clash, sub_cells, sub_target)
+            active = active[clash.any(-1)]
         return target
+
+    def _clashes(self, target: torch.Tensor) -> torch.Tensor:
+        """``[W, N]``: does another UAV of the same world target the same cell?  By counting targets per cell."""
+        C = self.cfg.num_cells
+        flat = (target + self._cell_offset[: len(target)]).view(-1)
+        return (torch.bincount(flat, minlength=len(target) * C).index_select(0, flat) > 1).view_as(target)
 
     def _check_action(self, action: torch.Tensor):
         shape = (self.num_worlds, self.num_uavs)
@@ -323,41 +443,40 @@ class UAVSpectrumEnv(EnvBase):
             raise ValueError(f"('agents', 'action') has shape {tuple(action.shape)}: expected {shape} (worlds, UAVs)")
         if action.dtype.is_floating_point or action.dtype.is_complex or action.dtype == torch.bool:
             raise TypeError(f"('agents', 'action') has dtype {action.dtype}: expected an integer dtype with values 0..5")
-        if bool(((action < 0) | (action >= NUM_ACTIONS)).any()):
-            bad = action[(action < 0) | (action >= NUM_ACTIONS)][0].item()
+        lo, hi = torch.aminmax(action)
+        if lo < 0 or hi >= NUM_ACTIONS:
+            bad = (lo if lo < 0 else hi).item()
             raise ValueError(f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = tensordict.get(("agents", "action"))
         self._check_action(action)
-        action = action.long()
-        cfg = self.cfg
-        target = self._resolve_moves(action)
-        tasks = torch.where(action == 4, SENSING, torch.where(action == 5, RELAYING, self._tasks))
-        moves = (target != self._pos).sum(-1)
-        switches = (tasks != self._tasks).sum(-1)
-        self._pos, self._tasks = target, tasks
-        self._counters += 1
-        prev = self._r
-        self._r = self._current_rates()
+        cfg, code = self.cfg, self._s.code
+        proposed = self._code_next.take(torch.add(action.long(), code, alpha=NUM_ACTIONS))  # [B, N] codes, moves unchecked
+        cells = code >> 1
+        target = self._resolve_moves(cells, proposed >> 1)
+        tasks = proposed & 1
+        new_code = torch.add(tasks, target, alpha=2)
+        moves = (target != cells).sum(-1)
+        switches = ((proposed ^ code) & 1).sum(-1)
+        self._s.code = new_code
+        self._s.counters += 1
+        prev = self._s.r
+        self._s.r = r = self._current_rates(new_code)
         if cfg.reward == "delta":
-            reward = delta_reward(self._r[:, 0], self._r[:, 1], prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
+            reward = delta_reward(r[:, 0], r[:, 1], prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
         else:
-            total = self._r.sum(-1)
-            reward = best_so_far_reward(total, self._best)
-            self._best = torch.maximum(self._best, total)
-        self._steps += 1
-        out = self._observe(moves, switches)
-        truncated = (self._steps >= cfg.max_steps).unsqueeze(-1)
-        out.update(
-            {
-                "reward": reward.float().unsqueeze(-1),
-                "done": truncated,
-                "terminated": torch.zeros_like(truncated),
-                "truncated": truncated.clone(),
-            }
-        )
-        return out
+            total = r.sum(-1)
+            reward = best_so_far_reward(total, self._s.best)
+            self._s.best = torch.maximum(self._s.best, total)
+        self._s.steps += 1
+        out = self._observe(new_code, target, moves, switches)
+        truncated = (self._s.steps >= cfg.max_steps).unsqueeze(-1)
+        out["reward"] = reward.float().unsqueeze(-1)
+        out["done"] = truncated
+        out["terminated"] = torch.zeros_like(truncated)
+        out["truncated"] = truncated.clone()
+        return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=self.device)
 
     # ------------------------------------------------------ shared helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:
@@ -398,7 +517,7 @@ class UAVSpectrumEnv(EnvBase):
         return joint_action_valid(cells, self._neighbours, self.num_uavs)
 
     def _require_layout(self):
-        if self.cfg.layout == "random" and not bool(self._started.all()):
+        if self.cfg.layout == "random" and not bool(self._s.started.all()):
             raise RuntimeError("layout='random' draws each world's layout at reset: call env.reset() first")
 
     @property

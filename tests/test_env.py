@@ -324,18 +324,23 @@ def test_dynamics_follow_spec(scenario):
         torch.testing.assert_close(rewards, weighted[1] - weighted[0], rtol=0, atol=1e-4)
 
 
-@pytest.mark.parametrize("start,actions,end,switches", [
-    ([(0, 0), (1, 0)], [3, 2], [(1, 0), (0, 0)], 0),  # swap
-    ([(0, 0), (1, 0)], [3, 5], [(0, 0), (1, 0)], 1),  # into a UAV that stays (task action): cancelled
-    ([(0, 0), (1, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # a train: UAV0 follows UAV1 into the freed cell
-    ([(0, 0), (1, 0)], [2, 0], [(0, 0), (1, 0)], 0),  # both off the grid: both stay
-    ([(0, 0), (2, 0)], [3, 2], [(0, 0), (2, 0)], 0),  # both into the middle: both cancelled
-    ([(1, 0), (2, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # UAV1 off the grid stays, so UAV0 is cancelled
+@pytest.mark.parametrize("grid,start,actions,end,switches", [
+    ((3, 1), [(0, 0), (1, 0)], [3, 2], [(1, 0), (0, 0)], 0),  # swap
+    ((3, 1), [(0, 0), (1, 0)], [3, 5], [(0, 0), (1, 0)], 1),  # into a UAV that stays (task action): cancelled
+    ((3, 1), [(0, 0), (1, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # a train: UAV0 follows UAV1 into the freed cell
+    ((3, 1), [(0, 0), (1, 0)], [2, 0], [(0, 0), (1, 0)], 0),  # both off the grid: both stay
+    ((3, 1), [(0, 0), (2, 0)], [3, 2], [(0, 0), (2, 0)], 0),  # both into the middle: both cancelled
+    ((3, 1), [(1, 0), (2, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # UAV1 off the grid stays, so UAV0 is cancelled
+    ((4, 1), [(1, 0), (2, 0), (3, 0)], [3, 3, 3], [(1, 0), (2, 0), (3, 0)], 0),  # a chain: cancelled over two rounds
+    ((4, 1), [(0, 0), (1, 0), (3, 0)], [3, 3, 2], [(0, 0), (1, 0), (3, 0)], 0),  # two into cell 2, then UAV0 behind
+    ((2, 2), [(0, 0), (1, 0), (1, 1)], [3, 1, 2], [(1, 0), (1, 1), (0, 1)], 0),  # a rotation with a free cell
+    ((2, 2), [(0, 0), (1, 0), (1, 1), (0, 1)], [3, 1, 2, 0], [(1, 0), (1, 1), (0, 1), (0, 0)], 0),  # a full cycle
+    ((2, 2), [(0, 0), (1, 0), (1, 1), (0, 1)], [3, 1, 2, 4], [(0, 0), (1, 0), (1, 1), (0, 1)], 0),  # a blocked cycle
 ])
-def test_swaps_and_cancelled_moves(start, actions, end, switches):
-    """SPEC 2 on a 3x1 grid: swaps are allowed, clashing moves are cancelled and count as no move."""
-    env = UAVSpectrumEnv(batch_size=1, grid=(3, 1), num_uavs=2, init_tasks="sensing")
-    for seed in range(200):
+def test_swaps_and_cancelled_moves(grid, start, actions, end, switches):
+    """SPEC 2: swaps and cycles are allowed, clashing moves are cancelled (in chains) and count as no move."""
+    env = UAVSpectrumEnv(batch_size=1, grid=grid, num_uavs=len(start), init_tasks="sensing")
+    for seed in range(3000):
         env.set_seed(seed)
         td = env.reset()
         if xy_list(td, 0) == start:
@@ -343,7 +348,7 @@ def test_swaps_and_cancelled_moves(start, actions, end, switches):
     else:
         raise AssertionError(f"no seed starts at {start}")
     out = step_with(env, td, actions)["next"]
-    assert xy_list(out, 0) == end
+    assert xy_list(out, 0) == end == resolve(start, actions, *grid)
     assert out["moves"].item() == sum(p != q for p, q in zip(start, end)) and out["task_switches"].item() == switches
 
 
@@ -593,7 +598,7 @@ def test_collector_with_partial_resets():
         return td
 
     collector = Collector(env, policy, frames_per_batch=B * 10, total_frames=B * 20, auto_register_policy_transforms=False)
-    base._steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
+    base._s.steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
     batches = [b.clone() for b in collector]
     collector.shutdown()
     data = torch.cat(batches, 1)
