@@ -1,0 +1,330 @@
+"""Factored deep Q-network: team Q-learning past the tabular state explosion.
+
+The tabular agent keeps one Q row per joint location, ``(L1 L2)^N`` rows; this
+agent replaces the table by a network over the joint observation, trained
+with double-DQN targets from a replay buffer and a soft-updated target network.
+
+Two heads (``agent.head``):
+
+- ``factored`` (default): a torso reads every UAV's observation (the joint
+  observation) and feeds one action head per UAV; the heads share parameters
+  and see the UAV's own observation, its one-hot id and which neighbouring
+  cells other UAVs hold.  The team value mixes the UAVs' chosen values by VDN
+  (their sum) or QMIX (a monotonic state-conditioned mix), ``agent.mixer``.
+  The greedy joint action is always valid: UAV by UAV in id order, each takes
+  its best action whose target cell is neither held by a UAV still to choose
+  nor claimed by one that chose (:class:`ValidGreedy`).
+- ``joint``: the torso feeds one ``6^N``-way head over joint actions, masked to
+  the valid ones: the exact deep counterpart of the team Q table, for N <= 4.
+
+One iteration: each of ``agent.worlds`` worlds plays one episode of
+``train.steps_per_episode`` steps (the worlds are reseeded from the seed and
+the iteration, so a resumed run continues exactly as the uninterrupted one),
+the transitions join the replay buffer, then ``agent.updates`` gradient steps.
+
+Built from TorchRL parts: ``MultiAgentMLP`` (torso and per-UAV heads),
+``QValueModule`` (joint argmax), ``EGreedyModule``, ``VDNMixer``/``QMixer``,
+``QMixerLoss`` (its double-DQN target here) and ``DQNLoss(double_dqn=True)``,
+``TensorDictReplayBuffer``, ``SoftUpdate`` and ``Collector``.
+
+Example:
+    >>> from hydra import compose, initialize_config_dir
+    >>> from uavrl.config import config_dir, model_config
+    >>> with initialize_config_dir(config_dir=config_dir(), version_base=None):
+    ...     cfg = compose("config", overrides=["agent=dqn", "env.grid=[3,3]", "agent.worlds=4", "agent.buffer_size=1000", "train.steps_per_episode=5"])
+    >>> agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    >>> metrics = agent.train_iteration()  # 4 worlds x 5 steps, no gradient step before agent.learning_starts
+    >>> agent.env_steps, metrics["train/epsilon"] < 1.0
+    (20, True)
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import Categorical, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, VDNMixer
+from torchrl.objectives import DQNLoss, QMixerLoss, SoftUpdate
+
+from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
+from uavrl.evaluation import episode_metrics
+
+HEADS = ("factored", "joint")
+MIXERS = ("vdn", "qmix")
+MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
+_ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
+
+
+# ----------------------------------------------------------------------------- networks
+def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
+    return positions[..., 1] * width + positions[..., 0]
+
+
+class TeamQNet(nn.Module):
+    """Action values from the joint observation ``[*, N, F]`` and the positions ``[*, N, 2]``.
+
+    The torso (a centralised ``MultiAgentMLP``) embeds all N observations at
+    once.  ``factored``: a shared per-UAV head reads that embedding, the UAV's
+    own observation, its one-hot id and which of its 4 neighbouring cells
+    another UAV holds, and returns ``[*, N, 6]``.  ``joint``: a linear head
+    returns ``[*, 6^N]``.
+    """
+
+    def __init__(self, env: UAVSpectrumEnv, head: str, hidden: int, depth: int):
+        super().__init__()
+        N, F, dev = env.num_uavs, env.observation_size, env.device
+        self.joint, self.width = head == "joint", env.cfg.grid[0]
+        self.torso = MultiAgentMLP(F, hidden, N, centralized=True, share_params=True, depth=depth, num_cells=hidden, activation_class=nn.ReLU, activate_last_layer=True, device=dev)
+        if self.joint:
+            self.head = nn.Linear(hidden, NUM_ACTIONS**N, device=dev)
+        else:
+            self.head = MultiAgentMLP(hidden + F + N + 4, NUM_ACTIONS, N, centralized=False, share_params=True, depth=1, num_cells=hidden, activation_class=nn.ReLU, device=dev)
+        self.register_buffer("ids", torch.eye(N, device=dev))
+        self.register_buffer("neighbours", env.neighbours.clone())
+
+    def forward(self, observation: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+        embedding = self.torso(observation)  # [*, N, hidden], the same row for every UAV
+        if self.joint:
+            return self.head(embedding[..., 0, :])
+        cells = _cells(positions, self.width)
+        held = (self.neighbours[cells].unsqueeze(-1) == cells[..., None, None, :]).any(-1)  # [*, N, 4]
+        ids = self.ids.expand(*observation.shape[:-1], -1)
+        return self.head(torch.cat([embedding, observation, ids, held.to(observation.dtype)], -1))
+
+
+class ValidGreedy(nn.Module):
+    """A valid joint action from per-UAV values ``[*, N, 6]``, masks ``[*, N, 6]`` and positions.
+
+    UAV by UAV in id order, each takes its best allowed action whose target
+    cell differs from the cells of the UAVs still to choose and from the
+    targets of those that chose.  Its own cell always qualifies, so every UAV
+    gets an action and all targets differ: a valid joint action (SPEC section 2).
+
+    Example:
+        >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
+        >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 9.0, 0, 0, 1]]])  # both want cell 1
+        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]))
+        tensor([[3, 5]])
+    """
+
+    def __init__(self, neighbours: torch.Tensor, width: int):
+        super().__init__()
+        self.width = width
+        self.register_buffer("neighbours", neighbours.clone())
+
+    def forward(self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+        cells = _cells(positions, self.width)
+        targets = torch.cat([self.neighbours[cells], cells.unsqueeze(-1).expand(*cells.shape, 2)], -1)  # [*, N, 6]
+        claimed = cells.clone()
+        actions = []
+        for i in range(cells.shape[-1]):
+            others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
+            free = (targets[..., i, :, None] != others[..., None, :]).all(-1) & action_mask[..., i, :]
+            action = action_value[..., i, :].masked_fill(~free, -math.inf).argmax(-1)
+            claimed[..., i] = targets[..., i, :].gather(-1, action.unsqueeze(-1)).squeeze(-1)
+            actions.append(action)
+        return torch.stack(actions, -1)
+
+
+class JointActionMask(nn.Module):
+    """``[*, 6^N]`` valid joint actions at positions ``[*, N, 2]`` (the environment's rule)."""
+
+    def __init__(self, neighbours: torch.Tensor, width: int, num_uavs: int):
+        super().__init__()
+        self.width, self.num_uavs = width, num_uavs
+        self.register_buffer("neighbours", neighbours.clone())
+
+    def forward(self, positions: torch.Tensor) -> torch.Tensor:
+        return joint_action_valid(_cells(positions, self.width), self.neighbours, self.num_uavs)
+
+
+class DecodeJointAction(nn.Module):
+    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i 6^i``."""
+
+    def __init__(self, num_uavs: int, device):
+        super().__init__()
+        self.register_buffer("table", decode_joint_actions(num_uavs, device))
+
+    def forward(self, joint_action: torch.Tensor) -> torch.Tensor:
+        return self.table[joint_action]
+
+
+# ----------------------------------------------------------------------------- loss
+class DoubleQMixerLoss(QMixerLoss):
+    """``QMixerLoss`` with double-DQN targets over valid joint actions.
+
+    ``y = r + gamma (1 - terminated) Mix_target(Q_target(s', a'), s')`` where the
+    online network's :class:`ValidGreedy` picks ``a'``; the loss is the Huber
+    distance to ``Mix(Q(s, a), s)``.
+    """
+
+    def __init__(self, greedy: TensorDictSequential, mixer: TensorDictModule, action_spec, gamma: float):
+        super().__init__(greedy, mixer, action_space=action_spec, loss_function="smooth_l1")
+        self.gamma = gamma
+
+    def _team_value(self, td: TensorDictBase, action: torch.Tensor, params, mixer_params) -> torch.Tensor:
+        """``[*, 1]`` mixed value of the per-UAV actions ``[*, N]`` at ``td``, under online or target parameters."""
+        net, mixer = self.local_value_network.module[0].module, self.mixer_network.module
+        with params.to_module(self.local_value_network, preserve_module_state=False):
+            chosen = net(td.get(("agents", "observation")), td.get("positions")).gather(-1, action.unsqueeze(-1))
+        with mixer_params.to_module(self.mixer_network, preserve_module_state=False):
+            return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        k, nxt = self.tensor_keys, td.get("next")
+        value = self._team_value(td, td.get(k.action), self.local_value_network_params, self.mixer_network_params)
+        with torch.no_grad():
+            with self.local_value_network_params.data.to_module(self.local_value_network, preserve_module_state=False):
+                next_action = self.local_value_network(nxt.clone(False)).get(k.action)  # the online greedy valid action
+            next_value = self._team_value(nxt, next_action, self.target_local_value_network_params, self.target_mixer_network_params)
+            target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
+        return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
+
+
+# ----------------------------------------------------------------------------- the agent
+def check_settings(env_cfg: ModelConfig, a) -> None:
+    """One-line errors for settings the agent cannot run."""
+    if a.head not in HEADS:
+        raise ValueError(f"agent.head={a.head!r} is invalid: allowed heads are {', '.join(map(repr, HEADS))}")
+    if a.mixer not in MIXERS:
+        raise ValueError(f"agent.mixer={a.mixer!r} is invalid: allowed mixers are {', '.join(map(repr, MIXERS))}")
+    if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
+        raise ValueError(
+            f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = {env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
+        )
+    for name in ("worlds", "hidden", "depth", "mixing_embed_dim", "batch_size", "buffer_size", "updates"):
+        if int(a[name]) < 1:
+            raise ValueError(f"agent.{name}={a[name]} is invalid: it must be a positive integer")
+    for name, low, high in (("gamma", 0.0, 1.0), ("tau", 0.0, 1.0), ("eps_start", 0.0, 1.0), ("eps_end", 0.0, 1.0), ("eps_fraction", 0.0, 1.0)):
+        if not low <= float(a[name]) <= high:
+            raise ValueError(f"agent.{name}={a[name]} is invalid: it must lie in [{low}, {high}]")
+    if not float(a.lr) > 0 or not float(a.max_grad_norm) > 0:
+        raise ValueError(f"agent.lr={a.lr} and agent.max_grad_norm={a.max_grad_norm} must be positive")
+
+
+class DQNAgent:
+    """The deep agent behind ``python -m uavrl.train agent=dqn`` (protocol in :mod:`uavrl.agents`).
+
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``cfg.train.iterations`` the run length.
+    """
+
+    def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
+        a = cfg.agent
+        check_settings(env_cfg, a)
+        self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
+        self.device = torch.device(device)
+        self.num_iterations = int(cfg.train.iterations)
+        self.iteration = 0
+        torch.manual_seed(self.seed)
+        self.env = UAVSpectrumEnv(batch_size=int(a.worlds), config=env_cfg, seed=self._world_seed(0), device=self.device)
+        env, N = self.env, env_cfg.num_uavs
+        net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
+        values = ("agents", "action_value") if a.head == "factored" else "joint_action_value"
+        q = TensorDictModule(net, in_keys=[("agents", "observation"), "positions"], out_keys=[values])
+        frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
+        eps = dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=max(1, int(float(a.eps_fraction) * frames)), device=self.device)
+        if a.head == "factored":
+            spec = env.full_action_spec_unbatched
+            greedy_action = TensorDictModule(ValidGreedy(env.neighbours, env_cfg.grid[0]), in_keys=[values, ("agents", "action_mask"), "positions"], out_keys=[("agents", "action")])
+            self.greedy = TensorDictSequential(q, greedy_action)
+            self.exploration = EGreedyModule(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
+            explore = TensorDictSequential(self.greedy, self.exploration)
+            if a.mixer == "vdn":
+                mixer = TensorDictModule(VDNMixer(N, self.device), in_keys=[("agents", "chosen_action_value")], out_keys=["chosen_action_value"])
+            else:
+                mixer = TensorDictModule(QMixer((env.state_size,), int(a.mixing_embed_dim), N, self.device), in_keys=[("agents", "chosen_action_value"), "state"], out_keys=["chosen_action_value"])
+            self.loss = DoubleQMixerLoss(self.greedy, mixer, spec, float(a.gamma))
+            self._action_keys = [("agents", "action")]
+        else:
+            spec = Categorical(env_cfg.num_joint_actions, device=self.device)
+            mask = TensorDictModule(JointActionMask(env.neighbours, env_cfg.grid[0], N), in_keys=["positions"], out_keys=["joint_action_mask"])
+            argmax = QValueModule(spec=spec, action_value_key=values, action_mask_key="joint_action_mask", out_keys=["joint_action", values, "joint_chosen_action_value"])
+            decode = TensorDictModule(DecodeJointAction(N, self.device), in_keys=["joint_action"], out_keys=[("agents", "action")])
+            self.exploration = EGreedyModule(spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps)
+            self.greedy = TensorDictSequential(mask, q, argmax, decode)
+            explore = TensorDictSequential(mask, q, argmax, self.exploration, decode)
+            self.loss = DQNLoss(TensorDictSequential(mask, q, argmax), double_dqn=True, delay_value=True, action_space=spec, loss_function="smooth_l1")
+            self.loss.set_keys(action="joint_action", action_value=values, value="joint_chosen_action_value")
+            self.loss.make_value_estimator(gamma=float(a.gamma))
+            self._action_keys = ["joint_action", ("agents", "action")]
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
+        self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
+        self.buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size))
+        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
+        self._keys = inputs + self._action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
+        self.collector = Collector(env, explore, frames_per_batch=int(a.worlds) * env_cfg.max_steps, total_frames=-1, device=self.device, auto_register_policy_transforms=False)
+        self._batches = iter(self.collector)
+
+    def _world_seed(self, iteration: int) -> int:
+        return self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE
+
+    @property
+    def env_steps(self) -> int:
+        """Team steps collected so far (worlds times steps)."""
+        return self.iteration * int(self.settings.worlds) * self.env_cfg.max_steps
+
+    def train_iteration(self) -> dict[str, float]:
+        """One episode in every world, then ``agent.updates`` gradient steps."""
+        self.collector.set_seed(self._world_seed(self.iteration), static_seed=True)
+        self.collector.reset()
+        u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
+        batch = next(self._batches)  # [worlds, steps]
+        self.buffer.extend(batch.reshape(-1).select(*self._keys))
+        losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
+        self.exploration.step(batch.numel())
+        self.iteration += 1
+        nxt = batch.get("next")
+        per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star)
+        out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
+        out["train/epsilon"] = self.exploration.eps.item()
+        if losses:
+            out["train/loss"] = torch.stack(losses).mean().item()
+        return out
+
+    def _update(self) -> torch.Tensor:
+        loss = self.loss(self.buffer.sample())["loss"]
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.loss.parameters(), float(self.settings.max_grad_norm))
+        self.optimizer.step()
+        self.target_update.step()
+        return loss.detach()
+
+    def policies(self) -> list[TensorDictSequential]:
+        """The greedy policy: reads the env's keys, writes ``("agents", "action")``."""
+        return [self.greedy]
+
+    def state_dict(self) -> dict:
+        """Networks with their targets, optimizer, exploration, replay buffer, RNG and progress."""
+        state = {
+            "iteration": self.iteration,
+            "loss": self.loss.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "exploration": self.exploration.state_dict(),
+            "buffer": self.buffer[: len(self.buffer)] if len(self.buffer) else None,  # the filled slots, in slot order
+            "buffer_writes": self.buffer.write_count,
+            "rng": torch.get_rng_state(),
+        }
+        if self.device.type == "cuda":
+            state["cuda_rng"] = torch.cuda.get_rng_state(self.device)
+        return state
+
+    def load_state_dict(self, state: dict):
+        self.loss.load_state_dict(state["loss"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.exploration.load_state_dict(state["exploration"])
+        self.buffer.empty()
+        if state["buffer"] is not None:
+            data = state["buffer"].to(self.device)
+            self.buffer.extend(data)
+            wrapped = state["buffer_writes"] % len(data) if state["buffer_writes"] > len(data) else 0
+            if wrapped:  # rewrite the first slots with themselves so the next write lands where it would have
+                self.buffer.extend(data[:wrapped])
+        self.iteration = int(state["iteration"])
+        torch.set_rng_state(state["rng"])
+        if "cuda_rng" in state:
+            torch.cuda.set_rng_state(state["cuda_rng"], self.device)

@@ -1,0 +1,188 @@
+"""Factored deep Q-network: learning, double-DQN targets over valid actions, masks, checkpoints, errors."""
+import io
+import math
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from tensordict import TensorDict
+
+from uavrl.agents.dqn import DQNAgent, ValidGreedy
+from uavrl.config import config_dir, model_config
+from uavrl.envs import UAVSpectrumEnv, joint_action_valid
+from uavrl.evaluation import RandomPolicy, evaluate
+
+TINY = ["env.grid=[3,3]", "train.steps_per_episode=8", "train.iterations=40", "agent.worlds=32", "agent.hidden=32", "agent.depth=1", "agent.batch_size=128", "agent.buffer_size=4000", "agent.updates=8", "agent.learning_starts=256", "agent.lr=0.003", "agent.tau=0.05"]
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Small tensors: one thread is fastest, and two threads crawl on a busy 2-core machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def make_agent(*overrides, seed=0):
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        cfg = compose(config_name="config", overrides=["agent=dqn", *TINY, *overrides])
+    return DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed)
+
+
+def transitions(agent, iterations=1):
+    """Stored transitions of ``iterations`` training iterations, straight from the replay buffer."""
+    for _ in range(iterations):
+        agent.train_iteration()
+    return agent.buffer[: len(agent.buffer)]
+
+
+@pytest.mark.parametrize("overrides", [["agent.mixer=vdn"], ["agent.mixer=qmix"], ["agent.head=joint"]])
+def test_short_training_beats_a_random_policy(overrides):
+    agent = make_agent(*overrides)
+    for _ in range(agent.num_iterations):
+        metrics = agent.train_iteration()
+    assert math.isfinite(metrics["train/loss"]) and metrics["train/epsilon"] == pytest.approx(0.05)
+    assert agent.env_steps == 40 * 32 * 8
+    trained = evaluate(agent.policies()[0], agent.env_cfg, num_starts=64)
+    random = evaluate(RandomPolicy(0), agent.env_cfg, num_starts=64)
+    assert trained["eval/optimality"] > random["eval/optimality"] + 0.25  # random: 0.58
+
+
+def test_valid_greedy_respects_masks_and_never_collides():
+    env = UAVSpectrumEnv(batch_size=256, grid=(4, 3), num_uavs=4, seed=3)
+    td = env.reset()
+    greedy = ValidGreedy(env.neighbours, width=4)
+    values = torch.randn(256, 4, 6)
+    actions = greedy(values, td["agents", "action_mask"], td["positions"])
+    assert td["agents", "action_mask"].gather(-1, actions.unsqueeze(-1)).all()
+    cells = env.cells_of(td["positions"])
+    joint = (actions * 6 ** torch.arange(4)).sum(-1)
+    assert joint_action_valid(cells, env.neighbours, 4).gather(-1, joint.unsqueeze(-1)).all()
+    # with no conflict it is the plain masked argmax
+    lone = UAVSpectrumEnv(batch_size=256, grid=(4, 3), num_uavs=1, seed=3).reset()
+    masked = values[:, :1].masked_fill(~lone["agents", "action_mask"], -math.inf).argmax(-1)
+    assert torch.equal(greedy(values[:, :1], lone["agents", "action_mask"], lone["positions"]), masked)
+
+
+def online_and_target(*overrides):
+    """An agent, its first transitions, and Q values under its online and its (perturbed) target parameters."""
+    agent = make_agent(*overrides, "agent.learning_starts=100000")  # no gradient step
+    data, loss = transitions(agent)[:64], agent.loss
+    factored = agent.settings.head == "factored"
+    params, module = (loss.target_local_value_network_params, loss.local_value_network) if factored else (loss.target_value_network_params, loss.value_network)
+    with torch.no_grad():  # make the target network differ from the online one
+        for name, p in params.items(True, True):
+            if name[-1] in ("weight", "bias"):
+                p.add_(0.1 * torch.randn_like(p))
+    net = agent.greedy[0 if factored else 1].module
+
+    def online(td):
+        return net(td["agents", "observation"], td["positions"])
+
+    def target(td):
+        with params.to_module(module):
+            return online(td)
+
+    return agent, data, online, target
+
+
+@torch.no_grad()
+def test_factored_target_is_double_dqn_over_valid_actions():
+    agent, data, online, target = online_and_target("agent.mixer=vdn", "agent.gamma=0.7")
+    nxt = data["next"]
+    best = ValidGreedy(agent.env.neighbours, 3)(online(nxt), nxt["agents", "action_mask"], nxt["positions"])
+    assert nxt["agents", "action_mask"].gather(-1, best.unsqueeze(-1)).all()
+    assert not torch.equal(best, online(nxt).argmax(-1))  # the unmasked argmax would pick invalid moves
+    y = nxt["reward"] + 0.7 * target(nxt).gather(-1, best.unsqueeze(-1)).sum(-2)
+    value = online(data).gather(-1, data["agents", "action"].unsqueeze(-1)).sum(-2)
+    assert agent.loss(data)["loss"].item() == pytest.approx(torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5)
+    # the plain DQN target (the target network's own max) is a different number
+    assert not torch.allclose(y, nxt["reward"] + 0.7 * target(nxt).max(-1).values.sum(-1, keepdim=True))
+
+
+@torch.no_grad()
+def test_joint_target_masks_invalid_joint_actions_in_the_max():
+    agent, data, online, target = online_and_target("agent.head=joint", "agent.gamma=0.5")
+    nxt = data["next"]
+    valid = joint_action_valid(agent.env.cells_of(nxt["positions"]), agent.env.neighbours, 2)
+    best = online(nxt).masked_fill(~valid, -math.inf).argmax(-1, keepdim=True)
+    assert not torch.equal(best, online(nxt).argmax(-1, keepdim=True))  # the unmasked argmax would pick invalid joint actions
+    y = nxt["reward"] + 0.5 * target(nxt).gather(-1, best)
+    value = online(data).gather(-1, data["joint_action"].unsqueeze(-1))
+    assert agent.loss(data)["loss"].item() == pytest.approx(torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5)
+
+
+@pytest.mark.parametrize("head", ["factored", "joint"])
+def test_policies_take_valid_actions(head):
+    agent = make_agent(f"agent.head={head}")
+    data = transitions(agent)  # exploration actions (epsilon = 1 at first)
+    assert data["agents", "action_mask"].gather(-1, data["agents", "action"].unsqueeze(-1)).all()
+    env = UAVSpectrumEnv(batch_size=32, config=agent.env_cfg, seed=5)
+    rollout = env.rollout(8, agent.policies()[0])
+    actions, mask = rollout["agents", "action"], rollout["agents", "action_mask"]
+    assert mask.gather(-1, actions.unsqueeze(-1)).all()
+    joint = (actions * 6 ** torch.arange(2)).sum(-1)
+    assert joint_action_valid(env.cells_of(rollout["positions"]), env.neighbours, 2).gather(-1, joint.unsqueeze(-1)).all()
+
+
+@pytest.mark.parametrize("overrides", [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix"], ["agent.head=joint"]])
+def test_checkpoint_round_trip_continues_identically(overrides):
+    """state_dict -> disk -> load_state_dict: same Q values, then the same training and the same greedy actions.
+
+    The first case wraps the replay buffer around (768 writes into 300 slots).
+    """
+    agent = make_agent(*overrides, seed=4)
+    for _ in range(3):
+        agent.train_iteration()
+    saved = io.BytesIO()
+    torch.save(agent.state_dict(), saved)  # a checkpoint on disk holds copies, not the live tensors
+    saved.seek(0)
+    state = torch.load(saved, weights_only=False)
+    restored = make_agent(*overrides, seed=4)
+    restored.load_state_dict(state)
+    probe = UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).reset()
+    assert (agent.greedy(probe.clone()) == restored.greedy(probe.clone())).all() and restored.env_steps == agent.env_steps
+    torch.set_rng_state(state["rng"])  # the two agents share this process's global RNG; a resumed run has its own
+    metrics = agent.train_iteration()
+    torch.set_rng_state(state["rng"])
+    assert restored.train_iteration() == metrics
+    assert (agent.greedy(probe.clone()) == restored.greedy(probe.clone())).all()
+    actions = [UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).rollout(8, a.policies()[0])["agents", "action"] for a in (agent, restored)]
+    assert torch.equal(*actions)
+
+
+def test_same_seed_same_training():
+    runs = []
+    for seed in (1, 1, 2):
+        agent = make_agent(seed=seed)
+        runs.append([agent.train_iteration() for _ in range(3)])
+    assert runs[0] == runs[1] and runs[0] != runs[2]
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["agent.mixer=sum"], "agent.mixer='sum' is invalid: allowed mixers are 'vdn', 'qmix'"),
+        (["agent.head=tree"], "agent.head='tree' is invalid: allowed heads are 'factored', 'joint'"),
+        (["agent.head=joint", "env.num_uavs=5"], r"needs 6\^5 = 7,776 outputs, over 1,296 \(N <= 4\): use agent.head=factored"),
+        (["agent.worlds=0"], "agent.worlds=0 is invalid"),
+        (["agent.gamma=1.5"], r"agent.gamma=1.5 is invalid: it must lie in \[0.0, 1.0\]"),
+        (["agent.lr=0"], "agent.lr=0 and agent.max_grad_norm=10.0 must be positive"),
+    ],
+)
+def test_bad_settings_fail_with_one_line_errors(overrides, message):
+    with pytest.raises(ValueError, match=message) as err:
+        make_agent(*overrides)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.slow
+def test_paper_preset_two_uavs_reaches_target():
+    """N = 2 on 6x6 with the default settings: greedy optimality >= 0.97 (BENCHMARKS.md, Factored DQN)."""
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        cfg = compose(config_name="config", overrides=["agent=dqn"])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    for _ in range(agent.num_iterations):
+        agent.train_iteration()
+    assert evaluate(agent.policies()[0], agent.env_cfg, num_starts=100)["eval/optimality"] >= 0.97
