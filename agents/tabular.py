@@ -53,6 +53,7 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
 
 DEFAULT_MEMORY_BUDGET = 4 * 2**30
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
+_START_BLOCK = 256  # episodes whose starts are drawn together
 
 
 def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
@@ -251,7 +252,7 @@ class TeamQLearner:
     Args:
         cfg: the model.
         runs: independent runs (each its own table), or worlds feeding one table with ``shared_table``.
-        seed: seeds the starts (world ``r`` of the env seeded ``seed``) and the learner's random numbers.
+        seed: seeds the episode starts (drawn by the env's reset) and the learner's random numbers.
         alpha, gamma, epsilon: eq. 9-10 constants (paper: 0.1, 0.3, 0.1).
         backend: ``"numba"`` (CPU) or ``"torch"`` (any device).
         memory_budget: refuse tables larger than this many bytes.
@@ -281,16 +282,22 @@ class TeamQLearner:
         self.model = TabularModel(cfg, self.device)
         self.q = torch.zeros(num_tables, cfg.num_states, cfg.num_joint_actions, dtype=torch.float64, device=self.device)
         self.episode = 0
-        self._starts = UAVSpectrumEnv(batch_size=self.runs, config=cfg, seed=self.seed, device=self.device)
         self._configuration = None  # end of the last episode, for reset_positions="keep"
+        self._start_block, self._block_starts = -1, None
 
-    # the start of every episode comes from the environment's own reset
     def _episode_starts(self) -> torch.Tensor:
-        td = self._starts.reset()
-        k = self.model.configuration_ids(td["positions"], td["tasks"])
+        """``[R]`` start configurations: run ``r``'s episode ``e`` starts where the environment's reset puts
+        world ``seed + e R + r``; drawn for blocks of episodes in one batched reset."""
         if self.cfg.reset_positions == "keep" and self._configuration is not None:
             return self._configuration.clone()
-        return k
+        block, offset = divmod(self.episode, _START_BLOCK)
+        if block != self._start_block:
+            worlds = _START_BLOCK * self.runs
+            env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=self.seed + block * worlds, device=self.device)
+            td = env.reset()
+            self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(_START_BLOCK, self.runs)
+            self._start_block = block
+        return self._block_starts[offset]
 
     def _uniforms(self) -> torch.Tensor:
         """``[R, T]`` uniforms of this episode, one per step and world, a pure function of (seed, episode)."""
@@ -361,10 +368,6 @@ class TeamQLearner:
         self.q.copy_(state["q"])
         self.episode = int(state["episode"])
         self._configuration = None if state["configuration"] is None else state["configuration"].to(self.device)
-        # replay the episode starts drawn so far, so the next episode starts where the original run's did
-        self._starts.set_seed(self.seed)
-        for _ in range(self.episode):
-            self._starts.reset()
 
 
 def _nth_true_batched(mask: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
