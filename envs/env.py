@@ -156,7 +156,7 @@ class UAVSpectrumEnv(EnvBase):
             keys=streams.world_keys(0, B, dev),
         )
         if layout is not None:
-            self._set_layout(torch.ones(1, dtype=torch.bool, device=dev))
+            self._set_layout(torch.zeros(1, dtype=torch.long, device=dev))
         self._make_specs()
         self.set_seed(seed)
 
@@ -211,71 +211,70 @@ class UAVSpectrumEnv(EnvBase):
         self._s.started.zero_()
 
     # ---------------------------------------------------------------- layout
-    def _set_layout(self, mask: torch.Tensor):
-        """Recompute the per-cell tables of the worlds in ``mask`` from ``self._nodes``."""
-        cfg, C = self.cfg, self.cfg.num_cells
-        gains = link_gains(self._cell_xyz, self._nodes, cfg)  # [Bt, C, 4]
+    def _set_layout(self, worlds: torch.Tensor):
+        """Recompute the per-cell and per-code tables of ``worlds`` (indices into the tables) from ``self._nodes``."""
+        cfg, C, k = self.cfg, self.cfg.num_cells, len(worlds)
+        nodes = self._nodes[worlds]
+        gains = link_gains(self._cell_xyz, nodes, cfg)  # [k, C, 4]
         contrib = relay_contributions(gains, cfg)
-        # observation of a UAV in cell c: its (x, y), then the contributions (scaled by the best cell's)
+        # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
         # at c and at the cells its four moves reach, -1 where a move leaves the grid
-        scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((contrib.shape[0], 1, 2), -1.0)], 1)
-        local = scaled[:, torch.cat([torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1)]
-        obs = torch.cat([(self._cell_xy / self._grid_scale).unsqueeze(0).expand(len(mask), -1, -1), local.flatten(2)], -1).float()
-        node_obs = (self._nodes / self._node_scale).flatten(1).float()
-        # per code 2 c + task: the observation's own block (x, y, task, 10 contributions) and the rate terms
-        cc, task = self._code_cell, self._code_task
-        code_obs = torch.cat([obs[:, cc, :2], task.to(obs.dtype)[None, :, None].expand(len(mask), -1, 1), obs[:, cc, 2:]], -1)
-        relay = (task == RELAYING)[None, :]
-        zero = contrib.new_zeros(())
-        code_rate = torch.stack([torch.where(relay, contrib[:, cc, 0], zero), torch.where(relay, zero, contrib[:, cc, 1]), relay.to(contrib.dtype).expand(len(mask), -1)], -1)
-        m = mask[:, None, None]
+        scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
+        around = torch.cat([torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1)  # [C, 5]
+        cc, relay = self._code_cell, (self._code_task == RELAYING)[None, :]
+        local = scaled.index_select(1, around[cc].flatten()).view(k, 2 * C, 10).float()
+        code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)  # [k, 2C, 13]
+        # per code: what the UAV adds to the sum inside the PU log, the SE log, and to the relaying count
+        at_code, zero = contrib.index_select(1, cc), contrib.new_zeros(())
+        code_rate = torch.stack([torch.where(relay, at_code[..., 0], zero), torch.where(relay, zero, at_code[..., 1]), relay.to(contrib.dtype).expand(k, -1)], -1)
+        tables = {"_cell_contrib": contrib, "_code_obs": code_obs, "_code_rate": code_rate, "_node_obs": (nodes / self._node_scale).flatten(1).float(), "_direct": direct_terms(nodes, cfg)}
         if self._cell_gains is not None:
-            self._cell_gains = torch.where(m, gains, self._cell_gains)
-        self._cell_contrib = torch.where(m, contrib, self._cell_contrib)
-        self._code_obs = torch.where(m, code_obs, self._code_obs)
-        self._code_rate = torch.where(m, code_rate, self._code_rate)
-        self._node_obs = torch.where(mask[:, None], node_obs, self._node_obs)
-        self._direct = torch.where(mask[:, None], direct_terms(self._nodes, cfg), self._direct)
+            tables["_cell_gains"] = gains
+        for name, rows in tables.items():
+            if k == len(getattr(self, name)):  # every world: a new table (no scatter)
+                setattr(self, name, rows)
+            else:
+                getattr(self, name)[worlds] = rows
         if self._pairs:
             self._set_pair_tables()
 
-    def _per_cell(self, table: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
-        """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[B, ...]``."""
+    def _per_cell(self, table: torch.Tensor, cells: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
+        """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[W, ...]`` of all worlds (or of ``worlds``)."""
         if table.shape[0] == 1:
             return table[0][cells]
-        return table[self._world.view(-1, *([1] * (cells.dim() - 1))), cells]
+        worlds = self._world.squeeze(-1) if worlds is None else worlds
+        return table[worlds.view(-1, *([1] * (cells.dim() - 1))), cells]
 
-    def _sample_layout(self, mask: torch.Tensor):
+    def _sample_layout(self, worlds: torch.Tensor):
         """``layout=random``: nodes uniform in the grid widened by half a grid per side (SPEC section 1).
 
         PT-PR and S-E must be at least 0.6 grid diagonals apart.  Decision: S and E
         (at UAV altitude) must also be at least half a cell from every cell centre,
         so no UAV is ever at distance 0 from a node.  Rejection rounds run until
-        every world in ``mask`` is accepted; each world uses only its own stream.
+        every world in ``worlds`` is accepted; each world uses only its own stream.
         """
         L1, L2 = self.cfg.grid
         h = self.cfg.height
         lo = torch.tensor([-L1 / 2, -L2 / 2], dtype=torch.float64, device=self.device)
         span = torch.tensor([2.0 * L1, 2.0 * L2], dtype=torch.float64, device=self.device)
         min_sep = 0.6 * math.hypot(L1, L2)
-        nodes = self._nodes.clone()  # [B, 4, 3]
+        nodes = self._nodes[worlds]  # [k, 4, 3]
+        keys, counters = self._s.keys[worlds], self._s.counters[worlds]
         for pair, z in ((0, 0.0), (1, h)):  # (PT, PR) on the ground, (S, E) at UAV altitude
-            pending = mask.clone()
+            pending = torch.arange(len(worlds), device=self.device)  # round r draws only for the worlds still pending
             rnd = 0
-            while bool(pending.any()):
-                u = streams.uniform(self._s.keys, self._s.counters, _LAYOUT + 2 * rnd + pair, 4)
+            while len(pending):
+                u = streams.uniform(keys[pending], counters[pending], _LAYOUT + 2 * rnd + pair, 4)
                 xy = lo + span * u.view(-1, 2, 2)
                 ok = torch.linalg.vector_norm(xy[:, 0] - xy[:, 1], dim=-1) >= min_sep
                 if z > 0:
                     nearest = torch.stack([xy[..., 0].round().clamp(0, L1 - 1), xy[..., 1].round().clamp(0, L2 - 1)], -1)
                     ok &= (torch.linalg.vector_norm(xy - nearest, dim=-1) >= 0.5).all(-1)
-                take = pending & ok
-                xyz = torch.cat([xy, xy.new_full(xy.shape[:-1] + (1,), z)], -1)
-                nodes[:, 2 * pair : 2 * pair + 2] = torch.where(take[:, None, None], xyz, nodes[:, 2 * pair : 2 * pair + 2])
-                pending &= ~ok
+                nodes[pending[ok], 2 * pair : 2 * pair + 2] = torch.cat([xy[ok], xy.new_full((int(ok.sum()), 2, 1), z)], -1)
+                pending = pending[~ok]
                 rnd += 1
-        self._nodes = torch.where(mask[:, None, None], nodes, self._nodes)
-        self._set_layout(mask)
+        self._nodes[worlds] = nodes
+        self._set_layout(worlds)
 
     # -------------------------------------------------------------- dynamics
     @property
@@ -288,10 +287,10 @@ class UAVSpectrumEnv(EnvBase):
         """``[B, N]`` task of every UAV (0 sensing, 1 relaying)."""
         return self._s.code & 1
 
-    def _code_rows(self, table: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
-        """Rows ``[B, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[B, N]`` (one gather)."""
+    def _code_rows(self, table: torch.Tensor, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
+        """Rows ``[W, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[W, N]`` of all worlds (or of ``worlds``)."""
         if self._code_offset is not None:
-            code = code + self._code_offset
+            code = code + (self._code_offset if worlds is None else worlds.unsqueeze(-1) * (2 * self.cfg.num_cells))
         return table.view(-1, table.shape[-1]).index_select(0, code.view(-1)).view(*code.shape, table.shape[-1])
 
     def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -310,13 +309,13 @@ class UAVSpectrumEnv(EnvBase):
         state = torch.cat([own[..., :5].reshape(W, 5 * N), nodes[:, 0]], -1)
         return observation, state
 
-    def _sum_rates(self, code: torch.Tensor) -> torch.Tensor:
-        """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations, from the per-code rate terms."""
-        rows = self._code_rows(self._code_rate, code)  # [W, N, 3]: terms of sum PU, sum SE, relaying count
+    def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
+        """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate terms."""
+        rows = self._code_rows(self._code_rate, code, worlds)  # [W, N, 3]: terms of sum PU, sum SE, relaying count
         terms = rows[:, 0]
         for i in range(1, code.shape[1]):  # N - 1 adds: a reduction over a tiny dim costs ~10x more
             terms = terms + rows[:, i]
-        sums = terms[:, :2] + self._direct if self.cfg.direct_links else terms[:, :2]
+        sums = terms[:, :2] + self._direct_of(worlds) if self.cfg.direct_links else terms[:, :2]
         return rates_from_sums(sums, terms[:, 2], code.shape[1], self.cfg)
 
     def _set_pair_tables(self):
@@ -366,40 +365,48 @@ class UAVSpectrumEnv(EnvBase):
             out["state_index"] = index.clone() if N == 1 else index
         return out
 
-    def _current_rates(self, code: torch.Tensor) -> torch.Tensor:
-        """``[B, 2]`` (R_PU, R_SE) of the configuration ``code``, drawing fresh fading if enabled."""
+    def _direct_of(self, worlds: torch.Tensor | None) -> torch.Tensor:
+        """Direct-link SNRs ``[Bt or W, 2]`` broadcastable to all worlds (or to ``worlds``)."""
+        return self._direct if worlds is None or len(self._direct) == 1 else self._direct[worlds]
+
+    def _current_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
+        """``[W, 2]`` (R_PU, R_SE) of the configurations ``code`` of all worlds (or of ``worlds``), with fresh fading if enabled."""
         cfg = self.cfg
         if cfg.fading == "none":
             if self._pair_rates is not None:
                 return self._pair_rates.index_select(0, torch.add(code[:, 1], code[:, 0], alpha=2 * cfg.num_cells))
-            return self._sum_rates(code)
-        cells, direct = code >> 1, self._direct.expand(self.num_worlds, 2)
-        gains = self._per_cell(self._cell_gains, cells)
-        u = streams.uniform(self._s.keys, self._s.counters, _FADING, 4 * self.num_uavs).view_as(gains)
+            return self._sum_rates(code, worlds)
+        keys, counters = (self._s.keys, self._s.counters) if worlds is None else (self._s.keys[worlds], self._s.counters[worlds])
+        gains = self._per_cell(self._cell_gains, code >> 1, worlds)
+        u = streams.uniform(keys, counters, _FADING, 4 * self.num_uavs).view_as(gains)
         contrib = relay_contributions(gains * -torch.log1p(-u), cfg)  # Exp(1) power gain per link
+        direct = self._direct_of(worlds).expand(len(code), 2)
         if cfg.direct_links:  # the direct links PT->PR and S->E fade too
-            direct = direct * -torch.log1p(-streams.uniform(self._s.keys, self._s.counters, _FADING_DIRECT, 2))
+            direct = direct * -torch.log1p(-streams.uniform(keys, counters, _FADING_DIRECT, 2))
         return torch.stack(rates(contrib, code & 1, direct, cfg), -1)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B, N, C, cfg, dev = self.num_worlds, self.num_uavs, self.cfg.num_cells, self.cfg, self.device
         mask = tensordict.get("_reset", None) if tensordict is not None else None
-        mask = torch.ones(B, dtype=torch.bool, device=dev) if mask is None else mask.reshape(B).to(dev)
-        self._s.counters += mask
+        worlds = torch.arange(B, device=dev) if mask is None else mask.reshape(B).to(dev).nonzero().squeeze(-1)
+        s = self._s
+        # only the worlds being reset are touched (a partial reset of a few worlds costs little)
+        s.counters[worlds] += 1
         if cfg.layout == "random":
-            self._sample_layout(mask)
-        fresh = mask & ~self._s.started if cfg.reset_positions == "keep" else mask
+            self._sample_layout(worlds)
+        fresh = worlds[~s.started[worlds]] if cfg.reset_positions == "keep" else worlds
         # distinct cells: the N smallest of C random keys; tasks per init_tasks
-        cells = streams.random_bits(self._s.keys, self._s.counters, _POSITIONS, C).topk(N, dim=-1, largest=False).indices
+        keys, counters = s.keys[fresh], s.counters[fresh]
+        cells = streams.random_bits(keys, counters, _POSITIONS, C).topk(N, dim=-1, largest=False).indices
         if cfg.init_tasks == "random":
-            tasks = streams.random_bits(self._s.keys, self._s.counters, _TASKS, N) & 1
+            tasks = streams.random_bits(keys, counters, _TASKS, N) & 1
         else:
-            tasks = torch.full((B, N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=dev)
-        self._s.code = torch.where(fresh[:, None], 2 * cells + tasks, self._s.code)
-        self._s.started |= mask
-        self._s.steps = torch.where(mask, 0, self._s.steps)
-        self._s.best = torch.where(mask, 0.0, self._s.best)
-        self._s.r = torch.where(mask[:, None], self._current_rates(self._s.code), self._s.r)
+            tasks = torch.full((len(fresh), N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=dev)
+        s.code[fresh] = 2 * cells + tasks
+        s.started[worlds] = True
+        s.steps[worlds] = 0
+        s.best[worlds] = 0.0
+        s.r[worlds] = self._current_rates(s.code[worlds], worlds)
         zeros = torch.zeros(B, dtype=torch.long, device=dev)
         out = self._observe(self._s.code, self._s.code >> 1, zeros, zeros.clone())
         done = torch.zeros(B, 1, dtype=torch.bool, device=dev)
@@ -523,12 +530,12 @@ class UAVSpectrumEnv(EnvBase):
     @property
     def cell_contributions(self) -> torch.Tensor:
         """``[B, C, 2]`` per-cell relay (PU) and sensing (SE) contributions, deterministic channels."""
-        return self._cell_contrib.expand(self.num_worlds, -1, -1)
+        return self._cell_contrib.clone().expand(self.num_worlds, -1, -1)
 
     @property
     def direct(self) -> torch.Tensor:
         """``[B, 2]`` direct-link SNRs (PT->PR, S->E)."""
-        return self._direct.expand(self.num_worlds, -1)
+        return self._direct.clone().expand(self.num_worlds, -1)
 
     @property
     def neighbours(self) -> torch.Tensor:
