@@ -352,7 +352,7 @@ class UAVSpectrumEnv(EnvBase):
             "tasks": code & 1,
             "r_pu": r[:, 0],
             "r_se": r[:, 1],
-            "utility": r.sum(-1),
+            "utility": r[:, 0] + r[:, 1],
             "moves": moves,
             "task_switches": switches,
         }
@@ -423,6 +423,8 @@ class UAVSpectrumEnv(EnvBase):
         two UAVs (a stayer or a second mover): N - 1 rounds always suffice.
         """
         N = self.num_uavs
+        if N == 1:
+            return target
         if N == 2:  # one round, no sync
             return torch.where(target[:, :1] == target[:, 1:], cells, target)
         clash = self._clashes(target)
