@@ -1,7 +1,9 @@
 """The batched TorchRL environment of the UAV spectrum-sharing model (SPEC.md).
 
 ``B`` independent worlds live in one set of tensors; a step is a fixed handful
-of tensor operations whatever ``B`` is, on CPU or CUDA.
+of tensor operations whatever ``B`` is, on CPU or CUDA.  A UAV's cell and task
+are one code ``2 c + task``, so dynamics, rates and observations are lookups in
+small per-code tables built once per layout (see BENCHMARKS.md for timings).
 """
 from __future__ import annotations
 
@@ -107,8 +109,8 @@ class UAVSpectrumEnv(EnvBase):
             nbrs.append(torch.where(inside, ny * L1 + nx, -1))
         self._neighbours = torch.stack(nbrs, -1)  # [C, 4]
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
-        base = 2 * C if cfg.state_includes_tasks else C
-        self._state_weights = torch.tensor([base**i for i in range(N)], device=dev) if cfg.has_state_index else None
+        # digit base of the tabular state index s = sum_i d_i base^i (SPEC section 6), None when it overflows int64
+        self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
         self._node_scale = torch.tensor([L1, L2, cfg.height], dtype=f64, device=dev)
         layout = fixed_layout(cfg, f64, dev)
@@ -190,7 +192,7 @@ class UAVSpectrumEnv(EnvBase):
             task_switches=Unbounded((), dtype=torch.long, device=self.device),
             device=self.device,
         )
-        if self._state_weights is not None:
+        if self._state_base is not None:
             obs["state_index"] = Unbounded((), dtype=torch.long, device=self.device)
         self.full_observation_spec_unbatched = obs
         self.full_action_spec_unbatched = Composite(
@@ -356,12 +358,11 @@ class UAVSpectrumEnv(EnvBase):
             "moves": moves,
             "task_switches": switches,
         }
-        if self._state_weights is not None:
+        if self._state_base is not None:
             digits = code if self.cfg.state_includes_tasks else cells
-            base = 2 * self.cfg.num_cells if self.cfg.state_includes_tasks else self.cfg.num_cells
             index = digits[:, N - 1]
             for i in range(N - 2, -1, -1):  # Horner: d_0 + base (d_1 + base (...)); sums over tiny dims are slow
-                index = torch.add(digits[:, i], index, alpha=base)
+                index = torch.add(digits[:, i], index, alpha=self._state_base)
             out["state_index"] = index.clone() if N == 1 else index
         return out
 
