@@ -202,8 +202,9 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
     for name, low, high in (("gamma", 0.0, 1.0), ("tau", 0.0, 1.0), ("eps_start", 0.0, 1.0), ("eps_end", 0.0, 1.0), ("eps_fraction", 0.0, 1.0)):
         if not low <= float(a[name]) <= high:
             raise ValueError(f"agent.{name}={a[name]} is invalid: it must lie in [{low}, {high}]")
-    if not float(a.lr) > 0 or not float(a.max_grad_norm) > 0:
-        raise ValueError(f"agent.lr={a.lr} and agent.max_grad_norm={a.max_grad_norm} must be positive")
+    for name in ("lr", "lr_end", "max_grad_norm"):
+        if not float(a[name]) > 0:
+            raise ValueError(f"agent.{name}={a[name]} is invalid: it must be positive")
 
 
 class DQNAgent:
@@ -252,6 +253,7 @@ class DQNAgent:
             self.loss.make_value_estimator(gamma=float(a.gamma))
             self._action_keys = ["joint_action", ("agents", "action")]
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
+        self.schedule = torch.optim.lr_scheduler.LinearLR(self.optimizer, start_factor=1.0, end_factor=float(a.lr_end) / float(a.lr), total_iters=self.num_iterations)
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
         self.buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size))
         inputs = [("agents", "observation"), ("agents", "action_mask"), "positions"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
@@ -276,6 +278,7 @@ class DQNAgent:
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
         losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
         self.exploration.step(batch.numel())
+        self.schedule.step()
         self.iteration += 1
         nxt = batch.get("next")
         per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star)
@@ -304,6 +307,7 @@ class DQNAgent:
             "iteration": self.iteration,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
+            "schedule": self.schedule.state_dict(),
             "exploration": self.exploration.state_dict(),
             "buffer": self.buffer[: len(self.buffer)] if len(self.buffer) else None,  # the filled slots, in slot order
             "buffer_writes": self.buffer.write_count,
@@ -316,6 +320,7 @@ class DQNAgent:
     def load_state_dict(self, state: dict):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
+        self.schedule.load_state_dict(state["schedule"])
         self.exploration.load_state_dict(state["exploration"])
         self.buffer.empty()
         if state["buffer"] is not None:
