@@ -18,9 +18,11 @@ Two heads (``agent.head``):
   the valid ones: the exact deep counterpart of the team Q table, for N <= 4.
 
 One iteration: each of ``agent.worlds`` worlds plays one episode of
-``train.steps_per_episode`` steps (the worlds are reseeded from the seed and
-the iteration, so a resumed run continues exactly as the uninterrupted one),
-the transitions join the replay buffer, then ``agent.updates`` gradient steps.
+``train.steps_per_episode`` steps, the transitions join the replay buffer,
+then ``agent.updates`` gradient steps.  Every iteration reseeds its worlds from
+the seed and the iteration number (so a resumed run continues exactly as the
+uninterrupted one, and episodes always start afresh, also with
+``reset_positions=keep``); the seeds stay clear of the evaluation's.
 
 Built from TorchRL parts: ``MultiAgentMLP`` (torso and per-UAV heads),
 ``QValueModule`` (joint argmax), ``EGreedyModule``, ``VDNMixer``/``QMixer``,
