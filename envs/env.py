@@ -38,10 +38,11 @@ class _WorldsState:
     ``code`` ``[B, N]`` is ``2 * cell + task`` of every UAV; ``r`` ``[B, 2]`` the current
     (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (``best_so_far``);
     ``steps`` the episode clock; ``started`` whether a world has been reset;
-    ``keys`` and ``counters`` the per-world random streams.
+    ``keys`` and ``counters`` the per-world random streams; ``was_reset``
+    whether ``_reset`` ever ran.
     """
 
-    __slots__ = ("code", "r", "best", "steps", "started", "counters", "keys")
+    __slots__ = ("code", "r", "best", "steps", "started", "counters", "keys", "was_reset")
 
     def __init__(self, **tensors):
         for name, value in tensors.items():
@@ -156,6 +157,7 @@ class UAVSpectrumEnv(EnvBase):
             started=torch.zeros(B, dtype=torch.bool, device=dev),
             counters=torch.zeros(B, dtype=torch.long, device=dev),
             keys=streams.world_keys(0, B, dev),
+            was_reset=False,  # a Python flag: stepping before the first reset is an error, at no per-step cost
         )
         if layout is not None:
             self._set_layout(torch.zeros(1, dtype=torch.long, device=dev))
@@ -408,6 +410,7 @@ class UAVSpectrumEnv(EnvBase):
         s.steps[worlds] = 0
         s.best[worlds] = 0.0
         s.r[worlds] = self._current_rates(s.code[worlds], worlds)
+        s.was_reset = True
         zeros = torch.zeros(B, dtype=torch.long, device=dev)
         out = self._observe(self._s.code, self._s.code >> 1, zeros, zeros.clone())
         done = torch.zeros(B, 1, dtype=torch.bool, device=dev)
@@ -459,6 +462,8 @@ class UAVSpectrumEnv(EnvBase):
             raise ValueError(f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        if not self._s.was_reset:
+            raise RuntimeError("UAVSpectrumEnv.step() before any reset: call env.reset() first (the worlds have no UAV positions yet)")
         action = tensordict.get(("agents", "action"))
         self._check_action(action)
         cfg, code = self.cfg, self._s.code

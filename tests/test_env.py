@@ -653,6 +653,14 @@ def test_bad_actions_raise_clear_errors():
             env.step(td)
 
 
+def test_step_before_reset_is_a_clear_error():
+    env = UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_uavs=2)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(TensorDict({("agents", "action"): torch.zeros(2, 2, dtype=torch.long)}, batch_size=[2]))
+    env.reset()
+    env.step(TensorDict({("agents", "action"): torch.zeros(2, 2, dtype=torch.long)}, batch_size=[2]))
+
+
 @pytest.mark.parametrize("grid,N,options", [
     ((1, 1), 1, {}), ((1, 7), 3, {}), ((7, 1), 7, {}), ((1, 5), 2, {"layout": "random"}),
     ((3, 3), 9, {"layout": "random", "fading": "rayleigh", "direct_links": True}), ((2, 9), 4, {"layout": "random"}),
