@@ -53,6 +53,7 @@ from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, 
 from torchrl.objectives import DQNLoss, QMixerLoss, SoftUpdate
 
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
+from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
 
 HEADS = ("factored", "joint")
@@ -99,35 +100,47 @@ class TeamQNet(nn.Module):
 
 
 class ValidGreedy(nn.Module):
-    """A valid joint action from per-UAV values ``[*, N, 6]``, masks ``[*, N, 6]`` and positions.
+    """A valid joint action from per-UAV values ``[*, N, 6]``, masks ``[*, N, 6]``, positions and tasks.
 
-    UAV by UAV in id order, each takes its best allowed action whose target
-    cell differs from the cells of the UAVs still to choose and from the
-    targets of those that chose.  Its own cell always qualifies, so every UAV
-    gets an action and all targets differ: a valid joint action (SPEC section 2).
+    UAV by UAV in id order, each takes its best allowed action.  Allowed: a
+    move whose target cell differs from the cells of the UAVs still to choose
+    and from the targets of those that chose (staying always qualifies, so all
+    targets differ: a valid joint action, SPEC section 2), and a switch to a
+    task that no UAV before it switches to in this step.  Per-UAV values rate
+    each switch as if it were the only one; two UAVs that both switch (say, the
+    two relays of N = 2 both turning to sensing) can land in a worse
+    configuration than either alone, and flip back and forth forever.
 
     Example:
         >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
         >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 9.0, 0, 0, 1]]])  # both want cell 1
-        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]))
+        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[0, 0]]))
         tensor([[3, 5]])
+        >>> values = torch.tensor([[[0, 0, 0, 0, 9.0, 1], [0, 0, 0, 0, 9.0, 1]]])  # both relays want to sense
+        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[1, 1]]))
+        tensor([[4, 5]])
     """
 
     def __init__(self, neighbours: torch.Tensor, width: int):
         super().__init__()
         self.width = width
         self.register_buffer("neighbours", neighbours.clone())
+        self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
-    def forward(self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+    def forward(self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
         cells = _cells(positions, self.width)
         targets = torch.cat([self.neighbours[cells], cells.unsqueeze(-1).expand(*cells.shape, 2)], -1)  # [*, N, 6]
         claimed = cells.clone()
+        switched_to = torch.zeros(*cells.shape[:-1], 2, dtype=torch.bool, device=cells.device)  # per task
         actions = []
         for i in range(cells.shape[-1]):
             others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
             free = (targets[..., i, :, None] != others[..., None, :]).all(-1) & action_mask[..., i, :]
+            switches = tasks[..., i, None] != self.task_ids  # [*, 2]: actions 4, 5 change this UAV's task
+            free = torch.cat([free[..., :4], free[..., 4:] & ~(switches & switched_to)], -1)
             action = action_value[..., i, :].masked_fill(~free, -math.inf).argmax(-1)
             claimed[..., i] = targets[..., i, :].gather(-1, action.unsqueeze(-1)).squeeze(-1)
+            switched_to |= switches & (action.unsqueeze(-1) == self.task_ids + 4)
             actions.append(action)
         return torch.stack(actions, -1)
 
@@ -232,7 +245,7 @@ class DQNAgent:
         eps = dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=max(1, int(float(a.eps_fraction) * frames)), device=self.device)
         if a.head == "factored":
             spec = env.full_action_spec_unbatched
-            greedy_action = TensorDictModule(ValidGreedy(env.neighbours, env_cfg.grid[0]), in_keys=[values, ("agents", "action_mask"), "positions"], out_keys=[("agents", "action")])
+            greedy_action = TensorDictModule(ValidGreedy(env.neighbours, env_cfg.grid[0]), in_keys=[values, ("agents", "action_mask"), "positions", "tasks"], out_keys=[("agents", "action")])
             self.greedy = TensorDictSequential(q, greedy_action)
             self.exploration = EGreedyModule(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
             explore = TensorDictSequential(self.greedy, self.exploration)
@@ -258,7 +271,7 @@ class DQNAgent:
         self.schedule = torch.optim.lr_scheduler.LinearLR(self.optimizer, start_factor=1.0, end_factor=float(a.lr_end) / float(a.lr), total_iters=self.num_iterations)
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
         self.buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size))
-        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
+        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
         self._keys = inputs + self._action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
         self.collector = Collector(env, explore, frames_per_batch=int(a.worlds) * env_cfg.max_steps, total_frames=-1, device=self.device, auto_register_policy_transforms=False)
         self._batches = iter(self.collector)

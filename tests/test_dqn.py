@@ -49,20 +49,21 @@ def test_short_training_beats_a_random_policy(overrides):
     assert trained["eval/optimality"] > random["eval/optimality"] + 0.25  # random: 0.58
 
 
-def test_valid_greedy_respects_masks_and_never_collides():
+def test_valid_greedy_respects_masks_never_collides_and_switches_each_task_once():
     env = UAVSpectrumEnv(batch_size=256, grid=(4, 3), num_uavs=4, seed=3)
     td = env.reset()
     greedy = ValidGreedy(env.neighbours, width=4)
     values = torch.randn(256, 4, 6)
-    actions = greedy(values, td["agents", "action_mask"], td["positions"])
+    actions = greedy(values, td["agents", "action_mask"], td["positions"], td["tasks"])
     assert td["agents", "action_mask"].gather(-1, actions.unsqueeze(-1)).all()
-    cells = env.cells_of(td["positions"])
     joint = (actions * 6 ** torch.arange(4)).sum(-1)
-    assert joint_action_valid(cells, env.neighbours, 4).gather(-1, joint.unsqueeze(-1)).all()
-    # with no conflict it is the plain masked argmax
+    assert joint_action_valid(env.cells_of(td["positions"]), env.neighbours, 4).gather(-1, joint.unsqueeze(-1)).all()
+    for task in (0, 1):  # at most one UAV switches to each task per step
+        assert ((actions == 4 + task) & (td["tasks"] != task)).sum(-1).max() <= 1
+    # one UAV has no one to coordinate with: the plain masked argmax
     lone = UAVSpectrumEnv(batch_size=256, grid=(4, 3), num_uavs=1, seed=3).reset()
     masked = values[:, :1].masked_fill(~lone["agents", "action_mask"], -math.inf).argmax(-1)
-    assert torch.equal(greedy(values[:, :1], lone["agents", "action_mask"], lone["positions"]), masked)
+    assert torch.equal(greedy(values[:, :1], lone["agents", "action_mask"], lone["positions"], lone["tasks"]), masked)
 
 
 def online_and_target(*overrides):
@@ -91,7 +92,7 @@ def online_and_target(*overrides):
 def test_factored_target_is_double_dqn_over_valid_actions():
     agent, data, online, target = online_and_target("agent.mixer=vdn", "agent.gamma=0.7")
     nxt = data["next"]
-    best = ValidGreedy(agent.env.neighbours, 3)(online(nxt), nxt["agents", "action_mask"], nxt["positions"])
+    best = ValidGreedy(agent.env.neighbours, 3)(online(nxt), nxt["agents", "action_mask"], nxt["positions"], nxt["tasks"])
     assert nxt["agents", "action_mask"].gather(-1, best.unsqueeze(-1)).all()
     assert not torch.equal(best, online(nxt).argmax(-1))  # the unmasked argmax would pick invalid moves
     y = nxt["reward"] + 0.7 * target(nxt).gather(-1, best.unsqueeze(-1)).sum(-2)
