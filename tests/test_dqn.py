@@ -5,12 +5,13 @@ import math
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
-from tensordict import TensorDict
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from uavrl.agents.dqn import DQNAgent, ValidGreedy
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid
 from uavrl.evaluation import RandomPolicy, evaluate
+from uavrl.train import train
 
 TINY = ["env.grid=[3,3]", "train.steps_per_episode=8", "train.iterations=30", "agent.worlds=32", "agent.hidden=32", "agent.depth=1", "agent.batch_size=128", "agent.buffer_size=4000", "agent.updates=16", "agent.learning_starts=256", "agent.lr=0.003", "agent.lr_end=0.0003", "agent.tau=0.05"]
 
@@ -24,9 +25,13 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def make_agent(*overrides, seed=0):
+def tiny_cfg(*overrides):
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        cfg = compose(config_name="config", overrides=["agent=dqn", *TINY, *overrides])
+        return compose(config_name="config", overrides=["agent=dqn", *TINY, *overrides])  # later overrides win
+
+
+def make_agent(*overrides, seed=0):
+    cfg = tiny_cfg(*overrides)
     return DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed)
 
 
@@ -151,6 +156,29 @@ def test_checkpoint_round_trip_continues_identically(overrides):
     assert (agent.greedy(probe.clone()) == restored.greedy(probe.clone())).all()
     actions = [UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).rollout(8, a.policies()[0])["agents", "action"] for a in (agent, restored)]
     assert torch.equal(*actions)
+
+
+def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, monkeypatch):
+    """Through ``uavrl.train``: the tabular agent's TensorBoard tags; a run killed after a checkpoint and resumed ends as the whole run."""
+    run = ["train.iterations=4", "train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
+    whole = train(tiny_cfg(*run, f"run_dir={tmp_path / 'whole'}"))
+    tags = set(EventAccumulator(str(whole)).Reload().Tags()["scalars"])
+    assert {"train/sum_utility", "train/sum_r_pu", "train/sum_r_se", "train/task_switches", "train/moves", "train/steps_to_90", "train/loss", "train/epsilon", "eval/optimality", "eval/optimal_fraction"} <= tags
+    original, calls = DQNAgent.train_iteration, []
+
+    def dies_at_four(self):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(DQNAgent, "train_iteration", dies_at_four)
+    with pytest.raises(KeyboardInterrupt):
+        train(tiny_cfg(*run, f"run_dir={tmp_path / 'killed'}"))
+    monkeypatch.setattr(DQNAgent, "train_iteration", original)
+    train(tiny_cfg(*run, f"resume={tmp_path / 'killed'}"), overrides=[f"resume={tmp_path / 'killed'}"])
+    a, b = (torch.load(d / "checkpoint.pt", weights_only=False)["agent"]["loss"] for d in (whole, tmp_path / "killed"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
 def test_same_seed_same_training():
