@@ -13,7 +13,8 @@ Two heads (``agent.head``):
   (their sum) or QMIX (a monotonic state-conditioned mix), ``agent.mixer``.
   The greedy joint action is always valid: UAV by UAV in id order, each takes
   its best action whose target cell is neither held by a UAV still to choose
-  nor claimed by one that chose (:class:`ValidGreedy`).
+  nor claimed by one that chose, switching task only to a task no UAV before
+  it switches to in that step (:class:`ValidGreedy`).
 - ``joint``: the torso feeds one ``6^N``-way head over joint actions, masked to
   the valid ones: the exact deep counterpart of the team Q table, for N <= 4.
 
