@@ -76,6 +76,14 @@ class TeamQNet(nn.Module):
     own observation, its one-hot id and which of its 4 neighbouring cells
     another UAV holds, and returns ``[*, N, 6]``.  ``joint``: a linear head
     returns ``[*, 6^N]``.
+
+    Example:
+        >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
+        >>> td = env.reset()
+        >>> TeamQNet(env, "factored", hidden=16, depth=1)(td["agents", "observation"], td["positions"]).shape
+        torch.Size([3, 2, 6])
+        >>> TeamQNet(env, "joint", hidden=16, depth=1)(td["agents", "observation"], td["positions"]).shape
+        torch.Size([3, 36])
     """
 
     def __init__(self, env: UAVSpectrumEnv, head: str, hidden: int, depth: int):
