@@ -12,6 +12,8 @@ policy on the same starts, and prints one markdown row per target and seed.
   layout per world and episode; the evaluation's layouts come from the eval
   seed, so none was seen in training)
 - ``n2-joint``: ``python -m uavrl.train agent=dqn agent.head=joint``
+- beyond the targets: ``n6-qmix`` (``agent.mixer=qmix``) and ``n6-random``
+  (random layouts with N = 6 on 10x10)
 
 Usage::
 
@@ -40,6 +42,8 @@ TARGETS = {
     "n6": ["env.grid=[10,10]", "env.num_uavs=6"],
     "random": ["env.layout=random"],
     "n2-joint": ["agent.head=joint"],
+    "n6-qmix": ["env.grid=[10,10]", "env.num_uavs=6", "agent.mixer=qmix"],
+    "n6-random": ["env.grid=[10,10]", "env.num_uavs=6", "env.layout=random"],
 }
 
 
