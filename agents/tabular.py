@@ -136,15 +136,8 @@ _delta = numba.njit(delta_reward)
 
 
 @numba.njit(cache=True, inline="always")
-def _choose(q_row, actions, n_valid, u, epsilon):
-    """Epsilon-greedy action among the ``n_valid`` valid joint ``actions`` (ascending) from one uniform ``u``.
-
-    ``u < epsilon`` explores, and then ``u / epsilon`` is a fresh uniform that
-    picks the valid action; otherwise ``(u - epsilon) / (1 - epsilon)`` picks
-    among the tied best ones.
-    """
-    if u < epsilon:
-        return actions[int(u / epsilon * n_valid)]
+def _scan(q_row, actions, n_valid):
+    """Best value over the ``n_valid`` valid joint ``actions``, how many tie for it, and the first of them."""
     best, ties, best_j = -np.inf, 0, -1
     for i in range(n_valid):
         value = q_row[actions[i]]
@@ -152,6 +145,19 @@ def _choose(q_row, actions, n_valid, u, epsilon):
             best, ties, best_j = value, 1, actions[i]
         elif value == best:
             ties += 1
+    return best, ties, best_j
+
+
+@numba.njit(cache=True, inline="always")
+def _choose(q_row, actions, n_valid, u, epsilon, best, ties, best_j):
+    """Epsilon-greedy action among the valid ``actions`` (ascending) from one uniform ``u``, given the row's :func:`_scan`.
+
+    ``u < epsilon`` explores, and then ``u / epsilon`` is a fresh uniform that
+    picks the valid action; otherwise ``(u - epsilon) / (1 - epsilon)`` picks
+    among the tied best ones.
+    """
+    if u < epsilon:
+        return actions[int(u / epsilon * n_valid)]
     if ties == 1:
         return best_j
     n = int((u - epsilon) / (1 - epsilon) * ties)
@@ -164,21 +170,9 @@ def _choose(q_row, actions, n_valid, u, epsilon):
 
 
 @numba.njit(cache=True, inline="always")
-def _max_valid(q_row, actions, n_valid):
-    best = -np.inf
-    for i in range(n_valid):
-        best = max(best, q_row[actions[i]])
-    return best
-
-
-@numba.njit(cache=True)
-def _world_step(q, w, cfg_k, u, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2):
-    """Choose and apply one world's action; return (s, j, target, new configuration)."""
-    p, t = cfg_k // T2, cfg_k % T2
-    s = row_t[cfg_k]
-    j = _choose(q[s], valid[p], n_valid[p], u, epsilon)
-    p2, t2 = next_cells[p, j], next_tasks[t, j]
-    k2 = p2 * T2 + t2
+def _transition(w, cfg_k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2):
+    """Apply joint action ``j`` in configuration ``cfg_k`` of world ``w``; return (next configuration, reward)."""
+    k2 = next_cells[cfg_k // T2, j] * T2 + next_tasks[cfg_k % T2, j]
     r_pu, r_se = r_pu_t[k2], r_se_t[k2]
     if use_best:
         reward = _best_so_far(r_pu + r_se, best[w])
@@ -186,25 +180,38 @@ def _world_step(q, w, cfg_k, u, r_pu_t, r_se_t, row_t, valid, n_valid, next_cell
     else:
         reward = _delta(r_pu, r_se, prev[w, 0], prev[w, 1], beta1, beta2)
     prev[w, 0], prev[w, 1] = r_pu, r_se
-    target = reward + gamma * _max_valid(q[row_t[k2]], valid[p2], n_valid[p2])
-    return s, j, target, k2
+    return k2, reward
 
 
 @numba.njit(cache=True, parallel=True)
 def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
-    """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves, switches)."""
+    """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves, switches).
+
+    The scan of the next state's row that gives the target's max is also the
+    next step's greedy choice, so each step scans one row (two when it stays
+    in the row it just updated).
+    """
     R, T = uniforms.shape[0], uniforms.shape[1]
     T2 = next_tasks.shape[0]
     prev = np.empty((R, 2))
     best = np.zeros(R)
     for r in numba.prange(R):
+        qr = q[r]
         k = k0[r]
         prev[r, 0], prev[r, 1] = r_pu_t[k], r_se_t[k]
+        p = k // T2
+        v_best, ties, best_j = _scan(qr[row_t[k]], valid[p], n_valid[p])
         for step in range(T):
-            s, j, target, k2 = _world_step(q[r], r, k, uniforms[r, step], r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
-            q[r, s, j] = (1 - alpha) * q[r, s, j] + alpha * target
+            s, p = row_t[k], k // T2
+            j = _choose(qr[s], valid[p], n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
+            k2, reward = _transition(r, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2)
+            s2, p2 = row_t[k2], k2 // T2
+            v_best, ties, best_j = _scan(qr[s2], valid[p2], n_valid[p2])
+            qr[s, j] = (1 - alpha) * qr[s, j] + alpha * (reward + gamma * v_best)
+            if s2 == s:
+                v_best, ties, best_j = _scan(qr[s2], valid[p2], n_valid[p2])
             out[r, step, 0], out[r, step, 1] = prev[r, 0], prev[r, 1]
-            out[r, step, 2] = moves_t[k // T2, j]
+            out[r, step, 2] = moves_t[p, j]
             out[r, step, 3] = switches_t[k % T2, j]
             k = k2
         k0[r] = k
@@ -229,10 +236,15 @@ def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next
     for step in range(T):
         for w in range(R):
             k = k0[w]
-            s_w[w], j_w[w], target_w[w], k0[w] = _world_step(qt, w, k, uniforms[w, step], r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, prev, best, epsilon, gamma, beta1, beta2, use_best, T2)
+            s, p = row_t[k], k // T2
+            v_best, ties, best_j = _scan(qt[s], valid[p], n_valid[p])
+            j = _choose(qt[s], valid[p], n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
+            k2, reward = _transition(w, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2)
+            s_w[w], j_w[w], k0[w] = s, j, k2
+            target_w[w] = reward + gamma * _scan(qt[row_t[k2]], valid[k2 // T2], n_valid[k2 // T2])[0]
             out[w, step, 0], out[w, step, 1] = prev[w, 0], prev[w, 1]
-            out[w, step, 2] = moves_t[k // T2, j_w[w]]
-            out[w, step, 3] = switches_t[k % T2, j_w[w]]
+            out[w, step, 2] = moves_t[p, j]
+            out[w, step, 3] = switches_t[k % T2, j]
         for w in range(R):
             f = s_w[w] * A + j_w[w]
             total[f] += target_w[w]

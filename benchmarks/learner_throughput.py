@@ -57,10 +57,20 @@ def rate(fn, steps: int, repeat: int = 3) -> float:
     return steps / best
 
 
+def training_rate(cfg, runs: int, episodes: int) -> float:
+    """Team steps/s of a whole training run from an empty table (early episodes, full of ties, included)."""
+    learner = TeamQLearner(cfg, runs=runs, seed=0)
+    started = time.perf_counter()
+    for _ in range(episodes):
+        learner.run_episode()
+    return runs * episodes * cfg.max_steps / (time.perf_counter() - started)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--grid", type=int, default=6)
     parser.add_argument("--steps", type=int, default=12000, help="steps per episode (Table II: 12,000 on 6x6)")
+    parser.add_argument("--episodes", type=int, default=200, help="episodes of the timed training runs (Table II: 200)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--table2", action="store_true", help="also time the whole Table II protocol")
     args = parser.parse_args()
@@ -68,12 +78,10 @@ def main() -> None:
     cfg = make_config("paper", grid=(args.grid, args.grid), num_uavs=2, max_steps=args.steps)
     print(f"team Q-learning, N=2, {args.grid}x{args.grid}, {args.steps} steps/episode, torch threads {args.threads}, numba threads {numba.get_num_threads()} ({numba.config.THREADING_LAYER} layer)")
 
+    TeamQLearner(cfg, runs=1, seed=0).run_episode()  # compile
+    fast_one = training_rate(cfg, 1, args.episodes)
+    fast_ten = training_rate(cfg, 10, args.episodes)
     one = TeamQLearner(cfg, runs=1, seed=0)
-    one.run_episode()  # compile
-    fast_one = rate(one.run_episode, args.steps)
-    ten = TeamQLearner(cfg, runs=10, seed=0)
-    ten.run_episode()
-    fast_ten = rate(ten.run_episode, 10 * args.steps)
     plain_steps = 20000
     plain = rate(lambda: plain_python_episode(one, plain_steps), plain_steps, repeat=1)
     short = cfg.replace(max_steps=500)
@@ -84,8 +92,8 @@ def main() -> None:
     print(f"{'loop':44s} {'team steps/s':>14s} {'vs plain':>9s}")
     for name, value in [
         ("plain Python loop (baseline), 1 run", plain),
-        ("compiled loop (numba), 1 run", fast_one),
-        ("compiled loop (numba), 10 runs in parallel", fast_ten),
+        (f"compiled loop (numba), 1 run x {args.episodes} episodes", fast_one),
+        (f"compiled loop (numba), 10 runs x {args.episodes} episodes", fast_ten),
         ("batched torch loop, 1 run", batched_one),
         ("batched torch loop, 10 runs", batched_ten),
     ]:
