@@ -25,3 +25,9 @@ def test_unknown_command_and_grid_fail_clearly(tmp_path):
     assert bad.returncode != 0 and "unknown command 'table3'" in bad.stderr
     bad = subprocess.run([sys.executable, "-m", "uavrl.reproduce", "table2", "grids=[7]", "progress=false", f"out_dir={tmp_path}"], capture_output=True, text=True)
     assert bad.returncode != 0 and "grid 7x7 is not in Table II" in bad.stderr
+
+
+def test_state_with_tasks_widens_the_table(tmp_path):
+    args = ["grids=[2]", "runs=1", "episodes=2", "eval_starts=4", "progress=false", f"out_dir={tmp_path}", "state_includes_tasks=true"]
+    table = subprocess.run([sys.executable, "-m", "uavrl.reproduce", "table2", *args], capture_output=True, text=True, check=True)
+    assert "| 2x2 | 64 | 2,304 | 120 |" in table.stdout

@@ -7,7 +7,9 @@ the table beside the paper's timings, with the final greedy optimality.
 the per-episode data that ``table2`` saved (it runs the 6x6 protocol first if
 there is none).  Both also write the curves to TensorBoard.
 
-Overrides (Hydra): ``grids=[6] runs=3 episodes=50 seed=1 out_dir=reproduction``.
+Overrides (Hydra): ``grids=[6] runs=3 episodes=50 seed=1 out_dir=reproduction``;
+``state_includes_tasks=true`` learns over the full configuration instead of the
+paper's joint location.
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ def run_grid(size: int, cfg: DictConfig, logger: RunLogger | None = None) -> dic
     steps = int(cfg.steps or PAPER_STEPS.get(size) or 0)
     if steps < 1:
         raise ValueError(f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<steps per episode>")
-    model = make_config("paper", grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps)
+    model = make_config("paper", grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps, state_includes_tasks=bool(cfg.state_includes_tasks))
     built = time.perf_counter()
     learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
     u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
