@@ -43,6 +43,7 @@ Example:
 from __future__ import annotations
 
 import math
+import warnings
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -302,7 +303,9 @@ class DQNAgent:
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
         losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
         self.exploration.step(batch.numel())
-        self.schedule.step()
+        with warnings.catch_warnings():  # the schedule follows iterations, also those before learning starts
+            warnings.filterwarnings("ignore", message="Detected call of `lr_scheduler.step", category=UserWarning)
+            self.schedule.step()
         self.iteration += 1
         nxt = batch.get("next")
         per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star)
