@@ -43,7 +43,6 @@ Example:
 from __future__ import annotations
 
 import math
-import warnings
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -278,7 +277,6 @@ class DQNAgent:
             self.loss.make_value_estimator(gamma=float(a.gamma))
             self._action_keys = ["joint_action", ("agents", "action")]
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
-        self.schedule = torch.optim.lr_scheduler.LinearLR(self.optimizer, start_factor=1.0, end_factor=float(a.lr_end) / float(a.lr), total_iters=self.num_iterations)
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
         self.buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size))
         inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
@@ -298,14 +296,13 @@ class DQNAgent:
         """One episode in every world, then ``agent.updates`` gradient steps."""
         self.collector.set_seed(self._world_seed(self.iteration), static_seed=True)
         self.collector.reset()
+        for group in self.optimizer.param_groups:  # annealed linearly from agent.lr to agent.lr_end over the run
+            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(1.0, self.iteration / self.num_iterations)
         u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
         batch = next(self._batches)  # [worlds, steps]
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
         losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
         self.exploration.step(batch.numel())
-        with warnings.catch_warnings():  # the schedule follows iterations, also those before learning starts
-            warnings.filterwarnings("ignore", message="Detected call of `lr_scheduler.step", category=UserWarning)
-            self.schedule.step()
         self.iteration += 1
         nxt = batch.get("next")
         per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star)
@@ -334,7 +331,6 @@ class DQNAgent:
             "iteration": self.iteration,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
-            "schedule": self.schedule.state_dict(),
             "exploration": self.exploration.state_dict(),
             "buffer": self.buffer[: len(self.buffer)] if len(self.buffer) else None,  # the filled slots, in slot order
             "buffer_writes": self.buffer.write_count,
@@ -347,7 +343,6 @@ class DQNAgent:
     def load_state_dict(self, state: dict):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
-        self.schedule.load_state_dict(state["schedule"])
         self.exploration.load_state_dict(state["exploration"])
         self.buffer.empty()
         if state["buffer"] is not None:
