@@ -1,4 +1,4 @@
-"""Team agents: tabular team Q-learning and a factored deep Q-network.
+"""Team agents (tabular team Q-learning, a factored deep Q-network) and the baselines (random, oracle).
 
 Every agent has the same shape, so ``uavrl.train`` and ``uavrl.evaluate`` drive any of them:
 
@@ -13,7 +13,12 @@ Every agent has the same shape, so ``uavrl.train`` and ``uavrl.evaluate`` drive 
 """
 import importlib
 
-AGENTS = {"tabular": "uavrl.agents.tabular:TabularAgent", "dqn": "uavrl.agents.dqn:DQNAgent"}
+AGENTS = {
+    "tabular": "uavrl.agents.tabular:TabularAgent",
+    "dqn": "uavrl.agents.dqn:DQNAgent",
+    "random": "uavrl.agents.baselines:RandomAgent",
+    "oracle": "uavrl.agents.baselines:OracleAgent",
+}
 
 
 def agent_class(name: str):

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
 import numba
 import numpy as np
@@ -44,6 +45,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs import ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid, joint_targets
 from uavrl.envs.channel import best_so_far_reward, delta_reward
+from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
 from uavrl.evaluation import episode_metrics
 
 # numba's OpenMP layer shares the process with torch's OpenMP runtime and costs ~15 ms a
@@ -52,6 +54,7 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "workqueue"
 
 DEFAULT_MEMORY_BUDGET = 4 * 2**30
+METHODS = ("q_learning", "value_iteration")
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
 _START_BLOCK = 256  # episodes whose starts are drawn together
 
@@ -437,14 +440,76 @@ class TabularPolicy(TensorDictModuleBase):
 
 
 # ----------------------------------------------------------------------------- the uavrl agent
+def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET) -> torch.Tensor:
+    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state (SPEC section 6).
+
+    Solved on the configuration graph (:mod:`uavrl.envs.exact`, the environment's
+    own dynamics and rates), infinite horizon, discount ``gamma``.  With
+    ``state_includes_tasks`` a row is one configuration and holds ``Q*`` itself.
+    The paper's location-only state hides the tasks, so no row can be exact for
+    every task vector behind it: a row holds the mean of ``Q*`` over the task
+    vectors an episode starts with (all ``2^N`` for ``init_tasks=random``, else
+    the one), the value of acting from that location when the tasks are known
+    only to come from the reset (QMDP).  Its greedy policy is the best such a
+    table can express, not an optimal policy.  Invalid joint actions hold 0, as
+    in a learned table (policies mask them).
+    """
+    if cfg.reward != "delta":
+        raise ValueError(
+            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: the best_so_far reward depends on the episode's past, not on the configuration; use env.reward=delta"
+        )
+    if cfg.layout == "random" or cfg.fading != "none":
+        raise ValueError("agent.method=value_iteration needs a fixed layout and deterministic channels (env.layout=line or reference_code, env.fading=none)")
+    need = cfg.num_states * cfg.num_joint_actions * 8
+    if not cfg.has_state_index or need > memory_budget:
+        raise ValueError(
+            f"the exact Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {cfg.num_states * cfg.num_joint_actions * 8:,} bytes, over the memory budget of {int(memory_budget):,} bytes; raise agent.memory_budget or use agent=dqn"
+        )
+    N, C, A, dev = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions, torch.device(device)
+    space = ConfigurationSpace(cfg.grid, N, dev)
+    potential = space.utility(cfg, *fixed_layout_tables(cfg, dev), beta=(cfg.beta1, cfg.beta2))
+    values = optimal_values(space, potential, gamma)
+    task_vectors = (torch.arange(2**N, device=dev)[:, None] >> torch.arange(N, device=dev)) & 1  # [2^N, N]
+    start_tasks = {"random": task_vectors, "sensing": task_vectors[:1], "relaying": task_vectors[-1:]}[cfg.init_tasks]
+    tasks = task_vectors if cfg.state_includes_tasks else start_tasks
+    place = C ** torch.arange(N, device=dev)
+    q = torch.zeros(cfg.num_states, A, dtype=torch.float64, device=dev)
+    step = max(1, _TABLE_CHUNK // (A * len(tasks)))
+    for start in range(0, C**N, step):
+        cells = (torch.arange(start, min(start + step, C**N), device=dev)[:, None] // place) % C  # [P, N] every placement
+        distinct = (cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
+        cells = cells[distinct]
+        both = (cells[:, None].expand(-1, len(tasks), -1), tasks[None].expand(len(cells), -1, -1))  # [P, T, N] each
+        q_star = space.q_values(potential, values, gamma, both[0][None], both[1][None])[0]  # [P, T, A]
+        q_star = q_star.masked_fill(q_star == -math.inf, 0.0)
+        if cfg.state_includes_tasks:
+            rows = ((2 * both[0] + both[1]) * (2 * C) ** torch.arange(N, device=dev)).sum(-1)
+            q[rows.flatten()] = q_star.reshape(-1, A)
+        else:
+            q[(cells * place).sum(-1)] = q_star.mean(1)
+    return q
+
+
 class TabularAgent:
     """The tabular agent behind ``python -m uavrl.train agent=tabular`` (protocol in :mod:`uavrl.agents`).
 
-    One iteration is one episode of ``cfg.train.runs`` runs of ``cfg.train.steps_per_episode`` steps.
+    ``agent.method=q_learning`` (the paper's learner): one iteration is one
+    episode of ``cfg.train.runs`` runs of ``cfg.train.steps_per_episode`` steps.
+    ``agent.method=value_iteration``: one iteration solves :func:`exact_q_table`.
     """
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
+        self.method = a.get("method", "q_learning")
+        if self.method not in METHODS:
+            raise ValueError(f"agent.method={self.method!r} is invalid: allowed methods are {', '.join(map(repr, METHODS))}")
+        self.env_cfg, self.device = env_cfg, torch.device(device)
+        if self.method == "value_iteration":
+            if not 0 < float(a.gamma) <= 1:
+                raise ValueError(f"agent.gamma={a.gamma} is invalid for value iteration: it must lie in (0, 1]")
+            self.gamma, self.memory_budget = float(a.gamma), float(a.memory_budget)
+            self.learner, self.q, self.num_iterations = None, None, 1
+            return
         self.learner = TeamQLearner(
             env_cfg,
             runs=int(cfg.train.runs),
@@ -457,26 +522,33 @@ class TabularAgent:
             device=device,
             memory_budget=float(a.memory_budget),
         )
-        self.env_cfg = env_cfg
         self.num_iterations = int(cfg.train.episodes)
         self._u_star = torch.full((self.learner.runs,), self.learner.model.u_star, dtype=torch.float64)
 
     @property
     def env_steps(self) -> int:
-        """Team steps per run so far (all runs advance together)."""
-        return self.learner.episode * self.env_cfg.max_steps
+        """Team steps per run so far (all runs advance together); value iteration takes none."""
+        return 0 if self.learner is None else self.learner.episode * self.env_cfg.max_steps
 
     def train_iteration(self) -> dict[str, float]:
+        if self.learner is None:
+            started = time.perf_counter()
+            self.q = exact_q_table(self.env_cfg, self.gamma, self.device, self.memory_budget)
+            return {"train/solve_seconds": time.perf_counter() - started}
         steps = self.learner.run_episode()
         per_run = episode_metrics(steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], self._u_star.to(steps["r_pu"].device))
         self.last_episode = per_run  # [R] each, for figures
         return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
 
     def policies(self) -> list[TabularPolicy]:
-        return [TabularPolicy(q, self.env_cfg) for q in self.learner.q]
+        tables = self.learner.q if self.learner is not None else [self.q]
+        return [TabularPolicy(q, self.env_cfg) for q in tables]
 
     def state_dict(self) -> dict:
-        return self.learner.state_dict()
+        return self.learner.state_dict() if self.learner is not None else {"q": None if self.q is None else self.q.cpu()}
 
     def load_state_dict(self, state: dict):
-        self.learner.load_state_dict(state)
+        if self.learner is not None:
+            self.learner.load_state_dict(state)
+        else:
+            self.q = None if state["q"] is None else state["q"].to(self.device)

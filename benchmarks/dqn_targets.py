@@ -35,7 +35,8 @@ from hydra import compose, initialize_config_dir
 
 from uavrl.config import config_dir, model_config
 from uavrl.evaluate import load_agent
-from uavrl.evaluation import RandomPolicy, evaluate, evaluate_agent
+from uavrl.agents.baselines import RandomPolicy
+from uavrl.evaluation import evaluate, evaluate_agent
 
 TARGETS = {
     "n2": [],

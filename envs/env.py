@@ -17,10 +17,9 @@ from torchrl.envs import EnvBase
 from . import streams
 from .channel import best_so_far_reward, delta_reward, direct_terms, fixed_layout, link_gains, rates, rates_from_sums, relay_contributions
 from .config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig, make_config
+from .grid import cells_of, grid_neighbours, joint_action_valid
 from .optimum import optimum as exact_optimum
 
-# (dx, dy) of the four moves: up, down, left, right (SPEC section 2)
-MOVES = ((0, -1), (0, 1), (-1, 0), (1, 0))
 # purposes of the per-world random streams
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
 
@@ -103,12 +102,7 @@ class UAVSpectrumEnv(EnvBase):
         # static geometry: the target cell of each move, -1 when it leaves the grid
         c = torch.arange(C, device=dev)
         x, y = c % L1, c // L1
-        nbrs = []
-        for dx, dy in MOVES:
-            nx, ny = x + dx, y + dy
-            inside = (nx >= 0) & (nx < L1) & (ny >= 0) & (ny < L2)
-            nbrs.append(torch.where(inside, ny * L1 + nx, -1))
-        self._neighbours = torch.stack(nbrs, -1)  # [C, 4]
+        self._neighbours = grid_neighbours(cfg.grid, dev)  # [C, 4]
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
         # digit base of the tabular state index s = sum_i d_i base^i (SPEC section 6), None when it overflows int64
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
@@ -496,7 +490,7 @@ class UAVSpectrumEnv(EnvBase):
     # ------------------------------------------------------ shared helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:
         """Cell indices ``y * L1 + x`` of ``[..., 2]`` (x, y) positions."""
-        return positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
+        return cells_of(positions, self.cfg.grid[0])
 
     def utility(self, positions: torch.Tensor, tasks: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(R_PU, R_SE, U)`` of configurations of this env's worlds, deterministic channels.
@@ -549,29 +543,3 @@ class UAVSpectrumEnv(EnvBase):
     def neighbours(self) -> torch.Tensor:
         """``[C, 4]`` target cell of each move, -1 off the grid."""
         return self._neighbours
-
-
-MAX_JOINT_ACTIONS = 6**7
-
-
-def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
-    """``[6^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i 6^i``."""
-    if NUM_ACTIONS**num_uavs > MAX_JOINT_ACTIONS:
-        raise ValueError(f"num_uavs={num_uavs} has 6^{num_uavs} joint actions: joint-action tables allow N <= 7")
-    j = torch.arange(NUM_ACTIONS**num_uavs, device=device)
-    return torch.stack([(j // NUM_ACTIONS**i) % NUM_ACTIONS for i in range(num_uavs)], -1)
-
-
-def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the grid)."""
-    actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
-    moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
-    moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
-    return torch.where(actions < 4, moved, cells.unsqueeze(-2))
-
-
-def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells distinct."""
-    target = joint_targets(cells, neighbours, num_uavs)
-    ordered = target.sort(-1).values
-    return (target >= 0).all(-1) & (ordered[..., 1:] != ordered[..., :-1]).all(-1)

@@ -10,7 +10,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from uavrl.agents.dqn import DQNAgent, ValidGreedy
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid
-from uavrl.evaluation import RandomPolicy, evaluate
+from uavrl.agents.baselines import RandomPolicy
+from uavrl.evaluation import evaluate
 from uavrl.train import train
 
 TINY = ["env.grid=[3,3]", "train.steps_per_episode=8", "train.iterations=30", "agent.worlds=32", "agent.hidden=32", "agent.depth=1", "agent.batch_size=128", "agent.buffer_size=4000", "agent.updates=16", "agent.learning_starts=256", "agent.lr=0.003", "agent.lr_end=0.0003", "agent.tau=0.05"]

@@ -17,7 +17,7 @@ from uavrl.agents import agent_class
 from uavrl.config import config_dir, model_config
 from uavrl.evaluation import evaluate_agent
 from uavrl.io import save_json
-from uavrl.train import CHECKPOINT, resolve_device
+from uavrl.train import CHECKPOINT, eval_settings, resolve_device
 
 
 def load_agent(path, device="cpu"):
@@ -40,7 +40,7 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
     agent, saved = load_agent(cfg.checkpoint, device)
-    metrics = evaluate_agent(agent, model_config(saved), num_starts=int(cfg.eval.num_starts), horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device)
+    metrics = evaluate_agent(agent, model_config(saved), **eval_settings(cfg, device))
     out_dir = Path(cfg.checkpoint) if Path(cfg.checkpoint).is_dir() else Path(cfg.checkpoint).parent
     save_json(metrics, out_dir / "eval.json")
     return metrics

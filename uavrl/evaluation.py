@@ -1,23 +1,50 @@
-"""One evaluation for every agent: the paper's per-episode metrics and greedy optimality.
+"""One evaluation for every agent and baseline: the paper's per-episode metrics and the exact yardstick.
 
 Training curves (``train/...``) and evaluations (``eval/...``) of all agents are
 computed here, so their TensorBoard tags and meanings are identical.
 
+The yardstick (SPEC section 7b) measures what the paper set out to do: reach
+the best configuration in as few steps as possible.  From each of
+``num_starts`` fixed, seeded starts the greedy policy runs ``horizon`` steps;
+with ``U_t`` the mean-channel utility after step ``t`` (faded draws never
+decide whether a level is reached):
+
+- ``eval/return``: mean of ``J = sum_{t=1..H} gamma^(t-1) (U_t - U_{t-1})``
+  with ``gamma = eval.gamma``; ``eval/return_ratio`` = sum of J over the sum
+  of the exact best ``V*_H`` (only where the exact solver fits).
+- per level (``99``: 0.99 U*, ``999``: 0.999 U*, ``optimum``: U* within a
+  relative 1e-9): ``eval/reach_<level>`` (share of starts reaching it within
+  H), and over those starts ``eval/steps_to_<level>`` (first step at the
+  level, 0 if the start is there), ``eval/min_steps_to_<level>`` (the fewest
+  possible: exact by breadth-first search, or a lower bound where the exact
+  solver does not fit; ``eval/min_steps_exact`` says which) and
+  ``eval/step_ratio_<level>`` (mean of steps / fewest over starts needing >= 1).
+- ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
+  ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
+
 Example:
+    >>> from uavrl.agents.baselines import RandomPolicy
     >>> from uavrl.envs import make_config
     >>> cfg = make_config("paper", grid=(3, 3), num_uavs=2)
     >>> metrics = evaluate(RandomPolicy(seed=0), cfg, num_starts=4, horizon=5)
-    >>> 0 < metrics["eval/optimality"] <= 1
-    True
+    >>> 0 < metrics["eval/optimality"] <= 1, metrics["eval/min_steps_exact"]
+    (True, 1.0)
 """
 from __future__ import annotations
+
+import functools
 
 import torch
 
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs import exact
+from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
+from uavrl.envs.grid import cells_of
 
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
+DEFAULT_GAMMA = 0.9
 NINETY_PERCENT = 0.9
+LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
 def default_horizon(cfg: ModelConfig) -> int:
@@ -25,68 +52,147 @@ def default_horizon(cfg: ModelConfig) -> int:
     return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
 
 
-def episode_metrics(r_pu, r_se, task_switches, moves, u_star) -> dict[str, torch.Tensor]:
+def check_settings(gamma, horizon, num_starts) -> None:
+    """One-line errors for evaluation settings, named as on the command line."""
+    if not (isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and 0 < gamma <= 1):
+        raise ValueError(f"eval.gamma={gamma!r} is invalid: the yardstick's discount must lie in (0, 1]")
+    if horizon is not None and not (isinstance(horizon, int) and not isinstance(horizon, bool) and horizon >= 1):
+        raise ValueError(f"eval.horizon={horizon!r} is invalid: give a whole number of steps >= 1, or null for the default")
+    if not (isinstance(num_starts, int) and not isinstance(num_starts, bool) and num_starts >= 1):
+        raise ValueError(f"eval.num_starts={num_starts!r} is invalid: give a whole number of starts >= 1")
+
+
+def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> dict[str, torch.Tensor]:
     """SPEC section 7 per episode.  Inputs ``[W, T]`` for ``W`` episodes of ``T`` steps, ``u_star`` ``[W]``.
 
     Returns ``[W]`` tensors: the sums over steps of R_PU, R_SE and U (Fig. 3), of
     task switches and moves (Fig. 4), and the number of steps until U first
-    reaches 90% of U* (Fig. 5; T if never).
+    reaches 90% of U* (Fig. 5; T if never).  ``utility`` ``[W, T]``, the
+    mean-channel utility, decides that under fading (default: R_PU + R_SE).
     """
-    utility = (r_pu + r_se).double()
-    T = utility.shape[-1]
-    reached = utility >= NINETY_PERCENT * u_star.double().unsqueeze(-1)
+    sum_utility = (r_pu + r_se).double()
+    reach_utility = sum_utility if utility is None else utility.double()
+    T = sum_utility.shape[-1]
+    reached = reach_utility >= NINETY_PERCENT * u_star.double().unsqueeze(-1)
     first = torch.where(reached.any(-1), reached.double().argmax(-1) + 1, torch.full_like(u_star.double(), T))
     return {
         "sum_r_pu": r_pu.double().sum(-1),
         "sum_r_se": r_se.double().sum(-1),
-        "sum_utility": utility.sum(-1),
+        "sum_utility": sum_utility.sum(-1),
         "task_switches": task_switches.double().sum(-1),
         "moves": moves.double().sum(-1),
         "steps_to_90": first.double(),
     }
 
 
+@functools.lru_cache(maxsize=4)
+def _space(grid: tuple[int, int], num_uavs: int, device: str) -> exact.ConfigurationSpace:
+    return exact.ConfigurationSpace(grid, num_uavs, device)
+
+
+def start_references(env: UAVSpectrumEnv, start, u_star: torch.Tensor, horizon: int, gamma: float) -> dict:
+    """Per start ``[B]``: the exact best return ``V*_H`` (or ``None``) and the fewest steps to each level.
+
+    Exact where the configuration space fits (:func:`uavrl.envs.exact.fits`),
+    else lower bounds (:mod:`uavrl.envs.bounds`): the relaxation for every
+    level, and for the optimum also the bottleneck assignment to every
+    optimal configuration.
+    """
+    cfg, B = env.cfg, env.num_worlds
+    cells, tasks = cells_of(start["positions"], cfg.grid[0]), start["tasks"]
+    contributions, direct = env.cell_contributions, env.direct
+    thresholds = torch.stack([q * u_star for q in LEVELS.values()], -1)  # [B, L]
+    if exact.fits(cfg):
+        per_world = cfg.layout == "random"  # one layout for all worlds otherwise
+        tables = slice(None) if per_world else slice(0, 1)
+        space = _space(cfg.grid, cfg.num_uavs, str(env.device))
+        potential = space.utility(cfg, contributions[tables], direct[tables])
+        world = torch.arange(B, device=env.device) if per_world else torch.zeros(B, dtype=torch.long, device=env.device)
+        start_index = space.index(cells, tasks)
+        best_return = exact.optimal_values(space, potential, gamma, horizon)[world, start_index]
+        fewest = [exact.min_steps(space, potential >= thresholds[tables, level, None])[world, start_index].long() for level in range(len(LEVELS))]
+        return {"best_return": best_return, "min_steps": torch.stack(fewest, -1), "exact": True}
+    fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon)
+    optimal = [optimal_configurations(contributions[w], direct[w], cfg, float(u_star[w])) for w in range(1 if cfg.layout != "random" else B)]
+    optimal = optimal * B if len(optimal) == 1 else optimal
+    assignment = assignment_min_steps(cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], cfg.grid)
+    fewest[:, -1] = torch.maximum(fewest[:, -1], assignment.to(fewest.device))
+    return {"best_return": None, "min_steps": fewest, "exact": False}
+
+
+def yardstick_metrics(utility: torch.Tensor, u_star: torch.Tensor, references: dict, gamma: float) -> dict[str, float]:
+    """The yardstick from mean-channel utilities ``[B, H + 1]`` (start first) and :func:`start_references`."""
+    H = utility.shape[1] - 1
+    discount = gamma ** torch.arange(H, dtype=torch.float64, device=utility.device)
+    returns = (utility.diff(dim=1) * discount).sum(-1)
+    out = {"eval/return": returns.mean().item(), "eval/min_steps_exact": float(references["exact"])}
+    if references["best_return"] is not None:
+        out["eval/return_ratio"] = (returns.sum() / references["best_return"].sum()).item()
+    for level, (name, q) in enumerate(LEVELS.items()):
+        at = utility >= q * u_star.unsqueeze(-1)
+        reached = at.any(-1)
+        out[f"eval/reach_{name}"] = reached.double().mean().item()
+        if not reached.any():
+            continue
+        steps, fewest = at.double().argmax(-1)[reached].double(), references["min_steps"][:, level][reached].double()
+        out[f"eval/steps_to_{name}"] = steps.mean().item()
+        out[f"eval/min_steps_to_{name}"] = fewest.mean().item()
+        moving = fewest >= 1
+        if moving.any():
+            out[f"eval/step_ratio_{name}"] = (steps[moving] / fewest[moving]).mean().item()
+    out["eval/end_at_optimum"] = (utility[:, -1] >= LEVELS["optimum"] * u_star).double().mean().item()
+    return out
+
+
 @torch.no_grad()
-def evaluate(policy, cfg: ModelConfig, *, num_starts: int = 64, horizon: int | None = None, seed: int = EVAL_SEED, device="cpu") -> dict[str, float]:
-    """Greedy rollouts of ``policy`` from ``num_starts`` fixed, seeded starts.
+def evaluate(policy, cfg: ModelConfig, *, num_starts: int = 64, horizon: int | None = None, seed: int = EVAL_SEED, device="cpu", gamma: float = DEFAULT_GAMMA) -> dict[str, float]:
+    """Greedy rollouts of ``policy`` from ``num_starts`` fixed, seeded starts, measured by the yardstick.
 
     ``policy`` is any TorchRL policy for :class:`UAVSpectrumEnv` (reads the
-    observation keys, writes ``("agents", "action")``).  Optimality is the
-    utility of the configuration reached after ``horizon`` steps, with
-    deterministic channels, over the exact optimum U*.
+    observation keys, writes ``("agents", "action")``); one with a ``bind_env``
+    method (the oracle) is first given the evaluation's environment.
     """
+    check_settings(gamma, horizon, num_starts)
     horizon = horizon or default_horizon(cfg)
     env = UAVSpectrumEnv(batch_size=num_starts, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     start = env.reset()
     u_star = env.optimum()[0]
+    references = _references(env, start, u_star, horizon, gamma)
+    if hasattr(policy, "bind_env"):
+        policy.bind_env(env)
     rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
     nxt = rollout["next"]
-    per_episode = episode_metrics(nxt["r_pu"], nxt["r_se"], nxt["task_switches"], nxt["moves"], u_star)
-    final_u = env.utility(nxt["positions"][:, -1], nxt["tasks"][:, -1])[2]
-    optimality = final_u / u_star
+    positions = torch.cat([start["positions"].unsqueeze(1), nxt["positions"]], 1)
+    tasks = torch.cat([start["tasks"].unsqueeze(1), nxt["tasks"]], 1)
+    utility = env.utility(positions, tasks)[2]  # [B, H + 1], mean channels
+    per_episode = episode_metrics(nxt["r_pu"], nxt["r_se"], nxt["task_switches"], nxt["moves"], u_star, utility[:, 1:])
+    optimality = utility[:, -1] / u_star
     out = {f"eval/{k}": v.mean().item() for k, v in per_episode.items()}
     out["eval/optimality"] = optimality.mean().item()
     out["eval/optimality_min"] = optimality.min().item()
     out["eval/optimal_fraction"] = (optimality >= 0.99).double().mean().item()
+    out.update(yardstick_metrics(utility, u_star, references, gamma))
     return out
 
 
-class RandomPolicy:
-    """Uniform random per-UAV actions among those the ``action_mask`` allows: the baseline policy."""
+_REFERENCE_CACHE: dict = {}
 
-    def __init__(self, seed: int = 0):
-        self.generator = torch.Generator().manual_seed(seed)
 
-    def __call__(self, td):
-        mask = td.get(("agents", "action_mask"))
-        scores = torch.rand(mask.shape, generator=self.generator).to(mask.device).masked_fill(~mask, -1.0)
-        td.set(("agents", "action"), scores.argmax(-1))
-        return td
+def _references(env, start, u_star, horizon, gamma) -> dict:
+    """:func:`start_references`, kept for the last few settings (every run of an agent shares the starts)."""
+    key = (env.cfg, env.num_worlds, horizon, gamma, str(env.device), start["positions"].cpu().numpy().tobytes(), start["tasks"].cpu().numpy().tobytes())
+    if key not in _REFERENCE_CACHE:
+        if len(_REFERENCE_CACHE) >= 4:
+            _REFERENCE_CACHE.pop(next(iter(_REFERENCE_CACHE)))
+        _REFERENCE_CACHE[key] = start_references(env, start, u_star, horizon, gamma)
+    return _REFERENCE_CACHE[key]
 
 
 def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
-    """Average :func:`evaluate` over an agent's policies (one per independent run)."""
+    """Average :func:`evaluate` over an agent's policies (one per independent run); the worst start's optimality."""
     results = [evaluate(policy, cfg, **kwargs) for policy in agent.policies()]
-    out = {k: sum(r[k] for r in results) / len(results) for k in results[0]}
-    out["eval/optimality_min"] = min(r["eval/optimality_min"] for r in results)
+    out = {}
+    for key in dict.fromkeys(k for r in results for k in r):
+        values = [r[key] for r in results if key in r]
+        out[key] = min(values) if key == "eval/optimality_min" else sum(values) / len(values)
     return out

@@ -23,6 +23,7 @@ from tqdm import tqdm
 
 from uavrl.agents import agent_class
 from uavrl.config import config_dir, flat_hparams, model_config
+from uavrl.evaluation import check_settings as check_eval_settings
 from uavrl.evaluation import evaluate_agent
 from uavrl.io import save_json, save_text, save_torch
 from uavrl.logger import RunLogger
@@ -40,6 +41,11 @@ def resolve_device(name: str) -> torch.device:
     if device.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"device={name!r} is not available: this torch has no usable CUDA (see the README for a CUDA build)")
     return device
+
+
+def eval_settings(cfg: DictConfig, device) -> dict:
+    """Keyword arguments of :func:`uavrl.evaluation.evaluate` from ``cfg.eval``."""
+    return dict(num_starts=cfg.eval.num_starts, horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device, gamma=cfg.eval.gamma)
 
 
 def seed_everything(seed: int) -> None:
@@ -80,6 +86,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict]:
 
 def train(cfg: DictConfig, overrides=()) -> Path:
     """Run training as configured; returns the run directory."""
+    check_eval_settings(cfg.eval.gamma, cfg.eval.horizon, cfg.eval.num_starts)
     checkpoint = None
     if cfg.resume:
         cfg, checkpoint = resumed_config(cfg, overrides)
@@ -103,7 +110,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         save_torch(state, run_dir / CHECKPOINT)
 
     every = int(cfg.train.checkpoint_every)
-    eval_kwargs = dict(num_starts=int(cfg.eval.num_starts), horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device)
+    eval_kwargs = eval_settings(cfg, device)
     started = time.perf_counter()
     bar = tqdm(range(start, agent.num_iterations), initial=start, total=agent.num_iterations, disable=not cfg.progress, desc=f"{cfg.agent.name} {cfg.env.name}", unit="it", dynamic_ncols=True)
     for iteration in bar:

@@ -1,0 +1,176 @@
+"""Baselines every agent is reported beside: the uniform random policy and an oracle planner.
+
+Both are TorchRL policies (read the environment's keys, write
+``("agents", "action")``) and both are agents of the registry with nothing to
+train (``python -m uavrl.train agent=random`` or ``agent=oracle`` evaluates
+them and saves a run directory like any agent's, so ``load_policy`` and the
+reports treat them alike).
+
+The **oracle** knows the model.  Each step it lists every optimal
+configuration of each world (:func:`uavrl.envs.bounds.optimal_configurations`),
+assigns the UAVs to the (cell, task) pairs of one of them by the bottleneck
+assignment (:func:`uavrl.envs.bounds.best_assignment`: the fewest steps for
+the slowest UAV, then the fewest UAVs on long paths) and moves every UAV one
+step along it: the UAV with the most steps left chooses first, a task change
+comes first, then a move that shortens its path along the longer axis, then
+the other axis, else it stays.  A move is taken only into a cell that no UAV
+still to choose holds and no UAV that chose targets, so every joint action is
+valid (no cancelled move, no collision).
+
+Example:
+    >>> from uavrl.envs import UAVSpectrumEnv
+    >>> env = UAVSpectrumEnv(batch_size=4, grid=(6, 6), num_uavs=3, max_steps=12)
+    >>> td = env.rollout(12, OraclePolicy(env.cfg))
+    >>> u_star = env.optimum()[0]
+    >>> bool(((td["next", "utility"][:, -1].double() - u_star).abs() <= 1e-6 * u_star).all())
+    True
+"""
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from uavrl.envs import ModelConfig
+from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
+from uavrl.envs.exact import fixed_layout_tables
+from uavrl.envs.grid import cells_of, grid_neighbours
+from uavrl.envs.optimum import optimum
+
+UP, DOWN, LEFT, RIGHT, SENSE = range(5)
+
+
+class RandomPolicy(TensorDictModuleBase):
+    """Uniform random per-UAV actions among those the ``action_mask`` allows, from its own seeded generator."""
+
+    in_keys = [("agents", "action_mask")]
+    out_keys = [("agents", "action")]
+
+    def __init__(self, seed: int = 0):
+        super().__init__()
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        mask = td.get(("agents", "action_mask"))
+        scores = torch.rand(mask.shape, generator=self.generator).to(mask.device).masked_fill(~mask, -1.0)
+        td.set(("agents", "action"), scores.argmax(-1))
+        return td
+
+
+class OraclePolicy(TensorDictModuleBase):
+    """Drives each world's team to an optimal configuration along a valid, collision-free plan (module doc).
+
+    Fixed layouts need only ``cfg``.  With ``layout="random"`` the oracle reads
+    each world's layout from the environment it acts in: give ``env=`` (or set
+    ``policy.env``) before the rollout.
+    """
+
+    in_keys = ["positions", "tasks"]
+    out_keys = [("agents", "action")]
+
+    def __init__(self, cfg: ModelConfig, env=None):
+        super().__init__()
+        self.cfg, self.env = cfg, env
+        self.neighbours = grid_neighbours(cfg.grid).tolist()
+        self._targets: dict[int, tuple] = {}  # world -> (its contributions, optimal cells, optimal tasks)
+        self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
+
+    def bind_env(self, env) -> None:
+        """Act in ``env`` (the evaluation calls this; with ``layout="random"`` the layouts come from it)."""
+        self.env = env
+
+    def _layout(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
+        if self._fixed is not None:
+            return self._fixed[0][0], self._fixed[1][0]
+        if self.env is None:
+            raise ValueError("OraclePolicy with layout='random' needs the environment it acts in: OraclePolicy(cfg, env=env)")
+        return self.env.cell_contributions[world], self.env.direct[world]
+
+    def _optimal_sets(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
+        contributions, direct = self._layout(world)
+        key = 0 if self._fixed is not None else world
+        cached = self._targets.get(key)
+        if cached is None or not torch.equal(cached[0], contributions):
+            u_star = float(optimum(contributions[None], direct[None], self.cfg)[0][0])
+            cached = (contributions, *optimal_configurations(contributions, direct, self.cfg, u_star))
+            self._targets[key] = cached
+        return cached[1], cached[2]
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        positions, tasks = td.get("positions"), td.get("tasks")
+        cells = cells_of(positions, self.cfg.grid[0]).cpu()
+        actions = torch.stack([self._plan(w, cells[w], tasks[w].cpu()) for w in range(len(cells))])
+        td.set(("agents", "action"), actions.to(positions.device))
+        return td
+
+    def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
+        """One valid joint action of one world, ``[N]``."""
+        target_cells, target_tasks = self._optimal_sets(world)
+        costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
+        _, s, pair = best_assignment(costs)
+        width = self.cfg.grid[0]
+        goal = list(zip(target_cells[s][pair].tolist(), target_tasks[s][pair].tolist()))
+        cells, tasks = cells.tolist(), tasks.tolist()
+
+        def steps_to(i: int, cell_task: tuple[int, int]) -> int:
+            (y, x), (gy, gx) = divmod(cells[i], width), divmod(cell_task[0], width)
+            return abs(gx - x) + abs(gy - y) + (cell_task[1] != tasks[i])
+
+        def preferences(i: int) -> list[int]:
+            """A task change first, then moves that shorten the path (longer axis first), then staying."""
+            (y, x), (gy, gx) = divmod(cells[i], width), divmod(goal[i][0], width)
+            moves = sorted([(abs(gx - x), RIGHT if gx > x else LEFT), (abs(gy - y), DOWN if gy > y else UP)], reverse=True)
+            change = [SENSE + goal[i][1]] if goal[i][1] != tasks[i] else []
+            return change + [move for distance, move in moves if distance > 0] + [SENSE + tasks[i]]
+
+        def target(i: int, action: int) -> int:
+            return cells[i] if action >= SENSE else self.neighbours[cells[i]][action]
+
+        holder = {cell: i for i, cell in enumerate(cells)}
+        waiting, claimed, actions = set(cells), set(), [0] * len(cells)
+        for i in sorted(range(len(cells)), key=lambda i: -steps_to(i, goal[i])):
+            waiting.discard(cells[i])
+            options = preferences(i)
+            if all(target(i, a) in waiting for a in options[:-1] if a < SENSE) and any(a < SENSE for a in options):
+                # every shortening move runs into a UAV still to choose: hand it this UAV's goal and take its
+                # place (it lies on this UAV's path), when that makes neither of the two slower
+                j = holder[target(i, next(a for a in options if a < SENSE))]
+                if max(steps_to(i, goal[j]), steps_to(j, goal[i])) <= max(steps_to(i, goal[i]), steps_to(j, goal[j])):
+                    goal[i], goal[j] = goal[j], goal[i]
+                    options = preferences(i)
+            actions[i] = next(a for a in options if a >= SENSE and target(i, a) == cells[i] or target(i, a) not in waiting | claimed)
+            claimed.add(target(i, actions[i]))
+        return torch.tensor(actions)
+
+
+class BaselineAgent:
+    """An agent with nothing to learn (protocol in :mod:`uavrl.agents`): no iteration, an empty checkpoint."""
+
+    num_iterations = 0
+    env_steps = 0
+
+    def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
+        self.env_cfg, self.seed = env_cfg, int(seed)
+
+    def train_iteration(self) -> dict[str, float]:
+        raise RuntimeError(f"{type(self).__name__} has nothing to train")
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict):
+        pass
+
+
+class RandomAgent(BaselineAgent):
+    """``agent=random``: the uniform random policy over allowed per-UAV actions, seeded by ``seed``."""
+
+    def policies(self) -> list[RandomPolicy]:
+        return [RandomPolicy(self.seed)]
+
+
+class OracleAgent(BaselineAgent):
+    """``agent=oracle``: the oracle planner (module doc)."""
+
+    def policies(self) -> list[OraclePolicy]:
+        return [OraclePolicy(self.env_cfg)]

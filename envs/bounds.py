@@ -1,0 +1,152 @@
+"""Lower bounds on the steps to a good configuration, for teams too large for the exact solver.
+
+Two bounds, both provably never above the true fewest steps:
+
+- :func:`relaxed_min_steps` (any level, e.g. 0.99 U*): after ``k`` steps UAV
+  ``i`` can only hold a (cell, task) with ``Manhattan distance + [task changed]
+  <= k`` (a step either moves or sets the task).  Forgetting that cells must
+  differ, the best utility within reach is the best, over which UAVs relay,
+  of every relay taking the largest relay contribution it can reach and every
+  sensor the largest sensing contribution (the rates grow with each sum).  No
+  real ``k``-step trajectory does better, so the first ``k`` whose relaxed best
+  reaches the level is a lower bound.
+- :func:`assignment_min_steps` (the optimum itself): to end in an optimal set
+  of (cell, task) pairs, some UAV must make the largest ``distance + [task
+  changed]`` of the best assignment of UAVs to that set's pairs (a bottleneck
+  assignment); the bound is the least of these over *every* optimal set
+  (:func:`optimal_configurations` finds them all).
+
+Example:
+    >>> from uavrl.envs.config import make_config
+    >>> from uavrl.envs.exact import fixed_layout_tables
+    >>> cfg = make_config("paper", grid=(6, 6), num_uavs=3)
+    >>> contributions, direct = fixed_layout_tables(cfg)
+    >>> u_star, cells, tasks = optimum(contributions, direct, cfg)
+    >>> start_cells, start_tasks = torch.tensor([[0, 1, 2]]), torch.tensor([[0, 0, 0]])
+    >>> relaxed_min_steps(start_cells, start_tasks, contributions, direct, cfg, u_star[:, None], max_steps=20).tolist()
+    [[4]]
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import torch
+from scipy.optimize import linear_sum_assignment
+
+from .channel import rates, rates_from_sums
+from .config import RELAYING, SENSING, ModelConfig
+from .grid import manhattan
+from .optimum import optimum
+
+OPTIMUM_RTOL = 1e-9  # a configuration "is optimal" when U >= (1 - OPTIMUM_RTOL) U*
+MAX_CANDIDATES = 2_000_000  # configurations examined per world by optimal_configurations
+
+
+def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``[W, K + 1, N]`` largest relay and sensing contribution UAV ``i`` can hold after ``k = 0..K`` steps.
+
+    ``-inf`` where no cell of that task is within reach (a task change alone takes a step).
+    """
+    distance = manhattan(grid, cells.device)[cells]  # [W, N, C]
+    steps = torch.arange(max_steps + 1, device=cells.device)[:, None, None]  # [K + 1, 1, 1]
+    best = []
+    for task, column in ((RELAYING, 0), (SENSING, 1)):
+        cost = distance + (tasks != task).long().unsqueeze(-1)  # [W, N, C]
+        value = contributions[..., column].unsqueeze(1).unsqueeze(1)  # [W, 1, 1, C]
+        best.append(torch.where(cost.unsqueeze(1) <= steps, value, -math.inf).amax(-1))  # [W, K + 1, N]
+    return best[0], best[1]
+
+
+def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
+    """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps."""
+    N = cfg.num_uavs
+    best_a, best_b = reachable_best(cells, tasks, contributions, cfg.grid, max_steps)
+    relays = ((torch.arange(2**N, device=cells.device)[:, None] >> torch.arange(N, device=cells.device)) & 1).double()  # [M, N]
+    # which UAVs relay: every split; a split is out of reach while one of its UAVs has no cell of its task in reach
+    blocked = (best_a == -math.inf).double() @ relays.T + (best_b == -math.inf).double() @ (1 - relays).T  # [W, K + 1, M]
+    sum_a = best_a.clamp(min=0) @ relays.T + direct[:, None, None, 0]
+    sum_b = best_b.clamp(min=0) @ (1 - relays).T + direct[:, None, None, 1]
+    r = rates_from_sums(torch.stack([sum_a, sum_b], -1), relays.sum(-1).expand_as(sum_a), N, cfg)
+    return r.sum(-1).masked_fill(blocked > 0, -math.inf).amax(-1)
+
+
+def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int) -> torch.Tensor:
+    """``[W, L]`` lower bound on the steps from ``[W, N]`` cells/tasks to utility ``>= levels`` ``[W, L]``.
+
+    ``max_steps + 1`` where even the relaxation does not reach a level within ``max_steps``.
+    """
+    reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(1)  # [W, K + 1, L]
+    return torch.where(reach.any(1), reach.double().argmax(1), max_steps + 1).long()
+
+
+def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: float, rtol: float = OPTIMUM_RTOL):
+    """Every set of (cell, task) pairs of one world with ``U >= (1 - rtol) U*``: ``(cells [S, N], tasks [S, N])``.
+
+    ``contributions`` ``[C, 2]``, ``direct`` ``[2]``.  Why the search is complete:
+    a relay on cell ``r`` whose relay contribution lies more than ``delta`` below
+    the N-th largest could move to an unused cell with a larger one (at most N - 1
+    of the N best cells are used), raising ``U`` by more than ``rtol U*`` when
+    ``delta = (1 + direct + sum of the N largest) (2^(2 rtol U*) - 1)``; so
+    relays lie within ``delta`` of the top N relay cells, sensors likewise,
+    and the candidates are every split of those cells.
+    """
+    N = cfg.num_uavs
+    slack = 2.0 ** (2 * rtol * u_star) - 1
+
+    def near_top(column: int) -> set[int]:
+        value = contributions[:, column]
+        top = value.topk(N).values
+        delta = (1 + float(direct[column]) + float(top.sum())) * slack
+        return set((value >= top[-1] - delta).nonzero().flatten().tolist())
+
+    relay_cells, sense_cells = sorted(near_top(0)), sorted(near_top(1))
+    count = sum(math.comb(len(relay_cells), m) * math.comb(len(sense_cells), N - m) for m in range(N + 1))
+    if count > MAX_CANDIDATES:
+        raise ValueError(f"{count:,} candidate configurations tie near the optimum: too many to list every optimal one")
+    dev = contributions.device
+    candidates = []
+    for m in range(N + 1):  # m relays on relay cells, N - m sensors on the other sense cells
+        relays = torch.tensor(list(itertools.combinations(relay_cells, m)), dtype=torch.long, device=dev).view(-1, m) if m else torch.zeros(1, 0, dtype=torch.long, device=dev)
+        sensors = torch.tensor(list(itertools.combinations(sense_cells, N - m)), dtype=torch.long, device=dev).view(-1, N - m) if m < N else torch.zeros(1, 0, dtype=torch.long, device=dev)
+        cells = torch.cat([relays.repeat_interleave(len(sensors), 0), sensors.repeat(len(relays), 1)], -1)
+        distinct = (cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
+        tasks = torch.tensor([RELAYING] * m + [SENSING] * (N - m), device=dev).expand(len(cells), -1)
+        candidates.append((cells[distinct], tasks[distinct]))
+    cells, tasks = torch.cat([c for c, _ in candidates]), torch.cat([t for _, t in candidates])
+    r_pu, r_se = rates(contributions[cells], tasks, direct, cfg)
+    optimal = (r_pu + r_se) >= (1 - rtol) * u_star
+    return cells[optimal], tasks[optimal]
+
+
+def assignment_costs(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
+    """``[S, N, N]`` steps UAV ``i`` (cells/tasks ``[N]``) needs to hold pair ``j`` of target set ``s`` (``[S, N]``)."""
+    distance = manhattan(grid, cells.device)[cells][:, target_cells]  # [N, S, N]
+    return (distance + (tasks[:, None, None] != target_tasks[None])).permute(1, 0, 2)
+
+
+def best_assignment(costs: torch.Tensor) -> tuple[int, int, np.ndarray]:
+    """``(steps, set s, pair of each UAV)`` of the lexicographically least assignment over ``[S, N, N]`` costs.
+
+    Minimising ``sum (N + 1)^cost`` minimises the largest cost first (one pair
+    at cost ``m`` outweighs N pairs below ``m``), then how many UAVs need it, and
+    so on: the bottleneck assignment, with the fewest UAVs on long paths.
+    """
+    costs = costs.cpu().numpy()
+    weights = float(costs.shape[1] + 1) ** costs
+    best = None
+    for s in range(len(costs)):
+        rows, cols = linear_sum_assignment(weights[s])
+        key = (int(costs[s, rows, cols].max()), float(weights[s, rows, cols].sum()))
+        if best is None or key < best[0]:
+            best = (key, s, cols)
+    return best[0][0], best[1], best[2]
+
+
+def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
+    """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists)."""
+    return torch.tensor(
+        [best_assignment(assignment_costs(c, t, tc, tt, grid))[0] for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks)],
+        dtype=torch.long,
+    )

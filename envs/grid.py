@@ -1,0 +1,86 @@
+"""Grid geometry and joint actions: the moves of SPEC section 2, with no TorchRL import.
+
+Cells are numbered ``c = y * L1 + x``; a UAV's move goes to a neighbouring cell
+(``-1`` when it would leave the grid); a joint action ``j = sum_i a_i 6^i``
+is valid when every UAV stays on the grid and all target cells differ.  The
+environment, the exact solver, the bounds, the oracle and the agents all use
+these functions.
+
+Example:
+    >>> neighbours = grid_neighbours((3, 2))
+    >>> neighbours[0].tolist()  # cell (0, 0): up leaves the grid, down is cell 3, left leaves, right is cell 1
+    [-1, 3, -1, 1]
+    >>> joint_action_valid(torch.tensor([0, 1]), neighbours, 2).sum().item()  # of 36 joint actions
+    20
+"""
+from __future__ import annotations
+
+import torch
+
+from .config import NUM_ACTIONS
+
+# (dx, dy) of the four moves: up, down, left, right
+MOVES = ((0, -1), (0, 1), (-1, 0), (1, 0))
+MAX_JOINT_ACTIONS = 6**7
+
+
+def grid_neighbours(grid: tuple[int, int], device=None) -> torch.Tensor:
+    """``[C, 4]`` target cell of each move (up, down, left, right) from every cell, ``-1`` off the grid."""
+    L1, L2 = grid
+    c = torch.arange(L1 * L2, device=device)
+    x, y = c % L1, c // L1
+    targets = []
+    for dx, dy in MOVES:
+        nx, ny = x + dx, y + dy
+        inside = (nx >= 0) & (nx < L1) & (ny >= 0) & (ny < L2)
+        targets.append(torch.where(inside, ny * L1 + nx, -1))
+    return torch.stack(targets, -1)
+
+
+def cells_of(positions: torch.Tensor, width: int) -> torch.Tensor:
+    """Cell indices ``y * L1 + x`` of ``[..., 2]`` (x, y) positions."""
+    return positions[..., 1] * width + positions[..., 0]
+
+
+def positions_of(cells: torch.Tensor, width: int) -> torch.Tensor:
+    """``[..., 2]`` (x, y) positions of cell indices."""
+    return torch.stack([cells % width, cells // width], -1)
+
+
+def manhattan(grid: tuple[int, int], device=None) -> torch.Tensor:
+    """``[C, C]`` Manhattan distances between cells: the fewest moves between them on an empty grid."""
+    xy = positions_of(torch.arange(grid[0] * grid[1], device=device), grid[0])
+    return (xy[:, None] - xy[None]).abs().sum(-1)
+
+
+def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
+    """``[6^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i 6^i``."""
+    if NUM_ACTIONS**num_uavs > MAX_JOINT_ACTIONS:
+        raise ValueError(f"num_uavs={num_uavs} has 6^{num_uavs} joint actions: joint-action tables allow N <= 7")
+    j = torch.arange(NUM_ACTIONS**num_uavs, device=device)
+    return torch.stack([(j // NUM_ACTIONS**i) % NUM_ACTIONS for i in range(num_uavs)], -1)
+
+
+def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
+    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the grid)."""
+    actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
+    moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
+    moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
+    return torch.where(actions < 4, moved, cells.unsqueeze(-2))
+
+
+def joint_next_tasks(tasks: torch.Tensor, num_uavs: int) -> torch.Tensor:
+    """``[..., 6^N, N]`` task of every UAV after every joint action from ``[..., N]`` tasks (4 senses, 5 relays)."""
+    actions = decode_joint_actions(num_uavs, tasks.device)  # [A, N]
+    return torch.where(actions == 4, 0, torch.where(actions == 5, 1, tasks.unsqueeze(-2)))
+
+
+def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
+    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells distinct."""
+    return targets_valid(joint_targets(cells, neighbours, num_uavs))
+
+
+def targets_valid(target: torch.Tensor) -> torch.Tensor:
+    """``[...]`` whether target cells ``[..., N]`` are all on the grid and pairwise distinct."""
+    ordered = target.sort(-1).values
+    return (target >= 0).all(-1) & (ordered[..., 1:] != ordered[..., :-1]).all(-1)
