@@ -59,6 +59,7 @@ from uavrl.evaluation import episode_metrics
 
 HEADS = ("factored", "joint")
 MIXERS = ("vdn", "qmix")
+OBJECTIVES = ("delta", "log_gap")
 MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 
@@ -115,7 +116,10 @@ class ValidGreedy(nn.Module):
     move whose target cell differs from the cells of the UAVs still to choose
     and from the targets of those that chose (staying always qualifies, so all
     targets differ: a valid joint action, SPEC section 2), and a switch to a
-    task that no UAV before it switches to in this step.  Per-UAV values rate
+    task that no UAV before it switches to in this step.  Then, in a second
+    pass, a UAV that kept its cell takes its best move into a cell that no
+    other UAV now targets, if it values that move more (a UAV held back by a
+    later one that moved away follows it in the same step).  Per-UAV values rate
     each switch as if it were the only one; two UAVs that both switch (say, the
     two relays of N = 2 both turning to sensing) can land in a worse
     configuration than either alone, and flip back and forth forever.
@@ -125,6 +129,9 @@ class ValidGreedy(nn.Module):
         >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 9.0, 0, 0, 1]]])  # both want cell 1
         >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[0, 0]]))
         tensor([[3, 5]])
+        >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 0, 9.0, 0, 1]]])  # a train: both move right together
+        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]]))
+        tensor([[3, 3]])
         >>> values = torch.tensor([[[0, 0, 0, 0, 9.0, 1], [0, 0, 0, 0, 9.0, 1]]])  # both relays want to sense
         >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[1, 1]]))
         tensor([[4, 5]])
@@ -151,7 +158,17 @@ class ValidGreedy(nn.Module):
             claimed[..., i] = targets[..., i, :].gather(-1, action.unsqueeze(-1)).squeeze(-1)
             switched_to |= switches & (action.unsqueeze(-1) == self.task_ids + 4)
             actions.append(action)
-        return torch.stack(actions, -1)
+        actions = torch.stack(actions, -1)
+        # second pass: a UAV that kept its cell because a later UAV still held the cell it wanted takes that move
+        # now if the holder has left it (UAVs following one another move together)
+        for i in range(cells.shape[-1]):
+            others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
+            free = (targets[..., i, :4, None] != others[..., None, :]).all(-1) & action_mask[..., i, :4]
+            value, move = action_value[..., i, :4].masked_fill(~free, -math.inf).max(-1)
+            better = (actions[..., i] >= 4) & (value > action_value[..., i, :].gather(-1, actions[..., i, None]).squeeze(-1))
+            actions[..., i] = torch.where(better, move, actions[..., i])
+            claimed[..., i] = torch.where(better, targets[..., i, :].gather(-1, move.unsqueeze(-1)).squeeze(-1), claimed[..., i])
+        return actions
 
 
 class JointActionMask(nn.Module):
@@ -216,6 +233,10 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
         raise ValueError(f"agent.head={a.head!r} is invalid: allowed heads are {', '.join(map(repr, HEADS))}")
     if a.mixer not in MIXERS:
         raise ValueError(f"agent.mixer={a.mixer!r} is invalid: allowed mixers are {', '.join(map(repr, MIXERS))}")
+    if a.objective not in OBJECTIVES:
+        raise ValueError(f"agent.objective={a.objective!r} is invalid: allowed objectives are {', '.join(map(repr, OBJECTIVES))}")
+    if not float(a.gap_floor) > 0:
+        raise ValueError(f"agent.gap_floor={a.gap_floor} is invalid: it must be positive")
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = {env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
@@ -300,17 +321,37 @@ class DQNAgent:
             group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(1.0, self.iteration / self.num_iterations)
         u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
         batch = next(self._batches)  # [worlds, steps]
+        if self.settings.objective == "log_gap":
+            batch.set(("next", "reward"), self._log_gap_reward(batch, u_star))
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
         losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
         self.exploration.step(batch.numel())
         self.iteration += 1
         nxt = batch.get("next")
-        per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star)
+        # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
+        mean_utility = self.env.utility(nxt.get("positions"), nxt.get("tasks"))[2] if self.env_cfg.fading != "none" else None
+        per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, mean_utility)
         out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
         out["train/epsilon"] = self.exploration.eps.item()
         if losses:
             out["train/loss"] = torch.stack(losses).mean().item()
         return out
+
+    def _log_gap_reward(self, batch: TensorDictBase, u_star: torch.Tensor) -> torch.Tensor:
+        """``[W, T, 1]`` the change of ``-log(1 - U / U* + agent.gap_floor)`` over each step, mean-channel ``U``.
+
+        The delta reward's action gaps shrink with the distance to the optimum
+        (the last 0.1% of U* is worth 0.01 bit/s/Hz), below what the network
+        resolves: greedy policies then wander near U*.  On a log scale of the
+        gap to U* each halving of the gap is worth the same, down to the floor.
+        """
+        floor = float(self.settings.gap_floor)
+
+        def potential(td):
+            fraction = self.env.utility(td.get("positions"), td.get("tasks"))[2] / u_star.unsqueeze(-1)
+            return -torch.log((1 - fraction).clamp(min=0) + floor)
+
+        return (potential(batch.get("next")) - potential(batch)).unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
 
     def _update(self) -> torch.Tensor:
         loss = self.loss(self.buffer.sample())["loss"]

@@ -17,7 +17,7 @@ from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.bounds import assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, min_steps, optimal_values
 from uavrl.envs.grid import cells_of
-from uavrl.evaluation import LEVELS, evaluate, yardstick_metrics
+from uavrl.evaluation import LEVELS, episode_metrics, evaluate, yardstick_metrics
 from uavrl.evaluation import check_settings as check_eval_settings
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
@@ -254,3 +254,12 @@ def test_bad_eval_setting_on_the_command_line_is_one_line(tmp_path):
     run = subprocess.run([sys.executable, "-m", "uavrl.train", "eval.gamma=0", f"run_dir={tmp_path / 'r'}"], capture_output=True, text=True)
     assert run.returncode != 0 and "eval.gamma=0 is invalid" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "r").exists()
+
+
+def test_steps_to_90_under_fading_uses_the_mean_channel_utility():
+    faded = torch.tensor([[4.0, 5.0, 12.0, 6.0]])  # a lucky draw crosses 90% of U* = 9 at step 3
+    mean = torch.tensor([[4.0, 9.5, 9.5, 9.5]])  # the configuration itself is there from step 2
+    zeros = torch.zeros_like(faded)
+    u_star = torch.tensor([10.0])
+    assert episode_metrics(faded, zeros, zeros, zeros, u_star)["steps_to_90"].item() == 3
+    assert episode_metrics(faded, zeros, zeros, zeros, u_star, mean)["steps_to_90"].item() == 2

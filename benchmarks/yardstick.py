@@ -1,0 +1,98 @@
+"""Every agent and baseline on the yardstick (BENCHMARKS.md, "The yardstick"): train as a user would, read metrics.json.
+
+Each row runs ``python -m uavrl.train <overrides> seed=<seed>`` as a whole
+process (Python start-up, training and the shared final evaluation on
+``--starts`` held-out starts), and prints one markdown row per row name and
+seed: the old final-utility measure beside the yardstick (return ratio against
+the exact optimum where it exists, share of starts reaching 0.999 U*, steps to
+reach it and their ratio to the fewest possible, exact or a lower bound).
+
+Usage::
+
+    python benchmarks/yardstick.py --table n2 --seeds 0 1 2      # N = 2 on 6x6
+    python benchmarks/yardstick.py --table n6 --seeds 0 1 2      # N = 6 on 10x10
+    python benchmarks/yardstick.py --rows n6-dqn n6-oracle --seeds 0
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+N6 = ["env.grid=[10,10]", "env.num_uavs=6"]
+ROWS = {
+    "n2-random": ["agent=random"],
+    "n2-oracle": ["agent=oracle"],
+    "n2-tabular": ["agent=tabular"],
+    "n2-tabular-tasks": ["agent=tabular", "env.state_includes_tasks=true"],
+    "n2-vi": ["agent=tabular", "agent.method=value_iteration"],
+    "n2-vi-tasks": ["agent=tabular", "agent.method=value_iteration", "env.state_includes_tasks=true"],
+    "n2-dqn": ["agent=dqn"],
+    "n2-dqn-joint": ["agent=dqn", "agent.head=joint"],
+    "n6-random": ["agent=random", *N6],
+    "n6-oracle": ["agent=oracle", *N6],
+    "n6-dqn": ["agent=dqn", *N6],
+    "n6-dqn-qmix": ["agent=dqn", *N6, "agent.mixer=qmix"],
+    "n6-random-layouts-random": ["agent=random", *N6, "env.layout=random"],
+    "n6-random-layouts-oracle": ["agent=oracle", *N6, "env.layout=random"],
+    "n6-random-layouts-dqn": ["agent=dqn", *N6, "env.layout=random"],
+}
+TABLES = {name: [row for row in ROWS if row.startswith(name + "-")] for name in ("n2", "n6")}
+DETERMINISTIC = ("oracle", "vi")  # one seed is enough
+
+
+def run_row(name: str, seed: int, starts: int, out: Path) -> dict:
+    overrides = [*ROWS[name], f"seed={seed}", f"eval.num_starts={starts}"]
+    run_dir = out / f"{name}-seed{seed}"
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "uavrl.train", *overrides, f"run_dir={run_dir}", "progress=false"], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{name} seed {seed} failed:\n{done.stderr}")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    return {"row": name, "seed": seed, "command": "python -m uavrl.train " + " ".join(overrides), "wall_seconds": time.perf_counter() - started, **metrics}
+
+
+def cell(metrics: dict, key: str, fmt: str) -> str:
+    return format(metrics[key], fmt) if key in metrics else "-"
+
+
+def row(m: dict) -> str:
+    fewest = "exact" if m.get("eval/min_steps_exact") == 1.0 else "bound"
+    return (
+        f"| {m['row']} | {m['seed']} | {cell(m, 'eval/optimality', '.4f')} | {cell(m, 'eval/return_ratio', '.4f')} "
+        f"| {cell(m, 'eval/reach_999', '.2f')} | {cell(m, 'eval/steps_to_999', '.2f')} | {cell(m, 'eval/min_steps_to_999', '.2f')} ({fewest}) "
+        f"| {cell(m, 'eval/step_ratio_999', '.3f')} | {cell(m, 'eval/reach_optimum', '.2f')} | {cell(m, 'eval/step_ratio_optimum', '.3f')} "
+        f"| {m['train_seconds']:.0f} | {m['wall_seconds']:.0f} |"
+    )
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--table", choices=sorted(TABLES), help="every row of one table")
+    parser.add_argument("--rows", nargs="+", choices=sorted(ROWS), default=[])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--starts", type=int, default=200, help="held-out evaluation starts (and layouts)")
+    parser.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary directory)")
+    parser.add_argument("--json", type=Path, default=None, help="also write every result here")
+    args = parser.parse_args()
+    rows = (TABLES[args.table] if args.table else []) + args.rows
+    if not rows:
+        parser.error("give --table or --rows")
+    out = args.out or Path(tempfile.mkdtemp(prefix="yardstick_"))
+    print("| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | reach U* | step ratio U* | train s | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    results = []
+    for name in rows:
+        for seed in args.seeds[:1] if any(k in name for k in DETERMINISTIC) else args.seeds:
+            results.append(run_row(name, seed, args.starts, out))
+            print(row(results[-1]), flush=True)
+            if args.json:
+                args.json.write_text(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()
