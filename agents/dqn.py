@@ -61,6 +61,7 @@ HEADS = ("factored", "joint")
 MIXERS = ("vdn", "qmix")
 MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
+_SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 
 
 # ----------------------------------------------------------------------------- networks
@@ -285,7 +286,7 @@ class DQNAgent:
         self._batches = iter(self.collector)
 
     def _world_seed(self, iteration: int) -> int:
-        return self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE
+        return (self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE) % _SEED_MODULUS
 
     @property
     def env_steps(self) -> int:
