@@ -176,7 +176,8 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
             f"{within:.0%} of starts within 1% of U*)",
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
-            f"look at it: tensorboard --logdir {run_dir}   again: python -m uavrl.evaluate checkpoint={run_dir}",
+            f"look at it: tensorboard --logdir {run_dir}   "
+            f"evaluate it again: python -m uavrl.evaluate checkpoint={run_dir}",
         ]
     )
 
