@@ -48,7 +48,7 @@ def load_agent(path, device="cpu"):
     return agent, cfg
 
 
-def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
+def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
 
@@ -64,8 +64,9 @@ def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
     return metrics
 
 
-def print_evaluation(cfg: DictConfig, overrides=()) -> None:
-    print(json.dumps(evaluate_checkpoint(cfg, overrides), indent=2, sort_keys=True))
+def print_evaluation(cfg: DictConfig, _overrides) -> None:
+    """``python -m uavrl.evaluate``: the metrics as JSON on stdout."""
+    print(json.dumps(evaluate_checkpoint(cfg), indent=2, sort_keys=True))
 
 
 if __name__ == "__main__":

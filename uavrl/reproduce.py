@@ -271,7 +271,8 @@ def figures(cfg: DictConfig) -> list[Path]:
     return written
 
 
-def reproduce(cfg: DictConfig, overrides=()) -> None:
+def reproduce(cfg: DictConfig, _overrides=()) -> None:
+    """``python -m uavrl.reproduce``: check the settings, then run ``cfg.command``."""
     check_settings(cfg)
     import numba  # the heavy modules, once the settings are known to be good
     import torch
