@@ -8,9 +8,11 @@ from torch.utils.tensorboard.summary import hparams as hparams_summaries
 class RunLogger:
     """Scalars against team steps.
 
-    A resumed run passes ``resume_step``, the step of its checkpoint: points a
-    killed run logged after it are purged (the resumed run logs them again),
-    the points up to it stay, so every curve has one point per logged step.
+    ``resume_step``: the points already in the directory up to this step stay,
+    later ones are purged (TensorBoard drops them on reading).  A resumed run
+    passes its checkpoint's step, so the points a killed run logged after it
+    give way to those logged again; a new run passes 0, so curves an earlier
+    attempt left give way entirely.  Every curve has one point per logged step.
     """
 
     def __init__(self, run_dir, resume_step: int | None = None):

@@ -39,7 +39,8 @@ def check_settings(cfg: DictConfig) -> None:
     if cfg.resume and not checkpoint_files(cfg.resume):
         raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory)")
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
-        raise FileExistsError(f"run_dir={cfg.run_dir!r} holds a run: continue it (resume=...) or pick another run_dir")
+        advice = f"continue it with resume={cfg.run_dir}, or pick another run_dir"
+        raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a run: {advice}")
 
 
 def seed_everything(seed: int) -> None:
