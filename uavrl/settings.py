@@ -77,7 +77,9 @@ def grid_sizes() -> Rule:
 
 
 SEED = Rule(lambda v: _is_whole(v) and 0 <= v < 2**63, "it must be a whole number in [0, 2^63)")
-DEVICE = Rule(lambda v: isinstance(v, str) and re.fullmatch(r"cpu|cuda(:\d+)?", v), "use 'cpu', 'cuda' or 'cuda:<n>'")
+DEVICE = Rule(
+    lambda v: isinstance(v, str) and bool(re.fullmatch(r"cpu|cuda(:\d+)?", v)), "use 'cpu', 'cuda' or 'cuda:<index>'"
+)
 UNIT = interval(0.0, 1.0)
 
 # python -m uavrl.train and python -m uavrl.evaluate (configs/config.yaml and configs/agent/*.yaml);
