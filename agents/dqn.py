@@ -56,12 +56,11 @@ from torchrl.objectives import DQNLoss, QMixerLoss, SoftUpdate
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
+from uavrl.settings import RUN_SETTINGS, check
 
-HEADS = ("factored", "joint")
-MIXERS = ("vdn", "qmix")
-OBJECTIVES = ("delta", "log_gap")
 MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
+_SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 
 
 # ----------------------------------------------------------------------------- networks
@@ -228,28 +227,12 @@ class DoubleQMixerLoss(QMixerLoss):
 
 # ----------------------------------------------------------------------------- the agent
 def check_settings(env_cfg: ModelConfig, a) -> None:
-    """One-line errors for settings the agent cannot run."""
-    if a.head not in HEADS:
-        raise ValueError(f"agent.head={a.head!r} is invalid: allowed heads are {', '.join(map(repr, HEADS))}")
-    if a.mixer not in MIXERS:
-        raise ValueError(f"agent.mixer={a.mixer!r} is invalid: allowed mixers are {', '.join(map(repr, MIXERS))}")
-    if a.objective not in OBJECTIVES:
-        raise ValueError(f"agent.objective={a.objective!r} is invalid: allowed objectives are {', '.join(map(repr, OBJECTIVES))}")
-    if not float(a.gap_floor) > 0:
-        raise ValueError(f"agent.gap_floor={a.gap_floor} is invalid: it must be positive")
+    """One-line errors for settings the agent cannot run: the rules of :mod:`uavrl.settings`, then the head's size."""
+    check(a, RUN_SETTINGS, section="agent")
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = {env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
         )
-    for name in ("worlds", "hidden", "depth", "mixing_embed_dim", "batch_size", "buffer_size", "updates"):
-        if int(a[name]) < 1:
-            raise ValueError(f"agent.{name}={a[name]} is invalid: it must be a positive integer")
-    for name, low, high in (("gamma", 0.0, 1.0), ("tau", 0.0, 1.0), ("eps_start", 0.0, 1.0), ("eps_end", 0.0, 1.0), ("eps_fraction", 0.0, 1.0)):
-        if not low <= float(a[name]) <= high:
-            raise ValueError(f"agent.{name}={a[name]} is invalid: it must lie in [{low}, {high}]")
-    for name in ("lr", "lr_end", "max_grad_norm"):
-        if not float(a[name]) > 0:
-            raise ValueError(f"agent.{name}={a[name]} is invalid: it must be positive")
 
 
 class DQNAgent:
@@ -306,7 +289,7 @@ class DQNAgent:
         self._batches = iter(self.collector)
 
     def _world_seed(self, iteration: int) -> int:
-        return self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE
+        return (self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE) % _SEED_MODULUS
 
     @property
     def env_steps(self) -> int:

@@ -308,7 +308,8 @@ class TeamQLearner:
         block, offset = divmod(self.episode, _START_BLOCK)
         if block != self._start_block:
             worlds = _START_BLOCK * self.runs
-            env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=self.seed + block * worlds, device=self.device)
+            first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
+            env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=first_world, device=self.device)
             td = env.reset()
             self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(_START_BLOCK, self.runs)
             self._start_block = block
@@ -316,7 +317,7 @@ class TeamQLearner:
 
     def _uniforms(self) -> torch.Tensor:
         """``[R, T]`` uniforms of this episode, one per step and world, a pure function of (seed, episode)."""
-        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.episode)
+        g = torch.Generator().manual_seed((self.seed * 1_000_003 + self.episode) % 2**64)  # any seed below 2^63
         return torch.rand(self.runs, self.cfg.max_steps, generator=g, dtype=torch.float64).to(self.device)
 
     def run_episode(self) -> dict[str, torch.Tensor]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import re
 from dataclasses import dataclass, field
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
@@ -29,6 +30,18 @@ RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
 RESET_POSITIONS = ("random", "keep")
 PRESETS = ("paper", "reference_code")
+
+
+class InvalidOption(ValueError):
+    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it."""
+
+    def __init__(self, option: str, value, reason: str):
+        super().__init__(f"{option}={value!r} is invalid: {reason}")
+        self.option = option
+
+    def renamed(self, names: dict[str, str]) -> str:
+        """The message with each ``option=`` in ``names`` written as ``names[option]=`` (``grid=`` as ``env.grid=``)."""
+        return re.sub(r"\b([a-z_0-9]+)=", lambda m: f"{names.get(m.group(1), m.group(1))}=", str(self))
 
 
 @dataclass(frozen=True)
@@ -69,15 +82,14 @@ class ModelConfig:
     def __post_init__(self):
         grid = tuple(int(g) for g in self.grid) if _is_pair(self.grid) else None
         if grid is None or min(grid) < 1:
-            raise ValueError(f"grid={self.grid!r} is invalid: give two integers L1, L2 >= 1, e.g. grid=(6, 6)")
+            raise InvalidOption("grid", self.grid, "give two integers L1, L2 >= 1, e.g. grid=(6, 6)")
         object.__setattr__(self, "grid", grid)
         cells = grid[0] * grid[1]
         if not _is_int(self.num_uavs) or not 1 <= self.num_uavs <= cells:
-            raise ValueError(
-                f"num_uavs={self.num_uavs!r} is invalid: a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
-            )
+            reason = f"a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
+            raise InvalidOption("num_uavs", self.num_uavs, reason)
         if not _is_int(self.max_steps) or self.max_steps < 1:
-            raise ValueError(f"max_steps={self.max_steps!r} is invalid: an episode needs a whole number of steps >= 1")
+            raise InvalidOption("max_steps", self.max_steps, "an episode needs a whole number of steps >= 1")
         object.__setattr__(self, "num_uavs", int(self.num_uavs))
         object.__setattr__(self, "max_steps", int(self.max_steps))
         _choice("layout", self.layout, LAYOUTS)
@@ -89,15 +101,15 @@ class ModelConfig:
         for name in ("p_pt", "p_s", "p_u", "noise", "cell_size", "g0", "alpha", "reference_gain"):
             value = getattr(self, name)
             if not (_is_real(value) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value!r} is invalid: it must be a finite positive number")
+                raise InvalidOption(name, value, "it must be a finite positive number")
         for name in ("beta1", "beta2"):
             value = getattr(self, name)
             if not (_is_real(value) and math.isfinite(value)):
-                raise ValueError(f"{name}={value!r} is invalid: it must be a finite number")
+                raise InvalidOption(name, value, "it must be a finite number")
         if self.direct_links and self.rate_model == "reference_code":
-            raise ValueError("direct_links=True is invalid with rate_model='reference_code': the authors' formula has no direct link")
+            raise InvalidOption("direct_links", True, "the authors' rate_model='reference_code' has no direct link")
         if self.altitude is not None and not (_is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0):
-            raise ValueError(f"altitude={self.altitude!r} is invalid: give a finite positive height in cells, or None for h = L1")
+            raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
 
     @property
     def num_cells(self) -> int:
@@ -153,7 +165,7 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
 
 def _choice(name, value, allowed):
     if value not in allowed:
-        raise ValueError(f"{name}={value!r} is invalid: allowed values are {', '.join(map(repr, allowed))}")
+        raise InvalidOption(name, value, f"allowed values are {', '.join(map(repr, allowed))}")
 
 
 def _is_int(value) -> bool:

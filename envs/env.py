@@ -8,6 +8,7 @@ small per-code tables built once per layout (see BENCHMARKS.md for timings).
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -16,12 +17,32 @@ from torchrl.envs import EnvBase
 
 from . import streams
 from .channel import best_so_far_reward, delta_reward, direct_terms, fixed_layout, link_gains, rates, rates_from_sums, relay_contributions
-from .config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig, make_config
+from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig, make_config
 from .grid import cells_of, grid_neighbours, joint_action_valid
 from .optimum import optimum as exact_optimum
 
 # purposes of the per-world random streams
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
+SEED_LIMIT = 2**63  # world seeds are int64
+
+
+def resolve_device(device) -> torch.device:
+    """``device`` as a ``torch.device``; a one-line ValueError when it is malformed or not on this machine."""
+    try:
+        resolved = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"device={device!r} is invalid: use 'cpu', 'cuda' or 'cuda:<index>'") from None
+    count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    if resolved.type == "cuda" and (resolved.index or 0) >= count:
+        raise ValueError(f"device={device!r} is not available: this torch sees {count} CUDA devices (README: GPU)")
+    return resolved
+
+
+def check_seed(seed) -> int:
+    """``seed`` as an int; a one-line ValueError outside ``[0, 2^63)``."""
+    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or not 0 <= seed < SEED_LIMIT:
+        raise ValueError(f"seed={seed!r} is invalid: give a whole number in [0, 2^63)")
+    return int(seed)
 
 
 def _check_batch_size(batch_size) -> int:
@@ -94,7 +115,7 @@ class UAVSpectrumEnv(EnvBase):
             raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
         B = _check_batch_size(batch_size)
-        super().__init__(device=device, batch_size=torch.Size([B]))
+        super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.num_uavs
         L1, L2 = cfg.grid
@@ -112,9 +133,8 @@ class UAVSpectrumEnv(EnvBase):
         if layout is not None:
             d = torch.cdist(self._cell_xyz, layout).min()
             if d == 0:
-                raise ValueError(
-                    f"grid={cfg.grid} is invalid for layout={cfg.layout!r}: a node sits on a UAV cell at UAV altitude (zero distance); use a smaller grid or layout='line'"
-                )
+                reason = f"with layout={cfg.layout!r} a node sits on a UAV cell at UAV altitude (zero distance)"
+                raise InvalidOption("grid", cfg.grid, f"{reason}; use a smaller grid or layout='line'")
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
         self._cell_mask = torch.cat([self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1)  # [C, 6]
         # A UAV's cell and task are one code 2 c + task, so a step is a few lookups in per-code tables.
@@ -203,7 +223,7 @@ class UAVSpectrumEnv(EnvBase):
 
     # --------------------------------------------------------------- seeding
     def _set_seed(self, seed: int | None):
-        seed = 0 if seed is None else int(seed)
+        seed = 0 if seed is None else check_seed(seed)
         self._s.keys = streams.world_keys(seed, self.num_worlds, self.device)
         self._s.counters.zero_()
         self._s.started.zero_()
@@ -455,6 +475,28 @@ class UAVSpectrumEnv(EnvBase):
             bad = (lo if lo < 0 else hi).item()
             raise ValueError(f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
 
+    def step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        if tensordict.batch_size != self.batch_size:
+            raise ValueError(
+                f"step() got a TensorDict of batch size {list(tensordict.batch_size)}: this env has "
+                f"[B={self.num_worlds}] worlds, so ('agents', 'action') is [{self.num_worlds}, {self.num_uavs}]"
+            )
+        return super().step(tensordict)
+
+    def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
+        """TorchRL's ``rollout``; one-line errors for ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
+        if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
+            raise ValueError(f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1")
+        try:
+            return super().rollout(max_steps, *args, **kwargs)
+        except RuntimeError as err:
+            if "batch dimension mismatch" not in str(err):
+                raise
+            # tensordict refused the policy's action: the "agents" group is [B, N], so the action must be too
+            expected = f"[B={self.num_worlds}, N={self.num_uavs}] (worlds, UAVs)"
+            refusal = str(err).splitlines()[0]
+            raise ValueError(f"the policy wrote ('agents', 'action') not {expected}: {refusal}") from err
+
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if not self._s.was_reset:
             raise RuntimeError("UAVSpectrumEnv.step() before any reset: call env.reset() first (the worlds have no UAV positions yet)")
@@ -503,6 +545,17 @@ class UAVSpectrumEnv(EnvBase):
             raise ValueError(
                 f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected [B={self.num_worlds}, ..., N={self.num_uavs}, 2] and [B, ..., N]"
             )
+        if any(t.dtype.is_floating_point or t.dtype.is_complex or t.dtype == torch.bool for t in (positions, tasks)):
+            raise TypeError(f"positions ({positions.dtype}) and tasks ({tasks.dtype}) must hold integers")
+        L1, L2 = self.cfg.grid
+        x, y = positions[..., 0], positions[..., 1]
+        off_grid = (x < 0) | (x >= L1) | (y < 0) | (y >= L2)
+        if off_grid.any():
+            where = tuple(positions[off_grid][0].tolist())
+            raise ValueError(f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in 0..{L2 - 1}")
+        bad_task = (tasks != SENSING) & (tasks != RELAYING)
+        if bad_task.any():
+            raise ValueError(f"tasks hold {tasks[bad_task][0].item()}: a task is 0 (sensing) or 1 (relaying)")
         cells = self.cells_of(positions)
         contrib = self._per_cell(self._cell_contrib, cells)
         direct = self.direct.view(self.num_worlds, *([1] * (cells.dim() - 2)), 2)

@@ -1,9 +1,16 @@
 """The reproduction commands on a tiny subset: table, findings, figures, TensorBoard."""
+import contextlib
 import json
 import subprocess
 import sys
 
+import pytest
+from hydra import compose, initialize_config_dir
 from PIL import Image
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from uavrl.config import config_dir
+from uavrl.reproduce import reproduce
 
 
 def test_table2_and_figures_subset(tmp_path):
@@ -31,3 +38,35 @@ def test_state_with_tasks_widens_the_table(tmp_path):
     args = ["grids=[2]", "runs=1", "episodes=2", "eval_starts=4", "progress=false", f"out_dir={tmp_path}", "state_includes_tasks=true"]
     table = subprocess.run([sys.executable, "-m", "uavrl.reproduce", "table2", *args], capture_output=True, text=True, check=True)
     assert "| 2x2 | 64 | 2,304 | 120 |" in table.stdout
+
+
+
+def reproduce_in(directory, *overrides):
+    """``python -m uavrl.reproduce <overrides>`` in ``directory``, in this process (its learner is compiled)."""
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        cfg = compose(config_name="reproduce", overrides=[*overrides, "progress=false"])
+    with contextlib.chdir(directory):
+        reproduce(cfg)
+
+
+def test_variants_do_not_overwrite_each_other(tmp_path):
+    tiny = ["grids=[2]", "episodes=2", "eval_starts=4"]
+    for runs in (1, 2, 1):  # the last run repeats the first variant: its results are replaced, the other's stay
+        reproduce_in(tmp_path, "command=table2", *tiny, f"runs={runs}")
+    one, two = (tmp_path / "reproduction" / f"grids-2_runs-{runs}_episodes-2_eval_starts-4" for runs in (1, 2))
+    assert [r["runs"] for r in json.loads((one / "table2.json").read_text())] == [1]
+    assert [r["runs"] for r in json.loads((two / "table2.json").read_text())] == [2]
+    assert len(EventAccumulator(str(one / "tensorboard" / "grid2x2")).Reload().Scalars("train/sum_utility")) == 2
+    with pytest.raises(FileExistsError, match=r"out_dir=.* holds another variant \(runs=1 there, 3 here\)"):
+        reproduce_in(tmp_path, "command=table2", *tiny, "runs=3", f"out_dir={one}")
+    reproduce_in(tmp_path, "command=table2", "grids=[3]", *tiny[1:], f"out_dir={one}", "overwrite=true")
+    assert sorted(p.name for p in one.glob("history_*.pt")) == ["history_3x3.pt"]
+
+
+def test_figures_say_what_they_draw_and_write_no_table(tmp_path, capsys):
+    overrides = ["grids=[2]", "figure_grid=2", "runs=1", "episodes=3", f"out_dir={tmp_path}"]
+    reproduce_in(tmp_path, "command=figures", *overrides)
+    out, err = capsys.readouterr()
+    assert "running the 2x2 protocol (1 runs x 3 episodes, no table) first" in err
+    assert "Figs. 3-5 of 2x2, 2 UAVs, 1 runs x 3 episodes of 120 steps, seed 0, state: joint location" in out
+    assert not (tmp_path / "table2.md").exists() and (tmp_path / "fig3_sum_utility.png").exists()

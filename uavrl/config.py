@@ -1,11 +1,15 @@
-"""Where the Hydra configs live and how a Hydra config becomes a model config."""
+"""Where the Hydra configs live and how a Hydra config becomes a model config (standard library and omegaconf only)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.envs import ModelConfig, make_config
+from uavrl.envs.config import OPTION_NAMES, ModelConfig, make_config
+
+# how the model's options are typed on the command line of uavrl.train and uavrl.evaluate
+RUN_OPTION_SETTINGS = {name: f"env.{name}" for name in (*OPTION_NAMES, "preset")}
+RUN_OPTION_SETTINGS["max_steps"] = "train.steps_per_episode"
 
 
 def config_dir() -> str:

@@ -1,42 +1,61 @@
 """Evaluate a saved agent: ``python -m uavrl.evaluate checkpoint=runs/tabular/paper/<stamp>``.
 
-Rebuilds the agent from the checkpoint's own config, runs the shared greedy
-evaluation (``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``),
-prints the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
+Rebuilds the agent from the checkpoint's own config (a run directory's newest
+readable checkpoint, or the file given), runs the shared greedy evaluation
+(``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), prints
+the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 """
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
-import hydra
-import torch
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.agents import agent_class
-from uavrl.config import config_dir, model_config
-from uavrl.evaluation import evaluate_agent
+from uavrl.checkpoints import CheckpointError, load_checkpoint
+from uavrl.cli import run_command
+from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.io import save_json
-from uavrl.train import CHECKPOINT, eval_settings, resolve_device
+from uavrl.train import eval_settings
+from uavrl.settings import RUN_SETTINGS, check
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """The settings of an evaluation, refused in one line before anything heavy is imported."""
+    check(cfg, RUN_SETTINGS)
+    if not cfg.checkpoint:
+        raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
+    if not Path(cfg.checkpoint).exists():
+        raise FileNotFoundError(f"checkpoint={cfg.checkpoint!r} does not exist (give checkpoint.pt or a run directory)")
 
 
 def load_agent(path, device="cpu"):
     """``(agent, saved config)`` from a ``checkpoint.pt`` or the run directory holding one."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / CHECKPOINT
-    if not path.exists():
-        raise FileNotFoundError(f"checkpoint={str(path)!r} does not exist: give a checkpoint.pt or a run directory written by uavrl.train")
-    state = torch.load(path, map_location="cpu", weights_only=False)
+    import torch
+
+    from uavrl.agents import agent_class
+
+    state, file, skipped = load_checkpoint(path, "checkpoint")
+    if skipped:
+        print(f"warning: {'; '.join(skipped)}: evaluating {file} (iteration {state['iteration']})", file=sys.stderr)
     cfg = OmegaConf.create(state["config"])
     agent = agent_class(cfg.agent.name)(model_config(cfg), cfg, torch.device(device), int(cfg.seed))
-    agent.load_state_dict(state["agent"])
+    try:
+        agent.load_state_dict(state["agent"])
+    except (KeyError, RuntimeError, ValueError) as err:
+        agent_kind, reason = f"a {cfg.agent.name} agent of this uavrl", f"{type(err).__name__}: {err}"
+        raise CheckpointError(f"{file}: its agent state does not fit {agent_kind} ({reason})") from None
     return agent, cfg
 
 
 def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
-    if not cfg.checkpoint:
-        raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
+    check_settings(cfg)
+    import torch  # the heavy modules, once the settings are known to be good
+
+    from uavrl.envs.env import resolve_device
+    from uavrl.evaluation import evaluate_agent
+
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
     agent, saved = load_agent(cfg.checkpoint, device)
@@ -46,13 +65,10 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     return metrics
 
 
-@hydra.main(config_path=config_dir(), config_name="config", version_base=None)
-def main(cfg: DictConfig) -> None:
-    try:
-        print(json.dumps(evaluate_checkpoint(cfg), indent=2, sort_keys=True))
-    except (ValueError, FileNotFoundError) as err:
-        raise SystemExit(f"error: {err}") from None
+def print_evaluation(cfg: DictConfig, _overrides) -> None:
+    """``python -m uavrl.evaluate``: the metrics as JSON on stdout."""
+    print(json.dumps(evaluate_checkpoint(cfg), indent=2, sort_keys=True))
 
 
 if __name__ == "__main__":
-    main()
+    run_command("config", print_evaluation, RUN_OPTION_SETTINGS)

@@ -1,4 +1,10 @@
-"""Atomic writes: a file is either the old one or the complete new one, never half written."""
+"""Atomic writes: a file is either the old one or the complete new one, never half written.
+
+A write goes to a temporary ``.<name>.<random>.tmp`` beside the file, then is
+renamed over it.  A process killed mid-write leaves that temporary file; the
+next write of the same file removes it.  torch is imported by :func:`save_torch`
+only, so the commands' light start-up can use this module.
+"""
 from __future__ import annotations
 
 import json
@@ -6,15 +12,21 @@ import os
 import tempfile
 from pathlib import Path
 
-import torch
-
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
-def _atomic(path: Path, write):
+def remove_orphans(path) -> None:
+    """Remove the temporary files that killed writes of ``path`` left."""
+    path = Path(path)
+    for orphan in path.parent.glob(f".{path.name}.*.tmp"):
+        orphan.unlink(missing_ok=True)
+
+
+def _atomic(path: Path, write, previous: Path | None = None):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_orphans(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
@@ -22,15 +34,19 @@ def _atomic(path: Path, write):
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)
+        if previous is not None and path.exists():
+            os.replace(path, previous)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
-def save_torch(obj, path) -> None:
-    """``torch.save`` to a temporary file in the same folder, then rename."""
-    _atomic(path, lambda f: torch.save(obj, f))
+def save_torch(obj, path, previous=None) -> None:
+    """``torch.save`` to a temporary file in the same folder, then rename; the file replaced becomes ``previous``."""
+    import torch
+
+    _atomic(path, lambda f: torch.save(obj, f), None if previous is None else Path(previous))
 
 
 def save_json(obj, path) -> None:

@@ -4,57 +4,142 @@
 episodes of 120 to 30,000 steps) with the compiled tabular learner and prints
 the table beside the paper's timings, with the final greedy optimality.
 ``figures`` draws Figs. 3-5 for 6x6 (mean over runs, min-max band) as PNG from
-the per-episode data that ``table2`` saved (it runs the 6x6 protocol first if
-there is none).  Both also write the curves to TensorBoard.
+the per-episode data that ``table2`` saved for the same settings (without any,
+it runs that grid's protocol first, and writes no table).  Both also write the
+curves to TensorBoard.
 
-Overrides (Hydra): ``grids=[6] runs=3 episodes=50 seed=1 out_dir=reproduction``;
+Overrides (Hydra): ``grids=[6] runs=3 episodes=50 seed=1``;
 ``state_includes_tasks=true`` learns over the full configuration instead of the
-paper's joint location.
+paper's joint location.  Each variant of the protocol writes to its own
+directory: ``reproduction/paper`` for the paper's settings, else
+``reproduction/<the settings that differ>`` (e.g.
+``reproduction/grids-6_runs-3_episodes-50``).  ``out_dir=<dir>`` chooses the
+directory; one that holds another variant is refused unless ``overwrite=true``
+(which replaces it).
 """
 from __future__ import annotations
 
+import json
+import shutil
 import sys
 import time
 from pathlib import Path
 
-import hydra
-import torch
-from omegaconf import DictConfig
-from tqdm import tqdm
+from omegaconf import DictConfig, OmegaConf
 
-from uavrl.agents.tabular import TabularPolicy, TeamQLearner
+from uavrl.cli import run_command
 from uavrl.config import config_dir
-from uavrl.envs import make_config
-from uavrl.evaluation import episode_metrics, evaluate
+from uavrl.envs.config import make_config
 from uavrl.io import save_json, save_text, save_torch
-from uavrl.logger import RunLogger
+from uavrl.settings import REPRODUCE_SETTINGS, check, shown
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
 PAPER_SECONDS = {2: 0.102628, 3: 0.762713, 4: 2.425558, 5: 8.757846, 6: 49.007077, 8: 146.936207, 10: 291.176670}
 METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 COMMANDS = ("table2", "figures")
+# the settings that change the results: one directory per combination
+PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
+OUTPUTS = ("variant.json", "table2.md", "table2.json", "history_*.pt", "fig*.png", "tensorboard")
+REFUSAL = "give another out_dir, or overwrite=true to replace them"
+# how the model's options are typed on this command line
+OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
 
 
-def run_grid(size: int, cfg: DictConfig, logger: RunLogger | None = None) -> dict:
-    """The protocol on a ``size x size`` grid: per-episode metrics ``[episodes, runs]``, timing, optimality."""
-    steps = int(cfg.steps or PAPER_STEPS.get(size) or 0)
-    if steps < 1:
-        raise ValueError(f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<steps per episode>")
+def steps_per_episode(size: int, cfg: DictConfig) -> int:
+    return int(cfg.steps or PAPER_STEPS[size])
+
+
+def variant(cfg: DictConfig) -> dict:
+    return {key: OmegaConf.to_container(cfg[key]) if key == "grids" else cfg[key] for key in PROTOCOL}
+
+
+def variant_name(cfg: DictConfig) -> str:
+    """``paper`` for the paper's settings (those of configs/reproduce.yaml), else the settings that differ."""
+    paper = OmegaConf.load(Path(config_dir()) / "reproduce.yaml")
+    changed = {key: value for key, value in variant(cfg).items() if value != paper[key]}
+    return "_".join(f"{key}-{_in_name(value)}" for key, value in changed.items()) or "paper"
+
+
+def _in_name(value) -> str:
+    return "-".join(map(str, value)) if isinstance(value, list) else shown(value)
+
+
+def output_dir(cfg: DictConfig) -> Path:
+    return Path(cfg.out_dir) if cfg.out_dir else Path("reproduction") / variant_name(cfg)
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """Every setting, and that the output directory holds no other variant, before anything heavy is imported."""
+    check(cfg, REPRODUCE_SETTINGS)
+    for size in cfg.grids:
+        if not cfg.steps and size not in PAPER_STEPS:
+            reason = f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<per episode>"
+            raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
+        shape = dict(grid=(size, size), num_uavs=cfg.num_uavs, max_steps=steps_per_episode(size, cfg))
+        make_config("paper", **shape, state_includes_tasks=cfg.state_includes_tasks)
+    if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
+        raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
+    out_dir = output_dir(cfg)
+    record = out_dir / "variant.json"
+    if cfg.overwrite or not out_dir.exists():
+        return
+    if record.exists():
+        saved = json.loads(record.read_text())
+        mine = variant(cfg)
+        if saved != mine:
+            changed = [key for key in PROTOCOL if saved.get(key) != mine[key]]
+            differences = ", ".join(f"{key}={shown(saved.get(key))} there, {shown(mine[key])} here" for key in changed)
+            raise FileExistsError(f"out_dir={str(out_dir)!r} holds another variant ({differences}): {REFUSAL}")
+    elif any(any(out_dir.glob(pattern)) for pattern in OUTPUTS):
+        raise FileExistsError(f"out_dir={str(out_dir)!r} holds results of unknown settings: {REFUSAL}")
+
+
+def claim(out_dir: Path, cfg: DictConfig) -> None:
+    """Make ``out_dir`` this variant's: with ``overwrite``, the outputs of another one go first."""
+    record = out_dir / "variant.json"
+    if cfg.overwrite and (not record.exists() or json.loads(record.read_text()) != variant(cfg)):
+        for pattern in OUTPUTS:
+            for old in out_dir.glob(pattern):
+                if old.is_dir():
+                    shutil.rmtree(old)
+                else:
+                    old.unlink()
+    save_json(variant(cfg), record)
+
+
+def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
+    """The protocol on a ``size x size`` grid: per-episode metrics ``[episodes, runs]``, timing, optimality.
+
+    The curves go to TensorBoard (``out_dir/tensorboard/grid<size>x<size>``, replacing those of an earlier
+    run of the same variant) and the per-episode metrics to ``out_dir/history_<size>x<size>.pt``.
+    """
+    import torch
+
+    from uavrl.agents.tabular import TabularPolicy, TeamQLearner
+    from uavrl.evaluation import episode_metrics, evaluate
+    from uavrl.logger import RunLogger
+
+    steps = steps_per_episode(size, cfg)
     model = make_config("paper", grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps, state_includes_tasks=bool(cfg.state_includes_tasks))
     built = time.perf_counter()
     learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
     u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
+    # an earlier run's points of this variant (steps from 1 on) are replaced
+    logger = RunLogger(out_dir / "tensorboard" / f"grid{size}x{size}", resume_step=0)
     started = time.perf_counter()
     for episode in range(int(cfg.episodes)):
         out = learner.run_episode()
         per_run = episode_metrics(out["r_pu"], out["r_se"], out["task_switches"], out["moves"], u_star)
         for k in METRICS:
             history[k][episode] = per_run[k]
-        if logger is not None:
-            logger.log({f"train/{k}": per_run[k].mean().item() for k in METRICS}, (episode + 1) * steps)
+        logger.log({f"train/{k}": per_run[k].mean().item() for k in METRICS}, (episode + 1) * steps)
     learn_seconds = time.perf_counter() - started
+    logger.close()
+    record = {"history": history, "grid": size, "steps_per_episode": steps}
+    record |= {key: cfg[key] for key in ("num_uavs", "runs", "episodes", "seed", "state_includes_tasks")}
+    save_torch(record, out_dir / f"history_{size}x{size}.pt")
     evaluations = [evaluate(TabularPolicy(q, model), model, num_starts=int(cfg.eval_starts)) for q in learner.q]
     return {
         "grid": size,
@@ -117,14 +202,14 @@ def findings(history: dict, grid: int) -> list[str]:
 
 
 def table2(cfg: DictConfig) -> list[dict]:
-    out_dir = Path(cfg.out_dir)
-    logger_root = out_dir / "tensorboard"
+    from tqdm import tqdm
+
+    out_dir = output_dir(cfg)
+    claim(out_dir, cfg)
     rows = []
     started = time.perf_counter()
     for size in tqdm([int(g) for g in cfg.grids], desc="Table II", unit="grid", disable=not cfg.progress):
-        logger = RunLogger(logger_root / f"grid{size}x{size}")
-        rows.append(run_grid(size, cfg, logger))
-        logger.close()
+        rows.append(run_grid(size, cfg, out_dir))
     wall = time.perf_counter() - started
     table = table2_markdown(rows, wall)
     notes = [line for r in rows for line in findings(r["history"], r["grid"])]
@@ -132,25 +217,31 @@ def table2(cfg: DictConfig) -> list[dict]:
     print("\n".join(notes))
     save_text(table + "\n" + "\n".join(f"- {n}" for n in notes) + "\n", out_dir / "table2.md")
     save_json([{k: v for k, v in r.items() if k != "history"} | {"wall_seconds_whole_table": wall} for r in rows], out_dir / "table2.json")
-    for r in rows:
-        save_torch({"history": r["history"], "grid": r["grid"], "runs": r["runs"], "episodes": r["episodes"]}, out_dir / f"history_{r['grid']}x{r['grid']}.pt")
+    print(f"results: {out_dir}")
     return rows
 
 
 def figures(cfg: DictConfig) -> list[Path]:
     import matplotlib
+    import torch
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     size = int(cfg.figure_grid)
-    out_dir = Path(cfg.out_dir)
+    out_dir = output_dir(cfg)
     path = out_dir / f"history_{size}x{size}.pt"
     if not path.exists():
-        cfg.grids = [size]
-        table2(cfg)
-    history = torch.load(path, weights_only=False)["history"]
+        protocol = f"the {size}x{size} protocol ({cfg.runs} runs x {cfg.episodes} episodes, no table)"
+        print(f"no {size}x{size} data in {out_dir}: running {protocol} first", file=sys.stderr)
+        claim(out_dir, cfg)
+        run_grid(size, cfg, out_dir)
+    record = torch.load(path, weights_only=False)
+    history = record["history"]
     episodes = torch.arange(1, history["sum_utility"].shape[0] + 1)
+    state = "location and tasks" if record["state_includes_tasks"] else "joint location (the paper's)"
+    episodes_of = f"{record['runs']} runs x {record['episodes']} episodes of {record['steps_per_episode']:,} steps"
+    drawn = f"{size}x{size}, {record['num_uavs']} UAVs, {episodes_of}, seed {record['seed']}, state: {state}"
 
     def band(ax, key, label, color):
         h = history[key]
@@ -167,28 +258,28 @@ def figures(cfg: DictConfig) -> list[Path]:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
         for key, label, color in curves:
             band(ax, key, label, color)
-        ax.set(title=f"{title} ({size}x{size}, 2 UAVs, mean over {history['sum_utility'].shape[1]} runs, band min-max)", xlabel="episode", ylabel=ylabel)
-        ax.title.set_fontsize(9)
+        ax.set(title=f"{title} (mean over runs, band min-max)\n{drawn}", xlabel="episode", ylabel=ylabel)
+        ax.title.set_fontsize(8)
         ax.grid(alpha=0.3)
         ax.legend()
         fig.tight_layout()
         fig.savefig(out_dir / name)
         plt.close(fig)
         written.append(out_dir / name)
+    print(f"Figs. 3-5 of {drawn}, from {path}:")
     print("\n".join(str(p) for p in written))
     return written
 
 
-@hydra.main(config_path=config_dir(), config_name="reproduce", version_base=None)
-def main(cfg: DictConfig) -> None:
-    import numba
+def reproduce(cfg: DictConfig, _overrides=()) -> None:
+    """``python -m uavrl.reproduce``: check the settings, then run ``cfg.command``."""
+    check_settings(cfg)
+    import numba  # the heavy modules, once the settings are known to be good
+    import torch
 
     torch.set_num_threads(int(cfg.num_threads))
     numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
-    try:
-        (table2 if cfg.command == "table2" else figures)(cfg)
-    except ValueError as err:
-        raise SystemExit(f"error: {err}") from None
+    (table2 if cfg.command == "table2" else figures)(cfg)
 
 
 def cli() -> None:
@@ -198,7 +289,7 @@ def cli() -> None:
         if command not in COMMANDS:
             raise SystemExit(f"error: unknown command {command!r}: use one of {', '.join(COMMANDS)}")
         sys.argv.append(f"command={command}")
-    main()
+    run_command("reproduce", reproduce, OPTION_SETTINGS)
 
 
 if __name__ == "__main__":

@@ -2,45 +2,45 @@
 
 Each run writes ``runs/<agent>/<env>/<timestamp>/``: TensorBoard events, the
 resolved ``config.yaml``, ``checkpoint.pt`` (atomic, every
-``train.checkpoint_every`` iterations and at the end) and ``metrics.json`` with
-the final evaluation.  ``resume=<run dir>`` continues a killed run from its
-checkpoint with the run's saved config; with the same seed it ends exactly as
-an uninterrupted run would.
+``train.checkpoint_every`` iterations and at the end; the one it replaces is
+kept as ``checkpoint.prev.pt``) and ``metrics.json`` with the final
+evaluation.  ``resume=<run dir>`` continues a killed run from its newest
+readable checkpoint with the run's saved config; with the same seed it ends
+exactly as an uninterrupted run would.
+
+Every setting is checked before torch is imported (:mod:`uavrl.settings`), so a
+mistyped override is refused at once; :func:`train` imports the heavy modules
+after its checks.
 """
 from __future__ import annotations
 
 import random
+import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
-import hydra
-import numpy as np
-import torch
-from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
-from uavrl.agents import agent_class
-from uavrl.config import config_dir, flat_hparams, model_config
-from uavrl.evaluation import check_settings as check_eval_settings
-from uavrl.evaluation import evaluate_agent
-from uavrl.io import save_json, save_text, save_torch
-from uavrl.logger import RunLogger
+from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
+from uavrl.cli import run_command
+from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config
+from uavrl.io import remove_orphans, save_json, save_text
+from uavrl.settings import RUN_SETTINGS, check
 
-CHECKPOINT = "checkpoint.pt"
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
 
 
-def resolve_device(name: str) -> torch.device:
-    try:
-        device = torch.device(name)
-    except RuntimeError:
-        raise ValueError(f"device={name!r} is invalid: use 'cpu', 'cuda' or 'cuda:<index>'") from None
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError(f"device={name!r} is not available: this torch has no usable CUDA (see the README for a CUDA build)")
-    return device
+def check_settings(cfg: DictConfig) -> None:
+    """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
+    check(cfg, RUN_SETTINGS)
+    model_config(cfg)
+    if cfg.resume and not checkpoint_files(cfg.resume):
+        raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory)")
+    if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
+        advice = f"continue it with resume={cfg.run_dir}, or pick another run_dir"
+        raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a run: {advice}")
 
 
 def eval_settings(cfg: DictConfig, device) -> dict:
@@ -49,6 +49,9 @@ def eval_settings(cfg: DictConfig, device) -> dict:
 
 
 def seed_everything(seed: int) -> None:
+    import numpy as np
+    import torch
+
     random.seed(seed)
     np.random.seed(seed % 2**32)
     torch.manual_seed(seed)
@@ -64,13 +67,17 @@ def new_run_dir(cfg: DictConfig) -> Path:
     return run_dir
 
 
-def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict]:
-    """The saved config and checkpoint of ``cfg.resume``; explicit overrides must agree with the saved run."""
+def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
+    """The saved config and newest readable checkpoint of ``cfg.resume``, and whether it is the newest file.
+
+    Explicit overrides must agree with the saved run.
+    """
     run_dir = Path(cfg.resume)
-    path = run_dir / CHECKPOINT
-    if not path.exists():
-        raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory written by uavrl.train)")
-    checkpoint = torch.load(path, weights_only=False)
+    remove_orphans(run_dir / CHECKPOINT)
+    checkpoint, file, skipped = load_checkpoint(run_dir, "resume")
+    if skipped:
+        iteration = checkpoint["iteration"]
+        print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
     saved = OmegaConf.create(checkpoint["config"])
     for override in overrides:
         key = override.split("=", 1)[0].lstrip("+~")
@@ -81,15 +88,24 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict]:
     for key in RESUMABLE_OVERRIDES:
         saved[key] = cfg[key]
     saved.run_dir = str(run_dir)
-    return saved, checkpoint
+    check(saved, RUN_SETTINGS)
+    return saved, checkpoint, not skipped
 
 
 def train(cfg: DictConfig, overrides=()) -> Path:
     """Run training as configured; returns the run directory."""
-    check_eval_settings(cfg.eval.gamma, cfg.eval.horizon, cfg.eval.num_starts)
-    checkpoint = None
+    check_settings(cfg)
+    import torch  # the heavy modules, once the settings are known to be good
+    from tqdm import tqdm
+
+    from uavrl.agents import agent_class
+    from uavrl.envs.env import resolve_device
+    from uavrl.evaluation import evaluate_agent
+    from uavrl.logger import RunLogger
+
+    checkpoint, newest_is_readable = None, True
     if cfg.resume:
-        cfg, checkpoint = resumed_config(cfg, overrides)
+        cfg, checkpoint, newest_is_readable = resumed_config(cfg, overrides)
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
     env_cfg = model_config(cfg)
@@ -103,33 +119,42 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         start = int(checkpoint["iteration"])
     resolved = OmegaConf.to_container(cfg, resolve=True)
     save_text(OmegaConf.to_yaml(resolved), run_dir / "config.yaml")
-    logger = RunLogger(run_dir, purge_step=agent.env_steps if checkpoint is not None else None)
+    # points after the checkpoint's step (any, for a new run) are replaced; those up to it stay
+    logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
+    checkpoints = CheckpointWriter(run_dir, newest_is_readable)
 
-    def save_checkpoint(iteration: int) -> None:
+    def save_checkpoint(iteration: int, final: dict | None = None) -> None:
         state = {"agent": agent.state_dict(), "iteration": iteration, "config": resolved, "torch_rng": torch.get_rng_state()}
-        save_torch(state, run_dir / CHECKPOINT)
+        checkpoints.save(state if final is None else {**state, "final": final})
 
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
     started = time.perf_counter()
     bar = tqdm(range(start, agent.num_iterations), initial=start, total=agent.num_iterations, disable=not cfg.progress, desc=f"{cfg.agent.name} {cfg.env.name}", unit="it", dynamic_ncols=True)
-    for iteration in bar:
-        metrics = agent.train_iteration()
-        done = iteration + 1
-        if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
-            logger.log(metrics, agent.env_steps)
-            if "train/sum_utility" in metrics:
-                bar.set_postfix(utility=f"{metrics['train/sum_utility']:.4g}", refresh=False)
-        if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
-            logger.log(evaluate_agent(agent, env_cfg, **eval_kwargs), agent.env_steps)
-        if done % every == 0 or done == agent.num_iterations:
-            save_checkpoint(done)
-    if start == agent.num_iterations:
-        save_checkpoint(start)
-    train_seconds = time.perf_counter() - started
-    final = evaluate_agent(agent, env_cfg, **eval_kwargs)
-    logger.log(final, agent.env_steps)
-    logger.hparams(flat_hparams(cfg), {k: v for k, v in final.items() if k in ("eval/optimality", "eval/optimal_fraction")})
+    try:
+        for iteration in bar:
+            metrics = agent.train_iteration()
+            done = iteration + 1
+            if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
+                logger.log(metrics, agent.env_steps)
+                if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
+                    per_step = metrics["train/sum_utility"] / env_cfg.max_steps
+                    bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
+            if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
+                logger.log(evaluate_agent(agent, env_cfg, **eval_kwargs), agent.env_steps)
+            if done % every == 0 and done < agent.num_iterations:
+                save_checkpoint(done)
+        train_seconds = time.perf_counter() - started
+        if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
+            final = checkpoint["final"]
+        else:
+            final = evaluate_agent(agent, env_cfg, **eval_kwargs)
+            logger.log(final, agent.env_steps)
+            save_checkpoint(agent.num_iterations, final)
+    except KeyboardInterrupt as err:
+        err.add_note(f"continue the run with: python -m uavrl.train resume={run_dir}")
+        raise
+    logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
     logger.close()
     result = {
         "agent": cfg.agent.name,
@@ -141,18 +166,27 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         **final,
     }
     save_json(result, run_dir / "metrics.json")
-    print(f"optimality {final['eval/optimality']:.4f} (min {final['eval/optimality_min']:.4f}) in {result['total_seconds']:.1f} s")
-    print(run_dir)
+    print(summary(cfg, env_cfg, result, run_dir))
     return run_dir
 
 
-@hydra.main(config_path=config_dir(), config_name="config", version_base=None)
-def main(cfg: DictConfig) -> None:
-    try:
-        train(cfg, HydraConfig.get().overrides.task)
-    except (ValueError, FileNotFoundError) as err:
-        raise SystemExit(f"error: {err}") from None
+def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
+    """The end of a run in words: what was trained, what the numbers mean, where the run is, how to look at it."""
+    optimality, worst = result["eval/optimality"], result["eval/optimality_min"]
+    within = result["eval/optimal_fraction"]
+    trained = f"{cfg.agent.name} on {cfg.env.name} ({env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs)"
+    return "\n".join(
+        [
+            f"trained {trained}: {result['iterations']} iterations in {result['total_seconds']:.1f} s",
+            f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
+            f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
+            f"{within:.0%} of starts within 1% of U*)",
+            f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
+            f"look at it: tensorboard --logdir {run_dir}   "
+            f"evaluate it again: python -m uavrl.evaluate checkpoint={run_dir}",
+        ]
+    )
 
 
 if __name__ == "__main__":
-    main()
+    run_command("config", train, RUN_OPTION_SETTINGS)

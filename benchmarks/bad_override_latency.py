@@ -1,0 +1,62 @@
+"""How long a bad override takes to be refused: whole processes, beside Python's and torch's start-up.
+
+    python benchmarks/bad_override_latency.py [--repeats 5] [--pythonpath DIR]
+
+Each command runs ``--repeats`` times as a fresh process; the table gives the
+median and the best wall time.  ``python -c pass`` is the interpreter's own
+start-up; ``import torch, tensordict, torchrl`` is what the commands imported
+before checking their settings until they checked them first.  ``--pythonpath``
+puts ``DIR`` first on the path of every process, to time another version of
+uavrl laid out there as a package (BENCHMARKS.md says how).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+COMMANDS = [
+    ("python -c pass", ["-c", "pass"]),
+    ('python -c "import torch"', ["-c", "import torch"]),
+    ('python -c "import torch, tensordict, torchrl"', ["-c", "import torch, tensordict, torchrl"]),
+    ("python -m uavrl.train train.steps_per_episode=0", ["-m", "uavrl.train", "train.steps_per_episode=0"]),
+    ("python -m uavrl.train env.grid=[0,3]", ["-m", "uavrl.train", "env.grid=[0,3]"]),
+    ("python -m uavrl.train train.episdoes=5 (unknown key)", ["-m", "uavrl.train", "train.episdoes=5"]),
+    ("python -m uavrl.evaluate checkpoint=missing.pt", ["-m", "uavrl.evaluate", "checkpoint=missing.pt"]),
+    ("python -m uavrl.reproduce table2 episodes=-5", ["-m", "uavrl.reproduce", "table2", "episodes=-5"]),
+]
+
+
+def wall_times(args: list[str], repeats: int, env: dict) -> list[float]:
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        subprocess.run([sys.executable, *args], capture_output=True, env=env)
+        times.append(time.perf_counter() - started)
+    return times
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--pythonpath", help="a directory put first on every process's path")
+    args = parser.parse_args()
+    env = dict(os.environ)
+    if args.pythonpath:
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [args.pythonpath, env.get("PYTHONPATH")]))
+    # a first import fills the file cache, as on any machine that ran torch before
+    subprocess.run([sys.executable, "-c", "import torch, tensordict, torchrl"], capture_output=True)
+    machine = f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, Python {sys.version.split()[0]}"
+    print(f"{machine}, {args.repeats} runs each")
+    print(f"uavrl from {args.pythonpath or 'the installed package'}\n")
+    print("| command | median | best |\n|---|---:|---:|")
+    for name, command in COMMANDS:
+        times = wall_times(command, args.repeats, env)
+        print(f"| `{name}` | {statistics.median(times):.2f} s | {min(times):.2f} s |")
+
+
+if __name__ == "__main__":
+    main()

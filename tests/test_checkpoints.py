@@ -1,0 +1,118 @@
+"""Checkpoints that survive damage and kills, and TensorBoard curves that stay whole across resumes."""
+import os
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensorboard.backend.event_processing.plugin_event_accumulator import EventAccumulator as PluginEventAccumulator
+
+import uavrl.agents.tabular as tabular
+from uavrl.checkpoints import CheckpointError
+from uavrl.config import config_dir
+from uavrl.io import save_text
+from uavrl.train import train
+
+SMALL = ["env.grid=[3,3]", "train.episodes=6", "train.steps_per_episode=100", "train.runs=2"]
+SMALL += ["train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
+CORRUPTIONS = {
+    "truncated": lambda data: data[: len(data) // 2],
+    "empty": lambda data: b"",
+    "random bytes": lambda data: os.urandom(len(data)),
+}
+
+
+def make_cfg(*overrides):
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        return compose(config_name="config", overrides=list(overrides))
+
+
+def run(run_dir, *overrides, killed_at: int | None = None):
+    """Train (or resume, when ``run_dir`` holds a checkpoint); ``killed_at``: interrupt that train_iteration call."""
+    original, calls = tabular.TabularAgent.train_iteration, []
+
+    def dies(self):
+        calls.append(1)
+        if len(calls) == killed_at:
+            raise KeyboardInterrupt
+        return original(self)
+
+    tabular.TabularAgent.train_iteration = dies
+    try:
+        if (run_dir / "checkpoint.pt").exists() or (run_dir / "checkpoint.prev.pt").exists():
+            train(make_cfg(*SMALL, *overrides, f"resume={run_dir}"), overrides=[f"resume={run_dir}"])
+        else:
+            train(make_cfg(*SMALL, *overrides, f"run_dir={run_dir}"))
+    except KeyboardInterrupt:
+        assert killed_at is not None
+    finally:
+        tabular.TabularAgent.train_iteration = original
+
+
+def load(path):
+    return torch.load(path, weights_only=False)
+
+
+@pytest.mark.parametrize("corruption", CORRUPTIONS)
+def test_resume_falls_back_to_the_previous_checkpoint_and_ends_exactly(corruption, tmp_path, capsys):
+    run(tmp_path / "whole")
+    killed = tmp_path / "killed"
+    run(killed, killed_at=5)  # checkpoints after iterations 2 (previous) and 4 (newest)
+    assert load(killed / "checkpoint.prev.pt")["iteration"] == 2 and load(killed / "checkpoint.pt")["iteration"] == 4
+    newest = killed / "checkpoint.pt"
+    newest.write_bytes(CORRUPTIONS[corruption](newest.read_bytes()))
+    capsys.readouterr()
+    run(killed)
+    warning = capsys.readouterr().err.strip()
+    assert warning.count("\n") == 0 and "checkpoint.pt:" in warning, warning
+    assert "resuming from checkpoint.prev.pt, iteration 2" in warning, warning
+    assert torch.equal(load(tmp_path / "whole" / "checkpoint.pt")["agent"]["q"], load(newest)["agent"]["q"])
+    assert load(killed / "checkpoint.prev.pt")["iteration"] == 4 and load(newest)["iteration"] == 6
+
+
+def test_no_readable_checkpoint_is_one_line_naming_each_file(tmp_path):
+    run(tmp_path, killed_at=5)
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    (tmp_path / "checkpoint.prev.pt").write_bytes(os.urandom(1000))
+    with pytest.raises(CheckpointError) as err:
+        run(tmp_path)
+    message = str(err.value)
+    assert "\n" not in message and f"resume={str(tmp_path)!r}" in message, message
+    assert "checkpoint.pt: empty file" in message and "checkpoint.prev.pt: not a torch file" in message, message
+
+
+def test_a_damaged_newest_checkpoint_is_replaced_but_the_readable_previous_one_kept(tmp_path):
+    run(tmp_path, killed_at=5)
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    run(tmp_path, killed_at=3)  # resumes from iteration 2, writes iteration 4 over the damaged file, then dies
+    assert load(tmp_path / "checkpoint.pt")["iteration"] == 4
+    assert load(tmp_path / "checkpoint.prev.pt")["iteration"] == 2
+
+
+def test_orphaned_temporary_files_are_removed_at_resume_and_at_the_next_write(tmp_path):
+    run(tmp_path, killed_at=3)
+    orphan = tmp_path / ".checkpoint.pt.k1ll3d.tmp"  # what a kill during torch.save leaves
+    orphan.write_bytes(os.urandom(1000))
+    run(tmp_path, killed_at=1)  # resumes and dies before any write
+    assert not orphan.exists()
+    orphans = [tmp_path / ".notes.txt.abc.tmp", tmp_path / ".notes.txt.def.tmp"]
+    for path in orphans:
+        path.write_text("half")
+    other = tmp_path / ".other.txt.abc.tmp"
+    other.write_text("half")
+    save_text("whole", tmp_path / "notes.txt")
+    assert not any(path.exists() for path in orphans) and other.exists()
+    assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == [other.name]
+
+
+@pytest.mark.parametrize("kills", [[], [3], [5], [7], [3, 3], [3, 1, 1, 2]], ids=str)
+def test_tensorboard_curves_have_one_point_per_logged_step_after_resumes(kills, tmp_path):
+    for killed_at in kills:
+        run(tmp_path, "eval.every=2", killed_at=killed_at)
+    run(tmp_path, "eval.every=2")
+    events = EventAccumulator(str(tmp_path)).Reload()
+    steps = {tag: [e.step for e in events.Scalars(tag)] for tag in events.Tags()["scalars"]}
+    assert steps["train/sum_utility"] == [100, 200, 300, 400, 500, 600]
+    assert steps["eval/optimality"] == steps["eval/optimal_fraction"] == [200, 400, 600]  # no step-0 point from hparams
+    hparams = PluginEventAccumulator(str(tmp_path)).Reload().PluginTagToContent("hparams")
+    assert "_hparams_/session_start_info" in hparams
