@@ -18,6 +18,7 @@ def test_table2_and_figures_subset(tmp_path):
     table = subprocess.run([sys.executable, "-m", "uavrl.reproduce", "table2", *common], capture_output=True, text=True, check=True)
     assert "| 2x2 | 16 | 576 | 120 |" in table.stdout and "| 3x3 | 81 | 2,916 | 800 |" in table.stdout
     assert "sum utility per episode rises" in table.stdout
+    assert "| return ratio | reach 0.999 U* | step ratio 0.999 |" in table.stdout and "against exact optimal control: return ratio" in table.stdout
     rows = json.loads((tmp_path / "table2.json").read_text())
     assert [r["grid"] for r in rows] == [2, 3] and all(0 < r["optimality"] <= 1 for r in rows)
     assert list((tmp_path / "tensorboard" / "grid3x3").glob("events.out.tfevents.*"))

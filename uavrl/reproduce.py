@@ -24,6 +24,7 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -37,6 +38,7 @@ from uavrl.settings import REPRODUCE_SETTINGS, check, shown
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
 PAPER_SECONDS = {2: 0.102628, 3: 0.762713, 4: 2.425558, 5: 8.757846, 6: 49.007077, 8: 146.936207, 10: 291.176670}
 METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
+YARDSTICK = ("return_ratio", "reach_999", "step_ratio_999", "reach_optimum")  # from the shared evaluation
 COMMANDS = ("table2", "figures")
 # the settings that change the results: one directory per combination
 PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
@@ -117,7 +119,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     import torch
 
     from uavrl.agents.tabular import TabularPolicy, TeamQLearner
-    from uavrl.evaluation import episode_metrics, evaluate
+    from uavrl.evaluation import episode_metrics, evaluate_agent
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
@@ -140,7 +142,8 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     record = {"history": history, "grid": size, "steps_per_episode": steps}
     record |= {key: cfg[key] for key in ("num_uavs", "runs", "episodes", "seed", "state_includes_tasks")}
     save_torch(record, out_dir / f"history_{size}x{size}.pt")
-    evaluations = [evaluate(TabularPolicy(q, model), model, num_starts=int(cfg.eval_starts)) for q in learner.q]
+    runs = SimpleNamespace(policies=lambda: [TabularPolicy(q, model) for q in learner.q])
+    evaluation = evaluate_agent(runs, model, num_starts=int(cfg.eval_starts))  # mean over runs, the yardstick's too
     return {
         "grid": size,
         "states": model.num_states,
@@ -152,16 +155,18 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
         "learn_seconds": learn_seconds,
         "seconds_per_episode": learn_seconds / (int(cfg.episodes) * int(cfg.runs)),
         "team_steps_per_second": int(cfg.episodes) * int(cfg.runs) * steps / learn_seconds,
-        "optimality": sum(e["eval/optimality"] for e in evaluations) / len(evaluations),
-        "optimality_min": min(e["eval/optimality_min"] for e in evaluations),
+        "optimality": evaluation["eval/optimality"],
+        "optimality_min": evaluation["eval/optimality_min"],
+        **{key: evaluation.get(f"eval/{key}") for key in YARDSTICK},
         "history": history,
     }
 
 
 def table2_markdown(rows: list[dict], wall: float) -> str:
     lines = [
-        "| grid | states | Q size | steps/episode | paper s/episode | ours s/episode | speedup | paper total | ours total | greedy U/U* (min) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| grid | states | Q size | steps/episode | paper s/episode | ours s/episode | speedup | paper total | ours total "
+        "| greedy U/U* (min) | return ratio | reach 0.999 U* | step ratio 0.999 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         paper = PAPER_SECONDS.get(r["grid"])
@@ -171,10 +176,15 @@ def table2_markdown(rows: list[dict], wall: float) -> str:
         lines.append(
             f"| {r['grid']}x{r['grid']} | {r['states']:,} | {r['q_size']:,} | {r['steps_per_episode']:,} | "
             f"{paper if paper else '-'} | {r['seconds_per_episode']:.2e} | {speedup} | "
-            f"{_duration(paper_total) if paper_total else '-'} | {ours_total:.2f} s | {r['optimality']:.4f} ({r['optimality_min']:.4f}) |"
+            f"{_duration(paper_total) if paper_total else '-'} | {ours_total:.2f} s | {r['optimality']:.4f} ({r['optimality_min']:.4f}) | "
+            f"{_number(r.get('return_ratio'), '.3f')} | {_number(r.get('reach_999'), '.2f')} | {_number(r.get('step_ratio_999'), '.2f')} |"
         )
     lines.append(f"\nWhole table: {wall:.1f} s wall ({sum(r['episodes'] * r['runs'] * r['steps_per_episode'] for r in rows):,} team steps with learning).")
     return "\n".join(lines) + "\n"
+
+
+def _number(value, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
 
 
 def _duration(seconds: float) -> str:
@@ -201,6 +211,18 @@ def findings(history: dict, grid: int) -> list[str]:
     return out
 
 
+def yardstick_finding(row: dict) -> str:
+    """What the greedy policies achieve against exact optimal control (the yardstick of ``uavrl.evaluation``)."""
+    grid = f"{row['grid']}x{row['grid']}"
+    if row.get("return_ratio") is None:
+        return f"{grid}: against exact optimal control: no exact values for this grid"
+    return (
+        f"{grid}: against exact optimal control: return ratio {row['return_ratio']:.3f} of the best possible, "
+        f"0.999 U* reached from {row['reach_999']:.0%} of starts"
+        + (f" in {row['step_ratio_999']:.2f}x the fewest steps" if row.get("step_ratio_999") is not None else "")
+    )
+
+
 def table2(cfg: DictConfig) -> list[dict]:
     from tqdm import tqdm
 
@@ -212,7 +234,7 @@ def table2(cfg: DictConfig) -> list[dict]:
         rows.append(run_grid(size, cfg, out_dir))
     wall = time.perf_counter() - started
     table = table2_markdown(rows, wall)
-    notes = [line for r in rows for line in findings(r["history"], r["grid"])]
+    notes = [line for r in rows for line in findings(r["history"], r["grid"]) + [yardstick_finding(r)]]
     print(table)
     print("\n".join(notes))
     save_text(table + "\n" + "\n".join(f"- {n}" for n in notes) + "\n", out_dir / "table2.md")
