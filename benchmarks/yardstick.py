@@ -66,7 +66,7 @@ def row(m: dict) -> str:
         f"| {m['row']} | {m['seed']} | {cell(m, 'eval/optimality', '.4f')} | {cell(m, 'eval/return_ratio', '.4f')} "
         f"| {cell(m, 'eval/reach_999', '.2f')} | {cell(m, 'eval/steps_to_999', '.2f')} | {cell(m, 'eval/min_steps_to_999', '.2f')} ({fewest}) "
         f"| {cell(m, 'eval/step_ratio_999', '.3f')} | {cell(m, 'eval/reach_optimum', '.2f')} | {cell(m, 'eval/step_ratio_optimum', '.3f')} "
-        f"| {m['train_seconds']:.0f} | {m['wall_seconds']:.0f} |"
+        f"| {m['train_seconds']:.0f} | {m.get('wall_seconds', m['total_seconds']):.0f} |"
     )
 
 
@@ -78,13 +78,19 @@ def main():
     parser.add_argument("--starts", type=int, default=200, help="held-out evaluation starts (and layouts)")
     parser.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary directory)")
     parser.add_argument("--json", type=Path, default=None, help="also write every result here")
+    parser.add_argument("--collect", type=Path, default=None, help="only print the rows of the runs already in this --out directory")
     args = parser.parse_args()
+    print("| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | reach U* | step ratio U* | train s | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    if args.collect:  # the command's own wall time is not in metrics.json: the wall column is the run's total_seconds
+        for name in ROWS:
+            for path in sorted(args.collect.glob(f"{name}-seed*/metrics.json")):
+                print(row({"row": name, "seed": int(path.parent.name.rsplit("seed", 1)[1]), **json.loads(path.read_text())}))
+        return
     rows = (TABLES[args.table] if args.table else []) + args.rows
     if not rows:
         parser.error("give --table or --rows")
     out = args.out or Path(tempfile.mkdtemp(prefix="yardstick_"))
-    print("| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | reach U* | step ratio U* | train s | wall s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     results = []
     for name in rows:
         for seed in args.seeds[:1] if any(k in name for k in DETERMINISTIC) else args.seeds:
