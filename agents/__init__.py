@@ -11,6 +11,7 @@ Every agent has the same shape, so ``uavrl.train`` and ``uavrl.evaluate`` drive 
 - ``policies()``: greedy TorchRL policies, one per independent run;
 - ``state_dict()`` / ``load_state_dict()``: everything a checkpoint needs to resume.
 """
+
 import importlib
 
 AGENTS = {

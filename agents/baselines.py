@@ -25,6 +25,7 @@ Example:
     >>> bool(((td["next", "utility"][:, -1].double() - u_star).abs() <= 1e-6 * u_star).all())
     True
 """
+
 from __future__ import annotations
 
 import torch
@@ -83,7 +84,9 @@ class OraclePolicy(TensorDictModuleBase):
         if self._fixed is not None:
             return self._fixed[0][0], self._fixed[1][0]
         if self.env is None:
-            raise ValueError("OraclePolicy with layout='random' needs the environment it acts in: OraclePolicy(cfg, env=env)")
+            raise ValueError(
+                "OraclePolicy with layout='random' needs the environment it acts in: OraclePolicy(cfg, env=env)"
+            )
         return self.env.cell_contributions[world], self.env.direct[world]
 
     def _optimal_sets(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -109,7 +112,7 @@ class OraclePolicy(TensorDictModuleBase):
         costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
         _, s, pair = best_assignment(costs)
         width = self.cfg.grid[0]
-        goal = list(zip(target_cells[s][pair].tolist(), target_tasks[s][pair].tolist()))
+        goal = list(zip(target_cells[s][pair].tolist(), target_tasks[s][pair].tolist(), strict=True))
         cells, tasks = cells.tolist(), tasks.tolist()
 
         def steps_to(i: int, cell_task: tuple[int, int]) -> int:
@@ -119,7 +122,9 @@ class OraclePolicy(TensorDictModuleBase):
         def preferences(i: int) -> list[int]:
             """A task change first, then moves that shorten the path (longer axis first), then staying."""
             (y, x), (gy, gx) = divmod(cells[i], width), divmod(goal[i][0], width)
-            moves = sorted([(abs(gx - x), RIGHT if gx > x else LEFT), (abs(gy - y), DOWN if gy > y else UP)], reverse=True)
+            moves = sorted(
+                [(abs(gx - x), RIGHT if gx > x else LEFT), (abs(gy - y), DOWN if gy > y else UP)], reverse=True
+            )
             change = [SENSE + goal[i][1]] if goal[i][1] != tasks[i] else []
             return change + [move for distance, move in moves if distance > 0] + [SENSE + tasks[i]]
 
@@ -138,7 +143,9 @@ class OraclePolicy(TensorDictModuleBase):
                 if max(steps_to(i, goal[j]), steps_to(j, goal[i])) <= max(steps_to(i, goal[i]), steps_to(j, goal[j])):
                     goal[i], goal[j] = goal[j], goal[i]
                     options = preferences(i)
-            actions[i] = next(a for a in options if a >= SENSE and target(i, a) == cells[i] or target(i, a) not in waiting | claimed)
+            actions[i] = next(
+                a for a in options if a >= SENSE and target(i, a) == cells[i] or target(i, a) not in waiting | claimed
+            )
             claimed.add(target(i, actions[i]))
         return torch.tensor(actions)
 

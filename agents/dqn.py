@@ -34,12 +34,14 @@ Example:
     >>> from hydra import compose, initialize_config_dir
     >>> from uavrl.config import config_dir, model_config
     >>> with initialize_config_dir(config_dir=config_dir(), version_base=None):
-    ...     cfg = compose("config", overrides=["agent=dqn", "env.grid=[3,3]", "agent.worlds=4", "agent.buffer_size=1000", "train.steps_per_episode=5"])
+    ...     overrides = ["agent=dqn", "env.grid=[3,3]", "agent.worlds=4", "agent.buffer_size=1000"]
+    ...     cfg = compose("config", overrides=[*overrides, "train.steps_per_episode=5"])
     >>> agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     >>> metrics = agent.train_iteration()  # 4 worlds x 5 steps, no gradient step before agent.learning_starts
     >>> agent.env_steps, metrics["train/epsilon"] < 1.0
     (20, True)
 """
+
 from __future__ import annotations
 
 import math
@@ -90,11 +92,32 @@ class TeamQNet(nn.Module):
         super().__init__()
         N, F, dev = env.num_uavs, env.observation_size, env.device
         self.joint, self.width = head == "joint", env.cfg.grid[0]
-        self.torso = MultiAgentMLP(F, hidden, N, centralized=True, share_params=True, depth=depth, num_cells=hidden, activation_class=nn.ReLU, activate_last_layer=True, device=dev)
+        self.torso = MultiAgentMLP(
+            F,
+            hidden,
+            N,
+            centralized=True,
+            share_params=True,
+            depth=depth,
+            num_cells=hidden,
+            activation_class=nn.ReLU,
+            activate_last_layer=True,
+            device=dev,
+        )
         if self.joint:
             self.head = nn.Linear(hidden, NUM_ACTIONS**N, device=dev)
         else:
-            self.head = MultiAgentMLP(hidden + F + N + 4, NUM_ACTIONS, N, centralized=False, share_params=True, depth=1, num_cells=hidden, activation_class=nn.ReLU, device=dev)
+            self.head = MultiAgentMLP(
+                hidden + F + N + 4,
+                NUM_ACTIONS,
+                N,
+                centralized=False,
+                share_params=True,
+                depth=1,
+                num_cells=hidden,
+                activation_class=nn.ReLU,
+                device=dev,
+            )
         self.register_buffer("ids", torch.eye(N, device=dev))
         self.register_buffer("neighbours", env.neighbours.clone())
 
@@ -125,14 +148,15 @@ class ValidGreedy(nn.Module):
 
     Example:
         >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
+        >>> allowed = torch.ones(1, 2, 6, dtype=torch.bool)
         >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 9.0, 0, 0, 1]]])  # both want cell 1
-        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[0, 0]]))
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[0, 0]]))
         tensor([[3, 5]])
         >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 0, 9.0, 0, 1]]])  # a train: both move right together
-        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]]))
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]]))
         tensor([[3, 3]])
         >>> values = torch.tensor([[[0, 0, 0, 0, 9.0, 1], [0, 0, 0, 0, 9.0, 1]]])  # both relays want to sense
-        >>> greedy(values, torch.ones(1, 2, 6, dtype=torch.bool), torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[1, 1]]))
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[1, 1]]))
         tensor([[4, 5]])
     """
 
@@ -142,7 +166,9 @@ class ValidGreedy(nn.Module):
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
-    def forward(self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
+    ) -> torch.Tensor:
         cells = _cells(positions, self.width)
         targets = torch.cat([self.neighbours[cells], cells.unsqueeze(-1).expand(*cells.shape, 2)], -1)  # [*, N, 6]
         claimed = cells.clone()
@@ -164,9 +190,13 @@ class ValidGreedy(nn.Module):
             others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
             free = (targets[..., i, :4, None] != others[..., None, :]).all(-1) & action_mask[..., i, :4]
             value, move = action_value[..., i, :4].masked_fill(~free, -math.inf).max(-1)
-            better = (actions[..., i] >= 4) & (value > action_value[..., i, :].gather(-1, actions[..., i, None]).squeeze(-1))
+            better = (actions[..., i] >= 4) & (
+                value > action_value[..., i, :].gather(-1, actions[..., i, None]).squeeze(-1)
+            )
             actions[..., i] = torch.where(better, move, actions[..., i])
-            claimed[..., i] = torch.where(better, targets[..., i, :].gather(-1, move.unsqueeze(-1)).squeeze(-1), claimed[..., i])
+            claimed[..., i] = torch.where(
+                better, targets[..., i, :].gather(-1, move.unsqueeze(-1)).squeeze(-1), claimed[..., i]
+            )
         return actions
 
 
@@ -220,7 +250,9 @@ class DoubleQMixerLoss(QMixerLoss):
         with torch.no_grad():
             with self.local_value_network_params.data.to_module(self.local_value_network, preserve_module_state=False):
                 next_action = self.local_value_network(nxt.clone(False)).get(k.action)  # the online greedy valid action
-            next_value = self._team_value(nxt, next_action, self.target_local_value_network_params, self.target_mixer_network_params)
+            next_value = self._team_value(
+                nxt, next_action, self.target_local_value_network_params, self.target_mixer_network_params
+            )
             target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
 
@@ -231,7 +263,8 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
     check(a, RUN_SETTINGS, section="agent")
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
-            f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = {env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
+            f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "
+            f"{env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
         )
 
 
@@ -249,43 +282,94 @@ class DQNAgent:
         self.num_iterations = int(cfg.train.iterations)
         self.iteration = 0
         torch.manual_seed(self.seed)
-        self.env = UAVSpectrumEnv(batch_size=int(a.worlds), config=env_cfg, seed=self._world_seed(0), device=self.device)
+        self.env = UAVSpectrumEnv(
+            batch_size=int(a.worlds), config=env_cfg, seed=self._world_seed(0), device=self.device
+        )
         env, N = self.env, env_cfg.num_uavs
         net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
         values = ("agents", "action_value") if a.head == "factored" else "joint_action_value"
         q = TensorDictModule(net, in_keys=[("agents", "observation"), "positions"], out_keys=[values])
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
-        eps = dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=max(1, int(float(a.eps_fraction) * frames)), device=self.device)
+        eps = dict(
+            eps_init=float(a.eps_start),
+            eps_end=float(a.eps_end),
+            annealing_num_steps=max(1, int(float(a.eps_fraction) * frames)),
+            device=self.device,
+        )
         if a.head == "factored":
             spec = env.full_action_spec_unbatched
-            greedy_action = TensorDictModule(ValidGreedy(env.neighbours, env_cfg.grid[0]), in_keys=[values, ("agents", "action_mask"), "positions", "tasks"], out_keys=[("agents", "action")])
+            greedy_action = TensorDictModule(
+                ValidGreedy(env.neighbours, env_cfg.grid[0]),
+                in_keys=[values, ("agents", "action_mask"), "positions", "tasks"],
+                out_keys=[("agents", "action")],
+            )
             self.greedy = TensorDictSequential(q, greedy_action)
-            self.exploration = EGreedyModule(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
+            self.exploration = EGreedyModule(
+                spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps
+            )
             explore = TensorDictSequential(self.greedy, self.exploration)
             if a.mixer == "vdn":
-                mixer = TensorDictModule(VDNMixer(N, self.device), in_keys=[("agents", "chosen_action_value")], out_keys=["chosen_action_value"])
+                mixer = TensorDictModule(
+                    VDNMixer(N, self.device),
+                    in_keys=[("agents", "chosen_action_value")],
+                    out_keys=["chosen_action_value"],
+                )
             else:
-                mixer = TensorDictModule(QMixer((env.state_size,), int(a.mixing_embed_dim), N, self.device), in_keys=[("agents", "chosen_action_value"), "state"], out_keys=["chosen_action_value"])
+                mixer = TensorDictModule(
+                    QMixer((env.state_size,), int(a.mixing_embed_dim), N, self.device),
+                    in_keys=[("agents", "chosen_action_value"), "state"],
+                    out_keys=["chosen_action_value"],
+                )
             self.loss = DoubleQMixerLoss(self.greedy, mixer, spec, float(a.gamma))
             self._action_keys = [("agents", "action")]
         else:
             spec = Categorical(env_cfg.num_joint_actions, device=self.device)
-            mask = TensorDictModule(JointActionMask(env.neighbours, env_cfg.grid[0], N), in_keys=["positions"], out_keys=["joint_action_mask"])
-            argmax = QValueModule(spec=spec, action_value_key=values, action_mask_key="joint_action_mask", out_keys=["joint_action", values, "joint_chosen_action_value"])
-            decode = TensorDictModule(DecodeJointAction(N, self.device), in_keys=["joint_action"], out_keys=[("agents", "action")])
-            self.exploration = EGreedyModule(spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps)
+            mask = TensorDictModule(
+                JointActionMask(env.neighbours, env_cfg.grid[0], N),
+                in_keys=["positions"],
+                out_keys=["joint_action_mask"],
+            )
+            argmax = QValueModule(
+                spec=spec,
+                action_value_key=values,
+                action_mask_key="joint_action_mask",
+                out_keys=["joint_action", values, "joint_chosen_action_value"],
+            )
+            decode = TensorDictModule(
+                DecodeJointAction(N, self.device), in_keys=["joint_action"], out_keys=[("agents", "action")]
+            )
+            self.exploration = EGreedyModule(
+                spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps
+            )
             self.greedy = TensorDictSequential(mask, q, argmax, decode)
             explore = TensorDictSequential(mask, q, argmax, self.exploration, decode)
-            self.loss = DQNLoss(TensorDictSequential(mask, q, argmax), double_dqn=True, delay_value=True, action_space=spec, loss_function="smooth_l1")
+            self.loss = DQNLoss(
+                TensorDictSequential(mask, q, argmax),
+                double_dqn=True,
+                delay_value=True,
+                action_space=spec,
+                loss_function="smooth_l1",
+            )
             self.loss.set_keys(action="joint_action", action_value=values, value="joint_chosen_action_value")
             self.loss.make_value_estimator(gamma=float(a.gamma))
             self._action_keys = ["joint_action", ("agents", "action")]
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
-        self.buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size))
-        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"] + (["state"] if a.head == "factored" and a.mixer == "qmix" else [])
+        self.buffer = TensorDictReplayBuffer(
+            storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size)
+        )
+        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"] + (
+            ["state"] if a.head == "factored" and a.mixer == "qmix" else []
+        )
         self._keys = inputs + self._action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
-        self.collector = Collector(env, explore, frames_per_batch=int(a.worlds) * env_cfg.max_steps, total_frames=-1, device=self.device, auto_register_policy_transforms=False)
+        self.collector = Collector(
+            env,
+            explore,
+            frames_per_batch=int(a.worlds) * env_cfg.max_steps,
+            total_frames=-1,
+            device=self.device,
+            auto_register_policy_transforms=False,
+        )
         self._batches = iter(self.collector)
 
     def _world_seed(self, iteration: int) -> int:
@@ -301,19 +385,29 @@ class DQNAgent:
         self.collector.set_seed(self._world_seed(self.iteration), static_seed=True)
         self.collector.reset()
         for group in self.optimizer.param_groups:  # annealed linearly from agent.lr to agent.lr_end over the run
-            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(1.0, self.iteration / self.num_iterations)
+            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(
+                1.0, self.iteration / self.num_iterations
+            )
         u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
         batch = next(self._batches)  # [worlds, steps]
         if self.settings.objective == "log_gap":
             batch.set(("next", "reward"), self._log_gap_reward(batch, u_star))
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
-        losses = [self._update() for _ in range(int(self.settings.updates))] if len(self.buffer) >= int(self.settings.learning_starts) else []
+        losses = (
+            [self._update() for _ in range(int(self.settings.updates))]
+            if len(self.buffer) >= int(self.settings.learning_starts)
+            else []
+        )
         self.exploration.step(batch.numel())
         self.iteration += 1
         nxt = batch.get("next")
         # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
-        mean_utility = self.env.utility(nxt.get("positions"), nxt.get("tasks"))[2] if self.env_cfg.fading != "none" else None
-        per_world = episode_metrics(nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, mean_utility)
+        mean_utility = (
+            self.env.utility(nxt.get("positions"), nxt.get("tasks"))[2] if self.env_cfg.fading != "none" else None
+        )
+        per_world = episode_metrics(
+            nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, mean_utility
+        )
         out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
         out["train/epsilon"] = self.exploration.eps.item()
         if losses:

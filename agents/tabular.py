@@ -31,6 +31,7 @@ Example:
     >>> learner.q.shape, metrics["r_pu"].shape
     (torch.Size([2, 81, 36]), torch.Size([2, 50]))
 """
+
 from __future__ import annotations
 
 import math
@@ -79,9 +80,15 @@ class TabularModel:
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
         if cfg.layout == "random":
-            raise ValueError("layout='random' is invalid for agent=tabular: its state has no layout, so one table cannot serve many; use agent=dqn")
+            raise ValueError(
+                "layout='random' is invalid for agent=tabular: its state has no layout, so one table cannot serve "
+                "many; use agent=dqn"
+            )
         if cfg.fading != "none":
-            raise ValueError(f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use fading='none'")
+            raise ValueError(
+                f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use "
+                "fading='none'"
+            )
         self.cfg, self.device = cfg, torch.device(device)
         N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
         env = UAVSpectrumEnv(batch_size=1, config=cfg, device=self.device)
@@ -118,7 +125,11 @@ class TabularModel:
             tasks_k = tasks[None].expand(len(p), -1, -1).reshape(1, -1, N)
             r_pu, r_se, _ = env.utility(pos_k, tasks_k)
             self.r_pu[k], self.r_se[k] = r_pu[0], r_se[0]
-            digits = 2 * cells[:, None, :] + tasks[None] if cfg.state_includes_tasks else cells[:, None, :].expand(-1, 2**N, -1)
+            digits = (
+                2 * cells[:, None, :] + tasks[None]
+                if cfg.state_includes_tasks
+                else cells[:, None, :].expand(-1, 2**N, -1)
+            )
             self.row[k] = (digits * row_place).sum(-1).reshape(-1)
         self.num_valid = self.valid.sum(-1).int()
         self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).int()
@@ -153,7 +164,8 @@ def _scan(q_row, actions, n_valid):
 
 @numba.njit(cache=True, inline="always")
 def _choose(q_row, actions, n_valid, u, epsilon, best, ties, best_j):
-    """Epsilon-greedy action among the valid ``actions`` (ascending) from one uniform ``u``, given the row's :func:`_scan`.
+    """Epsilon-greedy action among the valid ``actions`` (ascending) from one uniform ``u``, given the row's
+    :func:`_scan`.
 
     ``u < epsilon`` explores, and then ``u / epsilon`` is a fresh uniform that
     picks the valid action; otherwise ``(u - epsilon) / (1 - epsilon)`` picks
@@ -187,8 +199,29 @@ def _transition(w, cfg_k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best,
 
 
 @numba.njit(cache=True, parallel=True)
-def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
-    """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves, switches).
+def _episode_per_run(
+    q,
+    k0,
+    uniforms,
+    r_pu_t,
+    r_se_t,
+    row_t,
+    valid,
+    n_valid,
+    next_cells,
+    next_tasks,
+    moves_t,
+    switches_t,
+    alpha,
+    gamma,
+    epsilon,
+    beta1,
+    beta2,
+    use_best,
+    out,
+):
+    """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves,
+    switches).
 
     The scan of the next state's row that gives the target's max is also the
     next step's greedy choice, so each step scans one row (two when it stays
@@ -207,7 +240,9 @@ def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, nex
         for step in range(T):
             s, p = row_t[k], k // T2
             j = _choose(qr[s], valid[p], n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
-            k2, reward = _transition(r, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2)
+            k2, reward = _transition(
+                r, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2
+            )
             s2, p2 = row_t[k2], k2 // T2
             v_best, ties, best_j = _scan(qr[s2], valid[p2], n_valid[p2])
             qr[s, j] = (1 - alpha) * qr[s, j] + alpha * (reward + gamma * v_best)
@@ -221,7 +256,27 @@ def _episode_per_run(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, nex
 
 
 @numba.njit(cache=True)
-def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t, alpha, gamma, epsilon, beta1, beta2, use_best, out):
+def _episode_shared(
+    q,
+    k0,
+    uniforms,
+    r_pu_t,
+    r_se_t,
+    row_t,
+    valid,
+    n_valid,
+    next_cells,
+    next_tasks,
+    moves_t,
+    switches_t,
+    alpha,
+    gamma,
+    epsilon,
+    beta1,
+    beta2,
+    use_best,
+    out,
+):
     """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc)."""
     R, T = uniforms.shape[0], uniforms.shape[1]
     T2 = next_tasks.shape[0]
@@ -242,7 +297,9 @@ def _episode_shared(q, k0, uniforms, r_pu_t, r_se_t, row_t, valid, n_valid, next
             s, p = row_t[k], k // T2
             v_best, ties, best_j = _scan(qt[s], valid[p], n_valid[p])
             j = _choose(qt[s], valid[p], n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
-            k2, reward = _transition(w, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2)
+            k2, reward = _transition(
+                w, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2
+            )
             s_w[w], j_w[w], k0[w] = s, j, k2
             target_w[w] = reward + gamma * _scan(qt[row_t[k2]], valid[k2 // T2], n_valid[k2 // T2])[0]
             out[w, step, 0], out[w, step, 1] = prev[w, 0], prev[w, 1]
@@ -273,7 +330,19 @@ class TeamQLearner:
         memory_budget: refuse tables larger than this many bytes.
     """
 
-    def __init__(self, cfg: ModelConfig, runs: int = 1, seed: int = 0, alpha=0.1, gamma=0.3, epsilon=0.1, shared_table=False, backend="numba", device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET):
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        runs: int = 1,
+        seed: int = 0,
+        alpha=0.1,
+        gamma=0.3,
+        epsilon=0.1,
+        shared_table=False,
+        backend="numba",
+        device="cpu",
+        memory_budget=DEFAULT_MEMORY_BUDGET,
+    ):
         if backend not in ("numba", "torch"):
             raise ValueError(f"backend={backend!r} is invalid: allowed values are 'numba', 'torch'")
         if backend == "numba" and torch.device(device).type != "cpu":
@@ -282,14 +351,21 @@ class TeamQLearner:
             raise ValueError(f"runs={runs} is invalid: give at least 1")
         for name, value, low in (("alpha", alpha, 0.0), ("gamma", gamma, 0.0), ("epsilon", epsilon, 0.0)):
             if not (low <= float(value) <= 1.0) or (name == "alpha" and float(value) == 0.0):
-                raise ValueError(f"{name}={value} is invalid: it must lie in {'(0, 1]' if name == 'alpha' else '[0, 1]'}")
+                raise ValueError(
+                    f"{name}={value} is invalid: it must lie in {'(0, 1]' if name == 'alpha' else '[0, 1]'}"
+                )
         num_tables = 1 if shared_table else int(runs)
         if not cfg.has_state_index:
-            raise ValueError(f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} has {cfg.num_states:.3g} states: no int64 state index exists; use agent=dqn, which scales further")
+            raise ValueError(
+                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} has {cfg.num_states:.3g} "
+                "states: no int64 state index exists; use agent=dqn, which scales further"
+            )
         need = table_bytes(cfg, num_tables)
         if need > memory_budget:
             raise ValueError(
-                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {need:,} bytes ({need / 2**30:.3g} GiB) with the model tables, over the memory budget of {int(memory_budget):,} bytes; raise agent.memory_budget or use agent=dqn, which scales further"
+                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {need:,} bytes "
+                f"({need / 2**30:.3g} GiB) with the model tables, over the memory budget of {int(memory_budget):,} "
+                "bytes; raise agent.memory_budget or use agent=dqn, which scales further"
             )
         self.cfg, self.runs, self.seed = cfg, int(runs), int(seed)
         self.alpha, self.gamma, self.epsilon = float(alpha), float(gamma), float(epsilon)
@@ -311,7 +387,9 @@ class TeamQLearner:
             first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
             env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=first_world, device=self.device)
             td = env.reset()
-            self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(_START_BLOCK, self.runs)
+            self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(
+                _START_BLOCK, self.runs
+            )
             self._start_block = block
         return self._block_starts[offset]
 
@@ -333,14 +411,38 @@ class TeamQLearner:
         out = np.empty((self.runs, cfg.max_steps, 4))
         k = k0.numpy().copy()
         kernel = _episode_shared if self.shared_table else _episode_per_run
-        kernel(self.q.numpy(), k, u.numpy(), m.r_pu.numpy(), m.r_se.numpy(), m.row.numpy(), m.valid_actions.numpy(), m.num_valid.numpy(), m.next_cells.numpy(), m.next_tasks.numpy(), m.moves.numpy(), m.switches.numpy(), self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", out)
+        kernel(
+            self.q.numpy(),
+            k,
+            u.numpy(),
+            m.r_pu.numpy(),
+            m.r_se.numpy(),
+            m.row.numpy(),
+            m.valid_actions.numpy(),
+            m.num_valid.numpy(),
+            m.next_cells.numpy(),
+            m.next_tasks.numpy(),
+            m.moves.numpy(),
+            m.switches.numpy(),
+            self.alpha,
+            self.gamma,
+            self.epsilon,
+            cfg.beta1,
+            cfg.beta2,
+            cfg.reward == "best_so_far",
+            out,
+        )
         self._configuration = torch.from_numpy(k)
         return torch.from_numpy(out)
 
     def _episode_torch(self, k0, u):
         m, cfg, q = self.model, self.cfg, self.q
         R, T, T2, A = self.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
-        tables = torch.zeros(R, dtype=torch.long, device=self.device) if self.shared_table else torch.arange(R, device=self.device)
+        tables = (
+            torch.zeros(R, dtype=torch.long, device=self.device)
+            if self.shared_table
+            else torch.arange(R, device=self.device)
+        )
         out = torch.empty(R, T, 4, dtype=torch.float64, device=self.device)
         k = k0.to(self.device)
         prev = torch.stack([m.r_pu[k], m.r_se[k]], -1)
@@ -363,7 +465,9 @@ class TeamQLearner:
             if self.shared_table:
                 flat = s * A + j
                 total = torch.zeros(q[0].numel(), dtype=torch.float64, device=self.device).index_add_(0, flat, target)
-                count = torch.zeros(q[0].numel(), dtype=torch.float64, device=self.device).index_add_(0, flat, torch.ones_like(target))
+                count = torch.zeros(q[0].numel(), dtype=torch.float64, device=self.device).index_add_(
+                    0, flat, torch.ones_like(target)
+                )
                 q0 = q[0].view(-1)
                 q0[flat] = (1 - self.alpha) * q0[flat] + self.alpha * (total[flat] / count[flat])
             else:
@@ -376,11 +480,18 @@ class TeamQLearner:
 
     # checkpoints
     def state_dict(self) -> dict:
-        return {"q": self.q.cpu(), "episode": self.episode, "configuration": None if self._configuration is None else self._configuration.cpu()}
+        return {
+            "q": self.q.cpu(),
+            "episode": self.episode,
+            "configuration": None if self._configuration is None else self._configuration.cpu(),
+        }
 
     def load_state_dict(self, state: dict):
         if state["q"].shape != self.q.shape:
-            raise ValueError(f"checkpoint Q table has shape {tuple(state['q'].shape)}, this learner needs {tuple(self.q.shape)}: same env and agent settings are required")
+            raise ValueError(
+                f"checkpoint Q table has shape {tuple(state['q'].shape)}, this learner needs {tuple(self.q.shape)}: "
+                "same env and agent settings are required"
+            )
         self.q.copy_(state["q"])
         self.episode = int(state["episode"])
         self._configuration = None if state["configuration"] is None else state["configuration"].to(self.device)
@@ -394,7 +505,11 @@ def _choose_batched(q_rows, valid_rows, u, epsilon):
     """:func:`_choose` batched over worlds, same random numbers, same result."""
     explore = u < epsilon
     n_valid = valid_rows.sum(-1)
-    random_pick = _nth_true_batched(valid_rows, (u / epsilon * n_valid).long().clamp(max=valid_rows.shape[-1] - 1)) if epsilon > 0 else None
+    random_pick = (
+        _nth_true_batched(valid_rows, (u / epsilon * n_valid).long().clamp(max=valid_rows.shape[-1] - 1))
+        if epsilon > 0
+        else None
+    )
     best = q_rows.masked_fill(~valid_rows, -math.inf).amax(-1, keepdim=True)
     ties = valid_rows & (q_rows == best)
     greedy = _nth_true_batched(ties, ((u - epsilon) / (1 - epsilon) * ties.sum(-1)).long().clamp(min=0))
@@ -435,14 +550,17 @@ class TabularPolicy(TensorDictModuleBase):
         valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
         values = self.q[td.get("state_index").to(self.q.device)].masked_fill(~valid, -math.inf)
         ties = values == values.amax(-1, keepdim=True)
-        pick = torch.rand(ties.shape, generator=self.generator, device=self.q.device).masked_fill(~ties, -1.0).argmax(-1)
+        pick = (
+            torch.rand(ties.shape, generator=self.generator, device=self.q.device).masked_fill(~ties, -1.0).argmax(-1)
+        )
         td.set(("agents", "action"), self.actions[pick].to(td.device or self.q.device))
         return td
 
 
 # ----------------------------------------------------------------------------- the uavrl agent
 def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET) -> torch.Tensor:
-    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state (SPEC section 6).
+    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state (SPEC section
+    6).
 
     Solved on the configuration graph (:mod:`uavrl.envs.exact`, the environment's
     own dynamics and rates), infinite horizon, discount ``gamma``.  With
@@ -457,14 +575,20 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     """
     if cfg.reward != "delta":
         raise ValueError(
-            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: the best_so_far reward depends on the episode's past, not on the configuration; use env.reward=delta"
+            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: the best_so_far reward depends "
+            "on the episode's past, not on the configuration; use env.reward=delta"
         )
     if cfg.layout == "random" or cfg.fading != "none":
-        raise ValueError("agent.method=value_iteration needs a fixed layout and deterministic channels (env.layout=line or reference_code, env.fading=none)")
+        raise ValueError(
+            "agent.method=value_iteration needs a fixed layout and deterministic channels (env.layout=line or "
+            "reference_code, env.fading=none)"
+        )
     need = cfg.num_states * cfg.num_joint_actions * 8
     if not cfg.has_state_index or need > memory_budget:
         raise ValueError(
-            f"the exact Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {cfg.num_states * cfg.num_joint_actions * 8:,} bytes, over the memory budget of {int(memory_budget):,} bytes; raise agent.memory_budget or use agent=dqn"
+            f"the exact Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need "
+            f"{cfg.num_states * cfg.num_joint_actions * 8:,} bytes, over the memory budget of {int(memory_budget):,} "
+            "bytes; raise agent.memory_budget or use agent=dqn"
         )
     N, C, A, dev = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions, torch.device(device)
     space = ConfigurationSpace(cfg.grid, N, dev)
@@ -477,7 +601,9 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     q = torch.zeros(cfg.num_states, A, dtype=torch.float64, device=dev)
     step = max(1, _TABLE_CHUNK // (A * len(tasks)))
     for start in range(0, C**N, step):
-        cells = (torch.arange(start, min(start + step, C**N), device=dev)[:, None] // place) % C  # [P, N] every placement
+        cells = (
+            torch.arange(start, min(start + step, C**N), device=dev)[:, None] // place
+        ) % C  # [P, N] every placement
         distinct = (cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
         cells = cells[distinct]
         both = (cells[:, None].expand(-1, len(tasks), -1), tasks[None].expand(len(cells), -1, -1))  # [P, T, N] each
@@ -503,7 +629,9 @@ class TabularAgent:
         a = cfg.agent
         self.method = a.get("method", "q_learning")
         if self.method not in METHODS:
-            raise ValueError(f"agent.method={self.method!r} is invalid: allowed methods are {', '.join(map(repr, METHODS))}")
+            raise ValueError(
+                f"agent.method={self.method!r} is invalid: allowed methods are {', '.join(map(repr, METHODS))}"
+            )
         self.env_cfg, self.device = env_cfg, torch.device(device)
         if self.method == "value_iteration":
             if not 0 < float(a.gamma) <= 1:
@@ -537,7 +665,9 @@ class TabularAgent:
             self.q = exact_q_table(self.env_cfg, self.gamma, self.device, self.memory_budget)
             return {"train/solve_seconds": time.perf_counter() - started}
         steps = self.learner.run_episode()
-        per_run = episode_metrics(steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], self._u_star.to(steps["r_pu"].device))
+        per_run = episode_metrics(
+            steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], self._u_star.to(steps["r_pu"].device)
+        )
         self.last_episode = per_run  # [R] each, for figures
         return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
 
@@ -546,7 +676,9 @@ class TabularAgent:
         return [TabularPolicy(q, self.env_cfg) for q in tables]
 
     def state_dict(self) -> dict:
-        return self.learner.state_dict() if self.learner is not None else {"q": None if self.q is None else self.q.cpu()}
+        return (
+            self.learner.state_dict() if self.learner is not None else {"q": None if self.q is None else self.q.cpu()}
+        )
 
     def load_state_dict(self, state: dict):
         if self.learner is not None:

@@ -9,6 +9,7 @@ before checking their settings until they checked them first.  ``--pythonpath``
 puts ``DIR`` first on the path of every process, to time another version of
 uavrl laid out there as a package (BENCHMARKS.md says how).
 """
+
 from __future__ import annotations
 
 import argparse

@@ -30,6 +30,7 @@ Usage::
     python benchmarks/env_throughput.py --threads 2
     python benchmarks/env_throughput.py --malloc-hugetlb # re-runs itself with GLIBC_TUNABLES=glibc.malloc.hugetlb=1
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,10 +49,19 @@ def parse_args(argv=None):
     p.add_argument("--batch-sizes", type=int, nargs="+", default=[1, 64, 4096])
     p.add_argument("--uavs", type=int, nargs="+", default=[2, 6])
     p.add_argument("--grid", type=int, nargs=2, default=[6, 6])
-    p.add_argument("--world-steps", type=int, default=400_000, help="world-steps per timed run (T = this / B, clipped to [100, 2000])")
+    p.add_argument(
+        "--world-steps",
+        type=int,
+        default=400_000,
+        help="world-steps per timed run (T = this / B, clipped to [100, 2000])",
+    )
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--malloc-hugetlb", action="store_true", help=f"re-run with GLIBC_TUNABLES={HUGETLB} (transparent huge pages for malloc)")
+    p.add_argument(
+        "--malloc-hugetlb",
+        action="store_true",
+        help=f"re-run with GLIBC_TUNABLES={HUGETLB} (transparent huge pages for malloc)",
+    )
     return p.parse_args(argv)
 
 
@@ -82,12 +92,24 @@ def main(argv=None):
 
         def _reset(self, td):
             B = self.batch_size[0]
-            return TensorDict({"observation": torch.zeros(B, 1), "done": torch.zeros(B, 1, dtype=torch.bool), "terminated": torch.zeros(B, 1, dtype=torch.bool)}, self.batch_size)
+            return TensorDict(
+                {
+                    "observation": torch.zeros(B, 1),
+                    "done": torch.zeros(B, 1, dtype=torch.bool),
+                    "terminated": torch.zeros(B, 1, dtype=torch.bool),
+                },
+                self.batch_size,
+            )
 
         def _step(self, td):
             B = self.batch_size[0]
             return TensorDict(
-                {"observation": torch.zeros(B, 1), "reward": torch.zeros(B, 1), "done": torch.zeros(B, 1, dtype=torch.bool), "terminated": torch.zeros(B, 1, dtype=torch.bool)},
+                {
+                    "observation": torch.zeros(B, 1),
+                    "reward": torch.zeros(B, 1),
+                    "done": torch.zeros(B, 1, dtype=torch.bool),
+                    "terminated": torch.zeros(B, 1, dtype=torch.bool),
+                },
                 self.batch_size,
             )
 
@@ -99,7 +121,11 @@ def main(argv=None):
 
         def _step(self, td):
             if not hasattr(self, "_zeros"):
-                self._zeros = self.full_observation_spec.zero().update(self.full_reward_spec.zero()).update(self.full_done_spec.zero())
+                self._zeros = (
+                    self.full_observation_spec.zero()
+                    .update(self.full_reward_spec.zero())
+                    .update(self.full_done_spec.zero())
+                )
             return self._zeros.clone()
 
     gen = torch.Generator().manual_seed(0)
@@ -123,9 +149,16 @@ def main(argv=None):
                 times.append(time.perf_counter() - start)
         return statistics.median(times), min(times)
 
-    print(f"# uavrl env throughput: {time.strftime('%Y-%m-%d')}, torch {torch.__version__}, threads {torch.get_num_threads()}, "
-          f"{os.cpu_count()} CPUs ({platform.processor() or platform.machine()}), GLIBC_TUNABLES={os.environ.get('GLIBC_TUNABLES', '')!r}")
-    print(f"# grid {args.grid[0]}x{args.grid[1]}, max_steps > T (no resets), {args.repeats} runs after {args.warmup} warm-up runs; load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"# uavrl env throughput: {time.strftime('%Y-%m-%d')}, torch {torch.__version__}, threads "
+        f"{torch.get_num_threads()}, "
+        f"{os.cpu_count()} CPUs ({platform.processor() or platform.machine()}), "
+        f"GLIBC_TUNABLES={os.environ.get('GLIBC_TUNABLES', '')!r}"
+    )
+    print(
+        f"# grid {args.grid[0]}x{args.grid[1]}, max_steps > T (no resets), {args.repeats} runs after {args.warmup} "
+        f"warm-up runs; load average {os.getloadavg()[0]:.2f}"
+    )
     print(f"{'B':>5} {'N':>2} {'T':>5}  {'method':<17} {'world-steps/s':>14} {'best':>14} {'us/step':>9}")
     for N in args.uavs:
         for B in args.batch_sizes:
@@ -136,42 +169,49 @@ def main(argv=None):
             start = env.reset()
             actions = torch.stack([masked_random(start.clone())[("agents", "action")] for _ in range(T)])
 
-            def rollout_unstacked():  # what env.rollout does per step, without its final torch.stack
+            def rollout_unstacked(env=env, T=T):  # what env.rollout does per step, without its final torch.stack
                 td, kept = env.reset(), []
                 for _ in range(T):
                     td.update(masked_random(td))
                     out, td = env.step_and_maybe_reset(td)
                     kept.append(out)
 
-            def step_loop():
+            def step_loop(env=env, T=T):
                 td = env.reset()
                 for _ in range(T):
                     td = step_mdp(env.step(masked_random(td)))
 
-            def own_step():
+            def own_step(env=env, T=T, start=start, actions=actions):
                 td = start.clone()
                 kept = []
                 for t in range(T):
                     td.set(("agents", "action"), actions[t])
                     kept.append(env._step(td))
 
-            def policy_only():
+            def policy_only(T=T, start=start):
                 td = start.clone()
                 for _ in range(T):
                     masked_random(td)
 
             rows = [
-                ("rollout", lambda: env.rollout(T, masked_random, break_when_any_done=False)),
+                ("rollout", lambda env=env, T=T: env.rollout(T, masked_random, break_when_any_done=False)),
                 ("rollout, no stack", rollout_unstacked),
                 ("step loop", step_loop),
                 ("env._step", own_step),
                 ("policy", policy_only),
-                ("stub rollout", lambda: stub.rollout(T, masked_random, break_when_any_done=False)),
-                ("trivial rollout", lambda: trivial.rollout(T, random_action, break_when_any_done=False)),
+                ("stub rollout", lambda stub=stub, T=T: stub.rollout(T, masked_random, break_when_any_done=False)),
+                (
+                    "trivial rollout",
+                    lambda trivial=trivial, T=T: trivial.rollout(T, random_action, break_when_any_done=False),
+                ),
             ]
             for name, fn in rows:
                 median, best = timed(fn, args.repeats, args.warmup)
-                print(f"{B:>5} {N:>2} {T:>5}  {name:<17} {B * T / median:>14,.0f} {B * T / best:>14,.0f} {median / T * 1e6:>9.1f}", flush=True)
+                print(
+                    f"{B:>5} {N:>2} {T:>5}  {name:<17} {B * T / median:>14,.0f} {B * T / best:>14,.0f} "
+                    f"{median / T * 1e6:>9.1f}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ Usage::
 
     python benchmarks/exact_solver.py                 # N = 2 on 10x10, N = 3 on 6x6; gamma 0.3 and 0.9
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,12 @@ def dense_q(cfg, gamma, cells, tasks):
     every = torch.arange(C**N * 2**N)
     all_cells, all_tasks = ((every // 2**N)[:, None] // place) % C, ((every % 2**N)[:, None] // bits) % 2
     distinct = (all_cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
-    space = ConfigurationSpace(cfg.grid, N, memory_budget=2**40)  # only its rate helper: the utility of each ordered configuration
-    utility = space.utility(cfg, *fixed_layout_tables(cfg))[0][space.index(all_cells.where(distinct[:, None], 0).clamp(min=0), all_tasks)]
+    space = ConfigurationSpace(
+        cfg.grid, N, memory_budget=2**40
+    )  # only its rate helper: the utility of each ordered configuration
+    utility = space.utility(cfg, *fixed_layout_tables(cfg))[0][
+        space.index(all_cells.where(distinct[:, None], 0).clamp(min=0), all_tasks)
+    ]
     utility = utility.where(distinct, -1e30)
     neighbours = grid_neighbours(cfg.grid)
     successors = torch.empty(len(every), 6**N, dtype=torch.long)
@@ -67,7 +72,10 @@ def main():
     parser.add_argument("--gammas", nargs="+", type=float, default=[0.3, 0.9])
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print("| case | configurations (solver / dense) | gamma | solver Q* s | target s | dense baseline s | max abs difference |")
+    print(
+        "| case | configurations (solver / dense) | gamma | solver Q* s | target s | dense baseline s | max abs "
+        "difference |"
+    )
     print("|---|---|---|---|---|---|---|")
     for name in args.cases:
         grid, N, target = CASES[name]
@@ -83,7 +91,11 @@ def main():
             assert torch.equal(finite, dense > -torch.inf)
             diff = (q[finite] - dense[finite]).abs().max().item()
             ordered = cfg.num_cells**N * 2**N
-            print(f"| {name} | {space.num_configurations:,} / {ordered:,} | {gamma} | {solver_s:.2f} | < {target:g} | {dense_s:.2f} | {diff:.1e} |", flush=True)
+            print(
+                f"| {name} | {space.num_configurations:,} / {ordered:,} | {gamma} | {solver_s:.2f} | < {target:g} | "
+                f"{dense_s:.2f} | {diff:.1e} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ step over the same lookup tables, like the authors' code): the baseline the
 compiled loop is compared with.  The batched torch loop is the device-agnostic
 path (CUDA on a GPU), shown for reference.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -76,7 +77,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     cfg = make_config("paper", grid=(args.grid, args.grid), num_uavs=2, max_steps=args.steps)
-    print(f"team Q-learning, N=2, {args.grid}x{args.grid}, {args.steps} steps/episode, torch threads {args.threads}, numba threads {numba.get_num_threads()} ({numba.config.THREADING_LAYER} layer)")
+    print(
+        f"team Q-learning, N=2, {args.grid}x{args.grid}, {args.steps} steps/episode, torch threads {args.threads}, "
+        f"numba threads {numba.get_num_threads()} ({numba.config.THREADING_LAYER} layer)"
+    )
 
     TeamQLearner(cfg, runs=1, seed=0).run_episode()  # compile
     fast_one = training_rate(cfg, 1, args.episodes)
@@ -110,7 +114,10 @@ def main() -> None:
         started = time.perf_counter()
         table2(cfg2)
         wall = time.perf_counter() - started
-        print(f"Table II protocol (7 grids x 10 runs x 200 episodes, with evaluation): {wall:.1f} s wall; target <= 30 s: {'met' if wall <= 30 else 'NOT met'}")
+        print(
+            f"Table II protocol (7 grids x 10 runs x 200 episodes, with evaluation): {wall:.1f} s wall; target <= 30 "
+            f"s: {'met' if wall <= 30 else 'NOT met'}"
+        )
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ Usage::
     python benchmarks/yardstick.py --table n6 --seeds 0 1 2      # N = 6 on 10x10
     python benchmarks/yardstick.py --rows n6-dqn n6-oracle --seeds 0
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,11 +50,21 @@ def run_row(name: str, seed: int, starts: int, out: Path) -> dict:
     overrides = [*ROWS[name], f"seed={seed}", f"eval.num_starts={starts}"]
     run_dir = out / f"{name}-seed{seed}"
     started = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "uavrl.train", *overrides, f"run_dir={run_dir}", "progress=false"], capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "uavrl.train", *overrides, f"run_dir={run_dir}", "progress=false"],
+        capture_output=True,
+        text=True,
+    )
     if done.returncode != 0:
         raise SystemExit(f"{name} seed {seed} failed:\n{done.stderr}")
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    return {"row": name, "seed": seed, "command": "python -m uavrl.train " + " ".join(overrides), "wall_seconds": time.perf_counter() - started, **metrics}
+    return {
+        "row": name,
+        "seed": seed,
+        "command": "python -m uavrl.train " + " ".join(overrides),
+        "wall_seconds": time.perf_counter() - started,
+        **metrics,
+    }
 
 
 def cell(metrics: dict, key: str, fmt: str) -> str:
@@ -64,8 +75,10 @@ def row(m: dict) -> str:
     fewest = "exact" if m.get("eval/min_steps_exact") == 1.0 else "bound"
     return (
         f"| {m['row']} | {m['seed']} | {cell(m, 'eval/optimality', '.4f')} | {cell(m, 'eval/return_ratio', '.4f')} "
-        f"| {cell(m, 'eval/reach_999', '.2f')} | {cell(m, 'eval/steps_to_999', '.2f')} | {cell(m, 'eval/min_steps_to_999', '.2f')} ({fewest}) "
-        f"| {cell(m, 'eval/step_ratio_999', '.3f')} | {cell(m, 'eval/reach_optimum', '.2f')} | {cell(m, 'eval/step_ratio_optimum', '.3f')} "
+        f"| {cell(m, 'eval/reach_999', '.2f')} | {cell(m, 'eval/steps_to_999', '.2f')} | "
+        f"{cell(m, 'eval/min_steps_to_999', '.2f')} ({fewest}) "
+        f"| {cell(m, 'eval/step_ratio_999', '.3f')} | {cell(m, 'eval/reach_optimum', '.2f')} | "
+        f"{cell(m, 'eval/step_ratio_optimum', '.3f')} "
         f"| {m['train_seconds']:.0f} | {m.get('wall_seconds', m['total_seconds']):.0f} |"
     )
 
@@ -78,19 +91,35 @@ def main():
     parser.add_argument("--starts", type=int, default=200, help="held-out evaluation starts (and layouts)")
     parser.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary directory)")
     parser.add_argument("--json", type=Path, default=None, help="also write every result here")
-    parser.add_argument("--collect", type=Path, default=None, help="only print the rows of the runs already in this --out directory")
+    parser.add_argument("--collect", type=Path, default=None, help="only print the rows of the runs in this directory")
     args = parser.parse_args()
-    print("| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | reach U* | step ratio U* | train s | wall s |")
+    print(
+        "| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 "
+        "| reach U* | step ratio U* | train s | wall s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    if args.collect:  # the command's own wall time is not in metrics.json: the wall column is the run's total_seconds
+    if args.collect:  # metrics.json has no wall time of the command: the column shows the run's total_seconds
         for name in ROWS:
             for path in sorted(args.collect.glob(f"{name}-seed*/metrics.json")):
-                print(row({"row": name, "seed": int(path.parent.name.rsplit("seed", 1)[1]), **json.loads(path.read_text())}))
+                print(
+                    row(
+                        {
+                            "row": name,
+                            "seed": int(path.parent.name.rsplit("seed", 1)[1]),
+                            **json.loads(path.read_text()),
+                        }
+                    )
+                )
         return
     rows = (TABLES[args.table] if args.table else []) + args.rows
     if not rows:
         parser.error("give --table or --rows")
     out = args.out or Path(tempfile.mkdtemp(prefix="yardstick_"))
+    print(
+        "| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | "
+        "reach U* | step ratio U* | train s | wall s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     results = []
     for name in rows:
         for seed in args.seeds[:1] if any(k in name for k in DETERMINISTIC) else args.seeds:

@@ -5,6 +5,7 @@ environment and the joint-action helpers (torch, TorchRL) load on first use,
 so the commands check their settings before those imports.  The optimum and
 the solvers live in their modules: :mod:`.optimum`, :mod:`.exact`, :mod:`.bounds`.
 """
+
 from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, ModelConfig, make_config
 
 _LAZY = {"UAVSpectrumEnv": "env", "decode_joint_actions": "grid", "joint_action_valid": "grid", "joint_targets": "grid"}

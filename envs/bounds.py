@@ -19,13 +19,15 @@ Two bounds, both provably never above the true fewest steps:
 Example:
     >>> from uavrl.envs.config import make_config
     >>> from uavrl.envs.exact import fixed_layout_tables
+    >>> from uavrl.envs.optimum import optimum
     >>> cfg = make_config("paper", grid=(6, 6), num_uavs=3)
     >>> contributions, direct = fixed_layout_tables(cfg)
     >>> u_star, cells, tasks = optimum(contributions, direct, cfg)
     >>> start_cells, start_tasks = torch.tensor([[0, 1, 2]]), torch.tensor([[0, 0, 0]])
     >>> relaxed_min_steps(start_cells, start_tasks, contributions, direct, cfg, u_star[:, None], max_steps=20).tolist()
-    [[4]]
+    [[5]]
 """
+
 from __future__ import annotations
 
 import itertools
@@ -38,7 +40,6 @@ from scipy.optimize import linear_sum_assignment
 from .channel import rates, rates_from_sums
 from .config import RELAYING, SENSING, ModelConfig
 from .grid import manhattan
-from .optimum import optimum
 
 OPTIMUM_RTOL = 1e-9  # a configuration "is optimal" when U >= (1 - OPTIMUM_RTOL) U*
 MAX_CANDIDATES = 2_000_000  # configurations examined per world by optimal_configurations
@@ -63,9 +64,13 @@ def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, 
     """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps."""
     N = cfg.num_uavs
     best_a, best_b = reachable_best(cells, tasks, contributions, cfg.grid, max_steps)
-    relays = ((torch.arange(2**N, device=cells.device)[:, None] >> torch.arange(N, device=cells.device)) & 1).double()  # [M, N]
+    relays = (
+        (torch.arange(2**N, device=cells.device)[:, None] >> torch.arange(N, device=cells.device)) & 1
+    ).double()  # [M, N]
     # which UAVs relay: every split; a split is out of reach while one of its UAVs has no cell of its task in reach
-    blocked = (best_a == -math.inf).double() @ relays.T + (best_b == -math.inf).double() @ (1 - relays).T  # [W, K + 1, M]
+    blocked = (best_a == -math.inf).double() @ relays.T + (best_b == -math.inf).double() @ (
+        1 - relays
+    ).T  # [W, K + 1, M]
     sum_a = best_a.clamp(min=0) @ relays.T + direct[:, None, None, 0]
     sum_b = best_b.clamp(min=0) @ (1 - relays).T + direct[:, None, None, 1]
     r = rates_from_sums(torch.stack([sum_a, sum_b], -1), relays.sum(-1).expand_as(sum_a), N, cfg)
@@ -77,7 +82,9 @@ def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, lev
 
     ``max_steps + 1`` where even the relaxation does not reach a level within ``max_steps``.
     """
-    reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(1)  # [W, K + 1, L]
+    reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(
+        1
+    )  # [W, K + 1, L]
     return torch.where(reach.any(1), reach.double().argmax(1), max_steps + 1).long()
 
 
@@ -108,8 +115,16 @@ def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: floa
     dev = contributions.device
     candidates = []
     for m in range(N + 1):  # m relays on relay cells, N - m sensors on the other sense cells
-        relays = torch.tensor(list(itertools.combinations(relay_cells, m)), dtype=torch.long, device=dev).view(-1, m) if m else torch.zeros(1, 0, dtype=torch.long, device=dev)
-        sensors = torch.tensor(list(itertools.combinations(sense_cells, N - m)), dtype=torch.long, device=dev).view(-1, N - m) if m < N else torch.zeros(1, 0, dtype=torch.long, device=dev)
+        relays = (
+            torch.tensor(list(itertools.combinations(relay_cells, m)), dtype=torch.long, device=dev).view(-1, m)
+            if m
+            else torch.zeros(1, 0, dtype=torch.long, device=dev)
+        )
+        sensors = (
+            torch.tensor(list(itertools.combinations(sense_cells, N - m)), dtype=torch.long, device=dev).view(-1, N - m)
+            if m < N
+            else torch.zeros(1, 0, dtype=torch.long, device=dev)
+        )
         cells = torch.cat([relays.repeat_interleave(len(sensors), 0), sensors.repeat(len(relays), 1)], -1)
         distinct = (cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
         tasks = torch.tensor([RELAYING] * m + [SENSING] * (N - m), device=dev).expand(len(cells), -1)
@@ -147,6 +162,9 @@ def best_assignment(costs: torch.Tensor) -> tuple[int, int, np.ndarray]:
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
     """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists)."""
     return torch.tensor(
-        [best_assignment(assignment_costs(c, t, tc, tt, grid))[0] for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks)],
+        [
+            best_assignment(assignment_costs(c, t, tc, tt, grid))[0]
+            for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks, strict=True)
+        ],
         dtype=torch.long,
     )

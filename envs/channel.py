@@ -16,6 +16,7 @@ Example:
     >>> contrib.shape  # per cell: (relay contribution to PU, sensing contribution to SE)
     torch.Size([36, 2])
 """
+
 from __future__ import annotations
 
 import torch
@@ -42,10 +43,14 @@ def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor
     """``[C, 3]`` centre of every cell at UAV altitude, in cell index order ``c = y * L1 + x``."""
     L1, L2 = cfg.grid
     c = torch.arange(L1 * L2, device=device)
-    return torch.stack([(c % L1).to(dtype), (c // L1).to(dtype), torch.full((L1 * L2,), cfg.height, dtype=dtype, device=device)], -1)
+    return torch.stack(
+        [(c % L1).to(dtype), (c // L1).to(dtype), torch.full((L1 * L2,), cfg.height, dtype=dtype, device=device)], -1
+    )
 
 
-def link_gains(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig, fading: torch.Tensor | None = None) -> torch.Tensor:
+def link_gains(
+    uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig, fading: torch.Tensor | None = None
+) -> torch.Tensor:
     """``|h|^2 = g0 d^-alpha X`` from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``: ``[..., N, 4]``.
 
     ``d`` is the 3-D distance in metres (cells times ``cell_size``); ``fading``
@@ -83,7 +88,9 @@ def direct_terms(nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
     return torch.diagonal(gains, dim1=-2, dim2=-1) * p_src / cfg.noise
 
 
-def rates(contributions: torch.Tensor, tasks: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig) -> tuple[torch.Tensor, torch.Tensor]:
+def rates(
+    contributions: torch.Tensor, tasks: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(R_PU, R_SE)`` in bit/s/Hz of configurations, each of shape ``[...]``.
 
     ``contributions`` ``[..., N, 2]`` come from :func:`relay_contributions` at
@@ -99,7 +106,8 @@ def rates(contributions: torch.Tensor, tasks: torch.Tensor, direct: torch.Tensor
 
 
 def rates_from_sums(sums: torch.Tensor, num_relaying: torch.Tensor, num_uavs: int, cfg: ModelConfig) -> torch.Tensor:
-    """``[..., 2]`` (R_PU, R_SE) from the sums inside the two logs ``[..., 2]`` and the number of relaying UAVs ``[...]``.
+    """``[..., 2]`` (R_PU, R_SE) from the sums inside the two logs ``[..., 2]`` and the number of relaying UAVs
+    ``[...]``.
 
     The sums hold the direct terms plus the contributions of the relaying (PU) and
     sensing (SE) UAVs; this applies the 1/2 factor (``af``), the lease rule and the

@@ -7,9 +7,10 @@ numbers from here.
 
 Example:
     >>> cfg = make_config("paper", grid=(6, 6), num_uavs=2)
-    >>> cfg.num_cells, cfg.altitude
+    >>> cfg.num_cells, cfg.height  # h = L1 cells unless env.altitude is set
     (36, 6.0)
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -108,7 +109,9 @@ class ModelConfig:
                 raise InvalidOption(name, value, "it must be a finite number")
         if self.direct_links and self.rate_model == "reference_code":
             raise InvalidOption("direct_links", True, "the authors' rate_model='reference_code' has no direct link")
-        if self.altitude is not None and not (_is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0):
+        if self.altitude is not None and not (
+            _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
+        ):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
 
     @property

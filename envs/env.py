@@ -5,6 +5,7 @@ of tensor operations whatever ``B`` is, on CPU or CUDA.  A UAV's cell and task
 are one code ``2 c + task``, so dynamics, rates and observations are lookups in
 small per-code tables built once per layout (see BENCHMARKS.md for timings).
 """
+
 from __future__ import annotations
 
 import math
@@ -16,7 +17,16 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from . import streams
-from .channel import best_so_far_reward, delta_reward, direct_terms, fixed_layout, link_gains, rates, rates_from_sums, relay_contributions
+from .channel import (
+    best_so_far_reward,
+    delta_reward,
+    direct_terms,
+    fixed_layout,
+    link_gains,
+    rates,
+    rates_from_sums,
+    relay_contributions,
+)
 from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig, make_config
 from .grid import cells_of, grid_neighbours, joint_action_valid
 from .optimum import optimum as exact_optimum
@@ -47,13 +57,19 @@ def check_seed(seed) -> int:
 
 def _check_batch_size(batch_size) -> int:
     size = batch_size if isinstance(batch_size, int) else (list(batch_size) or [None])[0]
-    if isinstance(batch_size, (list, tuple, torch.Size)) and len(batch_size) != 1 or not isinstance(size, int) or size < 1:
+    if (
+        isinstance(batch_size, (list, tuple, torch.Size))
+        and len(batch_size) != 1
+        or not isinstance(size, int)
+        or size < 1
+    ):
         raise ValueError(f"batch_size={batch_size!r} is invalid: give the number of worlds B >= 1 (an int or [B])")
     return size
 
 
 class _WorldsState:
-    """The mutable per-world state, kept outside the ``nn.Module`` (whose ``__setattr__`` costs ~6 us a step per tensor).
+    """The mutable per-world state, kept outside the ``nn.Module`` (whose ``__setattr__`` costs ~6 us a step per
+    tensor).
 
     ``code`` ``[B, N]`` is ``2 * cell + task`` of every UAV; ``r`` ``[B, 2]`` the current
     (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (``best_so_far``);
@@ -110,7 +126,19 @@ class UAVSpectrumEnv(EnvBase):
 
     batch_locked = True
 
-    def __init__(self, batch_size=1, grid=(6, 6), num_uavs=2, preset="paper", seed=0, device="cpu", max_steps=100, *, config: ModelConfig | None = None, **overrides):
+    def __init__(
+        self,
+        batch_size=1,
+        grid=(6, 6),
+        num_uavs=2,
+        preset="paper",
+        seed=0,
+        device="cpu",
+        max_steps=100,
+        *,
+        config: ModelConfig | None = None,
+        **overrides,
+    ):
         if config is not None and overrides:
             raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
@@ -136,7 +164,9 @@ class UAVSpectrumEnv(EnvBase):
                 reason = f"with layout={cfg.layout!r} a node sits on a UAV cell at UAV altitude (zero distance)"
                 raise InvalidOption("grid", cfg.grid, f"{reason}; use a smaller grid or layout='line'")
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
-        self._cell_mask = torch.cat([self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1)  # [C, 6]
+        self._cell_mask = torch.cat(
+            [self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1
+        )  # [C, 6]
         # A UAV's cell and task are one code 2 c + task, so a step is a few lookups in per-code tables.
         # _code_next[6 code + a]: the code after action a alone (a move off the grid stays)
         code = torch.arange(2 * C, device=dev)
@@ -147,16 +177,24 @@ class UAVSpectrumEnv(EnvBase):
         self._code_xy = self._cell_xy[code_cell]  # [2C, 2]
         self._code_mask = self._cell_mask[code_cell]  # [2C, 6]
         self._code_cell, self._code_task = code_cell, code_task
-        self._code_xyt = torch.cat([self._code_xy / self._grid_scale, code_task[:, None]], -1).float()  # [2C, 3] as observed
+        self._code_xyt = torch.cat(
+            [self._code_xy / self._grid_scale, code_task[:, None]], -1
+        ).float()  # [2C, 3] as observed
         self._cell_offset = torch.arange(B, device=dev).unsqueeze(-1) * C  # world w's cells as w C + c (clash counts)
         # per-code tables of the layout: one shared row for a fixed layout, one per world for random ones
         Bt = 1 if layout is not None else B
         self._code_offset = None if Bt == 1 else torch.arange(B, device=dev).unsqueeze(-1) * (2 * C)
-        self._nodes = (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(Bt, 4, 3).clone()
+        self._nodes = (
+            (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(Bt, 4, 3).clone()
+        )
         self._cell_gains = torch.zeros(Bt, C, 4, dtype=f64, device=dev) if cfg.fading != "none" else None
         self._cell_contrib = torch.zeros(Bt, C, 2, dtype=f64, device=dev)
-        self._code_obs = torch.zeros(Bt, 2 * C, 13, dtype=torch.float32, device=dev)  # own (x, y, task) and contributions
-        self._code_rate = torch.zeros(Bt, 2 * C, 3, dtype=f64, device=dev)  # what a UAV adds to (sum PU, sum SE, relaying count)
+        self._code_obs = torch.zeros(
+            Bt, 2 * C, 13, dtype=torch.float32, device=dev
+        )  # own (x, y, task) and contributions
+        self._code_rate = torch.zeros(
+            Bt, 2 * C, 3, dtype=f64, device=dev
+        )  # what a UAV adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, 12, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
@@ -181,7 +219,8 @@ class UAVSpectrumEnv(EnvBase):
     # ------------------------------------------------------------------ specs
     @property
     def observation_size(self) -> int:
-        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task), the 4 nodes."""
+        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task),
+        the 4 nodes."""
         return 3 + 10 + 3 * (self.num_uavs - 1) + 12
 
     @property
@@ -189,7 +228,7 @@ class UAVSpectrumEnv(EnvBase):
         return 5 * self.num_uavs + 12
 
     def _make_specs(self):
-        N, L1, L2 = self.num_uavs, *self.cfg.grid
+        N = self.num_uavs
         agents = Composite(
             observation=Unbounded((N, self.observation_size), dtype=torch.float32, device=self.device),
             action_mask=Binary(n=NUM_ACTIONS, shape=(N, NUM_ACTIONS), dtype=torch.bool, device=self.device),
@@ -212,12 +251,21 @@ class UAVSpectrumEnv(EnvBase):
             obs["state_index"] = Unbounded((), dtype=torch.long, device=self.device)
         self.full_observation_spec_unbatched = obs
         self.full_action_spec_unbatched = Composite(
-            agents=Composite(action=Categorical(NUM_ACTIONS, (N,), dtype=torch.long, device=self.device), shape=(N,), device=self.device),
+            agents=Composite(
+                action=Categorical(NUM_ACTIONS, (N,), dtype=torch.long, device=self.device),
+                shape=(N,),
+                device=self.device,
+            ),
             device=self.device,
         )
-        self.full_reward_spec_unbatched = Composite(reward=Unbounded((1,), dtype=torch.float32, device=self.device), device=self.device)
+        self.full_reward_spec_unbatched = Composite(
+            reward=Unbounded((1,), dtype=torch.float32, device=self.device), device=self.device
+        )
         self.full_done_spec_unbatched = Composite(
-            {k: Categorical(2, (1,), dtype=torch.bool, device=self.device) for k in ("done", "terminated", "truncated")},
+            {
+                k: Categorical(2, (1,), dtype=torch.bool, device=self.device)
+                for k in ("done", "terminated", "truncated")
+            },
             device=self.device,
         )
 
@@ -238,14 +286,29 @@ class UAVSpectrumEnv(EnvBase):
         # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
         # at c and at the cells its four moves reach, -1 where a move leaves the grid
         scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
-        around = torch.cat([torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1)  # [C, 5]
+        around = torch.cat(
+            [torch.arange(C, device=self.device)[:, None], self._neighbours.where(self._neighbours >= 0, C)], -1
+        )  # [C, 5]
         cc, relay = self._code_cell, (self._code_task == RELAYING)[None, :]
         local = scaled.index_select(1, around[cc].flatten()).view(k, 2 * C, 10).float()
         code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)  # [k, 2C, 13]
         # per code: what the UAV adds to the sum inside the PU log, the SE log, and to the relaying count
         at_code, zero = contrib.index_select(1, cc), contrib.new_zeros(())
-        code_rate = torch.stack([torch.where(relay, at_code[..., 0], zero), torch.where(relay, zero, at_code[..., 1]), relay.to(contrib.dtype).expand(k, -1)], -1)
-        tables = {"_cell_contrib": contrib, "_code_obs": code_obs, "_code_rate": code_rate, "_node_obs": (nodes / self._node_scale).flatten(1).float(), "_direct": direct_terms(nodes, cfg)}
+        code_rate = torch.stack(
+            [
+                torch.where(relay, at_code[..., 0], zero),
+                torch.where(relay, zero, at_code[..., 1]),
+                relay.to(contrib.dtype).expand(k, -1),
+            ],
+            -1,
+        )
+        tables = {
+            "_cell_contrib": contrib,
+            "_code_obs": code_obs,
+            "_code_rate": code_rate,
+            "_node_obs": (nodes / self._node_scale).flatten(1).float(),
+            "_direct": direct_terms(nodes, cfg),
+        }
         if self._cell_gains is not None:
             tables["_cell_gains"] = gains
         for name, rows in tables.items():
@@ -286,9 +349,13 @@ class UAVSpectrumEnv(EnvBase):
                 xy = lo + span * u.view(-1, 2, 2)
                 ok = torch.linalg.vector_norm(xy[:, 0] - xy[:, 1], dim=-1) >= min_sep
                 if z > 0:
-                    nearest = torch.stack([xy[..., 0].round().clamp(0, L1 - 1), xy[..., 1].round().clamp(0, L2 - 1)], -1)
+                    nearest = torch.stack(
+                        [xy[..., 0].round().clamp(0, L1 - 1), xy[..., 1].round().clamp(0, L2 - 1)], -1
+                    )
                     ok &= (torch.linalg.vector_norm(xy - nearest, dim=-1) >= 0.5).all(-1)
-                nodes[pending[ok], 2 * pair : 2 * pair + 2] = torch.cat([xy[ok], xy.new_full((int(ok.sum()), 2, 1), z)], -1)
+                nodes[pending[ok], 2 * pair : 2 * pair + 2] = torch.cat(
+                    [xy[ok], xy.new_full((int(ok.sum()), 2, 1), z)], -1
+                )
                 pending = pending[~ok]
                 rnd += 1
         self._nodes[worlds] = nodes
@@ -306,13 +373,15 @@ class UAVSpectrumEnv(EnvBase):
         return self._s.code & 1
 
     def _code_rows(self, table: torch.Tensor, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
-        """Rows ``[W, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[W, N]`` of all worlds (or of ``worlds``)."""
+        """Rows ``[W, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[W, N]`` of all worlds (or of
+        ``worlds``)."""
         if self._code_offset is not None:
             code = code + (self._code_offset if worlds is None else worlds.unsqueeze(-1) * (2 * self.cfg.num_cells))
         return table.view(-1, table.shape[-1]).index_select(0, code.view(-1)).view(*code.shape, table.shape[-1])
 
     def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed layout)."""
+        """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
+        layout)."""
         W, N = code.shape
         own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
         nodes = self._node_obs.unsqueeze(1).expand(W, N, 12)
@@ -328,7 +397,8 @@ class UAVSpectrumEnv(EnvBase):
         return observation, state
 
     def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
-        """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate terms."""
+        """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate
+        terms."""
         rows = self._code_rows(self._code_rate, code, worlds)  # [W, N, 3]: terms of sum PU, sum SE, relaying count
         terms = rows[:, 0]
         for i in range(1, code.shape[1]):  # N - 1 adds: a reduction over a tiny dim costs ~10x more
@@ -347,9 +417,15 @@ class UAVSpectrumEnv(EnvBase):
         code = torch.arange(K, device=self.device)
         pairs = torch.stack([code.repeat_interleave(K), code.repeat(K)], -1)  # [K^2, 2]
         observation, state = self._assemble(pairs)
-        self._pair_obs, self._pair_state, self._pair_rates = observation[:, 0].contiguous(), state, self._sum_rates(pairs)
+        self._pair_obs, self._pair_state, self._pair_rates = (
+            observation[:, 0].contiguous(),
+            state,
+            self._sum_rates(pairs),
+        )
 
-    def _observe(self, code: torch.Tensor, cells: torch.Tensor, moves: torch.Tensor, switches: torch.Tensor) -> TensorDict:
+    def _observe(
+        self, code: torch.Tensor, cells: torch.Tensor, moves: torch.Tensor, switches: torch.Tensor
+    ) -> TensorDict:
         B, N, dev = self.num_worlds, self.num_uavs, self.device
         if self._pair_obs is not None:
             pair = torch.add(code.flip(-1), code, alpha=2 * self.cfg.num_cells)  # [B, 2]: rows (a, b) and (b, a)
@@ -361,7 +437,10 @@ class UAVSpectrumEnv(EnvBase):
         r = self._s.r.float()
         out = {
             "agents": TensorDict._new_unsafe(
-                {"observation": observation, "action_mask": self._code_mask.index_select(0, flat).view(B, N, NUM_ACTIONS)},
+                {
+                    "observation": observation,
+                    "action_mask": self._code_mask.index_select(0, flat).view(B, N, NUM_ACTIONS),
+                },
                 batch_size=torch.Size((B, N)),
                 device=dev,
             ),
@@ -387,13 +466,16 @@ class UAVSpectrumEnv(EnvBase):
         return self._direct if worlds is None or len(self._direct) == 1 else self._direct[worlds]
 
     def _current_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
-        """``[W, 2]`` (R_PU, R_SE) of the configurations ``code`` of all worlds (or of ``worlds``), with fresh fading if enabled."""
+        """``[W, 2]`` (R_PU, R_SE) of the configurations ``code`` of all worlds (or of ``worlds``), with fresh fading
+        if enabled."""
         cfg = self.cfg
         if cfg.fading == "none":
             if self._pair_rates is not None:
                 return self._pair_rates.index_select(0, torch.add(code[:, 1], code[:, 0], alpha=2 * cfg.num_cells))
             return self._sum_rates(code, worlds)
-        keys, counters = (self._s.keys, self._s.counters) if worlds is None else (self._s.keys[worlds], self._s.counters[worlds])
+        keys, counters = (
+            (self._s.keys, self._s.counters) if worlds is None else (self._s.keys[worlds], self._s.counters[worlds])
+        )
         gains = self._per_cell(self._cell_gains, code >> 1, worlds)
         u = streams.uniform(keys, counters, _FADING, 4 * self.num_uavs).view_as(gains)
         contrib = relay_contributions(gains * -torch.log1p(-u), cfg)  # Exp(1) power gain per link
@@ -469,11 +551,15 @@ class UAVSpectrumEnv(EnvBase):
         if tuple(action.shape) != shape:
             raise ValueError(f"('agents', 'action') has shape {tuple(action.shape)}: expected {shape} (worlds, UAVs)")
         if action.dtype.is_floating_point or action.dtype.is_complex or action.dtype == torch.bool:
-            raise TypeError(f"('agents', 'action') has dtype {action.dtype}: expected an integer dtype with values 0..5")
+            raise TypeError(
+                f"('agents', 'action') has dtype {action.dtype}: expected an integer dtype with values 0..5"
+            )
         lo, hi = torch.aminmax(action)
         if lo < 0 or hi >= NUM_ACTIONS:
             bad = (lo if lo < 0 else hi).item()
-            raise ValueError(f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
+            raise ValueError(
+                f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)"
+            )
 
     def step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if tensordict.batch_size != self.batch_size:
@@ -499,11 +585,15 @@ class UAVSpectrumEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if not self._s.was_reset:
-            raise RuntimeError("UAVSpectrumEnv.step() before any reset: call env.reset() first (the worlds have no UAV positions yet)")
+            raise RuntimeError(
+                "UAVSpectrumEnv.step() before any reset: call env.reset() first (the worlds have no UAV positions yet)"
+            )
         action = tensordict.get(("agents", "action"))
         self._check_action(action)
         cfg, code = self.cfg, self._s.code
-        proposed = self._code_next.take(torch.add(action.long(), code, alpha=NUM_ACTIONS))  # [B, N] codes, moves unchecked
+        proposed = self._code_next.take(
+            torch.add(action.long(), code, alpha=NUM_ACTIONS)
+        )  # [B, N] codes, moves unchecked
         cells = code >> 1
         target = self._resolve_moves(cells, proposed >> 1)
         tasks = proposed & 1
@@ -541,9 +631,14 @@ class UAVSpectrumEnv(EnvBase):
         """
         self._require_layout()
         positions, tasks = positions.to(self.device), tasks.to(self.device)
-        if positions.shape[0] != self.num_worlds or positions.shape[-2:] != (self.num_uavs, 2) or tasks.shape != positions.shape[:-1]:
+        if (
+            positions.shape[0] != self.num_worlds
+            or positions.shape[-2:] != (self.num_uavs, 2)
+            or tasks.shape != positions.shape[:-1]
+        ):
             raise ValueError(
-                f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected [B={self.num_worlds}, ..., N={self.num_uavs}, 2] and [B, ..., N]"
+                f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected "
+                f"[B={self.num_worlds}, ..., N={self.num_uavs}, 2] and [B, ..., N]"
             )
         if any(t.dtype.is_floating_point or t.dtype.is_complex or t.dtype == torch.bool for t in (positions, tasks)):
             raise TypeError(f"positions ({positions.dtype}) and tasks ({tasks.dtype}) must hold integers")

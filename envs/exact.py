@@ -32,6 +32,7 @@ Example:
     >>> bool((v >= 0).all())  # staying put is always allowed, so no start is worth less than 0
     True
 """
+
 from __future__ import annotations
 
 import math
@@ -66,10 +67,13 @@ def fits(cfg: ModelConfig, memory_budget: int = MEMORY_BUDGET) -> bool:
 
 
 def fixed_layout_tables(cfg: ModelConfig, device=None) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(contributions [1, C, 2], direct [1, 2])`` of a fixed layout (not ``layout=random``), from the channel model."""
+    """``(contributions [1, C, 2], direct [1, 2])`` of a fixed layout (not ``layout=random``), from the channel
+    model."""
     nodes = fixed_layout(cfg, torch.float64, device)
     if nodes is None:
-        raise ValueError("layout='random' has no fixed layout: take each world's tables from env.cell_contributions and env.direct")
+        raise ValueError(
+            "layout='random' has no fixed layout: take each world's tables from env.cell_contributions and env.direct"
+        )
     contributions = relay_contributions(link_gains(cell_xyz(cfg, torch.float64, device), nodes, cfg), cfg)
     return contributions.unsqueeze(0), direct_terms(nodes, cfg).unsqueeze(0)
 
@@ -99,9 +103,13 @@ class ConfigurationSpace:
         dev = self.device
         self.neighbours = grid_neighbours(grid, dev)
         # binomial[n, r] = C(n, r): the rank of ascending cells c_0 < ... < c_{N-1} is sum_i C(c_i, i + 1)
-        self._binomial = torch.tensor([[math.comb(n, r) for r in range(N + 1)] for n in range(C + 1)], dtype=torch.long, device=dev)
+        self._binomial = torch.tensor(
+            [[math.comb(n, r) for r in range(N + 1)] for n in range(C + 1)], dtype=torch.long, device=dev
+        )
         self._bits = 2 ** torch.arange(N, device=dev)
-        cell_sets = torch.combinations(torch.arange(C, device=dev), r=N) if N > 1 else torch.arange(C, device=dev)[:, None]
+        cell_sets = (
+            torch.combinations(torch.arange(C, device=dev), r=N) if N > 1 else torch.arange(C, device=dev)[:, None]
+        )
         by_rank = torch.empty_like(cell_sets)
         by_rank[self._rank(cell_sets)] = cell_sets
         task_vectors = (torch.arange(2**N, device=dev)[:, None] // self._bits) % 2  # [2^N, N]
@@ -124,14 +132,18 @@ class ConfigurationSpace:
         return self._rank(ordered) * 2**self.num_uavs + (tasks.gather(-1, order) * self._bits).sum(-1)
 
     def _successors(self, cells: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
-        """``[..., 6^N]`` configuration after every joint action from ordered ``cells``/``tasks`` ``[..., N]``, -1 invalid."""
+        """``[..., 6^N]`` configuration after every joint action from ordered ``cells``/``tasks`` ``[..., N]``, -1
+        invalid."""
         target = joint_targets(cells, self.neighbours, self.num_uavs)
         valid = targets_valid(target)
         nxt = self.index(target.clamp(min=0), joint_next_tasks(tasks, self.num_uavs))
         return torch.where(valid, nxt, -1)
 
-    def utility(self, cfg: ModelConfig, contributions: torch.Tensor, direct: torch.Tensor, beta=(1.0, 1.0)) -> torch.Tensor:
-        """``[B, K]`` potential ``beta1 R_PU + beta2 R_SE`` (default: the utility U) of every configuration in ``B`` layouts.
+    def utility(
+        self, cfg: ModelConfig, contributions: torch.Tensor, direct: torch.Tensor, beta=(1.0, 1.0)
+    ) -> torch.Tensor:
+        """``[B, K]`` potential ``beta1 R_PU + beta2 R_SE`` (default: the utility U) of every configuration in ``B``
+        layouts.
 
         ``contributions`` ``[B, C, 2]`` and ``direct`` ``[B, 2]`` as ``env.cell_contributions`` and ``env.direct``;
         ``cfg`` gives the rate rules.
@@ -144,8 +156,11 @@ class ConfigurationSpace:
             out[:, start : start + step] = beta[0] * r_pu + beta[1] * r_se
         return out
 
-    def q_values(self, potential: torch.Tensor, values: torch.Tensor, gamma: float, cells: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
-        """``[B, ..., 6^N]`` ``Q(s, a) = P(s') - P(s) + gamma V(s')`` at ordered configurations ``[B, ..., N]``, -inf where invalid.
+    def q_values(
+        self, potential: torch.Tensor, values: torch.Tensor, gamma: float, cells: torch.Tensor, tasks: torch.Tensor
+    ) -> torch.Tensor:
+        """``[B, ..., 6^N]`` ``Q(s, a) = P(s') - P(s) + gamma V(s')`` at ordered configurations ``[B, ..., N]``, -inf
+        where invalid.
 
         ``potential`` and ``values`` ``[B, K]`` (from :meth:`utility` and :func:`optimal_values`).
         """
@@ -153,7 +168,9 @@ class ConfigurationSpace:
         k = self.index(cells, tasks).reshape(B, -1)
         nxt = self._successors(cells, tasks).reshape(B, -1)
         gathered = lambda table, idx: table.gather(1, idx.clamp(min=0))  # noqa: E731
-        q = gathered(potential + gamma * values, nxt) - gathered(potential, k).repeat_interleave(self.num_joint_actions, 1)
+        q = gathered(potential + gamma * values, nxt) - gathered(potential, k).repeat_interleave(
+            self.num_joint_actions, 1
+        )
         return q.masked_fill(nxt < 0, -math.inf).view(*cells.shape[:-1], self.num_joint_actions)
 
 
@@ -172,7 +189,9 @@ def _best_successor(space: ConfigurationSpace, table: torch.Tensor, reduce: str)
     return out
 
 
-def optimal_values(space: ConfigurationSpace, potential: torch.Tensor, gamma: float, horizon: int | None = None) -> torch.Tensor:
+def optimal_values(
+    space: ConfigurationSpace, potential: torch.Tensor, gamma: float, horizon: int | None = None
+) -> torch.Tensor:
     """``[B, K]`` best discounted return ``sum_{t=1..H} gamma^(t-1) (P_t - P_{t-1})`` from every configuration.
 
     ``horizon=None``: the infinite-horizon value, iterated until no value moves by

@@ -11,8 +11,9 @@ Example:
     >>> neighbours[0].tolist()  # cell (0, 0): up leaves the grid, down is cell 3, left leaves, right is cell 1
     [-1, 3, -1, 1]
     >>> joint_action_valid(torch.tensor([0, 1]), neighbours, 2).sum().item()  # of 36 joint actions
-    20
+    16
 """
+
 from __future__ import annotations
 
 import torch
@@ -62,7 +63,8 @@ def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
 
 
 def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the grid)."""
+    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the
+    grid)."""
     actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
     moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
     moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
@@ -76,7 +78,8 @@ def joint_next_tasks(tasks: torch.Tensor, num_uavs: int) -> torch.Tensor:
 
 
 def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells distinct."""
+    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells
+    distinct."""
     return targets_valid(joint_targets(cells, neighbours, num_uavs))
 
 

@@ -16,6 +16,7 @@ of ``top_a`` is therefore exact: 1,024 candidates for N = 10 on any grid.
 Brute force (every set of N cells times every task vector) checks it in tests.
 Both evaluate candidates with :func:`uavrl.envs.channel.rates`.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -46,10 +47,15 @@ def optimum(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, 
         method = "brute" if brute_size <= BRUTE_FORCE_LIMIT else "exchange"
     if method == "brute":
         if brute_size > 50 * BRUTE_FORCE_LIMIT:
-            raise ValueError(f"brute force over {brute_size:,} configurations per world is too large: use method='exchange'")
+            raise ValueError(
+                f"brute force over {brute_size:,} configurations per world is too large: use method='exchange'"
+            )
         return _best_of(cell_contrib, direct, cfg, *_all_configurations(C, N, cell_contrib.device))
     if N > MAX_EXCHANGE_UAVS:
-        raise ValueError(f"num_uavs={N} is too many for the exact optimum: it enumerates 2^N subsets, allowed N <= {MAX_EXCHANGE_UAVS}")
+        raise ValueError(
+            f"num_uavs={N} is too many for the exact optimum: it enumerates 2^N subsets, allowed N <= "
+            f"{MAX_EXCHANGE_UAVS}"
+        )
     return _exchange(cell_contrib, direct, cfg)
 
 
@@ -98,11 +104,15 @@ def _exchange(cell_contrib, direct, cfg):
         # compact the N used slots of (top_a relaying) + (top_b sensing)
         slot_cells = torch.cat([ta[:, None].expand(-1, 2**N, -1), tb[:, None].expand(-1, 2**N, -1)], -1)
         used = torch.cat([in_r.expand(b, -1, -1), sense], -1)
-        slot_tasks = torch.cat([torch.ones_like(ta)[:, None].expand(-1, 2**N, -1), torch.zeros_like(tb)[:, None].expand(-1, 2**N, -1)], -1)
+        slot_tasks = torch.cat(
+            [torch.ones_like(ta)[:, None].expand(-1, 2**N, -1), torch.zeros_like(tb)[:, None].expand(-1, 2**N, -1)], -1
+        )
         order = (~used).to(torch.int8).argsort(dim=-1, stable=True)[..., :N]
         cells = torch.gather(slot_cells, -1, order)
         tasks = torch.gather(slot_tasks, -1, order)
-        contrib = torch.gather(cell_contrib[start : start + step], 1, cells.view(b, -1, 1).expand(-1, -1, 2)).view(b, 2**N, N, 2)
+        contrib = torch.gather(cell_contrib[start : start + step], 1, cells.view(b, -1, 1).expand(-1, -1, 2)).view(
+            b, 2**N, N, 2
+        )
         r_pu, r_se = rates(contrib, tasks, direct[start : start + step, None], cfg)
         u, k = (r_pu + r_se).max(-1)
         u_out.append(u)

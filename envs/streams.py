@@ -13,6 +13,7 @@ Example:
     >>> u.shape, bool((u >= 0).all() and (u < 1).all())
     (torch.Size([3, 4]), True)
 """
+
 from __future__ import annotations
 
 import torch

@@ -1,4 +1,5 @@
 """Bad input, from the command line and the Python API: one line from uavrl naming the setting, never a traceback."""
+
 import importlib.util
 import os
 import runpy
@@ -7,11 +8,9 @@ import sys
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 
 from uavrl.checkpoints import CheckpointError
-from uavrl.config import config_dir
 from uavrl.envs import UAVSpectrumEnv
 from uavrl.evaluate import load_agent
 from uavrl.train import train
@@ -153,44 +152,38 @@ def actions(*shape, batch_size):
     return TensorDict({("agents", "action"): torch.zeros(shape, dtype=torch.long)}, batch_size=batch_size)
 
 
-def make_cfg(*overrides):
-    with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        return compose(config_name="config", overrides=list(overrides))
-
-
-ENV = dict(batch_size=2, grid=(3, 3), num_uavs=2)
 POSITIONS = torch.tensor([[[0, 0], [1, 1]], [[2, 2], [0, 1]]])
 TASKS = torch.tensor([[0, 1], [1, 0]])
 
 # (call, exception type, words)
 API_CASES = [
-    (lambda env: UAVSpectrumEnv(device="cuda:7"), ValueError, "device='cuda:7'"),
-    (lambda env: UAVSpectrumEnv(device="gpu"), ValueError, "device='gpu'"),
-    (lambda env: UAVSpectrumEnv(seed=-1), ValueError, "seed=-1"),
-    (lambda env: UAVSpectrumEnv(grid=(0, 3)), ValueError, "grid=(0, 3)"),
-    (lambda env: env.set_seed(-5), ValueError, "seed=-5"),
-    (lambda env: env.set_seed(2**64), ValueError, f"seed={2**64}"),
-    (lambda env: env.rollout(0), ValueError, "max_steps=0"),
-    (lambda env: env.rollout(3, policy_writing((2, 3))), ValueError, "('agents', 'action')"),
-    (lambda env: env.rollout(3, policy_writing((2,))), ValueError, "('agents', 'action')"),
-    (lambda env: env.step(actions(3, 2, batch_size=[3])), ValueError, "('agents', 'action')"),
-    (lambda env: env.step(actions(2, 2, batch_size=[])), ValueError, "('agents', 'action')"),
-    (lambda env: env.utility(POSITIONS + 5, TASKS), ValueError, "positions"),
-    (lambda env: env.utility(POSITIONS - 1, TASKS), ValueError, "positions"),
-    (lambda env: env.utility(POSITIONS.float(), TASKS), TypeError, "positions"),
-    (lambda env: env.utility(POSITIONS, TASKS + 2), ValueError, "tasks"),
-    (lambda env: train(make_cfg("train.episodes=0")), ValueError, "train.episodes=0"),
-    (lambda env: train(make_cfg("agent=dqn", "agent.updates=0")), ValueError, "agent.updates=0"),
-    (lambda env: load_agent(__file__), CheckpointError, "checkpoint="),
+    (lambda env, compose: UAVSpectrumEnv(device="cuda:7"), ValueError, "device='cuda:7'"),
+    (lambda env, compose: UAVSpectrumEnv(device="gpu"), ValueError, "device='gpu'"),
+    (lambda env, compose: UAVSpectrumEnv(seed=-1), ValueError, "seed=-1"),
+    (lambda env, compose: UAVSpectrumEnv(grid=(0, 3)), ValueError, "grid=(0, 3)"),
+    (lambda env, compose: env.set_seed(-5), ValueError, "seed=-5"),
+    (lambda env, compose: env.set_seed(2**64), ValueError, f"seed={2**64}"),
+    (lambda env, compose: env.rollout(0), ValueError, "max_steps=0"),
+    (lambda env, compose: env.rollout(3, policy_writing((2, 3))), ValueError, "('agents', 'action')"),
+    (lambda env, compose: env.rollout(3, policy_writing((2,))), ValueError, "('agents', 'action')"),
+    (lambda env, compose: env.step(actions(3, 2, batch_size=[3])), ValueError, "('agents', 'action')"),
+    (lambda env, compose: env.step(actions(2, 2, batch_size=[])), ValueError, "('agents', 'action')"),
+    (lambda env, compose: env.utility(POSITIONS + 5, TASKS), ValueError, "positions"),
+    (lambda env, compose: env.utility(POSITIONS - 1, TASKS), ValueError, "positions"),
+    (lambda env, compose: env.utility(POSITIONS.float(), TASKS), TypeError, "positions"),
+    (lambda env, compose: env.utility(POSITIONS, TASKS + 2), ValueError, "tasks"),
+    (lambda env, compose: train(compose("train.episodes=0")), ValueError, "train.episodes=0"),
+    (lambda env, compose: train(compose("agent=dqn", "agent.updates=0")), ValueError, "agent.updates=0"),
+    (lambda env, compose: load_agent(__file__), CheckpointError, "checkpoint="),
 ]
 
 
 @pytest.mark.parametrize("call, error, words", API_CASES, ids=[words for _, _, words in API_CASES])
-def test_python_api_mistakes_are_one_line(call, error, words):
-    env = UAVSpectrumEnv(**ENV)
+def test_python_api_mistakes_are_one_line(call, error, words, tiny_env, compose_cfg):
+    env = tiny_env()
     env.reset()
     with pytest.raises(error) as raised:
-        call(env)
+        call(env, compose_cfg)
     assert "\n" not in str(raised.value) and words in str(raised.value), str(raised.value)
 
 

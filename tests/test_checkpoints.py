@@ -1,15 +1,14 @@
 """Checkpoints that survive damage and kills, and TensorBoard curves that stay whole across resumes."""
+
 import os
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.backend.event_processing.plugin_event_accumulator import EventAccumulator as PluginEventAccumulator
 
 import uavrl.agents.tabular as tabular
 from uavrl.checkpoints import CheckpointError
-from uavrl.config import config_dir
 from uavrl.io import save_text
 from uavrl.train import train
 
@@ -22,31 +21,22 @@ CORRUPTIONS = {
 }
 
 
-def make_cfg(*overrides):
-    with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        return compose(config_name="config", overrides=list(overrides))
+@pytest.fixture
+def run(compose_cfg, interrupt_at):
+    """``run(run_dir, *overrides, killed_at=None)``: train (or resume, when ``run_dir`` holds a checkpoint);
+    ``killed_at``: interrupt that train_iteration call."""
 
+    def train_or_resume(run_dir, *overrides, killed_at: int | None = None):
+        with interrupt_at(tabular.TabularAgent, killed_at):
+            try:
+                if (run_dir / "checkpoint.pt").exists() or (run_dir / "checkpoint.prev.pt").exists():
+                    train(compose_cfg(*SMALL, *overrides, f"resume={run_dir}"), overrides=[f"resume={run_dir}"])
+                else:
+                    train(compose_cfg(*SMALL, *overrides, f"run_dir={run_dir}"))
+            except KeyboardInterrupt:
+                assert killed_at is not None
 
-def run(run_dir, *overrides, killed_at: int | None = None):
-    """Train (or resume, when ``run_dir`` holds a checkpoint); ``killed_at``: interrupt that train_iteration call."""
-    original, calls = tabular.TabularAgent.train_iteration, []
-
-    def dies(self):
-        calls.append(1)
-        if len(calls) == killed_at:
-            raise KeyboardInterrupt
-        return original(self)
-
-    tabular.TabularAgent.train_iteration = dies
-    try:
-        if (run_dir / "checkpoint.pt").exists() or (run_dir / "checkpoint.prev.pt").exists():
-            train(make_cfg(*SMALL, *overrides, f"resume={run_dir}"), overrides=[f"resume={run_dir}"])
-        else:
-            train(make_cfg(*SMALL, *overrides, f"run_dir={run_dir}"))
-    except KeyboardInterrupt:
-        assert killed_at is not None
-    finally:
-        tabular.TabularAgent.train_iteration = original
+    return train_or_resume
 
 
 def load(path):
@@ -54,7 +44,7 @@ def load(path):
 
 
 @pytest.mark.parametrize("corruption", CORRUPTIONS)
-def test_resume_falls_back_to_the_previous_checkpoint_and_ends_exactly(corruption, tmp_path, capsys):
+def test_resume_falls_back_to_the_previous_checkpoint_and_ends_exactly(run, corruption, tmp_path, capsys):
     run(tmp_path / "whole")
     killed = tmp_path / "killed"
     run(killed, killed_at=5)  # checkpoints after iterations 2 (previous) and 4 (newest)
@@ -70,7 +60,7 @@ def test_resume_falls_back_to_the_previous_checkpoint_and_ends_exactly(corruptio
     assert load(killed / "checkpoint.prev.pt")["iteration"] == 4 and load(newest)["iteration"] == 6
 
 
-def test_no_readable_checkpoint_is_one_line_naming_each_file(tmp_path):
+def test_no_readable_checkpoint_is_one_line_naming_each_file(run, tmp_path):
     run(tmp_path, killed_at=5)
     (tmp_path / "checkpoint.pt").write_bytes(b"")
     (tmp_path / "checkpoint.prev.pt").write_bytes(os.urandom(1000))
@@ -81,7 +71,7 @@ def test_no_readable_checkpoint_is_one_line_naming_each_file(tmp_path):
     assert "checkpoint.pt: empty file" in message and "checkpoint.prev.pt: not a torch file" in message, message
 
 
-def test_a_damaged_newest_checkpoint_is_replaced_but_the_readable_previous_one_kept(tmp_path):
+def test_a_damaged_newest_checkpoint_is_replaced_but_the_readable_previous_one_kept(run, tmp_path):
     run(tmp_path, killed_at=5)
     (tmp_path / "checkpoint.pt").write_bytes(b"")
     run(tmp_path, killed_at=3)  # resumes from iteration 2, writes iteration 4 over the damaged file, then dies
@@ -89,7 +79,7 @@ def test_a_damaged_newest_checkpoint_is_replaced_but_the_readable_previous_one_k
     assert load(tmp_path / "checkpoint.prev.pt")["iteration"] == 2
 
 
-def test_orphaned_temporary_files_are_removed_at_resume_and_at_the_next_write(tmp_path):
+def test_orphaned_temporary_files_are_removed_at_resume_and_at_the_next_write(run, tmp_path):
     run(tmp_path, killed_at=3)
     orphan = tmp_path / ".checkpoint.pt.k1ll3d.tmp"  # what a kill during torch.save leaves
     orphan.write_bytes(os.urandom(1000))
@@ -106,7 +96,7 @@ def test_orphaned_temporary_files_are_removed_at_resume_and_at_the_next_write(tm
 
 
 @pytest.mark.parametrize("kills", [[], [3], [5], [7], [3, 3], [3, 1, 1, 2]], ids=str)
-def test_tensorboard_curves_have_one_point_per_logged_step_after_resumes(kills, tmp_path):
+def test_tensorboard_curves_have_one_point_per_logged_step_after_resumes(run, kills, tmp_path):
     for killed_at in kills:
         run(tmp_path, "eval.every=2", killed_at=killed_at)
     run(tmp_path, "eval.every=2")

@@ -1,4 +1,5 @@
 """Model options: presets hold the SPEC numbers, and every invalid value is a one-line ValueError naming it."""
+
 from __future__ import annotations
 
 import math
@@ -36,15 +37,41 @@ def test_state_space_sizes():
 
 
 BAD_VALUES = [
-    ("grid", (0, 3)), ("grid", (3, 0)), ("grid", (-2, 2)), ("grid", (2.5, 3)), ("grid", (1, 2, 3)), ("grid", "6x6"), ("grid", 6),
-    ("num_uavs", 0), ("num_uavs", -1), ("num_uavs", 10), ("num_uavs", 2.5),
-    ("max_steps", 0), ("max_steps", -5),
-    ("p_pt", -0.01), ("p_s", 0.0), ("p_u", -1.0), ("noise", -1e-9), ("noise", 0.0),
-    ("p_pt", math.inf), ("noise", math.nan), ("cell_size", 0.0), ("g0", -1.0), ("alpha", -2.0), ("reference_gain", 0.0),
-    ("altitude", 0.0), ("altitude", -3.0), ("altitude", math.inf),
-    ("beta1", math.nan), ("beta2", math.inf),
-    ("layout", "circle"), ("fading", "rician"), ("reward", "sparse"), ("rate_model", "df"),
-    ("init_tasks", "both"), ("reset_positions", "never"),
+    ("grid", (0, 3)),
+    ("grid", (3, 0)),
+    ("grid", (-2, 2)),
+    ("grid", (2.5, 3)),
+    ("grid", (1, 2, 3)),
+    ("grid", "6x6"),
+    ("grid", 6),
+    ("num_uavs", 0),
+    ("num_uavs", -1),
+    ("num_uavs", 10),
+    ("num_uavs", 2.5),
+    ("max_steps", 0),
+    ("max_steps", -5),
+    ("p_pt", -0.01),
+    ("p_s", 0.0),
+    ("p_u", -1.0),
+    ("noise", -1e-9),
+    ("noise", 0.0),
+    ("p_pt", math.inf),
+    ("noise", math.nan),
+    ("cell_size", 0.0),
+    ("g0", -1.0),
+    ("alpha", -2.0),
+    ("reference_gain", 0.0),
+    ("altitude", 0.0),
+    ("altitude", -3.0),
+    ("altitude", math.inf),
+    ("beta1", math.nan),
+    ("beta2", math.inf),
+    ("layout", "circle"),
+    ("fading", "rician"),
+    ("reward", "sparse"),
+    ("rate_model", "df"),
+    ("init_tasks", "both"),
+    ("reset_positions", "never"),
 ]
 
 
@@ -59,17 +86,20 @@ def test_invalid_option_is_a_one_line_value_error(name, value):
         UAVSpectrumEnv(**options)
 
 
-@pytest.mark.parametrize("call,words", [
-    (lambda: make_config("papers"), "preset='papers'"),
-    (lambda: make_config("paper", grdi=(3, 3)), "'grdi'"),
-    (lambda: UAVSpectrumEnv(batch_size=1, speed=3), "'speed'"),
-    (lambda: UAVSpectrumEnv(batch_size=0), "batch_size=0"),
-    (lambda: UAVSpectrumEnv(batch_size=[2, 3]), "batch_size=[2, 3]"),
-    (lambda: UAVSpectrumEnv(batch_size=-4), "batch_size=-4"),
-    (lambda: UAVSpectrumEnv(config=make_config(), layout="random"), "config="),
-    (lambda: make_config("reference_code", direct_links=True), "direct_links=True"),
-    (lambda: UAVSpectrumEnv(preset="reference_code", grid=(16, 6)), "grid=(16, 6)"),  # E sits on cell (15, 5)
-])
+@pytest.mark.parametrize(
+    "call,words",
+    [
+        (lambda: make_config("papers"), "preset='papers'"),
+        (lambda: make_config("paper", grdi=(3, 3)), "'grdi'"),
+        (lambda: UAVSpectrumEnv(batch_size=1, speed=3), "'speed'"),
+        (lambda: UAVSpectrumEnv(batch_size=0), "batch_size=0"),
+        (lambda: UAVSpectrumEnv(batch_size=[2, 3]), "batch_size=[2, 3]"),
+        (lambda: UAVSpectrumEnv(batch_size=-4), "batch_size=-4"),
+        (lambda: UAVSpectrumEnv(config=make_config(), layout="random"), "config="),
+        (lambda: make_config("reference_code", direct_links=True), "direct_links=True"),
+        (lambda: UAVSpectrumEnv(preset="reference_code", grid=(16, 6)), "grid=(16, 6)"),  # E sits on cell (15, 5)
+    ],
+)
 def test_other_bad_input(call, words):
     with pytest.raises(ValueError) as err:
         call()

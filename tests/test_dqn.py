@@ -1,20 +1,34 @@
 """Factored deep Q-network: learning, double-DQN targets over valid actions, masks, checkpoints, errors."""
+
 import io
 import math
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from uavrl.agents.dqn import DQNAgent, ValidGreedy
-from uavrl.config import config_dir, model_config
-from uavrl.envs import UAVSpectrumEnv, joint_action_valid
 from uavrl.agents.baselines import RandomPolicy
+from uavrl.agents.dqn import DQNAgent, ValidGreedy
+from uavrl.config import model_config
+from uavrl.envs import UAVSpectrumEnv, joint_action_valid
 from uavrl.evaluation import evaluate
 from uavrl.train import train
 
-TINY = ["env.grid=[3,3]", "train.steps_per_episode=8", "train.iterations=30", "agent.worlds=32", "agent.hidden=32", "agent.depth=1", "agent.batch_size=128", "agent.buffer_size=4000", "agent.updates=16", "agent.learning_starts=256", "agent.lr=0.003", "agent.lr_end=0.0003", "agent.tau=0.05"]
+TINY = [
+    "env.grid=[3,3]",
+    "train.steps_per_episode=8",
+    "train.iterations=30",
+    "agent.worlds=32",
+    "agent.hidden=32",
+    "agent.depth=1",
+    "agent.batch_size=128",
+    "agent.buffer_size=4000",
+    "agent.updates=16",
+    "agent.learning_starts=256",
+    "agent.lr=0.003",
+    "agent.lr_end=0.0003",
+    "agent.tau=0.05",
+]
 
 
 @pytest.fixture(autouse=True)
@@ -26,14 +40,21 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def tiny_cfg(*overrides):
-    with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        return compose(config_name="config", overrides=["agent=dqn", *TINY, *overrides])  # later overrides win
+@pytest.fixture
+def tiny_cfg(compose_cfg):
+    """``tiny_cfg(*overrides)``: the tiny DQN config; later overrides win."""
+    return lambda *overrides: compose_cfg("agent=dqn", *TINY, *overrides)
 
 
-def make_agent(*overrides, seed=0):
-    cfg = tiny_cfg(*overrides)
-    return DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed)
+@pytest.fixture
+def make_agent(tiny_cfg):
+    """``make_agent(*overrides, seed=0)``: a DQN agent of the tiny config."""
+
+    def make(*overrides, seed=0):
+        cfg = tiny_cfg(*overrides)
+        return DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed)
+
+    return make
 
 
 def transitions(agent, iterations=1):
@@ -44,7 +65,7 @@ def transitions(agent, iterations=1):
 
 
 @pytest.mark.parametrize("overrides", [["agent.mixer=vdn"], ["agent.mixer=qmix"], ["agent.head=joint"]])
-def test_short_training_beats_a_random_policy(overrides):
+def test_short_training_beats_a_random_policy(overrides, make_agent):
     agent = make_agent(*overrides)
     for _ in range(agent.num_iterations):
         metrics = agent.train_iteration()
@@ -72,12 +93,16 @@ def test_valid_greedy_respects_masks_never_collides_and_switches_each_task_once(
     assert torch.equal(greedy(values[:, :1], lone["agents", "action_mask"], lone["positions"], lone["tasks"]), masked)
 
 
-def online_and_target(*overrides):
+def online_and_target(make_agent, *overrides):
     """An agent, its first transitions, and Q values under its online and its (perturbed) target parameters."""
     agent = make_agent(*overrides, "agent.learning_starts=100000")  # no gradient step
     data, loss = transitions(agent)[:64], agent.loss
     factored = agent.settings.head == "factored"
-    params, module = (loss.target_local_value_network_params, loss.local_value_network) if factored else (loss.target_value_network_params, loss.value_network)
+    params, module = (
+        (loss.target_local_value_network_params, loss.local_value_network)
+        if factored
+        else (loss.target_value_network_params, loss.value_network)
+    )
     with torch.no_grad():  # make the target network differ from the online one
         for name, p in params.items(True, True):
             if name[-1] in ("weight", "bias"):
@@ -95,33 +120,41 @@ def online_and_target(*overrides):
 
 
 @torch.no_grad()
-def test_factored_target_is_double_dqn_over_valid_actions():
-    agent, data, online, target = online_and_target("agent.mixer=vdn", "agent.gamma=0.7")
+def test_factored_target_is_double_dqn_over_valid_actions(make_agent):
+    agent, data, online, target = online_and_target(make_agent, "agent.mixer=vdn", "agent.gamma=0.7")
     nxt = data["next"]
-    best = ValidGreedy(agent.env.neighbours, 3)(online(nxt), nxt["agents", "action_mask"], nxt["positions"], nxt["tasks"])
+    best = ValidGreedy(agent.env.neighbours, 3)(
+        online(nxt), nxt["agents", "action_mask"], nxt["positions"], nxt["tasks"]
+    )
     assert nxt["agents", "action_mask"].gather(-1, best.unsqueeze(-1)).all()
     assert not torch.equal(best, online(nxt).argmax(-1))  # the unmasked argmax would pick invalid moves
     y = nxt["reward"] + 0.7 * target(nxt).gather(-1, best.unsqueeze(-1)).sum(-2)
     value = online(data).gather(-1, data["agents", "action"].unsqueeze(-1)).sum(-2)
-    assert agent.loss(data)["loss"].item() == pytest.approx(torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5)
+    assert agent.loss(data)["loss"].item() == pytest.approx(
+        torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5
+    )
     # the plain DQN target (the target network's own max) is a different number
     assert not torch.allclose(y, nxt["reward"] + 0.7 * target(nxt).max(-1).values.sum(-1, keepdim=True))
 
 
 @torch.no_grad()
-def test_joint_target_masks_invalid_joint_actions_in_the_max():
-    agent, data, online, target = online_and_target("agent.head=joint", "agent.gamma=0.5")
+def test_joint_target_masks_invalid_joint_actions_in_the_max(make_agent):
+    agent, data, online, target = online_and_target(make_agent, "agent.head=joint", "agent.gamma=0.5")
     nxt = data["next"]
     valid = joint_action_valid(agent.env.cells_of(nxt["positions"]), agent.env.neighbours, 2)
     best = online(nxt).masked_fill(~valid, -math.inf).argmax(-1, keepdim=True)
-    assert not torch.equal(best, online(nxt).argmax(-1, keepdim=True))  # the unmasked argmax would pick invalid joint actions
+    assert not torch.equal(
+        best, online(nxt).argmax(-1, keepdim=True)
+    )  # the unmasked argmax would pick invalid joint actions
     y = nxt["reward"] + 0.5 * target(nxt).gather(-1, best)
     value = online(data).gather(-1, data["joint_action"].unsqueeze(-1))
-    assert agent.loss(data)["loss"].item() == pytest.approx(torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5)
+    assert agent.loss(data)["loss"].item() == pytest.approx(
+        torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5
+    )
 
 
 @pytest.mark.parametrize("head", ["factored", "joint"])
-def test_policies_take_valid_actions(head):
+def test_policies_take_valid_actions(head, make_agent):
     agent = make_agent(f"agent.head={head}")
     data = transitions(agent)  # exploration actions (epsilon = 1 at first)
     assert data["agents", "action_mask"].gather(-1, data["agents", "action"].unsqueeze(-1)).all()
@@ -130,11 +163,15 @@ def test_policies_take_valid_actions(head):
     actions, mask = rollout["agents", "action"], rollout["agents", "action_mask"]
     assert mask.gather(-1, actions.unsqueeze(-1)).all()
     joint = (actions * 6 ** torch.arange(2)).sum(-1)
-    assert joint_action_valid(env.cells_of(rollout["positions"]), env.neighbours, 2).gather(-1, joint.unsqueeze(-1)).all()
+    assert (
+        joint_action_valid(env.cells_of(rollout["positions"]), env.neighbours, 2).gather(-1, joint.unsqueeze(-1)).all()
+    )
 
 
-@pytest.mark.parametrize("overrides", [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix"], ["agent.head=joint"]])
-def test_checkpoint_round_trip_continues_identically(overrides):
+@pytest.mark.parametrize(
+    "overrides", [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix"], ["agent.head=joint"]]
+)
+def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
     """state_dict -> disk -> load_state_dict: same Q values, then the same training and the same greedy actions.
 
     The first case wraps the replay buffer around (768 writes into 300 slots).
@@ -149,40 +186,47 @@ def test_checkpoint_round_trip_continues_identically(overrides):
     restored = make_agent(*overrides, seed=4)
     restored.load_state_dict(state)
     probe = UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).reset()
-    assert (agent.greedy(probe.clone()) == restored.greedy(probe.clone())).all() and restored.env_steps == agent.env_steps
+    assert (
+        agent.greedy(probe.clone()) == restored.greedy(probe.clone())
+    ).all() and restored.env_steps == agent.env_steps
     torch.set_rng_state(state["rng"])  # the two agents share this process's global RNG; a resumed run has its own
     metrics = agent.train_iteration()
     torch.set_rng_state(state["rng"])
     assert restored.train_iteration() == metrics
     assert (agent.greedy(probe.clone()) == restored.greedy(probe.clone())).all()
-    actions = [UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).rollout(8, a.policies()[0])["agents", "action"] for a in (agent, restored)]
+    actions = [
+        UAVSpectrumEnv(batch_size=8, config=agent.env_cfg, seed=9).rollout(8, a.policies()[0])["agents", "action"]
+        for a in (agent, restored)
+    ]
     assert torch.equal(*actions)
 
 
-def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, monkeypatch):
-    """Through ``uavrl.train``: the tabular agent's TensorBoard tags; a run killed after a checkpoint and resumed ends as the whole run."""
+def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, tiny_cfg, interrupt_at):
+    """Through ``uavrl.train``: the tabular agent's TensorBoard tags; a run killed after a checkpoint and resumed ends
+    as the whole run."""
     run = ["train.iterations=4", "train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
     whole = train(tiny_cfg(*run, f"run_dir={tmp_path / 'whole'}"))
     tags = set(EventAccumulator(str(whole)).Reload().Tags()["scalars"])
-    assert {"train/sum_utility", "train/sum_r_pu", "train/sum_r_se", "train/task_switches", "train/moves", "train/steps_to_90", "train/loss", "train/epsilon", "eval/optimality", "eval/optimal_fraction"} <= tags
-    original, calls = DQNAgent.train_iteration, []
-
-    def dies_at_four(self):
-        calls.append(1)
-        if len(calls) == 4:
-            raise KeyboardInterrupt
-        return original(self)
-
-    monkeypatch.setattr(DQNAgent, "train_iteration", dies_at_four)
-    with pytest.raises(KeyboardInterrupt):
+    assert {
+        "train/sum_utility",
+        "train/sum_r_pu",
+        "train/sum_r_se",
+        "train/task_switches",
+        "train/moves",
+        "train/steps_to_90",
+        "train/loss",
+        "train/epsilon",
+        "eval/optimality",
+        "eval/optimal_fraction",
+    } <= tags
+    with interrupt_at(DQNAgent, 4), pytest.raises(KeyboardInterrupt):
         train(tiny_cfg(*run, f"run_dir={tmp_path / 'killed'}"))
-    monkeypatch.setattr(DQNAgent, "train_iteration", original)
     train(tiny_cfg(*run, f"resume={tmp_path / 'killed'}"), overrides=[f"resume={tmp_path / 'killed'}"])
     a, b = (torch.load(d / "checkpoint.pt", weights_only=False)["agent"]["loss"] for d in (whole, tmp_path / "killed"))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
-def test_same_seed_same_training():
+def test_same_seed_same_training(make_agent):
     runs = []
     for seed in (1, 1, 2):
         agent = make_agent(seed=seed)
@@ -195,23 +239,25 @@ def test_same_seed_same_training():
     [
         (["agent.mixer=sum"], "agent.mixer='sum' is invalid: allowed mixers are 'vdn', 'qmix'"),
         (["agent.head=tree"], "agent.head='tree' is invalid: allowed heads are 'factored', 'joint'"),
-        (["agent.head=joint", "env.num_uavs=5"], r"needs 6\^5 = 7,776 outputs, over 1,296 \(N <= 4\): use agent.head=factored"),
+        (
+            ["agent.head=joint", "env.num_uavs=5"],
+            r"needs 6\^5 = 7,776 outputs, over 1,296 \(N <= 4\): use agent.head=factored",
+        ),
         (["agent.worlds=0"], "agent.worlds=0 is invalid"),
         (["agent.gamma=1.5"], r"agent.gamma=1.5 is invalid: it must lie in \[0.0, 1.0\]"),
         (["agent.lr=0"], "agent.lr=0 is invalid: it must be positive"),
     ],
 )
-def test_bad_settings_fail_with_one_line_errors(overrides, message):
+def test_bad_settings_fail_with_one_line_errors(overrides, message, make_agent):
     with pytest.raises(ValueError, match=message) as err:
         make_agent(*overrides)
     assert "\n" not in str(err.value)
 
 
 @pytest.mark.slow
-def test_paper_preset_two_uavs_reaches_target():
+def test_paper_preset_two_uavs_reaches_target(compose_cfg):
     """N = 2 on 6x6 with the default settings: return ratio >= 0.99 against the exact optimum (BENCHMARKS.md)."""
-    with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        cfg = compose(config_name="config", overrides=["agent=dqn"])
+    cfg = compose_cfg("agent=dqn")
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
     for _ in range(agent.num_iterations):
         agent.train_iteration()
@@ -220,7 +266,7 @@ def test_paper_preset_two_uavs_reaches_target():
 
 
 @pytest.mark.parametrize("objective", ["delta", "log_gap"])
-def test_training_reward_of_each_objective(objective):
+def test_training_reward_of_each_objective(objective, make_agent):
     agent = make_agent(f"agent.objective={objective}", "agent.learning_starts=100000")
     agent.train_iteration()
     data = agent.buffer[: len(agent.buffer)]

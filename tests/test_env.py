@@ -4,6 +4,7 @@ The reference values here are computed with plain Python ``math`` from the SPEC
 formulas, never with :mod:`uavrl.envs.channel`, so a wrong formula in the
 package cannot hide behind the same wrong formula in the test.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,7 +20,18 @@ from torchrl.envs.utils import check_env_specs, step_mdp
 from uavrl.envs import UAVSpectrumEnv
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
-OUTPUT_KEYS = ["positions", "tasks", "r_pu", "r_se", "utility", "moves", "task_switches", "state", ("agents", "observation"), ("agents", "action_mask")]
+OUTPUT_KEYS = [
+    "positions",
+    "tasks",
+    "r_pu",
+    "r_se",
+    "utility",
+    "moves",
+    "task_switches",
+    "state",
+    ("agents", "observation"),
+    ("agents", "action_mask"),
+]
 PROPERTY_SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -29,7 +41,9 @@ def line_nodes(L1, L2, h):
     return (0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)
 
 
-def paper_rates(cells_xy, tasks, nodes, h, *, cell=10.0, p_pt=0.01, p_s=0.02, p_u=0.02, noise=1e-9, direct=False, lease=True):
+def paper_rates(
+    cells_xy, tasks, nodes, h, *, cell=10.0, p_pt=0.01, p_s=0.02, p_u=0.02, noise=1e-9, direct=False, lease=True
+):
     """SPEC 3-4: |h|^2 = d^-2 (d in metres), normalised AF, 1/2 log2, lease rule."""
     PT, PR, S, E = nodes
 
@@ -38,7 +52,7 @@ def paper_rates(cells_xy, tasks, nodes, h, *, cell=10.0, p_pt=0.01, p_s=0.02, p_
 
     sum_pu = p_pt * gain(PT, PR) / noise if direct else 0.0
     sum_se = p_s * gain(S, E) / noise if direct else 0.0
-    for (x, y), task in zip(cells_xy, tasks):
+    for (x, y), task in zip(cells_xy, tasks, strict=True):
         uav = (x, y, h)
         if task == 1:
             g1, g2 = p_pt * gain(PT, uav) / noise, p_u * gain(uav, PR) / noise
@@ -53,14 +67,15 @@ def paper_rates(cells_xy, tasks, nodes, h, *, cell=10.0, p_pt=0.01, p_s=0.02, p_
 
 
 def reference_code_rates(cells_xy, tasks):
-    """SPEC 8: absolute layout, |h|^2 = 2 d^-4 in cells, A = 200 |h|^2 |h|^2, A/(1+A), log2, 0 unless both tasks staffed."""
+    """SPEC 8: absolute layout, |h|^2 = 2 d^-4 in cells, A = 200 |h|^2 |h|^2, A/(1+A), log2, 0 unless both tasks
+    staffed."""
     PT, PR, S, E = (0, 5, 0), (10, 5, 0), (-5, 5, 10), (15, 5, 10)
 
     def h2(a, b):
         return 2 * math.dist(a, b) ** -4
 
     sum_pu = sum_se = 0.0
-    for (x, y), task in zip(cells_xy, tasks):
+    for (x, y), task in zip(cells_xy, tasks, strict=True):
         uav = (x, y, 10)
         src, dst = (PT, PR) if task == 1 else (S, E)
         a = 200 * h2(src, uav) * h2(uav, dst)
@@ -74,16 +89,21 @@ def reference_code_rates(cells_xy, tasks):
 
 
 def resolve(cells_xy, actions, L1, L2):
-    """SPEC 2 in plain Python: off-grid moves stay, then clashing movers are cancelled (all at once) until cells differ."""
+    """SPEC 2 in plain Python: off-grid moves stay, then clashing movers are cancelled (all at once) until cells
+    differ."""
     targets = []
-    for (x, y), a in zip(cells_xy, actions):
+    for (x, y), a in zip(cells_xy, actions, strict=True):
         if a < 4:
             nx, ny = x + MOVES[a][0], y + MOVES[a][1]
             targets.append((nx, ny) if 0 <= nx < L1 and 0 <= ny < L2 else (x, y))
         else:
             targets.append((x, y))
     while True:
-        clash = [i for i, t in enumerate(targets) if t != cells_xy[i] and any(t == u for j, u in enumerate(targets) if j != i)]
+        clash = [
+            i
+            for i, t in enumerate(targets)
+            if t != cells_xy[i] and any(t == u for j, u in enumerate(targets) if j != i)
+        ]
         if not clash:
             return targets
         for i in clash:
@@ -91,7 +111,7 @@ def resolve(cells_xy, actions, L1, L2):
 
 
 def new_tasks(tasks, actions):
-    return [0 if a == 4 else 1 if a == 5 else t for t, a in zip(tasks, actions)]
+    return [0 if a == 4 else 1 if a == 5 else t for t, a in zip(tasks, actions, strict=True)]
 
 
 def xy_list(td, world):
@@ -127,7 +147,9 @@ def test_one_cell_by_hand():
     # sensing alone: the lease rule pays nothing; without it, R_SE = 1/2 log2(1 + c_se)
     assert env.utility(pos, torch.zeros(1, 1, dtype=torch.long))[2].item() == 0.0
     free = UAVSpectrumEnv(batch_size=1, grid=(1, 1), num_uavs=1, lease_rule=False)
-    assert free.utility(pos, torch.zeros(1, 1, dtype=torch.long))[1].item() == pytest.approx(0.5 * math.log2(1 + c_se), rel=1e-12)
+    assert free.utility(pos, torch.zeros(1, 1, dtype=torch.long))[1].item() == pytest.approx(
+        0.5 * math.log2(1 + c_se), rel=1e-12
+    )
     # the same through reset and step: relay (action 5), then sense (action 4)
     td = step_with(env, env.reset(), [5])
     assert td["next", "r_pu"].item() == pytest.approx(0.5 * math.log2(1 + c_pu), rel=1e-6)
@@ -159,14 +181,17 @@ def test_two_by_one_by_hand():
     assert (got[0].item(), got[1].item()) == (pytest.approx(r_pu, rel=1e-12), pytest.approx(r_se, rel=1e-12))
 
 
-@pytest.mark.parametrize("preset,grid,num_uavs,options", [
-    ("paper", (2, 1), 2, {}),
-    ("paper", (3, 2), 3, {"direct_links": True}),
-    ("paper", (1, 4), 2, {"lease_rule": False, "cell_size": 3.0}),
-    ("paper", (4, 3), 3, {"altitude": 2.5, "p_pt": 0.05, "noise": 1e-8}),
-    ("reference_code", (2, 2), 2, {}),
-    ("reference_code", (3, 3), 3, {"init_tasks": "random"}),
-])
+@pytest.mark.parametrize(
+    "preset,grid,num_uavs,options",
+    [
+        ("paper", (2, 1), 2, {}),
+        ("paper", (3, 2), 3, {"direct_links": True}),
+        ("paper", (1, 4), 2, {"lease_rule": False, "cell_size": 3.0}),
+        ("paper", (4, 3), 3, {"altitude": 2.5, "p_pt": 0.05, "noise": 1e-8}),
+        ("reference_code", (2, 2), 2, {}),
+        ("reference_code", (3, 3), 3, {"init_tasks": "random"}),
+    ],
+)
 def test_env_outputs_match_hand_rates(preset, grid, num_uavs, options):
     """r_pu, r_se, utility after reset and after every step equal the plain-Python SPEC formulas."""
     L1, L2 = grid
@@ -174,7 +199,11 @@ def test_env_outputs_match_hand_rates(preset, grid, num_uavs, options):
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=num_uavs, preset=preset, seed=11, max_steps=50, **options)
     h = options.get("altitude", float(L1))
     kwargs = {k: options[k] for k in ("p_pt", "noise") if k in options}
-    kwargs.update(direct=options.get("direct_links", False), lease=options.get("lease_rule", True), cell=options.get("cell_size", 10.0))
+    kwargs.update(
+        direct=options.get("direct_links", False),
+        lease=options.get("lease_rule", True),
+        cell=options.get("cell_size", 10.0),
+    )
 
     def check(out):
         for w in range(B):
@@ -186,8 +215,13 @@ def test_env_outputs_match_hand_rates(preset, grid, num_uavs, options):
             assert out["r_pu"][w].item() == pytest.approx(want[0], rel=1e-6, abs=1e-7)
             assert out["r_se"][w].item() == pytest.approx(want[1], rel=1e-6, abs=1e-7)
             assert out["utility"][w].item() == pytest.approx(sum(want), rel=1e-6, abs=1e-7)
-            r_pu, r_se, u = env.utility(out["positions"][w : w + 1].expand(B, -1, -1), out["tasks"][w : w + 1].expand(B, -1))
-            assert (r_pu[0].item(), r_se[0].item()) == (pytest.approx(want[0], rel=1e-12, abs=1e-15), pytest.approx(want[1], rel=1e-12, abs=1e-15))
+            r_pu, r_se, u = env.utility(
+                out["positions"][w : w + 1].expand(B, -1, -1), out["tasks"][w : w + 1].expand(B, -1)
+            )
+            assert (r_pu[0].item(), r_se[0].item()) == (
+                pytest.approx(want[0], rel=1e-12, abs=1e-15),
+                pytest.approx(want[1], rel=1e-12, abs=1e-15),
+            )
 
     gen = torch.Generator().manual_seed(0)
     td = env.reset()
@@ -232,7 +266,9 @@ def test_reference_code_preset():
         cells = [(1, 2), (3, 0)]
         r_pu, r_se, _ = env.utility(torch.tensor([cells, cells]), torch.tensor([tasks, tasks]))
         want = reference_code_rates(cells, tasks)
-        assert r_pu[0].item() == pytest.approx(want[0], rel=1e-12, abs=0) and r_se[1].item() == pytest.approx(want[1], rel=1e-12, abs=0)
+        assert r_pu[0].item() == pytest.approx(want[0], rel=1e-12, abs=0) and r_se[1].item() == pytest.approx(
+            want[1], rel=1e-12, abs=0
+        )
     # one value by hand: UAV at (0,5) relaying? no: UAV (2,2) relaying, (1,1) sensing
     # PT (0,5,0)->(2,2,10): d^2 = 4+9+100 = 113; (2,2,10)->PR (10,5,0): 64+9+100 = 173
     # S (-5,5,10)->(1,1,10): 36+16 = 52; (1,1,10)->E (15,5,10): 196+16 = 212
@@ -253,12 +289,12 @@ def test_state_index_and_observation_layout():
         for w in range(4):
             cells = [y * L1 + x for x, y in xy_list(td, w)]
             tasks = td["tasks"][w].tolist()
-            digits = [2 * c + t for c, t in zip(cells, tasks)] if with_tasks else cells
+            digits = [2 * c + t for c, t in zip(cells, tasks, strict=True)] if with_tasks else cells
             base = 2 * C if with_tasks else C
             assert td["state_index"][w].item() == sum(d * base**i for i, d in enumerate(digits))
             obs, state = td["agents", "observation"][w], td["state"][w]
             assert obs.shape == (N, 3 + 10 + 3 * (N - 1) + 12) and state.shape == (5 * N + 12,)
-            xyt = [(x / (L1 - 1), y / (L2 - 1), float(t)) for (x, y), t in zip(xy_list(td, w), tasks)]
+            xyt = [(x / (L1 - 1), y / (L2 - 1), float(t)) for (x, y), t in zip(xy_list(td, w), tasks, strict=True)]
             for i in range(N):
                 assert obs[i, :3].tolist() == pytest.approx(xyt[i])
                 others = [v for j in list(range(i + 1, N)) + list(range(i)) for v in xyt[j]]
@@ -269,7 +305,9 @@ def test_state_index_and_observation_layout():
                 x, y = xy_list(td, w)[i]
                 assert td["agents", "action_mask"][w, i].tolist() == [y > 0, y < L2 - 1, x > 0, x < L1 - 1, True, True]
     nodes = line_nodes(L1, L2, float(L1))
-    assert td["state"][0, -12:].tolist() == pytest.approx([v / s for node in nodes for v, s in zip(node, (L1, L2, L1))])
+    assert td["state"][0, -12:].tolist() == pytest.approx(
+        [v / s for node in nodes for v, s in zip(node, (L1, L2, L1), strict=True)]
+    )
 
 
 # ----------------------------------------------------------------- dynamics properties
@@ -279,7 +317,9 @@ def scenarios(draw):
     N = draw(st.integers(1, min(4, L1 * L2)))
     B = draw(st.integers(1, 3))
     steps = draw(st.integers(1, 10))
-    actions = draw(st.lists(st.lists(st.integers(0, 5), min_size=B * N, max_size=B * N), min_size=steps, max_size=steps))
+    actions = draw(
+        st.lists(st.lists(st.integers(0, 5), min_size=B * N, max_size=B * N), min_size=steps, max_size=steps)
+    )
     options = dict(
         layout=draw(st.sampled_from(["line", "random"])),
         reward=draw(st.sampled_from(["delta", "best_so_far"])),
@@ -302,7 +342,9 @@ def test_dynamics_follow_spec(scenario):
     best = [0.0] * B
     for joint in actions:
         out = step_with(env, td, joint)["next"]
-        utility = env.utility(out["positions"], out["tasks"])[2]  # float64: the reward is computed before the float32 cast
+        utility = env.utility(out["positions"], out["tasks"])[
+            2
+        ]  # float64: the reward is computed before the float32 cast
         for w in range(B):
             a = joint[w * N : (w + 1) * N]
             before, tasks_before = xy_list(td, w), td["tasks"][w].tolist()
@@ -310,8 +352,10 @@ def test_dynamics_follow_spec(scenario):
             assert after == resolve(before, a, L1, L2)
             assert all(0 <= x < L1 and 0 <= y < L2 for x, y in after) and len(set(after)) == N
             assert out["tasks"][w].tolist() == new_tasks(tasks_before, a)
-            assert out["moves"][w].item() == sum(p != q for p, q in zip(before, after))
-            assert out["task_switches"][w].item() == sum(p != q for p, q in zip(tasks_before, out["tasks"][w].tolist()))
+            assert out["moves"][w].item() == sum(p != q for p, q in zip(before, after, strict=True))
+            assert out["task_switches"][w].item() == sum(
+                p != q for p, q in zip(tasks_before, out["tasks"][w].tolist(), strict=True)
+            )
             total = utility[w].item()
             assert out["utility"][w].item() == pytest.approx(total, rel=1e-6, abs=1e-6)
             if options["reward"] == "best_so_far":
@@ -326,19 +370,34 @@ def test_dynamics_follow_spec(scenario):
         torch.testing.assert_close(rewards, weighted[1] - weighted[0], rtol=0, atol=1e-4)
 
 
-@pytest.mark.parametrize("grid,start,actions,end,switches", [
-    ((3, 1), [(0, 0), (1, 0)], [3, 2], [(1, 0), (0, 0)], 0),  # swap
-    ((3, 1), [(0, 0), (1, 0)], [3, 5], [(0, 0), (1, 0)], 1),  # into a UAV that stays (task action): cancelled
-    ((3, 1), [(0, 0), (1, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # a train: UAV0 follows UAV1 into the freed cell
-    ((3, 1), [(0, 0), (1, 0)], [2, 0], [(0, 0), (1, 0)], 0),  # both off the grid: both stay
-    ((3, 1), [(0, 0), (2, 0)], [3, 2], [(0, 0), (2, 0)], 0),  # both into the middle: both cancelled
-    ((3, 1), [(1, 0), (2, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # UAV1 off the grid stays, so UAV0 is cancelled
-    ((4, 1), [(1, 0), (2, 0), (3, 0)], [3, 3, 3], [(1, 0), (2, 0), (3, 0)], 0),  # a chain: cancelled over two rounds
-    ((4, 1), [(0, 0), (1, 0), (3, 0)], [3, 3, 2], [(0, 0), (1, 0), (3, 0)], 0),  # two into cell 2, then UAV0 behind
-    ((2, 2), [(0, 0), (1, 0), (1, 1)], [3, 1, 2], [(1, 0), (1, 1), (0, 1)], 0),  # a rotation with a free cell
-    ((2, 2), [(0, 0), (1, 0), (1, 1), (0, 1)], [3, 1, 2, 0], [(1, 0), (1, 1), (0, 1), (0, 0)], 0),  # a full cycle
-    ((2, 2), [(0, 0), (1, 0), (1, 1), (0, 1)], [3, 1, 2, 4], [(0, 0), (1, 0), (1, 1), (0, 1)], 0),  # a blocked cycle
-])
+@pytest.mark.parametrize(
+    "grid,start,actions,end,switches",
+    [
+        ((3, 1), [(0, 0), (1, 0)], [3, 2], [(1, 0), (0, 0)], 0),  # swap
+        ((3, 1), [(0, 0), (1, 0)], [3, 5], [(0, 0), (1, 0)], 1),  # into a UAV that stays (task action): cancelled
+        ((3, 1), [(0, 0), (1, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # a train: UAV0 follows UAV1 into the freed cell
+        ((3, 1), [(0, 0), (1, 0)], [2, 0], [(0, 0), (1, 0)], 0),  # both off the grid: both stay
+        ((3, 1), [(0, 0), (2, 0)], [3, 2], [(0, 0), (2, 0)], 0),  # both into the middle: both cancelled
+        ((3, 1), [(1, 0), (2, 0)], [3, 3], [(1, 0), (2, 0)], 0),  # UAV1 off the grid stays, so UAV0 is cancelled
+        (
+            (4, 1),
+            [(1, 0), (2, 0), (3, 0)],
+            [3, 3, 3],
+            [(1, 0), (2, 0), (3, 0)],
+            0,
+        ),  # a chain: cancelled over two rounds
+        ((4, 1), [(0, 0), (1, 0), (3, 0)], [3, 3, 2], [(0, 0), (1, 0), (3, 0)], 0),  # two into cell 2, then UAV0 behind
+        ((2, 2), [(0, 0), (1, 0), (1, 1)], [3, 1, 2], [(1, 0), (1, 1), (0, 1)], 0),  # a rotation with a free cell
+        ((2, 2), [(0, 0), (1, 0), (1, 1), (0, 1)], [3, 1, 2, 0], [(1, 0), (1, 1), (0, 1), (0, 0)], 0),  # a full cycle
+        (
+            (2, 2),
+            [(0, 0), (1, 0), (1, 1), (0, 1)],
+            [3, 1, 2, 4],
+            [(0, 0), (1, 0), (1, 1), (0, 1)],
+            0,
+        ),  # a blocked cycle
+    ],
+)
 def test_swaps_and_cancelled_moves(grid, start, actions, end, switches):
     """SPEC 2: swaps and cycles are allowed, clashing moves are cancelled (in chains) and count as no move."""
     env = UAVSpectrumEnv(batch_size=1, grid=grid, num_uavs=len(start), init_tasks="sensing")
@@ -351,7 +410,10 @@ def test_swaps_and_cancelled_moves(grid, start, actions, end, switches):
         raise AssertionError(f"no seed starts at {start}")
     out = step_with(env, td, actions)["next"]
     assert xy_list(out, 0) == end == resolve(start, actions, *grid)
-    assert out["moves"].item() == sum(p != q for p, q in zip(start, end)) and out["task_switches"].item() == switches
+    assert (
+        out["moves"].item() == sum(p != q for p, q in zip(start, end, strict=True))
+        and out["task_switches"].item() == switches
+    )
 
 
 def test_truncation_and_keep_positions():
@@ -407,7 +469,15 @@ def trajectory(env, actions_fn, steps):
     return out
 
 
-@pytest.mark.parametrize("options", [{"layout": "line"}, {"layout": "random"}, {"fading": "rayleigh"}, {"layout": "random", "fading": "rayleigh", "direct_links": True}])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"layout": "line"},
+        {"layout": "random"},
+        {"fading": "rayleigh"},
+        {"layout": "random", "fading": "rayleigh", "direct_links": True},
+    ],
+)
 def test_world_i_equals_single_world_seeded_s_plus_i(options):
     B, N, seed, steps = 5, 3, 123, 14
     acts = torch.randint(0, 6, (steps, B, N), generator=torch.Generator().manual_seed(9))
@@ -415,8 +485,8 @@ def test_world_i_equals_single_world_seeded_s_plus_i(options):
     full = trajectory(big, lambda t: acts[t], steps)
     for i in range(B):
         one = UAVSpectrumEnv(batch_size=1, grid=(4, 3), num_uavs=N, seed=seed + i, max_steps=4, **options)
-        single = trajectory(one, lambda t: acts[t, i : i + 1], steps)
-        for a, b in zip(full, single):
+        single = trajectory(one, lambda t, i=i: acts[t, i : i + 1], steps)
+        for a, b in zip(full, single, strict=True):
             assert (a[i : i + 1] == b).all(), f"world {i} differs"
         torch.testing.assert_close(big.cell_contributions[i], one.cell_contributions[0], rtol=0, atol=0)
 
@@ -425,20 +495,22 @@ def test_same_seed_same_trajectory_and_reseeding():
     acts = torch.randint(0, 6, (10, 4, 2), generator=torch.Generator().manual_seed(0))
     runs = []
     for _ in range(2):
-        env = UAVSpectrumEnv(batch_size=4, grid=(5, 5), num_uavs=2, seed=7, max_steps=3, layout="random", fading="rayleigh")
+        env = UAVSpectrumEnv(
+            batch_size=4, grid=(5, 5), num_uavs=2, seed=7, max_steps=3, layout="random", fading="rayleigh"
+        )
         runs.append(trajectory(env, lambda t: acts[t], 10))
     env.set_seed(7)
     runs.append(trajectory(env, lambda t: acts[t], 10))
     env.set_seed(8)
     other = trajectory(env, lambda t: acts[t], 10)
-    for a, b, c in zip(*runs):
+    for a, b, c in zip(*runs, strict=True):
         assert (a == b).all() and (a == c).all()
-    assert not all((a == o).all() for a, o in zip(runs[0], other))
+    assert not all((a == o).all() for a, o in zip(runs[0], other, strict=True))
 
 
 @pytest.mark.parametrize("layout", ["line", "random"])
 def test_partial_reset_touches_only_masked_worlds(layout):
-    """"_reset" re-initialises the masked worlds (exactly as a lone world would) and leaves the others alone."""
+    """ "_reset" re-initialises the masked worlds (exactly as a lone world would) and leaves the others alone."""
     B, N, seed = 6, 3, 2
     acts = torch.randint(0, 6, (3, B, N), generator=torch.Generator().manual_seed(3))
     env = UAVSpectrumEnv(batch_size=B, grid=(5, 4), num_uavs=N, seed=seed, max_steps=5, layout=layout)
@@ -472,15 +544,25 @@ def test_partial_reset_touches_only_masked_worlds(layout):
     assert stepped["next", "truncated"][:, 0].equal(keep)
 
 
-@pytest.mark.parametrize("options", [{}, {"preset": "reference_code"}, {"direct_links": True, "lease_rule": False}, {"state_includes_tasks": True, "reward": "best_so_far"}, {"fading": "rayleigh"}])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"preset": "reference_code"},
+        {"direct_links": True, "lease_rule": False},
+        {"state_includes_tasks": True, "reward": "best_so_far"},
+        {"fading": "rayleigh"},
+    ],
+)
 def test_two_uav_pair_tables_agree_with_the_generic_path(options):
-    """Two UAVs on a fixed layout read observation, state and rates from cached pair tables; the generic path must agree."""
+    """Two UAVs on a fixed layout read observation, state and rates from cached pair tables; the generic path must
+    agree."""
     acts = torch.randint(0, 6, (12, 6, 2), generator=torch.Generator().manual_seed(4))
     fast = UAVSpectrumEnv(batch_size=6, grid=(4, 3), num_uavs=2, seed=8, max_steps=5, **options)
     generic = UAVSpectrumEnv(batch_size=6, grid=(4, 3), num_uavs=2, seed=8, max_steps=5, **options)
     assert fast._pair_obs is not None
     generic._pair_obs = generic._pair_state = generic._pair_rates = None  # white box: force the generic assembly
-    for a, b in zip(trajectory(fast, lambda t: acts[t], 12), trajectory(generic, lambda t: acts[t], 12)):
+    for a, b in zip(trajectory(fast, lambda t: acts[t], 12), trajectory(generic, lambda t: acts[t], 12), strict=True):
         assert (a == b).all()
 
 
@@ -497,14 +579,19 @@ def test_rayleigh_power_gain_is_exp1(measured):
         powers = dict(p_pt=small, p_s=small, p_u=huge)
     else:
         powers = dict(p_pt=huge, p_s=huge, p_u=small)
-    env = UAVSpectrumEnv(batch_size=1024, grid=(L1, L2), num_uavs=2, fading="rayleigh", seed=2024, noise=noise, max_steps=10**6, **powers)
+    env = UAVSpectrumEnv(
+        batch_size=1024, grid=(L1, L2), num_uavs=2, fading="rayleigh", seed=2024, noise=noise, max_steps=10**6, **powers
+    )
     PT, PR, S, E = line_nodes(L1, L2, h)
     td = env.reset()
     xs = {"pu": [], "se": []}
     for _ in range(60):
         td = step_with(env, td, [[5, 4]] * 1024)
         out = td["next"]
-        for w_key, r_key, node in (("pu", "r_pu", PT if measured == "source" else PR), ("se", "r_se", S if measured == "source" else E)):
+        for w_key, r_key, node in (
+            ("pu", "r_pu", PT if measured == "source" else PR),
+            ("se", "r_se", S if measured == "source" else E),
+        ):
             uav = 0 if w_key == "pu" else 1
             xy = out["positions"][:, uav].double()
             d2 = ((xy[:, 0] - node[0]) ** 2 + (xy[:, 1] - node[1]) ** 2 + (h - node[2]) ** 2) * cell**2
@@ -535,8 +622,19 @@ def test_rayleigh_fades_direct_links():
     """
     L1, noise = 2, 1e-9
     p_pt, p_s = 1e-7, 4e-7  # k = 1e-7 / 20^2 / 1e-9 = 0.25 and 4e-7 / 40^2 / 1e-9 = 0.25
-    env = UAVSpectrumEnv(batch_size=1024, grid=(L1, 1), num_uavs=2, fading="rayleigh", direct_links=True, seed=77,
-                         p_pt=p_pt, p_s=p_s, p_u=1e-30, noise=noise, max_steps=10**6)
+    env = UAVSpectrumEnv(
+        batch_size=1024,
+        grid=(L1, 1),
+        num_uavs=2,
+        fading="rayleigh",
+        direct_links=True,
+        seed=77,
+        p_pt=p_pt,
+        p_s=p_s,
+        p_u=1e-30,
+        noise=noise,
+        max_steps=10**6,
+    )
     k_pu, k_se = p_pt / (L1 * 10.0) ** 2 / noise, p_s / (2 * L1 * 10.0) ** 2 / noise
     td = env.reset()
     xs = {"r_pu": [], "r_se": []}
@@ -565,14 +663,17 @@ def test_fading_none_is_deterministic_and_utility_ignores_fading():
 
 
 # ----------------------------------------------------------------- TorchRL integration
-@pytest.mark.parametrize("B,grid,N,preset,options", [
-    (1, (1, 1), 1, "paper", {}),
-    (1, (1, 3), 2, "paper", {}),
-    (3, (2, 2), 4, "paper", {"layout": "random"}),
-    (4, (6, 6), 2, "paper", {"fading": "rayleigh", "state_includes_tasks": True}),
-    (2, (3, 3), 2, "reference_code", {}),
-    (2, (20, 20), 10, "paper", {}),  # no state_index: 400^10 does not fit int64
-])
+@pytest.mark.parametrize(
+    "B,grid,N,preset,options",
+    [
+        (1, (1, 1), 1, "paper", {}),
+        (1, (1, 3), 2, "paper", {}),
+        (3, (2, 2), 4, "paper", {"layout": "random"}),
+        (4, (6, 6), 2, "paper", {"fading": "rayleigh", "state_includes_tasks": True}),
+        (2, (3, 3), 2, "reference_code", {}),
+        (2, (20, 20), 10, "paper", {}),  # no state_index: 400^10 does not fit int64
+    ],
+)
 def test_check_env_specs(B, grid, N, preset, options):
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=N, preset=preset, max_steps=5, **options)
     check_env_specs(env, seed=0)
@@ -583,7 +684,9 @@ def test_rollout_shapes_and_transforms():
     B, N, T = 3, 2, 7
     env = TransformedEnv(
         UAVSpectrumEnv(batch_size=B, grid=(3, 3), num_uavs=N, max_steps=5),
-        Compose(ActionMask(action_key=("agents", "action"), mask_key=("agents", "action_mask")), StepCounter(), RewardSum()),
+        Compose(
+            ActionMask(action_key=("agents", "action"), mask_key=("agents", "action_mask")), StepCounter(), RewardSum()
+        ),
     )
     check_env_specs(env, seed=0)
     td = env.rollout(T, break_when_any_done=False)
@@ -612,7 +715,9 @@ def test_collector_with_partial_resets():
         td.set(("agents", "action"), masked_random_actions(td, gen))
         return td
 
-    collector = Collector(env, policy, frames_per_batch=B * 10, total_frames=B * 20, auto_register_policy_transforms=False)
+    collector = Collector(
+        env, policy, frames_per_batch=B * 10, total_frames=B * 20, auto_register_policy_transforms=False
+    )
     base._s.steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
     batches = [b.clone() for b in collector]
     collector.shutdown()
@@ -632,7 +737,9 @@ def test_collector_with_partial_resets():
         for t in ends:
             start = max([e + 1 for e in ends if e < t], default=None)
             if start is not None:
-                torch.testing.assert_close(data["next", "episode_reward"][w, t, 0], data["next", "reward"][w, start : t + 1, 0].sum())
+                torch.testing.assert_close(
+                    data["next", "episode_reward"][w, t, 0], data["next", "reward"][w, start : t + 1, 0].sum()
+                )
 
 
 # ----------------------------------------------------------------- bad input and numerical hygiene
@@ -661,11 +768,19 @@ def test_step_before_reset_is_a_clear_error():
     env.step(TensorDict({("agents", "action"): torch.zeros(2, 2, dtype=torch.long)}, batch_size=[2]))
 
 
-@pytest.mark.parametrize("grid,N,options", [
-    ((1, 1), 1, {}), ((1, 7), 3, {}), ((7, 1), 7, {}), ((1, 5), 2, {"layout": "random"}),
-    ((3, 3), 9, {"layout": "random", "fading": "rayleigh", "direct_links": True}), ((2, 9), 4, {"layout": "random"}),
-    ((1, 1), 1, {"preset": "reference_code"}), ((1, 4), 2, {"preset": "reference_code", "fading": "rayleigh"}),
-])
+@pytest.mark.parametrize(
+    "grid,N,options",
+    [
+        ((1, 1), 1, {}),
+        ((1, 7), 3, {}),
+        ((7, 1), 7, {}),
+        ((1, 5), 2, {"layout": "random"}),
+        ((3, 3), 9, {"layout": "random", "fading": "rayleigh", "direct_links": True}),
+        ((2, 9), 4, {"layout": "random"}),
+        ((1, 1), 1, {"preset": "reference_code"}),
+        ((1, 4), 2, {"preset": "reference_code", "fading": "rayleigh"}),
+    ],
+)
 def test_outputs_are_finite(grid, N, options):
     env = UAVSpectrumEnv(batch_size=16, grid=grid, num_uavs=N, max_steps=4, seed=17, **options)
     gen = torch.Generator().manual_seed(0)

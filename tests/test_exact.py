@@ -1,4 +1,5 @@
 """The yardstick: exact optimal control, lower bounds, the oracle planner and the evaluation's new metrics."""
+
 from __future__ import annotations
 
 import functools
@@ -30,17 +31,19 @@ class PlainModel:
         self.env = UAVSpectrumEnv(grid=grid, num_uavs=num_uavs, **options)
         self.grid, self.N = grid, num_uavs
         cells = list(itertools.product(range(grid[0]), range(grid[1])))
-        self.configs = [(p, t) for p in itertools.permutations(cells, num_uavs) for t in itertools.product((0, 1), repeat=num_uavs)]
+        self.configs = [
+            (p, t) for p in itertools.permutations(cells, num_uavs) for t in itertools.product((0, 1), repeat=num_uavs)
+        ]
         pos = torch.tensor([p for p, _ in self.configs]).unsqueeze(0)
         tasks = torch.tensor([t for _, t in self.configs]).unsqueeze(0)
-        self.u = dict(zip(self.configs, self.env.utility(pos, tasks)[2][0].tolist()))
+        self.u = dict(zip(self.configs, self.env.utility(pos, tasks)[2][0].tolist(), strict=True))
         joints = list(itertools.product(range(6), repeat=num_uavs))
         self.next = {c: [(j, self.step(c, j)) for j in joints] for c in self.configs}
 
     def step(self, config, joint):
         """The next configuration, or None for an invalid joint action (off the grid or two UAVs in one cell)."""
         (positions, tasks), new_pos, new_tasks = config, [], []
-        for (x, y), task, a in zip(positions, tasks, joint):
+        for (x, y), task, a in zip(positions, tasks, joint, strict=True):
             if a < 4:
                 x, y = x + MOVES[a][0], y + MOVES[a][1]
                 if not (0 <= x < self.grid[0] and 0 <= y < self.grid[1]):
@@ -66,8 +69,17 @@ class PlainModel:
     def q_star(self, gamma, sweeps=200):
         values = dict.fromkeys(self.configs, 0.0)
         for _ in range(sweeps):
-            values = {c: max(self.u[n] - self.u[c] + gamma * values[n] for _, n in self.successors(c) if n is not None) for c in self.configs}
-        return {c: {j: (self.u[n] - self.u[c] + gamma * values[n]) if n is not None else -math.inf for j, n in self.successors(c)} for c in self.configs}
+            values = {
+                c: max(self.u[n] - self.u[c] + gamma * values[n] for _, n in self.successors(c) if n is not None)
+                for c in self.configs
+            }
+        return {
+            c: {
+                j: (self.u[n] - self.u[c] + gamma * values[n]) if n is not None else -math.inf
+                for j, n in self.successors(c)
+            }
+            for c in self.configs
+        }
 
     def solver_index(self, space, config):
         positions, tasks = config
@@ -85,7 +97,9 @@ def test_finite_horizon_values_equal_brute_force(grid, N):
     for horizon, gamma in ((1, 0.9), (4, 0.9), (5, 0.3), (3, 1.0)):
         v = optimal_values(space, u, gamma, horizon)[0]
         for config in plain.configs:
-            assert v[plain.solver_index(space, config)].item() == pytest.approx(plain.best_return(config, horizon, gamma), rel=1e-12, abs=1e-12)
+            assert v[plain.solver_index(space, config)].item() == pytest.approx(
+                plain.best_return(config, horizon, gamma), rel=1e-12, abs=1e-12
+            )
 
 
 @pytest.mark.parametrize("grid,N", TINY)
@@ -100,7 +114,7 @@ def test_q_star_equals_brute_force(grid, N, gamma):
     tasks = torch.tensor([t for _, t in plain.configs]).unsqueeze(0)
     q = space.q_values(u, values, gamma, cells_of(positions, grid[0]), tasks)[0]
     decode = [tuple((j // 6**i) % 6 for i in range(N)) for j in range(6**N)]  # joint action j = sum_i a_i 6^i
-    for row, config in zip(q, plain.configs):
+    for row, config in zip(q, plain.configs, strict=True):
         want = torch.tensor([expected[config][joint] for joint in decode], dtype=torch.float64)
         torch.testing.assert_close(row, want, rtol=1e-10, atol=1e-10)
 
@@ -130,7 +144,13 @@ def test_bfs_distances_by_hand():
     assert min_steps(one, target)[0, one.index(torch.tensor([0]), torch.tensor([0]))].item() == 3
 
 
-BOUND_CASES = [((6, 6), 2, {}), ((6, 6), 3, {}), ((4, 4), 3, {"preset": "reference_code"}), ((5, 4), 3, {"layout": "random"}), ((3, 3), 4, {})]
+BOUND_CASES = [
+    ((6, 6), 2, {}),
+    ((6, 6), 3, {}),
+    ((4, 4), 3, {"preset": "reference_code"}),
+    ((5, 4), 3, {"layout": "random"}),
+    ((3, 3), 4, {}),
+]
 
 
 @pytest.mark.parametrize("grid,N,options", BOUND_CASES)
@@ -149,7 +169,9 @@ def test_bounds_never_exceed_the_exact_minimum(grid, N, options):
     for level in range(len(LEVELS)):
         exact = min_steps(space, u >= levels[:layouts, level : level + 1])[torch.arange(B) % layouts, k]
         assert (relaxed[:, level] <= exact).all()
-    optimal = [optimal_configurations(env.cell_contributions[w], env.direct[w], env.cfg, float(u_star[w])) for w in range(B)]
+    optimal = [
+        optimal_configurations(env.cell_contributions[w], env.direct[w], env.cfg, float(u_star[w])) for w in range(B)
+    ]
     assignment = assignment_min_steps(cells, tasks, [c for c, _ in optimal], [t for _, t in optimal], grid)
     assert (assignment <= exact).all()
     assert (torch.maximum(assignment, relaxed[:, -1]) == exact).double().mean() >= 0.9  # and nearly always tight
@@ -168,7 +190,9 @@ def test_every_optimal_configuration_is_listed(grid, N, options):
         assert sorted(space.index(cells, tasks).tolist()) == expected.tolist()
 
 
-@pytest.mark.parametrize("grid,N,options", [((6, 6), 2, {}), ((6, 6), 3, {}), ((10, 10), 6, {}), ((8, 8), 4, {"layout": "random"})])
+@pytest.mark.parametrize(
+    "grid,N,options", [((6, 6), 2, {}), ((6, 6), 3, {}), ((10, 10), 6, {}), ((8, 8), 4, {"layout": "random"})]
+)
 def test_oracle_plans_are_valid_and_reach_the_optimum(grid, N, options):
     B, H = 24, 2 * sum(grid) + 4
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=N, max_steps=H, seed=3, **options)
@@ -196,7 +220,9 @@ def test_value_iteration_policy_is_the_exact_greedy_policy():
             valid = want > -math.inf
             torch.testing.assert_close(row[valid], want[valid], rtol=1e-10, atol=1e-10)
             best = want.max()
-            assert set((row == row[valid].max()).logical_and(valid).nonzero().flatten().tolist()) <= set(((want - best).abs() <= 1e-9).nonzero().flatten().tolist())
+            assert set((row == row[valid].max()).logical_and(valid).nonzero().flatten().tolist()) <= set(
+                ((want - best).abs() <= 1e-9).nonzero().flatten().tolist()
+            )
             by_location.setdefault(c0 + 9 * c1, []).append(want.masked_fill(~valid, 0.0))
         for row, qs in by_location.items():  # the paper's state: Q* averaged over the 4 task vectors a start deals
             torch.testing.assert_close(location_only[row], torch.stack(qs).mean(0), rtol=1e-10, atol=1e-10)
@@ -212,7 +238,11 @@ def test_yardstick_metrics_on_a_hand_made_trajectory():
         ],
         dtype=torch.float64,
     )
-    references = {"best_return": torch.tensor([5.0, 0.0, 9.0], dtype=torch.float64), "min_steps": torch.tensor([[1, 1, 1], [0, 0, 0], [1, 2, 2]]), "exact": True}
+    references = {
+        "best_return": torch.tensor([5.0, 0.0, 9.0], dtype=torch.float64),
+        "min_steps": torch.tensor([[1, 1, 1], [0, 0, 0], [1, 2, 2]]),
+        "exact": True,
+    }
     m = yardstick_metrics(utility, u_star, references, gamma=0.5)
     returns = [4.95 + 0.5 * 0.05, 0.0, 1.0 + 0.5 * 1.0 + 0.25 * 6.0]
     assert m["eval/return"] == pytest.approx(sum(returns) / 3)
@@ -220,7 +250,9 @@ def test_yardstick_metrics_on_a_hand_made_trajectory():
     assert m["eval/reach_99"] == pytest.approx(2 / 3) and m["eval/reach_optimum"] == pytest.approx(2 / 3)
     assert m["eval/steps_to_99"] == pytest.approx(0.5)  # 1 and 0
     assert m["eval/steps_to_optimum"] == pytest.approx(1.0)  # 2 and 0
-    assert m["eval/step_ratio_99"] == pytest.approx(1.0) and m["eval/step_ratio_optimum"] == pytest.approx(2.0)  # starts needing >= 1 step
+    assert m["eval/step_ratio_99"] == pytest.approx(1.0) and m["eval/step_ratio_optimum"] == pytest.approx(
+        2.0
+    )  # starts needing >= 1 step
     assert m["eval/min_steps_to_optimum"] == pytest.approx(0.5)
     assert m["eval/end_at_optimum"] == pytest.approx(2 / 3) and m["eval/min_steps_exact"] == 1.0
 
@@ -236,7 +268,11 @@ def test_fading_levels_use_mean_channels():
     cfg = make_config("paper", grid=(6, 6), num_uavs=2, fading="rayleigh")
     m = evaluate(OraclePolicy(cfg), cfg, num_starts=16)
     # faded utilities would almost never equal U*; the configuration's mean-channel utility does
-    assert m["eval/reach_optimum"] == 1.0 and m["eval/end_at_optimum"] == 1.0 and m["eval/return_ratio"] == pytest.approx(1.0, abs=0.02)
+    assert (
+        m["eval/reach_optimum"] == 1.0
+        and m["eval/end_at_optimum"] == 1.0
+        and m["eval/return_ratio"] == pytest.approx(1.0, abs=0.02)
+    )
 
 
 def test_solver_too_large_is_one_clear_line():
@@ -244,14 +280,26 @@ def test_solver_too_large_is_one_clear_line():
         ConfigurationSpace((10, 10), 4)
 
 
-@pytest.mark.parametrize("gamma,horizon,name", [(0, None, "eval.gamma=0"), (1.5, None, "eval.gamma=1.5"), (0.9, 0, "eval.horizon=0"), ("x", None, "eval.gamma='x'")])
+@pytest.mark.parametrize(
+    "gamma,horizon,name",
+    [
+        (0, None, "eval.gamma=0"),
+        (1.5, None, "eval.gamma=1.5"),
+        (0.9, 0, "eval.horizon=0"),
+        ("x", None, "eval.gamma='x'"),
+    ],
+)
 def test_bad_eval_settings_name_the_setting(gamma, horizon, name):
     with pytest.raises(ValueError, match=f"^{re.escape(name)} is invalid: [^\n]*$"):
         check_eval_settings(gamma, horizon, 64)
 
 
 def test_bad_eval_setting_on_the_command_line_is_one_line(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "uavrl.train", "eval.gamma=0", f"run_dir={tmp_path / 'r'}"], capture_output=True, text=True)
+    run = subprocess.run(
+        [sys.executable, "-m", "uavrl.train", "eval.gamma=0", f"run_dir={tmp_path / 'r'}"],
+        capture_output=True,
+        text=True,
+    )
     assert run.returncode != 0 and "eval.gamma=0 is invalid" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "r").exists()
 

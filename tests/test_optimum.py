@@ -1,4 +1,5 @@
 """The exact optimum U* (SPEC 9) and the joint-action tables against plain-Python searches."""
+
 from __future__ import annotations
 
 import itertools
@@ -11,17 +12,26 @@ from uavrl.envs import UAVSpectrumEnv, decode_joint_actions, joint_targets
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
 
 CASES = [
-    ((2, 2), 1, "paper", {}), ((2, 2), 2, "paper", {"layout": "random"}), ((2, 2), 4, "paper", {}),
-    ((3, 2), 3, "paper", {"layout": "random", "direct_links": True}), ((1, 5), 2, "paper", {"layout": "random"}),
-    ((3, 3), 2, "paper", {"lease_rule": False, "layout": "random"}), ((3, 3), 4, "paper", {"layout": "random"}),
-    ((4, 3), 3, "paper", {"layout": "random", "p_pt": 0.001}), ((4, 4), 2, "paper", {"direct_links": True}),
-    ((5, 2), 5, "paper", {"layout": "random"}), ((2, 2), 2, "reference_code", {}), ((3, 3), 3, "reference_code", {}),
-    ((4, 3), 4, "reference_code", {}), ((4, 4), 3, "paper", {"layout": "random", "alpha": 3.0, "beta1": 2.0}),
+    ((2, 2), 1, "paper", {}),
+    ((2, 2), 2, "paper", {"layout": "random"}),
+    ((2, 2), 4, "paper", {}),
+    ((3, 2), 3, "paper", {"layout": "random", "direct_links": True}),
+    ((1, 5), 2, "paper", {"layout": "random"}),
+    ((3, 3), 2, "paper", {"lease_rule": False, "layout": "random"}),
+    ((3, 3), 4, "paper", {"layout": "random"}),
+    ((4, 3), 3, "paper", {"layout": "random", "p_pt": 0.001}),
+    ((4, 4), 2, "paper", {"direct_links": True}),
+    ((5, 2), 5, "paper", {"layout": "random"}),
+    ((2, 2), 2, "reference_code", {}),
+    ((3, 3), 3, "reference_code", {}),
+    ((4, 3), 4, "reference_code", {}),
+    ((4, 4), 3, "paper", {"layout": "random", "alpha": 3.0, "beta1": 2.0}),
 ]
 
 
 def brute_force(env):
-    """Plain enumeration with ``env.utility`` (checked against hand-worked rates in test_env): every set of cells, every task vector."""
+    """Plain enumeration with ``env.utility`` (checked against hand-worked rates in test_env): every set of cells,
+    every task vector."""
     L1, L2 = env.cfg.grid
     N = env.num_uavs
     cells = list(itertools.product(range(L1), range(L2)))
@@ -93,7 +103,7 @@ def test_ten_uavs_on_twenty_by_twenty():
 
 def python_valid(cells_xy, joint, L1, L2):
     targets = []
-    for (x, y), a in zip(cells_xy, joint):
+    for (x, y), a in zip(cells_xy, joint, strict=True):
         if a < 4:
             x, y = x + MOVES[a][0], y + MOVES[a][1]
         if not (0 <= x < L1 and 0 <= y < L2):
@@ -102,7 +112,9 @@ def python_valid(cells_xy, joint, L1, L2):
     return len(set(targets)) == len(targets)
 
 
-@pytest.mark.parametrize("grid,N", [((1, 1), 1), ((1, 3), 2), ((3, 3), 1), ((3, 3), 2), ((2, 2), 3), ((4, 3), 3), ((2, 2), 4)])
+@pytest.mark.parametrize(
+    "grid,N", [((1, 1), 1), ((1, 3), 2), ((3, 3), 1), ((3, 3), 2), ((2, 2), 3), ((4, 3), 3), ((2, 2), 4)]
+)
 def test_joint_action_mask_matches_python(grid, N):
     L1, L2 = grid
     B = 8

@@ -1,4 +1,5 @@
 """Tabular team Q-learning: the update rule, both loops, learning, the TorchRL policy."""
+
 import math
 
 import pytest
@@ -31,7 +32,15 @@ def test_q_update_matches_hand_worked_step():
 
 
 @pytest.mark.parametrize("shared", [False, True])
-@pytest.mark.parametrize("options", [dict(preset="paper"), dict(preset="paper", state_includes_tasks=True), dict(preset="reference_code"), dict(preset="paper", reset_positions="keep", grid=(2, 3), num_uavs=3)])
+@pytest.mark.parametrize(
+    "options",
+    [
+        dict(preset="paper"),
+        dict(preset="paper", state_includes_tasks=True),
+        dict(preset="reference_code"),
+        dict(preset="paper", reset_positions="keep", grid=(2, 3), num_uavs=3),
+    ],
+)
 def test_numba_and_torch_loops_give_identical_tables(shared, options):
     options = {"grid": (3, 3), "num_uavs": 2, **options}
     cfg = make_config(options.pop("preset"), max_steps=150, **options)
@@ -94,7 +103,13 @@ def test_policy_runs_in_rollout_and_collector():
     env = UAVSpectrumEnv(batch_size=4, config=cfg)
     rollout = env.rollout(5, policy)
     assert rollout["agents", "action"].shape == (4, 5, 2)
-    collector = Collector(UAVSpectrumEnv(batch_size=4, config=cfg), policy, frames_per_batch=40, total_frames=80, auto_register_policy_transforms=False)
+    collector = Collector(
+        UAVSpectrumEnv(batch_size=4, config=cfg),
+        policy,
+        frames_per_batch=40,
+        total_frames=80,
+        auto_register_policy_transforms=False,
+    )
     batches = [b for b in collector]
     collector.shutdown()
     assert len(batches) == 2 and batches[0]["next", "done"].any()

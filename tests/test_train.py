@@ -1,52 +1,53 @@
 """The training command: run directory contents, resume, evaluation of a checkpoint, errors."""
+
 import json
 import subprocess
 import sys
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 import uavrl.agents.tabular as tabular
-from uavrl.config import config_dir
 from uavrl.evaluate import evaluate_checkpoint
 from uavrl.train import train
 
-SMALL = ["env.grid=[3,3]", "train.episodes=6", "train.steps_per_episode=100", "train.runs=2", "train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
+SMALL = [
+    "env.grid=[3,3]",
+    "train.episodes=6",
+    "train.steps_per_episode=100",
+    "train.runs=2",
+    "train.checkpoint_every=2",
+    "eval.num_starts=8",
+    "progress=false",
+]
 
 
-def make_cfg(*overrides):
-    with initialize_config_dir(config_dir=config_dir(), version_base=None):
-        return compose(config_name="config", overrides=list(overrides))
-
-
-def test_run_directory_has_everything(tmp_path):
+def test_run_directory_has_everything(tmp_path, compose_cfg):
+    make_cfg = compose_cfg
     run_dir = train(make_cfg(*SMALL, f"run_dir={tmp_path / 'run'}"))
     assert {"checkpoint.pt", "config.yaml", "metrics.json"} <= {p.name for p in run_dir.iterdir()}
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert 0 < metrics["eval/optimality"] <= 1 and metrics["env_steps"] == 600
     events = EventAccumulator(str(run_dir)).Reload()
     tags = set(events.Tags()["scalars"])
-    assert {"train/sum_utility", "train/sum_r_pu", "train/sum_r_se", "train/task_switches", "train/moves", "train/steps_to_90", "eval/optimality"} <= tags
+    assert {
+        "train/sum_utility",
+        "train/sum_r_pu",
+        "train/sum_r_se",
+        "train/task_switches",
+        "train/moves",
+        "train/steps_to_90",
+        "eval/optimality",
+    } <= tags
     assert len(events.Scalars("train/sum_utility")) == 6
 
 
-def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path, monkeypatch):
+def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path, compose_cfg, interrupt_at):
+    make_cfg = compose_cfg
     whole = train(make_cfg(*SMALL, f"run_dir={tmp_path / 'whole'}"))
-    original = tabular.TabularAgent.train_iteration
-    calls = {"n": 0}
-
-    def dies_at_five(self):
-        calls["n"] += 1
-        if calls["n"] == 5:
-            raise KeyboardInterrupt
-        return original(self)
-
-    monkeypatch.setattr(tabular.TabularAgent, "train_iteration", dies_at_five)
-    with pytest.raises(KeyboardInterrupt):
+    with interrupt_at(tabular.TabularAgent, 5), pytest.raises(KeyboardInterrupt):
         train(make_cfg(*SMALL, f"run_dir={tmp_path / 'killed'}"))
-    monkeypatch.setattr(tabular.TabularAgent, "train_iteration", original)
     assert torch.load(tmp_path / "killed" / "checkpoint.pt", weights_only=False)["iteration"] == 4
     train(make_cfg(*SMALL, f"resume={tmp_path / 'killed'}"), overrides=[f"resume={tmp_path / 'killed'}"])
     a = torch.load(whole / "checkpoint.pt", weights_only=False)["agent"]["q"]
@@ -54,7 +55,8 @@ def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path, monkeypatch):
     assert torch.equal(a, b)
 
 
-def test_resume_refuses_conflicting_overrides(tmp_path):
+def test_resume_refuses_conflicting_overrides(tmp_path, compose_cfg):
+    make_cfg = compose_cfg
     train(make_cfg(*SMALL, f"run_dir={tmp_path / 'r'}"))
     with pytest.raises(ValueError, match="differs from the saved run"):
         train(make_cfg(*SMALL, "seed=3", f"resume={tmp_path / 'r'}"), overrides=["seed=3", f"resume={tmp_path / 'r'}"])
@@ -62,7 +64,8 @@ def test_resume_refuses_conflicting_overrides(tmp_path):
         train(make_cfg(*SMALL, f"resume={tmp_path / 'nothing'}"))
 
 
-def test_evaluate_a_checkpoint(tmp_path):
+def test_evaluate_a_checkpoint(tmp_path, compose_cfg):
+    make_cfg = compose_cfg
     run_dir = train(make_cfg(*SMALL, f"run_dir={tmp_path / 'r'}"))
     metrics = evaluate_checkpoint(make_cfg(f"checkpoint={run_dir}", "eval.num_starts=8"))
     saved = json.loads((run_dir / "metrics.json").read_text())
@@ -81,7 +84,11 @@ def test_evaluate_a_checkpoint(tmp_path):
     ],
 )
 def test_bad_overrides_fail_with_one_line(override, message, tmp_path):
-    result = subprocess.run([sys.executable, "-m", "uavrl.train", *override.split(), "progress=false", f"run_dir={tmp_path}"], capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "uavrl.train", *override.split(), "progress=false", f"run_dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+    )
     assert result.returncode != 0
     assert message in result.stderr
     assert result.stderr.strip().count("\n") == 0, result.stderr

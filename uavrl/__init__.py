@@ -23,5 +23,7 @@ def load_policy(run_dir, device="cpu", run: int = 0):
     agent, cfg = load_agent(run_dir, device)
     policies = agent.policies()
     if not 0 <= run < len(policies):
-        raise ValueError(f"run={run} is invalid: this run directory holds {len(policies)} trained run(s), 0 to {len(policies) - 1}")
+        raise ValueError(
+            f"run={run} is invalid: this run directory holds {len(policies)} trained run(s), 0 to {len(policies) - 1}"
+        )
     return policies[run], model_config(cfg)

@@ -6,6 +6,7 @@ a copy cut short, a stray edit) still leaves a readable one.  Reading tries the
 newest first and says which files it skipped and why.  Only the standard
 library is imported here; torch is imported when a checkpoint is read or written.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -5,6 +5,7 @@ override) ends the command with ``error: <one line>`` on stderr and exit
 status 1, never a traceback.  Hydra's own flags (``--help``, ``--cfg job``,
 ``--multirun``, ...) go to Hydra's command line unchanged.
 """
+
 from __future__ import annotations
 
 import functools

@@ -1,4 +1,5 @@
 """Where the Hydra configs live and how a Hydra config becomes a model config (standard library and omegaconf only)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,7 +27,8 @@ def config_dir() -> str:
 
 
 def model_config(cfg: DictConfig) -> ModelConfig:
-    """The :class:`ModelConfig` of a run: ``cfg.env`` options (null: the preset's value), episode length ``cfg.train.steps_per_episode``."""
+    """The :class:`ModelConfig` of a run: ``cfg.env`` options (null: the preset's value), episode length
+    ``cfg.train.steps_per_episode``."""
     options = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if v is not None}
     options.pop("name", None)
     preset = options.pop("preset", "paper")

@@ -5,6 +5,7 @@ readable checkpoint, or the file given), runs the shared greedy evaluation
 (``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), prints
 the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 """
+
 from __future__ import annotations
 
 import json
@@ -17,8 +18,8 @@ from uavrl.checkpoints import CheckpointError, load_checkpoint
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.io import save_json
-from uavrl.train import eval_settings
 from uavrl.settings import RUN_SETTINGS, check
+from uavrl.train import eval_settings
 
 
 def check_settings(cfg: DictConfig) -> None:

@@ -30,14 +30,14 @@ Example:
     >>> 0 < metrics["eval/optimality"] <= 1, metrics["eval/min_steps_exact"]
     (True, 1.0)
 """
+
 from __future__ import annotations
 
 import functools
 
 import torch
 
-from uavrl.envs import ModelConfig, UAVSpectrumEnv
-from uavrl.envs import exact
+from uavrl.envs import ModelConfig, UAVSpectrumEnv, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
 
@@ -57,7 +57,9 @@ def check_settings(gamma, horizon, num_starts) -> None:
     if not (isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and 0 < gamma <= 1):
         raise ValueError(f"eval.gamma={gamma!r} is invalid: the yardstick's discount must lie in (0, 1]")
     if horizon is not None and not (isinstance(horizon, int) and not isinstance(horizon, bool) and horizon >= 1):
-        raise ValueError(f"eval.horizon={horizon!r} is invalid: give a whole number of steps >= 1, or null for the default")
+        raise ValueError(
+            f"eval.horizon={horizon!r} is invalid: give a whole number of steps >= 1, or null for the default"
+        )
     if not (isinstance(num_starts, int) and not isinstance(num_starts, bool) and num_starts >= 1):
         raise ValueError(f"eval.num_starts={num_starts!r} is invalid: give a whole number of starts >= 1")
 
@@ -110,12 +112,20 @@ def start_references(env: UAVSpectrumEnv, start, u_star: torch.Tensor, horizon: 
         world = torch.arange(B, device=env.device) if per_world else torch.zeros(B, dtype=torch.long, device=env.device)
         start_index = space.index(cells, tasks)
         best_return = exact.optimal_values(space, potential, gamma, horizon)[world, start_index]
-        fewest = [exact.min_steps(space, potential >= thresholds[tables, level, None])[world, start_index].long() for level in range(len(LEVELS))]
+        fewest = [
+            exact.min_steps(space, potential >= thresholds[tables, level, None])[world, start_index].long()
+            for level in range(len(LEVELS))
+        ]
         return {"best_return": best_return, "min_steps": torch.stack(fewest, -1), "exact": True}
     fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon)
-    optimal = [optimal_configurations(contributions[w], direct[w], cfg, float(u_star[w])) for w in range(1 if cfg.layout != "random" else B)]
+    optimal = [
+        optimal_configurations(contributions[w], direct[w], cfg, float(u_star[w]))
+        for w in range(1 if cfg.layout != "random" else B)
+    ]
     optimal = optimal * B if len(optimal) == 1 else optimal
-    assignment = assignment_min_steps(cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], cfg.grid)
+    assignment = assignment_min_steps(
+        cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], cfg.grid
+    )
     fewest[:, -1] = torch.maximum(fewest[:, -1], assignment.to(fewest.device))
     return {"best_return": None, "min_steps": fewest, "exact": False}
 
@@ -145,7 +155,16 @@ def yardstick_metrics(utility: torch.Tensor, u_star: torch.Tensor, references: d
 
 
 @torch.no_grad()
-def evaluate(policy, cfg: ModelConfig, *, num_starts: int = 64, horizon: int | None = None, seed: int = EVAL_SEED, device="cpu", gamma: float = DEFAULT_GAMMA) -> dict[str, float]:
+def evaluate(
+    policy,
+    cfg: ModelConfig,
+    *,
+    num_starts: int = 64,
+    horizon: int | None = None,
+    seed: int = EVAL_SEED,
+    device="cpu",
+    gamma: float = DEFAULT_GAMMA,
+) -> dict[str, float]:
     """Greedy rollouts of ``policy`` from ``num_starts`` fixed, seeded starts, measured by the yardstick.
 
     ``policy`` is any TorchRL policy for :class:`UAVSpectrumEnv` (reads the
@@ -180,7 +199,15 @@ _REFERENCE_CACHE: dict = {}
 
 def _references(env, start, u_star, horizon, gamma) -> dict:
     """:func:`start_references`, kept for the last few settings (every run of an agent shares the starts)."""
-    key = (env.cfg, env.num_worlds, horizon, gamma, str(env.device), start["positions"].cpu().numpy().tobytes(), start["tasks"].cpu().numpy().tobytes())
+    key = (
+        env.cfg,
+        env.num_worlds,
+        horizon,
+        gamma,
+        str(env.device),
+        start["positions"].cpu().numpy().tobytes(),
+        start["tasks"].cpu().numpy().tobytes(),
+    )
     if key not in _REFERENCE_CACHE:
         if len(_REFERENCE_CACHE) >= 4:
             _REFERENCE_CACHE.pop(next(iter(_REFERENCE_CACHE)))

@@ -5,6 +5,7 @@ renamed over it.  A process killed mid-write leaves that temporary file; the
 next write of the same file removes it.  torch is imported by :func:`save_torch`
 only, so the commands' light start-up can use this module.
 """
+
 from __future__ import annotations
 
 import json

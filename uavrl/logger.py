@@ -1,4 +1,5 @@
 """The one logging path: TensorBoard event files in the run directory."""
+
 from __future__ import annotations
 
 from torch.utils.tensorboard import SummaryWriter

@@ -17,6 +17,7 @@ directory: ``reproduction/paper`` for the paper's settings, else
 directory; one that holds another variant is refused unless ``overwrite=true``
 (which replaces it).
 """
+
 from __future__ import annotations
 
 import json
@@ -123,7 +124,13 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
-    model = make_config("paper", grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps, state_includes_tasks=bool(cfg.state_includes_tasks))
+    model = make_config(
+        "paper",
+        grid=(size, size),
+        num_uavs=int(cfg.num_uavs),
+        max_steps=steps,
+        state_includes_tasks=bool(cfg.state_includes_tasks),
+    )
     built = time.perf_counter()
     learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
     u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
@@ -164,8 +171,8 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
 
 def table2_markdown(rows: list[dict], wall: float) -> str:
     lines = [
-        "| grid | states | Q size | steps/episode | paper s/episode | ours s/episode | speedup | paper total | ours total "
-        "| greedy U/U* (min) | return ratio | reach 0.999 U* | step ratio 0.999 |",
+        "| grid | states | Q size | steps/episode | paper s/episode | ours s/episode | speedup | paper total "
+        "| ours total | greedy U/U* (min) | return ratio | reach 0.999 U* | step ratio 0.999 |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -176,10 +183,14 @@ def table2_markdown(rows: list[dict], wall: float) -> str:
         lines.append(
             f"| {r['grid']}x{r['grid']} | {r['states']:,} | {r['q_size']:,} | {r['steps_per_episode']:,} | "
             f"{paper if paper else '-'} | {r['seconds_per_episode']:.2e} | {speedup} | "
-            f"{_duration(paper_total) if paper_total else '-'} | {ours_total:.2f} s | {r['optimality']:.4f} ({r['optimality_min']:.4f}) | "
-            f"{_number(r.get('return_ratio'), '.3f')} | {_number(r.get('reach_999'), '.2f')} | {_number(r.get('step_ratio_999'), '.2f')} |"
+            f"{_duration(paper_total) if paper_total else '-'} | {ours_total:.2f} s | {r['optimality']:.4f} "
+            f"({r['optimality_min']:.4f}) | {_number(r.get('return_ratio'), '.3f')} "
+            f"| {_number(r.get('reach_999'), '.2f')} | {_number(r.get('step_ratio_999'), '.2f')} |"
         )
-    lines.append(f"\nWhole table: {wall:.1f} s wall ({sum(r['episodes'] * r['runs'] * r['steps_per_episode'] for r in rows):,} team steps with learning).")
+    lines.append(
+        f"\nWhole table: {wall:.1f} s wall "
+        f"({sum(r['episodes'] * r['runs'] * r['steps_per_episode'] for r in rows):,} team steps with learning)."
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -202,12 +213,20 @@ def findings(history: dict, grid: int) -> list[str]:
         h = history[key].mean(1)
         return h[:n].mean().item(), h[-n:].mean().item()
 
-    claims = [("sum utility per episode rises", "sum_utility", +1), ("task switches fall", "task_switches", -1), ("moves fall", "moves", -1), ("steps to 90% of U* fall", "steps_to_90", -1)]
+    claims = [
+        ("sum utility per episode rises", "sum_utility", +1),
+        ("task switches fall", "task_switches", -1),
+        ("moves fall", "moves", -1),
+        ("steps to 90% of U* fall", "steps_to_90", -1),
+    ]
     out = []
     for text, key, sign in claims:
         first, last = change(key)
         holds = (last - first) * sign > 0
-        out.append(f"{grid}x{grid}: {text}: {'holds' if holds else 'does not hold'} (first {n} episodes {first:.4g}, last {n} {last:.4g})")
+        out.append(
+            f"{grid}x{grid}: {text}: {'holds' if holds else 'does not hold'} (first {n} episodes {first:.4g}, last "
+            f"{n} {last:.4g})"
+        )
     return out
 
 
@@ -238,7 +257,10 @@ def table2(cfg: DictConfig) -> list[dict]:
     print(table)
     print("\n".join(notes))
     save_text(table + "\n" + "\n".join(f"- {n}" for n in notes) + "\n", out_dir / "table2.md")
-    save_json([{k: v for k, v in r.items() if k != "history"} | {"wall_seconds_whole_table": wall} for r in rows], out_dir / "table2.json")
+    save_json(
+        [{k: v for k, v in r.items() if k != "history"} | {"wall_seconds_whole_table": wall} for r in rows],
+        out_dir / "table2.json",
+    )
     print(f"results: {out_dir}")
     return rows
 
@@ -271,9 +293,28 @@ def figures(cfg: DictConfig) -> list[Path]:
         ax.fill_between(episodes, h.amin(1), h.amax(1), color=color, alpha=0.2, linewidth=0)
 
     specs = [
-        ("fig3_sum_utility.png", "Fig. 3: summation throughput per episode", "sum over steps (bit/s/Hz)", [("sum_utility", "both networks (U)", "C0"), ("sum_r_pu", "primary (R_PU)", "C1"), ("sum_r_se", "emergency (R_SE)", "C2")]),
-        ("fig4_switches_moves.png", "Fig. 4: task switches and moves per episode", "count (all UAVs, all steps)", [("task_switches", "task switches", "C3"), ("moves", "moves", "C4")]),
-        ("fig5_steps_to_90.png", "Fig. 5: steps until U first reaches 90% of U*", "steps", [("steps_to_90", "steps to 90% of U*", "C5")]),
+        (
+            "fig3_sum_utility.png",
+            "Fig. 3: summation throughput per episode",
+            "sum over steps (bit/s/Hz)",
+            [
+                ("sum_utility", "both networks (U)", "C0"),
+                ("sum_r_pu", "primary (R_PU)", "C1"),
+                ("sum_r_se", "emergency (R_SE)", "C2"),
+            ],
+        ),
+        (
+            "fig4_switches_moves.png",
+            "Fig. 4: task switches and moves per episode",
+            "count (all UAVs, all steps)",
+            [("task_switches", "task switches", "C3"), ("moves", "moves", "C4")],
+        ),
+        (
+            "fig5_steps_to_90.png",
+            "Fig. 5: steps until U first reaches 90% of U*",
+            "steps",
+            [("steps_to_90", "steps to 90% of U*", "C5")],
+        ),
     ]
     written = []
     for name, title, ylabel, curves in specs:

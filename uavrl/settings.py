@@ -10,6 +10,7 @@ names the setting, the value and what is allowed::
 Only the standard library and omegaconf are imported, so a bad override is
 refused in a fraction of a second.
 """
+
 from __future__ import annotations
 
 import math
@@ -172,7 +173,7 @@ def check(cfg: DictConfig, table: dict[str, Rule], section: str = "") -> None:
     for name, rule in table.items():
         if not name.startswith(prefix):
             continue
-        value = OmegaConf.select(cfg, name[len(prefix):], default=_ABSENT)
+        value = OmegaConf.select(cfg, name[len(prefix) :], default=_ABSENT)
         if value is _ABSENT:
             continue
         if isinstance(value, (DictConfig, ListConfig)):

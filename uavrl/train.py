@@ -12,6 +12,7 @@ Every setting is checked before torch is imported (:mod:`uavrl.settings`), so a
 mistyped override is refused at once; :func:`train` imports the heavy modules
 after its checks.
 """
+
 from __future__ import annotations
 
 import random
@@ -45,7 +46,13 @@ def check_settings(cfg: DictConfig) -> None:
 
 def eval_settings(cfg: DictConfig, device) -> dict:
     """Keyword arguments of :func:`uavrl.evaluation.evaluate` from ``cfg.eval``."""
-    return dict(num_starts=cfg.eval.num_starts, horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device, gamma=cfg.eval.gamma)
+    return dict(
+        num_starts=cfg.eval.num_starts,
+        horizon=cfg.eval.horizon,
+        seed=int(cfg.eval.seed),
+        device=device,
+        gamma=cfg.eval.gamma,
+    )
 
 
 def seed_everything(seed: int) -> None:
@@ -84,7 +91,10 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
         if key.split(".")[0] in RESUMABLE_OVERRIDES:
             continue
         if OmegaConf.select(saved, key) != OmegaConf.select(cfg, key):
-            raise ValueError(f"resume: {override!r} differs from the saved run ({key}={OmegaConf.select(saved, key)}); resume continues the saved config")
+            raise ValueError(
+                f"resume: {override!r} differs from the saved run ({key}={OmegaConf.select(saved, key)}); resume "
+                "continues the saved config"
+            )
     for key in RESUMABLE_OVERRIDES:
         saved[key] = cfg[key]
     saved.run_dir = str(run_dir)
@@ -124,13 +134,26 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     checkpoints = CheckpointWriter(run_dir, newest_is_readable)
 
     def save_checkpoint(iteration: int, final: dict | None = None) -> None:
-        state = {"agent": agent.state_dict(), "iteration": iteration, "config": resolved, "torch_rng": torch.get_rng_state()}
+        state = {
+            "agent": agent.state_dict(),
+            "iteration": iteration,
+            "config": resolved,
+            "torch_rng": torch.get_rng_state(),
+        }
         checkpoints.save(state if final is None else {**state, "final": final})
 
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
     started = time.perf_counter()
-    bar = tqdm(range(start, agent.num_iterations), initial=start, total=agent.num_iterations, disable=not cfg.progress, desc=f"{cfg.agent.name} {cfg.env.name}", unit="it", dynamic_ncols=True)
+    bar = tqdm(
+        range(start, agent.num_iterations),
+        initial=start,
+        total=agent.num_iterations,
+        disable=not cfg.progress,
+        desc=f"{cfg.agent.name} {cfg.env.name}",
+        unit="it",
+        dynamic_ncols=True,
+    )
     try:
         for iteration in bar:
             metrics = agent.train_iteration()

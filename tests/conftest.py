@@ -1,0 +1,58 @@
+"""Fixtures shared by the test files: the Hydra config as the commands compose it, tiny environments, a killed run."""
+
+from __future__ import annotations
+
+import contextlib
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from uavrl.config import config_dir
+
+
+def _compose(*overrides: str, config_name: str = "config"):
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        return compose(config_name=config_name, overrides=list(overrides))
+
+
+@pytest.fixture
+def compose_cfg():
+    """``compose_cfg(*overrides, config_name="config")``: the config ``python -m uavrl.train`` would run with."""
+    return _compose
+
+
+@pytest.fixture
+def tiny_env():
+    """``tiny_env(batch_size=2, **options)``: a :class:`~uavrl.envs.UAVSpectrumEnv` of 2 UAVs on a 3x3 grid."""
+    from uavrl.envs import UAVSpectrumEnv
+
+    def make(batch_size: int = 2, **options):
+        return UAVSpectrumEnv(batch_size=batch_size, **{"grid": (3, 3), "num_uavs": 2, **options})
+
+    return make
+
+
+@pytest.fixture
+def interrupt_at(monkeypatch):
+    """``with interrupt_at(AgentClass, n): ...``: the n-th ``train_iteration`` call raises KeyboardInterrupt (Ctrl-C).
+
+    A run killed this way and resumed must end exactly as the uninterrupted run.
+    """
+
+    @contextlib.contextmanager
+    def interrupted(agent_class, n: int | None):
+        original, calls = agent_class.train_iteration, []
+
+        def dies(self):
+            calls.append(1)
+            if len(calls) == n:
+                raise KeyboardInterrupt
+            return original(self)
+
+        monkeypatch.setattr(agent_class, "train_iteration", dies)
+        try:
+            yield
+        finally:
+            monkeypatch.setattr(agent_class, "train_iteration", original)
+
+    return interrupted
