@@ -204,11 +204,26 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
             f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
             f"{within:.0%} of starts within 1% of U*)",
+            yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
             f"look at it: tensorboard --logdir {run_dir}   "
             f"evaluate it again: python -m uavrl.evaluate checkpoint={run_dir}",
         ]
     )
+
+
+def yardstick_line(cfg: DictConfig, result: dict) -> str:
+    """Against exact optimal control (README, The yardstick): return ratio and steps to 0.999 U*."""
+    parts = []
+    if "eval/return_ratio" in result:
+        parts.append(
+            f"return ratio {result['eval/return_ratio']:.4f} (discounted gain / the exact best, gamma {cfg.eval.gamma})"
+        )
+    reach = f"0.999 U* reached from {result['eval/reach_999']:.0%} of starts"
+    if "eval/step_ratio_999" in result:
+        fewest = "fewest" if result["eval/min_steps_exact"] == 1.0 else "a lower bound on the fewest"
+        reach += f" in {result['eval/step_ratio_999']:.2f}x {fewest} steps"
+    return "yardstick: " + "; ".join([*parts, reach])
 
 
 if __name__ == "__main__":
