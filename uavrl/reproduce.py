@@ -319,7 +319,10 @@ def reproduce(cfg: DictConfig, _overrides=()) -> None:
     import numba  # the heavy modules, once the settings are known to be good
     import torch
 
+    from uavrl.agents.tabular.kernels import use_workqueue_threads
+
     torch.set_num_threads(int(cfg.num_threads))
+    use_workqueue_threads()  # before numba launches its threads
     numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
     (table2 if cfg.command == "table2" else figures)(cfg)
 
