@@ -19,7 +19,7 @@ Two heads (``agent.head``):
   the valid ones: the exact deep counterpart of the team Q table, for N <= 4.
 
 One iteration: each of ``agent.worlds`` worlds plays one episode of
-``train.steps_per_episode`` steps, the transitions join the replay buffer,
+``env.max_steps`` steps, the transitions join the replay buffer,
 then ``agent.updates`` gradient steps.  Every iteration reseeds its worlds from
 the seed and the iteration number (so a resumed run continues exactly as the
 uninterrupted one, and episodes always start afresh, also with
@@ -35,7 +35,7 @@ Example:
     >>> from uavrl.config import config_dir, model_config
     >>> with initialize_config_dir(config_dir=config_dir(), version_base=None):
     ...     overrides = ["agent=dqn", "env.grid=[3,3]", "agent.worlds=4", "agent.buffer_size=1000"]
-    ...     cfg = compose("config", overrides=[*overrides, "train.steps_per_episode=5"])
+    ...     cfg = compose("config", overrides=[*overrides, "env.max_steps=5"])
     >>> agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     >>> metrics = agent.train_iteration()  # 4 worlds x 5 steps, no gradient step before agent.learning_starts
     >>> agent.env_steps, metrics["train/epsilon"] < 1.0

@@ -18,7 +18,7 @@ from uavrl.train import train
 # (command and overrides, words the one-line error must contain: the setting as typed); {tmp} is an empty
 # directory, {garbage} ... {tensor} unreadable or foreign checkpoint files, {run} a run, {other} another variant
 CLI_CASES = [
-    ("train train.steps_per_episode=0", "train.steps_per_episode=0 is invalid"),
+    ("train env.max_steps=0", "env.max_steps=0 is invalid"),
     ("train train.episodes=-1", "train.episodes=-1 is invalid"),
     ("train train.episodes=0", "train.episodes=0 is invalid"),
     ("train train.episodes=2.5", "train.episodes=2.5 is invalid"),
@@ -135,13 +135,13 @@ def test_command_line_mistakes_exit_with_one_line_on_stderr(line, words, files, 
 def test_a_bad_override_is_refused_before_torch_is_imported():
     probe = (
         "import runpy, sys\n"
-        "sys.argv = ['train', 'train.steps_per_episode=0']\n"
+        "sys.argv = ['train', 'env.max_steps=0']\n"
         "try:\n    runpy.run_module('uavrl.train', run_name='__main__')\n"
         "except SystemExit as exit:\n    print(exit.code)\n"
         "print(sorted(m for m in ('torch', 'tensordict', 'torchrl', 'numba') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.splitlines()
-    assert out == ["error: train.steps_per_episode=0 is invalid: it must be a whole number >= 1", "[]"]
+    assert out == ["error: env.max_steps=0 is invalid: an episode needs a whole number of steps >= 1", "[]"]
 
 
 def policy_writing(shape):

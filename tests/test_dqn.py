@@ -16,7 +16,7 @@ from uavrl.train import train
 
 TINY = [
     "env.grid=[3,3]",
-    "train.steps_per_episode=8",
+    "env.max_steps=8",
     "train.iterations=30",
     "agent.worlds=32",
     "agent.hidden=32",

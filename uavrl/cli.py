@@ -19,6 +19,8 @@ from uavrl.config import config_dir
 from uavrl.envs.config import InvalidOption
 
 Command = Callable[[DictConfig, list], object]
+# settings that moved: an override of the old name says the new one
+RENAMED = {"train.steps_per_episode": "env.max_steps"}
 
 
 def run_command(config_name: str, command: Command, option_settings: dict[str, str]) -> None:
@@ -46,6 +48,10 @@ def compose_config(config_name: str, overrides: list[str]) -> DictConfig:
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
 
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        if key in RENAMED:
+            raise SystemExit(f"error: {key} is now {RENAMED[key]}: write {override.replace(key, RENAMED[key], 1)}")
     try:
         with initialize_config_dir(config_dir=config_dir(), version_base=None):
             return compose(config_name=config_name, overrides=overrides)

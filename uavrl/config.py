@@ -10,7 +10,6 @@ from uavrl.envs.config import OPTION_NAMES, ModelConfig, make_config
 
 # how the model's options are typed on the command line of uavrl.train and uavrl.evaluate
 RUN_OPTION_SETTINGS = {name: f"env.{name}" for name in (*OPTION_NAMES, "preset")}
-RUN_OPTION_SETTINGS["max_steps"] = "train.steps_per_episode"
 
 
 def config_dir() -> str:
@@ -27,14 +26,17 @@ def config_dir() -> str:
 
 
 def model_config(cfg: DictConfig) -> ModelConfig:
-    """The :class:`ModelConfig` of a run: ``cfg.env`` options (null: the preset's value), episode length
-    ``cfg.train.steps_per_episode``."""
+    """The :class:`ModelConfig` of a run: the ``cfg.env`` options (null: the preset's value), the episode length
+    ``env.max_steps`` among them."""
     options = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if v is not None}
     options.pop("name", None)
     preset = options.pop("preset", "paper")
     if "grid" in options:
         options["grid"] = tuple(options["grid"])
-    return make_config(preset, max_steps=int(cfg.train.steps_per_episode), **options)
+    legacy = OmegaConf.select(cfg, "train.steps_per_episode")  # the config of a run saved before env.max_steps
+    if "max_steps" not in options and legacy is not None:
+        options["max_steps"] = int(legacy)
+    return make_config(preset, **options)
 
 
 def flat_hparams(cfg: DictConfig) -> dict:

@@ -43,6 +43,17 @@ COMMANDS = ("table2", "figures")
 PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
 OUTPUTS = ("variant.json", "table2.md", "table2.json", "history_*.pt", "fig*.png", "tensorboard")
 REFUSAL = "give another out_dir, or overwrite=true to replace them"
+# the paper's learner (eqs. 9-10): agent=tabular's settings, whatever configs/agent/tabular.yaml says
+PAPER_LEARNER = dict(
+    name="tabular",
+    method="q_learning",
+    alpha=0.1,
+    gamma=0.3,
+    epsilon=0.1,
+    shared_table=False,
+    backend="numba",
+    memory_budget=4 * 2**30,
+)
 # how the model's options are typed on this command line
 OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
 
@@ -117,8 +128,8 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     """
     import torch
 
-    from uavrl.agents.tabular import TabularPolicy, TeamQLearner
-    from uavrl.evaluation import episode_metrics, evaluate
+    from uavrl.agents.tabular import TabularAgent
+    from uavrl.evaluation import evaluate
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
@@ -130,15 +141,17 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
         state_includes_tasks=bool(cfg.state_includes_tasks),
     )
     built = time.perf_counter()
-    learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
-    u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
+    settings = OmegaConf.create(
+        {"agent": PAPER_LEARNER, "train": {"episodes": int(cfg.episodes), "runs": int(cfg.runs)}}
+    )
+    agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced
     logger = RunLogger(out_dir / "tensorboard" / f"grid{size}x{size}", resume_step=0)
     started = time.perf_counter()
     for episode in range(int(cfg.episodes)):
-        out = learner.run_episode()
-        per_run = episode_metrics(out["r_pu"], out["r_se"], out["task_switches"], out["moves"], u_star)
+        agent.train_iteration()
+        per_run = agent.last_episode
         for k in METRICS:
             history[k][episode] = per_run[k]
         logger.log({f"train/{k}": per_run[k].mean().item() for k in METRICS}, (episode + 1) * steps)
@@ -147,7 +160,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     record = {"history": history, "grid": size, "steps_per_episode": steps}
     record |= {key: cfg[key] for key in ("num_uavs", "runs", "episodes", "seed", "state_includes_tasks")}
     save_torch(record, out_dir / f"history_{size}x{size}.pt")
-    evaluations = [evaluate(TabularPolicy(q, model), model, num_starts=int(cfg.eval_starts)) for q in learner.q]
+    evaluations = [evaluate(policy, model, num_starts=int(cfg.eval_starts)) for policy in agent.policies()]
     return {
         "grid": size,
         "states": model.num_states,

@@ -5,7 +5,7 @@ A setting missing from a config (another agent's, or one a newer config adds)
 is skipped, so a new setting is one line here.  A refusal is one line that
 names the setting, the value and what is allowed::
 
-    train.steps_per_episode=0 is invalid: it must be a whole number >= 1
+    train.episodes=0 is invalid: it must be a whole number >= 1
 
 Only the standard library and omegaconf are imported, so a bad override is
 refused in a fraction of a second.
@@ -95,7 +95,6 @@ RUN_SETTINGS: dict[str, Rule] = {
     "progress": flag(),
     "train.episodes": whole(1),
     "train.iterations": whole(1),
-    "train.steps_per_episode": whole(1),
     "train.runs": whole(1),
     "train.checkpoint_every": whole(1),
     "train.log_every": whole(1),

@@ -21,7 +21,7 @@ class TabularAgent(Agent):
     """The tabular agent behind ``python -m uavrl.train agent=tabular`` (contract: :class:`uavrl.agents.base.Agent`).
 
     ``agent.method=q_learning`` (the paper's learner): one iteration is one
-    episode of ``cfg.train.runs`` runs of ``cfg.train.steps_per_episode`` steps.
+    episode of ``cfg.train.runs`` runs of ``env.max_steps`` steps.
     ``agent.method=value_iteration``: one iteration solves :func:`exact_q_table`.
     """
 
