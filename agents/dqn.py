@@ -405,7 +405,7 @@ def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collec
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``cfg.train.iterations`` the run length.
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.
     """
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
@@ -413,7 +413,7 @@ class DQNAgent(Agent):
         check_settings(env_cfg, a)
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
-        self.num_iterations = int(cfg.train.iterations)
+        self.num_iterations = int(a.iterations)
         self.iteration = 0
         torch.manual_seed(self.seed)  # the networks' initial weights; build order matters
         self.env = UAVSpectrumEnv(

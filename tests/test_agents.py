@@ -13,9 +13,9 @@ from uavrl.train import train
 
 COMMON = ["env.grid=[3,3]", "eval.num_starts=4", "train.checkpoint_every=2", "progress=false"]
 TINY = {
-    "tabular": ["train.episodes=4", "env.max_steps=50", "train.runs=2"],
+    "tabular": ["agent.episodes=4", "env.max_steps=50", "agent.runs=2"],
     "dqn": [
-        "train.iterations=4",
+        "agent.iterations=4",
         "env.max_steps=8",
         "agent.worlds=8",
         "agent.hidden=16",

@@ -14,9 +14,9 @@ from uavrl.train import train
 
 SMALL = [
     "env.grid=[3,3]",
-    "train.episodes=6",
+    "agent.episodes=6",
     "env.max_steps=100",
-    "train.runs=2",
+    "agent.runs=2",
     "train.checkpoint_every=2",
     "eval.num_starts=8",
     "progress=false",

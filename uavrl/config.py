@@ -13,7 +13,13 @@ RUN_OPTION_SETTINGS = {name: f"env.{name}" for name in (*OPTION_NAMES, "preset")
 
 
 def config_dir() -> str:
-    """Absolute path of the Hydra configs: the installed ``uavrl.configs`` package, else the checkout's ``configs/``."""
+    """Absolute path of the Hydra configs: the installed ``uavrl.configs`` package, else the checkout's ``configs/``.
+
+    Their schemas (:mod:`uavrl.schema`) are registered with Hydra's ConfigStore on the way.
+    """
+    from uavrl.schema import register
+
+    register()
     try:
         import uavrl.configs as packaged
 
@@ -33,10 +39,29 @@ def model_config(cfg: DictConfig) -> ModelConfig:
     preset = options.pop("preset", "paper")
     if "grid" in options:
         options["grid"] = tuple(options["grid"])
-    legacy = OmegaConf.select(cfg, "train.steps_per_episode")  # the config of a run saved before env.max_steps
-    if "max_steps" not in options and legacy is not None:
-        options["max_steps"] = int(legacy)
     return make_config(preset, **options)
+
+
+# where settings of earlier versions live now (saved run configs are read through saved_config)
+MOVED = {
+    "train.steps_per_episode": "env.max_steps",
+    "train.episodes": "agent.episodes",
+    "train.runs": "agent.runs",
+    "train.iterations": "agent.iterations",
+}
+
+
+def saved_config(saved: dict) -> DictConfig:
+    """The config a run directory saved, with the settings of earlier versions moved to where they live now."""
+    cfg = OmegaConf.create(saved)
+    for old, new in MOVED.items():
+        value = OmegaConf.select(cfg, old)
+        if value is not None and OmegaConf.select(cfg, new) is None:
+            OmegaConf.update(cfg, new, value)
+        if value is not None:
+            group, key = old.split(".")
+            del cfg[group][key]
+    return cfg
 
 
 def flat_hparams(cfg: DictConfig) -> dict:

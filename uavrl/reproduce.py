@@ -141,9 +141,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
         state_includes_tasks=bool(cfg.state_includes_tasks),
     )
     built = time.perf_counter()
-    settings = OmegaConf.create(
-        {"agent": PAPER_LEARNER, "train": {"episodes": int(cfg.episodes), "runs": int(cfg.runs)}}
-    )
+    settings = OmegaConf.create({"agent": {**PAPER_LEARNER, "episodes": int(cfg.episodes), "runs": int(cfg.runs)}})
     agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced

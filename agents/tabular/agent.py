@@ -21,7 +21,7 @@ class TabularAgent(Agent):
     """The tabular agent behind ``python -m uavrl.train agent=tabular`` (contract: :class:`uavrl.agents.base.Agent`).
 
     ``agent.method=q_learning`` (the paper's learner): one iteration is one
-    episode of ``cfg.train.runs`` runs of ``env.max_steps`` steps.
+    episode of ``agent.runs`` runs of ``env.max_steps`` steps.
     ``agent.method=value_iteration``: one iteration solves :func:`exact_q_table`.
     """
 
@@ -41,7 +41,7 @@ class TabularAgent(Agent):
             return
         self.learner = TeamQLearner(
             env_cfg,
-            runs=int(cfg.train.runs),
+            runs=int(a.runs),
             seed=seed,
             alpha=a.alpha,
             gamma=a.gamma,
@@ -51,7 +51,7 @@ class TabularAgent(Agent):
             device=device,
             memory_budget=float(a.memory_budget),
         )
-        self.num_iterations = int(cfg.train.episodes)
+        self.num_iterations = int(a.episodes)
         self._u_star = torch.full((self.learner.runs,), self.learner.model.u_star, dtype=torch.float64)
 
     @property
