@@ -8,7 +8,8 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from uavrl.envs import ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
 
 class TabularPolicy(TensorDictModuleBase):
@@ -32,9 +33,8 @@ class TabularPolicy(TensorDictModuleBase):
     def __init__(self, q: torch.Tensor, cfg: ModelConfig, seed: int = 0):
         super().__init__()
         self.cfg = cfg
-        env = UAVSpectrumEnv(batch_size=1, config=cfg, device=q.device)
         self.register_buffer("q", q)
-        self.register_buffer("neighbours", env.neighbours)
+        self.register_buffer("neighbours", grid_neighbours(cfg.grid, q.device))
         self.register_buffer("actions", decode_joint_actions(cfg.num_uavs, q.device))
         self.generator = torch.Generator(device=q.device).manual_seed(seed)
 

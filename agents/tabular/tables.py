@@ -1,9 +1,9 @@
 """The model as lookup tables for the tabular learner, and the exact ``Q*`` table (value iteration).
 
-:class:`TabularModel` tabulates, with the environment's own functions, the
+:class:`TabularModel` tabulates, with the functions the environment steps with, the
 rates of every configuration and the effect of every joint action;
 :func:`exact_q_table` solves the paper's "offline" table on the configuration
-graph (:mod:`uavrl.envs.exact`).
+graph (:mod:`uavrl.envs.exact`).  This module uses no TorchRL (the package still imports it: learner, policy).
 """
 
 from __future__ import annotations
@@ -12,8 +12,11 @@ import math
 
 import torch
 
-from uavrl.envs import ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid, joint_targets
+from uavrl.envs.channel import rates
+from uavrl.envs.config import ModelConfig
 from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
+from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
+from uavrl.envs.optimum import optimum
 
 DEFAULT_MEMORY_BUDGET = 4 * 2**30
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
@@ -28,7 +31,12 @@ def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
 
 
 class TabularModel:
-    """The model of ``cfg`` as lookup tables, computed by the environment's own functions.
+    """The model of ``cfg`` as lookup tables, computed by the model's own functions (no TorchRL).
+
+    The geometry comes from :mod:`uavrl.envs.grid`, the per-cell rate terms of
+    the fixed layout from :func:`uavrl.envs.exact.fixed_layout_tables`, the
+    rates from :func:`uavrl.envs.channel.rates` and ``U*`` from
+    :func:`uavrl.envs.optimum.optimum`: the functions the environment steps with.
 
     Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
     the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
@@ -50,8 +58,9 @@ class TabularModel:
             )
         self.cfg, self.device = cfg, torch.device(device)
         N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
-        env = UAVSpectrumEnv(batch_size=1, config=cfg, device=self.device)
         dev = self.device
+        neighbours = grid_neighbours(cfg.grid, dev)
+        contributions, direct = fixed_layout_tables(cfg, dev)  # [1, C, 2], [1, 2]
         self.num_positions, self.num_task_codes = C**N, 2**N
         place = torch.tensor([C**i for i in range(N)], device=dev)
         bits = torch.tensor([2**i for i in range(N)], device=dev)
@@ -74,15 +83,14 @@ class TabularModel:
         for start in range(0, C**N, step):
             p = torch.arange(start, min(start + step, C**N), device=dev)
             cells = (p[:, None] // place) % C  # [P, N]
-            target = joint_targets(cells, env.neighbours, N)  # [P, A, N]
-            self.valid[p] = joint_action_valid(cells, env.neighbours, N)
+            target = joint_targets(cells, neighbours, N)  # [P, A, N]
+            self.valid[p] = joint_action_valid(cells, neighbours, N)
             self.next_cells[p] = (target.clamp(min=0) * place).sum(-1).int()
             self.moves[p] = (target != cells[:, None, :]).sum(-1).to(torch.int8)
-            positions = torch.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1)  # [P, N, 2]
             k = (p[:, None] * 2**N + task_codes).reshape(-1)
-            pos_k = positions[:, None].expand(-1, 2**N, -1, -1).reshape(1, -1, N, 2)
+            cells_k = cells[:, None].expand(-1, 2**N, -1).reshape(1, -1, N)
             tasks_k = tasks[None].expand(len(p), -1, -1).reshape(1, -1, N)
-            r_pu, r_se, _ = env.utility(pos_k, tasks_k)
+            r_pu, r_se = rates(contributions[0][cells_k], tasks_k, direct.view(1, 1, 2), cfg)
             self.r_pu[k], self.r_se[k] = r_pu[0], r_se[0]
             digits = (
                 2 * cells[:, None, :] + tasks[None]
@@ -92,7 +100,7 @@ class TabularModel:
             self.row[k] = (digits * row_place).sum(-1).reshape(-1)
         self.num_valid = self.valid.sum(-1).int()
         self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).int()
-        self.u_star = env.optimum()[0].item()
+        self.u_star = optimum(contributions, direct, cfg)[0].item()
 
     def configuration_ids(self, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
         """``k`` of ``[..., N, 2]`` positions and ``[..., N]`` tasks."""
