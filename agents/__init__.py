@@ -1,29 +1,53 @@
 """Team agents (tabular team Q-learning, a factored deep Q-network) and the baselines (random, oracle).
 
-Every agent has the same shape, so ``uavrl.train`` and ``uavrl.evaluate`` drive any of them:
+Every agent subclasses :class:`~uavrl.agents.base.Agent` (the contract that
+``uavrl.train`` and ``uavrl.evaluate`` drive) and has a name in :data:`AGENTS`.
+The registry maps each name to a function that imports the agent's class, so
+that naming an agent (``uavrl.settings`` checks ``agent.name`` before torch is
+imported) costs nothing, and ``agent=tabular`` never imports the DQN's modules.
 
-- ``Agent(env_cfg, cfg, device, seed)``: ``env_cfg`` a :class:`~uavrl.envs.ModelConfig`,
-  ``cfg`` the full Hydra config (``cfg.agent``, ``cfg.train``);
-- ``num_iterations``: how many ``train_iteration()`` calls make the whole run;
-- ``train_iteration() -> dict[str, float]``: one unit of training, returning
-  ``train/...`` scalars (episode metrics from :func:`uavrl.evaluation.episode_metrics`);
-- ``env_steps``: team steps consumed so far, the x axis of every curve;
-- ``policies()``: greedy TorchRL policies, one per independent run;
-- ``state_dict()`` / ``load_state_dict()``: everything a checkpoint needs to resume.
+A new agent: a subclass of ``Agent`` in its own module, one entry here, a
+config ``configs/agent/<name>.yaml``, its settings' rules in ``uavrl.settings``;
+``tests/test_agents.py`` then runs the contract test over it.
 """
 
-import importlib
+from __future__ import annotations
 
-AGENTS = {
-    "tabular": "uavrl.agents.tabular:TabularAgent",
-    "dqn": "uavrl.agents.dqn:DQNAgent",
-    "random": "uavrl.agents.baselines:RandomAgent",
-    "oracle": "uavrl.agents.baselines:OracleAgent",
-}
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:
+    from .base import Agent
 
 
-def agent_class(name: str):
+def _tabular() -> type[Agent]:
+    from .tabular import TabularAgent
+
+    return TabularAgent
+
+
+def _dqn() -> type[Agent]:
+    from .dqn import DQNAgent
+
+    return DQNAgent
+
+
+def _random() -> type[Agent]:
+    from .baselines import RandomAgent
+
+    return RandomAgent
+
+
+def _oracle() -> type[Agent]:
+    from .baselines import OracleAgent
+
+    return OracleAgent
+
+
+AGENTS: dict[str, Callable[[], type[Agent]]] = {"tabular": _tabular, "dqn": _dqn, "random": _random, "oracle": _oracle}
+
+
+def agent_class(name: str) -> type[Agent]:
+    """The class of the agent named ``name`` (a key of :data:`AGENTS`)."""
     if name not in AGENTS:
         raise ValueError(f"agent={name!r} is invalid: allowed agents are {', '.join(AGENTS)}")
-    module, cls = AGENTS[name].split(":")
-    return getattr(importlib.import_module(module), cls)
+    return AGENTS[name]()

@@ -32,6 +32,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from uavrl.agents.base import Agent
 from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
 from uavrl.envs.exact import fixed_layout_tables
@@ -150,8 +151,8 @@ class OraclePolicy(TensorDictModuleBase):
         return torch.tensor(actions)
 
 
-class BaselineAgent:
-    """An agent with nothing to learn (protocol in :mod:`uavrl.agents`): no iteration, an empty checkpoint."""
+class BaselineAgent(Agent):
+    """An agent with nothing to learn (contract: :class:`~uavrl.agents.base.Agent`): no iteration, no checkpoint."""
 
     num_iterations = 0
     env_steps = 0

@@ -19,7 +19,7 @@ Two heads (``agent.head``):
   the valid ones: the exact deep counterpart of the team Q table, for N <= 4.
 
 One iteration: each of ``agent.worlds`` worlds plays one episode of
-``train.steps_per_episode`` steps, the transitions join the replay buffer,
+``env.max_steps`` steps, the transitions join the replay buffer,
 then ``agent.updates`` gradient steps.  Every iteration reseeds its worlds from
 the seed and the iteration number (so a resumed run continues exactly as the
 uninterrupted one, and episodes always start afresh, also with
@@ -35,7 +35,7 @@ Example:
     >>> from uavrl.config import config_dir, model_config
     >>> with initialize_config_dir(config_dir=config_dir(), version_base=None):
     ...     overrides = ["agent=dqn", "env.grid=[3,3]", "agent.worlds=4", "agent.buffer_size=1000"]
-    ...     cfg = compose("config", overrides=[*overrides, "train.steps_per_episode=5"])
+    ...     cfg = compose("config", overrides=[*overrides, "env.max_steps=5"])
     >>> agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     >>> metrics = agent.train_iteration()  # 4 worlds x 5 steps, no gradient step before agent.learning_starts
     >>> agent.env_steps, metrics["train/epsilon"] < 1.0
@@ -45,6 +45,7 @@ Example:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -53,8 +54,9 @@ from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import Categorical, LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, VDNMixer
-from torchrl.objectives import DQNLoss, QMixerLoss, SoftUpdate
+from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
+from uavrl.agents.base import Agent
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
@@ -257,7 +259,7 @@ class DoubleQMixerLoss(QMixerLoss):
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
 
 
-# ----------------------------------------------------------------------------- the agent
+# ----------------------------------------------------------------------------- settings
 def check_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for settings the agent cannot run: the rules of :mod:`uavrl.settings`, then the head's size."""
     check(a, RUN_SETTINGS, section="agent")
@@ -268,10 +270,142 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
         )
 
 
-class DQNAgent:
-    """The deep agent behind ``python -m uavrl.train agent=dqn`` (protocol in :mod:`uavrl.agents`).
+# ----------------------------------------------------------------------------- builders
+@dataclass
+class Policies:
+    """The modules that act: ``greedy`` (the greedy valid joint action), ``explore`` (greedy, then
+    ``exploration``'s epsilon-greedy), ``value_network`` (what the loss evaluates), ``action_spec`` and
+    ``action_keys`` (the action entries a transition stores)."""
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``cfg.train.iterations`` the run length.
+    greedy: TensorDictSequential
+    explore: TensorDictSequential
+    exploration: EGreedyModule
+    value_network: TensorDictSequential
+    action_spec: object
+    action_keys: list
+
+
+def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
+    """:class:`TeamQNet` as a module writing ``("agents", "action_value")`` (factored) or ``"joint_action_value"``."""
+    net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
+    return TensorDictModule(net, in_keys=[("agents", "observation"), "positions"], out_keys=[_values_key(a)])
+
+
+def _values_key(a):
+    return ("agents", "action_value") if a.head == "factored" else "joint_action_value"
+
+
+def exploration_schedule(a, frames: int, device) -> dict:
+    """``EGreedyModule`` keywords: epsilon from ``agent.eps_start`` to ``agent.eps_end`` over ``agent.eps_fraction``
+    of the run's ``frames``."""
+    steps = max(1, int(float(a.eps_fraction) * frames))
+    return dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=steps, device=device)
+
+
+def build_policies(env: UAVSpectrumEnv, a, q: TensorDictModule, eps: dict) -> Policies:
+    """The greedy and the exploring policy of ``agent.head`` around the Q network ``q``."""
+    return (_factored_policies if a.head == "factored" else _joint_policies)(env, q, eps)
+
+
+def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
+    spec = env.full_action_spec_unbatched
+    greedy_action = TensorDictModule(
+        ValidGreedy(env.neighbours, env.cfg.grid[0]),
+        in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],
+        out_keys=[("agents", "action")],
+    )
+    greedy = TensorDictSequential(q, greedy_action)
+    exploration = EGreedyModule(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
+    explore = TensorDictSequential(greedy, exploration)
+    return Policies(greedy, explore, exploration, greedy, spec, [("agents", "action")])
+
+
+def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
+    N, values = env.num_uavs, "joint_action_value"
+    spec = Categorical(env.cfg.num_joint_actions, device=env.device)
+    mask = TensorDictModule(
+        JointActionMask(env.neighbours, env.cfg.grid[0], N),
+        in_keys=["positions"],
+        out_keys=["joint_action_mask"],
+    )
+    argmax = QValueModule(
+        spec=spec,
+        action_value_key=values,
+        action_mask_key="joint_action_mask",
+        out_keys=["joint_action", values, "joint_chosen_action_value"],
+    )
+    decode = TensorDictModule(
+        DecodeJointAction(N, env.device), in_keys=["joint_action"], out_keys=[("agents", "action")]
+    )
+    exploration = EGreedyModule(spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps)
+    greedy = TensorDictSequential(mask, q, argmax, decode)
+    explore = TensorDictSequential(mask, q, argmax, exploration, decode)
+    value_network = TensorDictSequential(mask, q, argmax)
+    return Policies(greedy, explore, exploration, value_network, spec, ["joint_action", ("agents", "action")])
+
+
+def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
+    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``)."""
+    if a.mixer == "vdn":
+        return TensorDictModule(
+            VDNMixer(env.num_uavs, env.device),
+            in_keys=[("agents", "chosen_action_value")],
+            out_keys=["chosen_action_value"],
+        )
+    return TensorDictModule(
+        QMixer((env.state_size,), int(a.mixing_embed_dim), env.num_uavs, env.device),
+        in_keys=[("agents", "chosen_action_value"), "state"],
+        out_keys=["chosen_action_value"],
+    )
+
+
+def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
+    """Double-DQN loss with target networks: mixed per-UAV values (factored) or the joint head's (joint)."""
+    if a.head == "factored":
+        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), policies.action_spec, float(a.gamma))
+    loss = DQNLoss(
+        policies.value_network,
+        double_dqn=True,
+        delay_value=True,
+        action_space=policies.action_spec,
+        loss_function="smooth_l1",
+    )
+    loss.set_keys(action="joint_action", action_value=_values_key(a), value="joint_chosen_action_value")
+    loss.make_value_estimator(gamma=float(a.gamma))
+    return loss
+
+
+def build_replay_buffer(a, device) -> TensorDictReplayBuffer:
+    """``agent.buffer_size`` transitions, uniform samples of ``agent.batch_size``."""
+    storage = LazyTensorStorage(int(a.buffer_size), device=device)
+    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size))
+
+
+def transition_keys(a, action_keys: list) -> list:
+    """The entries of a transition the replay buffer keeps (the loss reads no others)."""
+    inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"]
+    if a.head == "factored" and a.mixer == "qmix":
+        inputs.append("state")
+    return inputs + action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
+
+
+def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:
+    """One episode of every world of ``env`` per batch."""
+    return Collector(
+        env,
+        policy,
+        frames_per_batch=env.num_worlds * env.cfg.max_steps,
+        total_frames=-1,
+        device=env.device,
+        auto_register_policy_transforms=False,
+    )
+
+
+# ----------------------------------------------------------------------------- the agent
+class DQNAgent(Agent):
+    """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
+
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.
     """
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
@@ -279,97 +413,22 @@ class DQNAgent:
         check_settings(env_cfg, a)
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
-        self.num_iterations = int(cfg.train.iterations)
+        self.num_iterations = int(a.iterations)
         self.iteration = 0
-        torch.manual_seed(self.seed)
+        torch.manual_seed(self.seed)  # the networks' initial weights; build order matters
         self.env = UAVSpectrumEnv(
             batch_size=int(a.worlds), config=env_cfg, seed=self._world_seed(0), device=self.device
         )
-        env, N = self.env, env_cfg.num_uavs
-        net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
-        values = ("agents", "action_value") if a.head == "factored" else "joint_action_value"
-        q = TensorDictModule(net, in_keys=[("agents", "observation"), "positions"], out_keys=[values])
+        q = build_q_network(self.env, a)
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
-        eps = dict(
-            eps_init=float(a.eps_start),
-            eps_end=float(a.eps_end),
-            annealing_num_steps=max(1, int(float(a.eps_fraction) * frames)),
-            device=self.device,
-        )
-        if a.head == "factored":
-            spec = env.full_action_spec_unbatched
-            greedy_action = TensorDictModule(
-                ValidGreedy(env.neighbours, env_cfg.grid[0]),
-                in_keys=[values, ("agents", "action_mask"), "positions", "tasks"],
-                out_keys=[("agents", "action")],
-            )
-            self.greedy = TensorDictSequential(q, greedy_action)
-            self.exploration = EGreedyModule(
-                spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps
-            )
-            explore = TensorDictSequential(self.greedy, self.exploration)
-            if a.mixer == "vdn":
-                mixer = TensorDictModule(
-                    VDNMixer(N, self.device),
-                    in_keys=[("agents", "chosen_action_value")],
-                    out_keys=["chosen_action_value"],
-                )
-            else:
-                mixer = TensorDictModule(
-                    QMixer((env.state_size,), int(a.mixing_embed_dim), N, self.device),
-                    in_keys=[("agents", "chosen_action_value"), "state"],
-                    out_keys=["chosen_action_value"],
-                )
-            self.loss = DoubleQMixerLoss(self.greedy, mixer, spec, float(a.gamma))
-            self._action_keys = [("agents", "action")]
-        else:
-            spec = Categorical(env_cfg.num_joint_actions, device=self.device)
-            mask = TensorDictModule(
-                JointActionMask(env.neighbours, env_cfg.grid[0], N),
-                in_keys=["positions"],
-                out_keys=["joint_action_mask"],
-            )
-            argmax = QValueModule(
-                spec=spec,
-                action_value_key=values,
-                action_mask_key="joint_action_mask",
-                out_keys=["joint_action", values, "joint_chosen_action_value"],
-            )
-            decode = TensorDictModule(
-                DecodeJointAction(N, self.device), in_keys=["joint_action"], out_keys=[("agents", "action")]
-            )
-            self.exploration = EGreedyModule(
-                spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps
-            )
-            self.greedy = TensorDictSequential(mask, q, argmax, decode)
-            explore = TensorDictSequential(mask, q, argmax, self.exploration, decode)
-            self.loss = DQNLoss(
-                TensorDictSequential(mask, q, argmax),
-                double_dqn=True,
-                delay_value=True,
-                action_space=spec,
-                loss_function="smooth_l1",
-            )
-            self.loss.set_keys(action="joint_action", action_value=values, value="joint_chosen_action_value")
-            self.loss.make_value_estimator(gamma=float(a.gamma))
-            self._action_keys = ["joint_action", ("agents", "action")]
+        policies = build_policies(self.env, a, q, exploration_schedule(a, frames, self.device))
+        self.greedy, self.exploration = policies.greedy, policies.exploration
+        self.loss = build_loss(self.env, a, policies)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
-        self.buffer = TensorDictReplayBuffer(
-            storage=LazyTensorStorage(int(a.buffer_size), device=self.device), batch_size=int(a.batch_size)
-        )
-        inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"] + (
-            ["state"] if a.head == "factored" and a.mixer == "qmix" else []
-        )
-        self._keys = inputs + self._action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
-        self.collector = Collector(
-            env,
-            explore,
-            frames_per_batch=int(a.worlds) * env_cfg.max_steps,
-            total_frames=-1,
-            device=self.device,
-            auto_register_policy_transforms=False,
-        )
+        self.buffer = build_replay_buffer(a, self.device)
+        self._keys = transition_keys(a, policies.action_keys)
+        self.collector = build_collector(self.env, policies.explore)
         self._batches = iter(self.collector)
 
     def _world_seed(self, iteration: int) -> int:
@@ -450,8 +509,7 @@ class DQNAgent:
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "exploration": self.exploration.state_dict(),
-            "buffer": self.buffer[: len(self.buffer)] if len(self.buffer) else None,  # the filled slots, in slot order
-            "buffer_writes": self.buffer.write_count,
+            "buffer": self.buffer.state_dict(),  # storage, write cursor and count, sampler
             "rng": torch.get_rng_state(),
         }
         if self.device.type == "cuda":
@@ -462,14 +520,20 @@ class DQNAgent:
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.exploration.load_state_dict(state["exploration"])
-        self.buffer.empty()
-        if state["buffer"] is not None:
-            data = state["buffer"].to(self.device)
-            self.buffer.extend(data)
-            wrapped = state["buffer_writes"] % len(data) if state["buffer_writes"] > len(data) else 0
-            if wrapped:  # rewrite the first slots with themselves so the next write lands where it would have
-                self.buffer.extend(data[:wrapped])
+        if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
+            self._load_filled_slots(state["buffer"], state["buffer_writes"])
+        else:
+            self.buffer.load_state_dict(state["buffer"])
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:
             torch.cuda.set_rng_state(state["cuda_rng"], self.device)
+
+    def _load_filled_slots(self, data, writes: int) -> None:
+        self.buffer.empty()
+        if data is not None:
+            data = data.to(self.device)
+            self.buffer.extend(data)
+            wrapped = writes % len(data) if writes > len(data) else 0
+            if wrapped:  # rewrite the first slots with themselves so the next write lands where it would have
+                self.buffer.extend(data[:wrapped])

@@ -23,7 +23,7 @@ COMMANDS = [
     ("python -c pass", ["-c", "pass"]),
     ('python -c "import torch"', ["-c", "import torch"]),
     ('python -c "import torch, tensordict, torchrl"', ["-c", "import torch, tensordict, torchrl"]),
-    ("python -m uavrl.train train.steps_per_episode=0", ["-m", "uavrl.train", "train.steps_per_episode=0"]),
+    ("python -m uavrl.train agent.episodes=0", ["-m", "uavrl.train", "agent.episodes=0"]),
     ("python -m uavrl.train env.grid=[0,3]", ["-m", "uavrl.train", "env.grid=[0,3]"]),
     ("python -m uavrl.train train.episdoes=5 (unknown key)", ["-m", "uavrl.train", "train.episdoes=5"]),
     ("python -m uavrl.evaluate checkpoint=missing.pt", ["-m", "uavrl.evaluate", "checkpoint=missing.pt"]),

@@ -19,6 +19,7 @@ import numba
 import torch
 
 from uavrl.agents.tabular import TeamQLearner
+from uavrl.agents.tabular.kernels import use_workqueue_threads
 from uavrl.envs import make_config
 
 
@@ -76,6 +77,7 @@ def main() -> None:
     parser.add_argument("--table2", action="store_true", help="also time the whole Table II protocol")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    use_workqueue_threads()  # as the learner does, before numba.get_num_threads() launches the threads
     cfg = make_config("paper", grid=(args.grid, args.grid), num_uavs=2, max_steps=args.steps)
     print(
         f"team Q-learning, N=2, {args.grid}x{args.grid}, {args.steps} steps/episode, torch threads {args.threads}, "

@@ -18,13 +18,13 @@ from uavrl.train import train
 # (command and overrides, words the one-line error must contain: the setting as typed); {tmp} is an empty
 # directory, {garbage} ... {tensor} unreadable or foreign checkpoint files, {run} a run, {other} another variant
 CLI_CASES = [
-    ("train train.steps_per_episode=0", "train.steps_per_episode=0 is invalid"),
-    ("train train.episodes=-1", "train.episodes=-1 is invalid"),
-    ("train train.episodes=0", "train.episodes=0 is invalid"),
-    ("train train.episodes=2.5", "train.episodes=2.5 is invalid"),
-    ("train train.episodes=many", "train.episodes='many' is invalid"),
-    ("train agent=dqn train.iterations=-3", "train.iterations=-3 is invalid"),
-    ("train train.runs=0", "train.runs=0 is invalid"),
+    ("train env.max_steps=0", "env.max_steps=0 is invalid"),
+    ("train agent.episodes=-1", "agent.episodes=-1 is invalid"),
+    ("train agent.episodes=0", "agent.episodes=0 is invalid"),
+    ("train agent.episodes=2.5", "agent.episodes=2.5 is invalid"),
+    ("train agent.episodes=many", "agent.episodes='many' is invalid"),
+    ("train agent=dqn agent.iterations=-3", "agent.iterations=-3 is invalid"),
+    ("train agent.runs=0", "agent.runs=0 is invalid"),
     ("train train.checkpoint_every=0", "train.checkpoint_every=0 is invalid"),
     ("train train.log_every=0", "train.log_every=0 is invalid"),
     ("train eval.horizon=0", "eval.horizon=0 is invalid"),
@@ -55,7 +55,7 @@ CLI_CASES = [
     ("train run_dir={run}", "run_dir="),
     ("train train.episdoes=5", "train.episdoes"),
     ("train agent=sarsa", "agent/sarsa"),
-    ("train train.episodes=[1", "[1"),
+    ("train agent.episodes=[1", "[1"),
     ("evaluate", "checkpoint is not set"),
     ("evaluate checkpoint={tmp}/nothing.pt", "checkpoint="),
     ("evaluate checkpoint={garbage}", "checkpoint="),
@@ -135,13 +135,13 @@ def test_command_line_mistakes_exit_with_one_line_on_stderr(line, words, files, 
 def test_a_bad_override_is_refused_before_torch_is_imported():
     probe = (
         "import runpy, sys\n"
-        "sys.argv = ['train', 'train.steps_per_episode=0']\n"
+        "sys.argv = ['train', 'env.max_steps=0']\n"
         "try:\n    runpy.run_module('uavrl.train', run_name='__main__')\n"
         "except SystemExit as exit:\n    print(exit.code)\n"
         "print(sorted(m for m in ('torch', 'tensordict', 'torchrl', 'numba') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.splitlines()
-    assert out == ["error: train.steps_per_episode=0 is invalid: it must be a whole number >= 1", "[]"]
+    assert out == ["error: env.max_steps=0 is invalid: an episode needs a whole number of steps >= 1", "[]"]
 
 
 def policy_writing(shape):
@@ -172,7 +172,7 @@ API_CASES = [
     (lambda env, compose: env.utility(POSITIONS - 1, TASKS), ValueError, "positions"),
     (lambda env, compose: env.utility(POSITIONS.float(), TASKS), TypeError, "positions"),
     (lambda env, compose: env.utility(POSITIONS, TASKS + 2), ValueError, "tasks"),
-    (lambda env, compose: train(compose("train.episodes=0")), ValueError, "train.episodes=0"),
+    (lambda env, compose: train(compose("agent.episodes=0")), ValueError, "agent.episodes=0"),
     (lambda env, compose: train(compose("agent=dqn", "agent.updates=0")), ValueError, "agent.updates=0"),
     (lambda env, compose: load_agent(__file__), CheckpointError, "checkpoint="),
 ]

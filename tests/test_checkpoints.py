@@ -12,7 +12,7 @@ from uavrl.checkpoints import CheckpointError
 from uavrl.io import save_text
 from uavrl.train import train
 
-SMALL = ["env.grid=[3,3]", "train.episodes=6", "train.steps_per_episode=100", "train.runs=2"]
+SMALL = ["env.grid=[3,3]", "agent.episodes=6", "env.max_steps=100", "agent.runs=2"]
 SMALL += ["train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
 CORRUPTIONS = {
     "truncated": lambda data: data[: len(data) // 2],

@@ -16,8 +16,8 @@ from uavrl.train import train
 
 TINY = [
     "env.grid=[3,3]",
-    "train.steps_per_episode=8",
-    "train.iterations=30",
+    "env.max_steps=8",
+    "agent.iterations=30",
     "agent.worlds=32",
     "agent.hidden=32",
     "agent.depth=1",
@@ -204,7 +204,7 @@ def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
 def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, tiny_cfg, interrupt_at):
     """Through ``uavrl.train``: the tabular agent's TensorBoard tags; a run killed after a checkpoint and resumed ends
     as the whole run."""
-    run = ["train.iterations=4", "train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
+    run = ["agent.iterations=4", "train.checkpoint_every=2", "eval.num_starts=8", "progress=false"]
     whole = train(tiny_cfg(*run, f"run_dir={tmp_path / 'whole'}"))
     tags = set(EventAccumulator(str(whole)).Reload().Tags()["scalars"])
     assert {

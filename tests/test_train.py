@@ -14,9 +14,9 @@ from uavrl.train import train
 
 SMALL = [
     "env.grid=[3,3]",
-    "train.episodes=6",
-    "train.steps_per_episode=100",
-    "train.runs=2",
+    "agent.episodes=6",
+    "env.max_steps=100",
+    "agent.runs=2",
     "train.checkpoint_every=2",
     "eval.num_starts=8",
     "progress=false",
@@ -81,6 +81,7 @@ def test_evaluate_a_checkpoint(tmp_path, compose_cfg):
         ("env.num_uavs=5 env.grid=[10,10]", "would need"),
         ("device=cuda:7", "device='cuda:7' is not available"),
         ("agent.epsilon=2", "epsilon=2 is invalid"),
+        ("train.steps_per_episode=50", "train.steps_per_episode is now env.max_steps: write env.max_steps=50"),
     ],
 )
 def test_bad_overrides_fail_with_one_line(override, message, tmp_path):

@@ -9,16 +9,20 @@ status 1, never a traceback.  Hydra's own flags (``--help``, ``--cfg job``,
 from __future__ import annotations
 
 import functools
+import re
 import sys
 from typing import Callable
 
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from uavrl.config import config_dir
+from uavrl.config import MOVED, config_dir
 from uavrl.envs.config import InvalidOption
+from uavrl.settings import shown
 
 Command = Callable[[DictConfig, list], object]
+# settings that moved: an override of the old name says the new one
+RENAMED = MOVED
 
 
 def run_command(config_name: str, command: Command, option_settings: dict[str, str]) -> None:
@@ -46,11 +50,29 @@ def compose_config(config_name: str, overrides: list[str]) -> DictConfig:
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
 
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        if key in RENAMED:
+            raise SystemExit(f"error: {key} is now {RENAMED[key]}: write {override.replace(key, RENAMED[key], 1)}")
     try:
         with initialize_config_dir(config_dir=config_dir(), version_base=None):
             return compose(config_name=config_name, overrides=overrides)
     except (HydraException, OmegaConfBaseException) as err:
-        raise SystemExit(f"error: {hydra_message(err)}") from None
+        raise SystemExit(f"error: {wrong_type(err) or hydra_message(err)}") from None
+
+
+def wrong_type(err: Exception) -> str | None:
+    """``<setting>=<value> is invalid: ...`` for a value the schema's type refuses (:mod:`uavrl.schema`), else None."""
+    from omegaconf.errors import ValidationError
+
+    cause = err.__cause__
+    if not isinstance(cause, ValidationError) or not getattr(cause, "full_key", None):
+        return None
+    expected = {"Integer": "a whole number", "Boolean": "true or false", "Float": "a number", "String": "text"}
+    converted = re.search(r"could not be converted to (\w+)|is not a valid (bool)", str(cause))
+    name = converted and (converted.group(1) or "Boolean")
+    kind = expected.get(name, name) if converted else "of the setting's type"
+    return f"{cause.full_key}={shown(cause.value)} is invalid: it must be {kind}"
 
 
 def hydra_message(err: Exception) -> str:

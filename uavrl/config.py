@@ -10,11 +10,16 @@ from uavrl.envs.config import OPTION_NAMES, ModelConfig, make_config
 
 # how the model's options are typed on the command line of uavrl.train and uavrl.evaluate
 RUN_OPTION_SETTINGS = {name: f"env.{name}" for name in (*OPTION_NAMES, "preset")}
-RUN_OPTION_SETTINGS["max_steps"] = "train.steps_per_episode"
 
 
 def config_dir() -> str:
-    """Absolute path of the Hydra configs: the installed ``uavrl.configs`` package, else the checkout's ``configs/``."""
+    """Absolute path of the Hydra configs: the installed ``uavrl.configs`` package, else the checkout's ``configs/``.
+
+    Their schemas (:mod:`uavrl.schema`) are registered with Hydra's ConfigStore on the way.
+    """
+    from uavrl.schema import register
+
+    register()
     try:
         import uavrl.configs as packaged
 
@@ -27,14 +32,36 @@ def config_dir() -> str:
 
 
 def model_config(cfg: DictConfig) -> ModelConfig:
-    """The :class:`ModelConfig` of a run: ``cfg.env`` options (null: the preset's value), episode length
-    ``cfg.train.steps_per_episode``."""
+    """The :class:`ModelConfig` of a run: the ``cfg.env`` options (null: the preset's value), the episode length
+    ``env.max_steps`` among them."""
     options = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if v is not None}
     options.pop("name", None)
     preset = options.pop("preset", "paper")
     if "grid" in options:
         options["grid"] = tuple(options["grid"])
-    return make_config(preset, max_steps=int(cfg.train.steps_per_episode), **options)
+    return make_config(preset, **options)
+
+
+# where settings of earlier versions live now (saved run configs are read through saved_config)
+MOVED = {
+    "train.steps_per_episode": "env.max_steps",
+    "train.episodes": "agent.episodes",
+    "train.runs": "agent.runs",
+    "train.iterations": "agent.iterations",
+}
+
+
+def saved_config(saved: dict) -> DictConfig:
+    """The config a run directory saved, with the settings of earlier versions moved to where they live now."""
+    cfg = OmegaConf.create(saved)
+    for old, new in MOVED.items():
+        value = OmegaConf.select(cfg, old)
+        if value is not None and OmegaConf.select(cfg, new) is None:
+            OmegaConf.update(cfg, new, value)
+        if value is not None:
+            group, key = old.split(".")
+            del cfg[group][key]
+    return cfg
 
 
 def flat_hparams(cfg: DictConfig) -> dict:

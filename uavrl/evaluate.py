@@ -12,11 +12,11 @@ import json
 import sys
 from pathlib import Path
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from uavrl.checkpoints import CheckpointError, load_checkpoint
 from uavrl.cli import run_command
-from uavrl.config import RUN_OPTION_SETTINGS, model_config
+from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import save_json
 from uavrl.settings import RUN_SETTINGS, check
 from uavrl.train import eval_settings
@@ -40,7 +40,7 @@ def load_agent(path, device="cpu"):
     state, file, skipped = load_checkpoint(path, "checkpoint")
     if skipped:
         print(f"warning: {'; '.join(skipped)}: evaluating {file} (iteration {state['iteration']})", file=sys.stderr)
-    cfg = OmegaConf.create(state["config"])
+    cfg = saved_config(state["config"])
     agent = agent_class(cfg.agent.name)(model_config(cfg), cfg, torch.device(device), int(cfg.seed))
     try:
         agent.load_state_dict(state["agent"])

@@ -25,7 +25,6 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -45,6 +44,17 @@ COMMANDS = ("table2", "figures")
 PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
 OUTPUTS = ("variant.json", "table2.md", "table2.json", "history_*.pt", "fig*.png", "tensorboard")
 REFUSAL = "give another out_dir, or overwrite=true to replace them"
+# the paper's learner (eqs. 9-10): agent=tabular's settings, whatever configs/agent/tabular.yaml says
+PAPER_LEARNER = dict(
+    name="tabular",
+    method="q_learning",
+    alpha=0.1,
+    gamma=0.3,
+    epsilon=0.1,
+    shared_table=False,
+    backend="numba",
+    memory_budget=4 * 2**30,
+)
 # how the model's options are typed on this command line
 OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
 
@@ -119,8 +129,8 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     """
     import torch
 
-    from uavrl.agents.tabular import TabularPolicy, TeamQLearner
-    from uavrl.evaluation import episode_metrics, evaluate_agent
+    from uavrl.agents.tabular import TabularAgent
+    from uavrl.evaluation import evaluate_agent
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
@@ -132,15 +142,15 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
         state_includes_tasks=bool(cfg.state_includes_tasks),
     )
     built = time.perf_counter()
-    learner = TeamQLearner(model, runs=int(cfg.runs), seed=int(cfg.seed))
-    u_star = torch.full((int(cfg.runs),), learner.model.u_star, dtype=torch.float64)
+    settings = OmegaConf.create({"agent": {**PAPER_LEARNER, "episodes": int(cfg.episodes), "runs": int(cfg.runs)}})
+    agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced
     logger = RunLogger(out_dir / "tensorboard" / f"grid{size}x{size}", resume_step=0)
     started = time.perf_counter()
     for episode in range(int(cfg.episodes)):
-        out = learner.run_episode()
-        per_run = episode_metrics(out["r_pu"], out["r_se"], out["task_switches"], out["moves"], u_star)
+        agent.train_iteration()
+        per_run = agent.last_episode
         for k in METRICS:
             history[k][episode] = per_run[k]
         logger.log({f"train/{k}": per_run[k].mean().item() for k in METRICS}, (episode + 1) * steps)
@@ -149,8 +159,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     record = {"history": history, "grid": size, "steps_per_episode": steps}
     record |= {key: cfg[key] for key in ("num_uavs", "runs", "episodes", "seed", "state_includes_tasks")}
     save_torch(record, out_dir / f"history_{size}x{size}.pt")
-    runs = SimpleNamespace(policies=lambda: [TabularPolicy(q, model) for q in learner.q])
-    evaluation = evaluate_agent(runs, model, num_starts=int(cfg.eval_starts))  # mean over runs, the yardstick's too
+    evaluation = evaluate_agent(agent, model, num_starts=int(cfg.eval_starts))  # mean over runs, the yardstick's too
     return {
         "grid": size,
         "states": model.num_states,
@@ -340,7 +349,10 @@ def reproduce(cfg: DictConfig, _overrides=()) -> None:
     import numba  # the heavy modules, once the settings are known to be good
     import torch
 
+    from uavrl.agents.tabular.kernels import use_workqueue_threads
+
     torch.set_num_threads(int(cfg.num_threads))
+    use_workqueue_threads()  # before numba launches its threads
     numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
     (table2 if cfg.command == "table2" else figures)(cfg)
 

@@ -5,7 +5,7 @@ A setting missing from a config (another agent's, or one a newer config adds)
 is skipped, so a new setting is one line here.  A refusal is one line that
 names the setting, the value and what is allowed::
 
-    train.steps_per_episode=0 is invalid: it must be a whole number >= 1
+    agent.episodes=0 is invalid: it must be a whole number >= 1
 
 Only the standard library and omegaconf are imported, so a bad override is
 refused in a fraction of a second.
@@ -93,10 +93,6 @@ RUN_SETTINGS: dict[str, Rule] = {
     "resume": optional(path(), "a new run"),  # its files are checked by uavrl.train
     "checkpoint": optional(path(), "unset"),  # its files are checked by uavrl.evaluate
     "progress": flag(),
-    "train.episodes": whole(1),
-    "train.iterations": whole(1),
-    "train.steps_per_episode": whole(1),
-    "train.runs": whole(1),
     "train.checkpoint_every": whole(1),
     "train.log_every": whole(1),
     "eval.num_starts": whole(1),
@@ -112,7 +108,10 @@ RUN_SETTINGS: dict[str, Rule] = {
     "agent.shared_table": flag(),
     "agent.backend": one_of("numba", "torch", what="backends"),
     "agent.memory_budget": positive(),
+    "agent.episodes": whole(1),
+    "agent.runs": whole(1),
     # agent=dqn
+    "agent.iterations": whole(1),
     "agent.head": one_of("factored", "joint", what="heads"),
     "agent.mixer": one_of("vdn", "qmix", what="mixers"),
     "agent.objective": one_of("delta", "log_gap", what="objectives"),

@@ -1,4 +1,4 @@
-"""Train an agent: ``python -m uavrl.train agent=tabular env=paper env.grid=[6,6] train.episodes=200``.
+"""Train an agent: ``python -m uavrl.train agent=tabular env=paper env.grid=[6,6] agent.episodes=200``.
 
 Each run writes ``runs/<agent>/<env>/<timestamp>/``: TensorBoard events, the
 resolved ``config.yaml``, ``checkpoint.pt`` (atomic, every
@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
 from uavrl.cli import run_command
-from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config
+from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import remove_orphans, save_json, save_text
 from uavrl.settings import RUN_SETTINGS, check
 
@@ -85,7 +85,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
     if skipped:
         iteration = checkpoint["iteration"]
         print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
-    saved = OmegaConf.create(checkpoint["config"])
+    saved = saved_config(checkpoint["config"])
     for override in overrides:
         key = override.split("=", 1)[0].lstrip("+~")
         if key.split(".")[0] in RESUMABLE_OVERRIDES:

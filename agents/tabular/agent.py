@@ -1,0 +1,87 @@
+"""The tabular agent behind ``python -m uavrl.train agent=tabular``: the learner, or the exact table."""
+
+from __future__ import annotations
+
+import time
+
+import torch
+
+from uavrl.agents.base import Agent
+from uavrl.envs import ModelConfig
+from uavrl.evaluation import episode_metrics
+
+from .learner import TeamQLearner
+from .policy import TabularPolicy
+from .tables import exact_q_table
+
+METHODS = ("q_learning", "value_iteration")
+
+
+class TabularAgent(Agent):
+    """The tabular agent behind ``python -m uavrl.train agent=tabular`` (contract: :class:`uavrl.agents.base.Agent`).
+
+    ``agent.method=q_learning`` (the paper's learner): one iteration is one
+    episode of ``agent.runs`` runs of ``env.max_steps`` steps.
+    ``agent.method=value_iteration``: one iteration solves :func:`exact_q_table`.
+    """
+
+    def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
+        a = cfg.agent
+        self.method = a.get("method", "q_learning")
+        if self.method not in METHODS:
+            raise ValueError(
+                f"agent.method={self.method!r} is invalid: allowed methods are {', '.join(map(repr, METHODS))}"
+            )
+        self.env_cfg, self.device = env_cfg, torch.device(device)
+        if self.method == "value_iteration":
+            if not 0 < float(a.gamma) <= 1:
+                raise ValueError(f"agent.gamma={a.gamma} is invalid for value iteration: it must lie in (0, 1]")
+            self.gamma, self.memory_budget = float(a.gamma), float(a.memory_budget)
+            self.learner, self.q, self.num_iterations = None, None, 1
+            return
+        self.learner = TeamQLearner(
+            env_cfg,
+            runs=int(a.runs),
+            seed=seed,
+            alpha=a.alpha,
+            gamma=a.gamma,
+            epsilon=a.epsilon,
+            shared_table=bool(a.shared_table),
+            backend=a.backend,
+            device=device,
+            memory_budget=float(a.memory_budget),
+        )
+        self.num_iterations = int(a.episodes)
+        self._u_star = torch.full((self.learner.runs,), self.learner.model.u_star, dtype=torch.float64)
+
+    @property
+    def env_steps(self) -> int:
+        """Team steps per run so far (all runs advance together); value iteration takes none."""
+        return 0 if self.learner is None else self.learner.episode * self.env_cfg.max_steps
+
+    def train_iteration(self) -> dict[str, float]:
+        if self.learner is None:
+            started = time.perf_counter()
+            self.q = exact_q_table(self.env_cfg, self.gamma, self.device, self.memory_budget)
+            return {"train/solve_seconds": time.perf_counter() - started}
+        steps = self.learner.run_episode()
+        per_run = episode_metrics(
+            steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], self._u_star.to(steps["r_pu"].device)
+        )
+        self.last_episode = per_run  # [R] each, for figures
+        return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
+
+    def policies(self) -> list[TabularPolicy]:
+        tables = self.learner.q if self.learner is not None else [self.q]
+        return [TabularPolicy(q, self.env_cfg) for q in tables]
+
+    def state_dict(self) -> dict:
+        return (
+            self.learner.state_dict() if self.learner is not None else {"q": None if self.q is None else self.q.cpu()}
+        )
+
+    def load_state_dict(self, state: dict):
+        if self.learner is not None:
+            self.learner.load_state_dict(state)
+        else:
+            self.q = None if state["q"] is None else state["q"].to(self.device)

@@ -1,0 +1,196 @@
+"""Team Q-learning over the model tables: :class:`TeamQLearner`, one episode at a time, on either backend."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs.channel import best_so_far_reward, delta_reward
+
+from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
+from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, table_bytes
+
+_START_BLOCK = 256  # episodes whose starts are drawn together
+
+
+class TeamQLearner:
+    """Team Q-learning over ``runs`` worlds of ``cfg`` (episode length ``cfg.max_steps``).
+
+    Args:
+        cfg: the model.
+        runs: independent runs (each its own table), or worlds feeding one table with ``shared_table``.
+        seed: seeds the episode starts (drawn by the env's reset) and the learner's random numbers.
+        alpha, gamma, epsilon: eq. 9-10 constants (paper: 0.1, 0.3, 0.1).
+        backend: ``"numba"`` (CPU) or ``"torch"`` (any device).
+        memory_budget: refuse tables larger than this many bytes.
+    """
+
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        runs: int = 1,
+        seed: int = 0,
+        alpha=0.1,
+        gamma=0.3,
+        epsilon=0.1,
+        shared_table=False,
+        backend="numba",
+        device="cpu",
+        memory_budget=DEFAULT_MEMORY_BUDGET,
+    ):
+        if backend not in ("numba", "torch"):
+            raise ValueError(f"backend={backend!r} is invalid: allowed values are 'numba', 'torch'")
+        if backend == "numba" and torch.device(device).type != "cpu":
+            raise ValueError(f"backend='numba' runs on the CPU, not device={device!r}: use backend='torch' there")
+        if int(runs) < 1:
+            raise ValueError(f"runs={runs} is invalid: give at least 1")
+        for name, value, low in (("alpha", alpha, 0.0), ("gamma", gamma, 0.0), ("epsilon", epsilon, 0.0)):
+            if not (low <= float(value) <= 1.0) or (name == "alpha" and float(value) == 0.0):
+                raise ValueError(
+                    f"{name}={value} is invalid: it must lie in {'(0, 1]' if name == 'alpha' else '[0, 1]'}"
+                )
+        num_tables = 1 if shared_table else int(runs)
+        if not cfg.has_state_index:
+            raise ValueError(
+                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} has {cfg.num_states:.3g} "
+                "states: no int64 state index exists; use agent=dqn, which scales further"
+            )
+        need = table_bytes(cfg, num_tables)
+        if need > memory_budget:
+            raise ValueError(
+                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {need:,} bytes "
+                f"({need / 2**30:.3g} GiB) with the model tables, over the memory budget of {int(memory_budget):,} "
+                "bytes; raise agent.memory_budget or use agent=dqn, which scales further"
+            )
+        self.cfg, self.runs, self.seed = cfg, int(runs), int(seed)
+        self.alpha, self.gamma, self.epsilon = float(alpha), float(gamma), float(epsilon)
+        self.shared_table, self.backend, self.device = bool(shared_table), backend, torch.device(device)
+        self.model = TabularModel(cfg, self.device)
+        self.q = torch.zeros(num_tables, cfg.num_states, cfg.num_joint_actions, dtype=torch.float64, device=self.device)
+        self.episode = 0
+        self._configuration = None  # end of the last episode, for reset_positions="keep"
+        self._start_block, self._block_starts = -1, None
+
+    def _episode_starts(self) -> torch.Tensor:
+        """``[R]`` start configurations: run ``r``'s episode ``e`` starts where the environment's reset puts
+        world ``seed + e R + r``; drawn for blocks of episodes in one batched reset."""
+        if self.cfg.reset_positions == "keep" and self._configuration is not None:
+            return self._configuration.clone()
+        block, offset = divmod(self.episode, _START_BLOCK)
+        if block != self._start_block:
+            worlds = _START_BLOCK * self.runs
+            first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
+            env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=first_world, device=self.device)
+            td = env.reset()
+            self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(
+                _START_BLOCK, self.runs
+            )
+            self._start_block = block
+        return self._block_starts[offset]
+
+    def _uniforms(self) -> torch.Tensor:
+        """``[R, T]`` uniforms of this episode, one per step and world, a pure function of (seed, episode)."""
+        g = torch.Generator().manual_seed((self.seed * 1_000_003 + self.episode) % 2**64)  # any seed below 2^63
+        return torch.rand(self.runs, self.cfg.max_steps, generator=g, dtype=torch.float64).to(self.device)
+
+    def run_episode(self) -> dict[str, torch.Tensor]:
+        """Learn for one episode; returns per-step ``r_pu``, ``r_se``, ``moves``, ``task_switches`` ``[R, T]``."""
+        k0 = self._episode_starts()
+        u = self._uniforms()
+        out = (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, u)
+        self.episode += 1
+        return {"r_pu": out[..., 0], "r_se": out[..., 1], "moves": out[..., 2], "task_switches": out[..., 3]}
+
+    def _episode_numba(self, k0, u):
+        m, cfg = self.model, self.cfg
+        out = np.empty((self.runs, cfg.max_steps, 4))
+        k = k0.numpy().copy()
+        kernel = _episode_shared if self.shared_table else _episode_per_run
+        use_workqueue_threads()
+        kernel(
+            self.q.numpy(),
+            k,
+            u.numpy(),
+            m.r_pu.numpy(),
+            m.r_se.numpy(),
+            m.row.numpy(),
+            m.valid_actions.numpy(),
+            m.num_valid.numpy(),
+            m.next_cells.numpy(),
+            m.next_tasks.numpy(),
+            m.moves.numpy(),
+            m.switches.numpy(),
+            self.alpha,
+            self.gamma,
+            self.epsilon,
+            cfg.beta1,
+            cfg.beta2,
+            cfg.reward == "best_so_far",
+            out,
+        )
+        self._configuration = torch.from_numpy(k)
+        return torch.from_numpy(out)
+
+    def _episode_torch(self, k0, u):
+        m, cfg, q = self.model, self.cfg, self.q
+        R, T, T2, A = self.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
+        tables = (
+            torch.zeros(R, dtype=torch.long, device=self.device)
+            if self.shared_table
+            else torch.arange(R, device=self.device)
+        )
+        out = torch.empty(R, T, 4, dtype=torch.float64, device=self.device)
+        k = k0.to(self.device)
+        prev = torch.stack([m.r_pu[k], m.r_se[k]], -1)
+        best = torch.zeros(R, dtype=torch.float64, device=self.device)
+        for step in range(T):
+            p, t = k // T2, k % T2
+            s = m.row[k]
+            j = _choose_batched(q[tables, s], m.valid[p], u[:, step], self.epsilon)
+            p2, t2 = m.next_cells[p, j].long(), m.next_tasks[t, j].long()
+            k2 = p2 * T2 + t2
+            r_pu, r_se = m.r_pu[k2], m.r_se[k2]
+            if cfg.reward == "best_so_far":
+                reward = best_so_far_reward(r_pu + r_se, best)
+                best = torch.maximum(best, r_pu + r_se)
+            else:
+                reward = delta_reward(r_pu, r_se, prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
+            prev = torch.stack([r_pu, r_se], -1)
+            next_q = q[tables, m.row[k2]].masked_fill(~m.valid[p2], -math.inf).amax(-1)
+            target = reward + self.gamma * next_q
+            if self.shared_table:
+                flat = s * A + j
+                total = torch.zeros(q[0].numel(), dtype=torch.float64, device=self.device).index_add_(0, flat, target)
+                count = torch.zeros(q[0].numel(), dtype=torch.float64, device=self.device).index_add_(
+                    0, flat, torch.ones_like(target)
+                )
+                q0 = q[0].view(-1)
+                q0[flat] = (1 - self.alpha) * q0[flat] + self.alpha * (total[flat] / count[flat])
+            else:
+                q[tables, s, j] = (1 - self.alpha) * q[tables, s, j] + self.alpha * target
+            out[:, step, 0], out[:, step, 1] = r_pu, r_se
+            out[:, step, 2], out[:, step, 3] = m.moves[p, j].double(), m.switches[t, j].double()
+            k = k2
+        self._configuration = k
+        return out
+
+    # checkpoints
+    def state_dict(self) -> dict:
+        return {
+            "q": self.q.cpu(),
+            "episode": self.episode,
+            "configuration": None if self._configuration is None else self._configuration.cpu(),
+        }
+
+    def load_state_dict(self, state: dict):
+        if state["q"].shape != self.q.shape:
+            raise ValueError(
+                f"checkpoint Q table has shape {tuple(state['q'].shape)}, this learner needs {tuple(self.q.shape)}: "
+                "same env and agent settings are required"
+            )
+        self.q.copy_(state["q"])
+        self.episode = int(state["episode"])
+        self._configuration = None if state["configuration"] is None else state["configuration"].to(self.device)

@@ -1,0 +1,51 @@
+"""The greedy policy of a team Q table as a TorchRL policy."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
+
+
+class TabularPolicy(TensorDictModuleBase):
+    """Greedy valid joint action from a Q table ``[S, 6^N]``, as a TorchRL policy.
+
+    Reads ``state_index`` and ``positions``; writes ``("agents", "action")``.
+    Ties are broken uniformly at random (SPEC section 6) from the policy's own
+    generator seeded ``seed``, so a rollout is reproducible.
+
+    Example:
+        >>> from uavrl.envs import UAVSpectrumEnv
+        >>> env = UAVSpectrumEnv(batch_size=3, grid=(3, 3), num_uavs=2)
+        >>> policy = TabularPolicy(torch.zeros(81, 36), env.cfg)
+        >>> env.rollout(4, policy)["agents", "action"].shape
+        torch.Size([3, 4, 2])
+    """
+
+    in_keys = ["state_index", "positions"]
+    out_keys = [("agents", "action")]
+
+    def __init__(self, q: torch.Tensor, cfg: ModelConfig, seed: int = 0):
+        super().__init__()
+        self.cfg = cfg
+        self.register_buffer("q", q)
+        self.register_buffer("neighbours", grid_neighbours(cfg.grid, q.device))
+        self.register_buffer("actions", decode_joint_actions(cfg.num_uavs, q.device))
+        self.generator = torch.Generator(device=q.device).manual_seed(seed)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        positions = td.get("positions").to(self.q.device)
+        cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
+        valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
+        values = self.q[td.get("state_index").to(self.q.device)].masked_fill(~valid, -math.inf)
+        ties = values == values.amax(-1, keepdim=True)
+        pick = (
+            torch.rand(ties.shape, generator=self.generator, device=self.q.device).masked_fill(~ties, -1.0).argmax(-1)
+        )
+        td.set(("agents", "action"), self.actions[pick].to(td.device or self.q.device))
+        return td

@@ -1,0 +1,170 @@
+"""The model as lookup tables for the tabular learner, and the exact ``Q*`` table (value iteration).
+
+:class:`TabularModel` tabulates, with the functions the environment steps with, the
+rates of every configuration and the effect of every joint action;
+:func:`exact_q_table` solves the paper's "offline" table on the configuration
+graph (:mod:`uavrl.envs.exact`).  This module uses no TorchRL (the package still imports it: learner, policy).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from uavrl.envs.channel import rates
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
+from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
+from uavrl.envs.optimum import optimum
+
+DEFAULT_MEMORY_BUDGET = 4 * 2**30
+_TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
+
+
+def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
+    """Bytes of the Q tables plus the model tables the learner keeps beside them."""
+    A = cfg.num_joint_actions
+    positions = cfg.num_cells**cfg.num_uavs
+    configs = positions * 2**cfg.num_uavs
+    return num_tables * cfg.num_states * A * 8 + positions * A * (4 + 4 + 1 + 1) + configs * (8 + 8 + 8)
+
+
+class TabularModel:
+    """The model of ``cfg`` as lookup tables, computed by the model's own functions (no TorchRL).
+
+    The geometry comes from :mod:`uavrl.envs.grid`, the per-cell rate terms of
+    the fixed layout from :func:`uavrl.envs.exact.fixed_layout_tables`, the
+    rates from :func:`uavrl.envs.channel.rates` and ``U*`` from
+    :func:`uavrl.envs.optimum.optimum`: the functions the environment steps with.
+
+    Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
+    the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
+    ``r_pu[k]``, ``r_se[k]``, ``row[k]`` (the Q row: the env's ``state_index``),
+    ``valid[p, j]`` (and the same as lists: ``valid_actions[p, :num_valid[p]]``),
+    ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``, ``switches[t, j]``.
+    """
+
+    def __init__(self, cfg: ModelConfig, device="cpu"):
+        if cfg.layout == "random":
+            raise ValueError(
+                "layout='random' is invalid for agent=tabular: its state has no layout, so one table cannot serve "
+                "many; use agent=dqn"
+            )
+        if cfg.fading != "none":
+            raise ValueError(
+                f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use "
+                "fading='none'"
+            )
+        self.cfg, self.device = cfg, torch.device(device)
+        N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
+        dev = self.device
+        neighbours = grid_neighbours(cfg.grid, dev)
+        contributions, direct = fixed_layout_tables(cfg, dev)  # [1, C, 2], [1, 2]
+        self.num_positions, self.num_task_codes = C**N, 2**N
+        place = torch.tensor([C**i for i in range(N)], device=dev)
+        bits = torch.tensor([2**i for i in range(N)], device=dev)
+        task_codes = torch.arange(2**N, device=dev)
+        tasks = (task_codes[:, None] // bits) % 2  # [2^N, N]
+        # tasks after every joint action, and how many UAVs switched
+        actions = decode_joint_actions(N, dev)  # [A, N]
+        new_tasks = torch.where(actions == 4, 0, torch.where(actions == 5, 1, tasks[:, None, :]))  # [2^N, A, N]
+        self.next_tasks = (new_tasks * bits).sum(-1).int()
+        self.switches = (new_tasks != tasks[:, None, :]).sum(-1).to(torch.int8)
+        self.valid = torch.empty(C**N, A, dtype=torch.bool, device=dev)
+        self.next_cells = torch.empty(C**N, A, dtype=torch.int32, device=dev)
+        self.moves = torch.empty(C**N, A, dtype=torch.int8, device=dev)
+        self.r_pu = torch.empty(C**N * 2**N, dtype=torch.float64, device=dev)
+        self.r_se = torch.empty_like(self.r_pu)
+        self.row = torch.empty(C**N * 2**N, dtype=torch.long, device=dev)
+        base = 2 * C if cfg.state_includes_tasks else C
+        row_place = torch.tensor([base**i for i in range(N)], device=dev)
+        step = max(1, _TABLE_CHUNK // (A * N))
+        for start in range(0, C**N, step):
+            p = torch.arange(start, min(start + step, C**N), device=dev)
+            cells = (p[:, None] // place) % C  # [P, N]
+            target = joint_targets(cells, neighbours, N)  # [P, A, N]
+            self.valid[p] = joint_action_valid(cells, neighbours, N)
+            self.next_cells[p] = (target.clamp(min=0) * place).sum(-1).int()
+            self.moves[p] = (target != cells[:, None, :]).sum(-1).to(torch.int8)
+            k = (p[:, None] * 2**N + task_codes).reshape(-1)
+            cells_k = cells[:, None].expand(-1, 2**N, -1).reshape(1, -1, N)
+            tasks_k = tasks[None].expand(len(p), -1, -1).reshape(1, -1, N)
+            r_pu, r_se = rates(contributions[0][cells_k], tasks_k, direct.view(1, 1, 2), cfg)
+            self.r_pu[k], self.r_se[k] = r_pu[0], r_se[0]
+            digits = (
+                2 * cells[:, None, :] + tasks[None]
+                if cfg.state_includes_tasks
+                else cells[:, None, :].expand(-1, 2**N, -1)
+            )
+            self.row[k] = (digits * row_place).sum(-1).reshape(-1)
+        self.num_valid = self.valid.sum(-1).int()
+        self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).int()
+        self.u_star = optimum(contributions, direct, cfg)[0].item()
+
+    def configuration_ids(self, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
+        """``k`` of ``[..., N, 2]`` positions and ``[..., N]`` tasks."""
+        N, C, L1 = self.cfg.num_uavs, self.cfg.num_cells, self.cfg.grid[0]
+        cells = positions[..., 1] * L1 + positions[..., 0]
+        place = torch.tensor([C**i for i in range(N)], device=positions.device)
+        bits = torch.tensor([2**i for i in range(N)], device=positions.device)
+        return (cells * place).sum(-1) * 2**N + (tasks * bits).sum(-1)
+
+
+def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET) -> torch.Tensor:
+    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state (SPEC section
+    6).
+
+    Solved on the configuration graph (:mod:`uavrl.envs.exact`, the environment's
+    own dynamics and rates), infinite horizon, discount ``gamma``.  With
+    ``state_includes_tasks`` a row is one configuration and holds ``Q*`` itself.
+    The paper's location-only state hides the tasks, so no row can be exact for
+    every task vector behind it: a row holds the mean of ``Q*`` over the task
+    vectors an episode starts with (all ``2^N`` for ``init_tasks=random``, else
+    the one), the value of acting from that location when the tasks are known
+    only to come from the reset (QMDP).  Its greedy policy is the best such a
+    table can express, not an optimal policy.  Invalid joint actions hold 0, as
+    in a learned table (policies mask them).
+    """
+    if cfg.reward != "delta":
+        raise ValueError(
+            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: the best_so_far reward depends "
+            "on the episode's past, not on the configuration; use env.reward=delta"
+        )
+    if cfg.layout == "random" or cfg.fading != "none":
+        raise ValueError(
+            "agent.method=value_iteration needs a fixed layout and deterministic channels (env.layout=line or "
+            "reference_code, env.fading=none)"
+        )
+    need = cfg.num_states * cfg.num_joint_actions * 8
+    if not cfg.has_state_index or need > memory_budget:
+        raise ValueError(
+            f"the exact Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need "
+            f"{cfg.num_states * cfg.num_joint_actions * 8:,} bytes, over the memory budget of {int(memory_budget):,} "
+            "bytes; raise agent.memory_budget or use agent=dqn"
+        )
+    N, C, A, dev = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions, torch.device(device)
+    space = ConfigurationSpace(cfg.grid, N, dev)
+    potential = space.utility(cfg, *fixed_layout_tables(cfg, dev), beta=(cfg.beta1, cfg.beta2))
+    values = optimal_values(space, potential, gamma)
+    task_vectors = (torch.arange(2**N, device=dev)[:, None] >> torch.arange(N, device=dev)) & 1  # [2^N, N]
+    start_tasks = {"random": task_vectors, "sensing": task_vectors[:1], "relaying": task_vectors[-1:]}[cfg.init_tasks]
+    tasks = task_vectors if cfg.state_includes_tasks else start_tasks
+    place = C ** torch.arange(N, device=dev)
+    q = torch.zeros(cfg.num_states, A, dtype=torch.float64, device=dev)
+    step = max(1, _TABLE_CHUNK // (A * len(tasks)))
+    for start in range(0, C**N, step):
+        cells = (
+            torch.arange(start, min(start + step, C**N), device=dev)[:, None] // place
+        ) % C  # [P, N] every placement
+        distinct = (cells.sort(-1).values.diff(dim=-1) != 0).all(-1)
+        cells = cells[distinct]
+        both = (cells[:, None].expand(-1, len(tasks), -1), tasks[None].expand(len(cells), -1, -1))  # [P, T, N] each
+        q_star = space.q_values(potential, values, gamma, both[0][None], both[1][None])[0]  # [P, T, A]
+        q_star = q_star.masked_fill(q_star == -math.inf, 0.0)
+        if cfg.state_includes_tasks:
+            rows = ((2 * both[0] + both[1]) * (2 * C) ** torch.arange(N, device=dev)).sum(-1)
+            q[rows.flatten()] = q_star.reshape(-1, A)
+        else:
+            q[(cells * place).sum(-1)] = q_star.mean(1)
+    return q

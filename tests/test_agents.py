@@ -1,0 +1,112 @@
+"""The agent contract (:class:`uavrl.agents.base.Agent`), checked for every agent of the registry."""
+
+import io
+
+import pytest
+import torch
+
+from uavrl.agents import AGENTS, agent_class
+from uavrl.agents.base import Agent
+from uavrl.config import model_config
+from uavrl.envs import UAVSpectrumEnv
+from uavrl.train import train
+
+COMMON = ["env.grid=[3,3]", "eval.num_starts=4", "train.checkpoint_every=2", "progress=false"]
+TINY = {
+    "tabular": ["agent.episodes=4", "env.max_steps=50", "agent.runs=2"],
+    "dqn": [
+        "agent.iterations=4",
+        "env.max_steps=8",
+        "agent.worlds=8",
+        "agent.hidden=16",
+        "agent.depth=1",
+        "agent.batch_size=32",
+        "agent.buffer_size=100",  # wraps around: 4 x 64 writes
+        "agent.updates=2",
+        "agent.learning_starts=16",
+    ],
+    "random": [],
+    "oracle": [],
+}
+
+
+def test_every_agent_has_tiny_settings():
+    assert set(TINY) == set(AGENTS)
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture
+def agent_cfg(compose_cfg):
+    return lambda name, *overrides: compose_cfg(f"agent={name}", *COMMON, *TINY[name], *overrides)
+
+
+def make(cfg, seed=0):
+    return agent_class(cfg.agent.name)(model_config(cfg), cfg, torch.device("cpu"), seed)
+
+
+def same(a, b) -> bool:
+    """Equal nested checkpoints: tensors by ``torch.equal``, tensordicts entry by entry, the rest by ``==``."""
+    if hasattr(a, "to_dict") and not isinstance(a, dict):
+        a, b = a.to_dict(), b.to_dict()
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.shape == b.shape and a.dtype == b.dtype and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_agent_contract_train_checkpoint_and_policy(name, agent_cfg):
+    cfg = agent_cfg(name)
+    cls = agent_class(name)
+    assert issubclass(cls, Agent)
+    agent = make(cfg)
+    assert isinstance(agent.num_iterations, int) and agent.num_iterations >= 0
+    for done in range(1, min(2, agent.num_iterations) + 1):
+        metrics = agent.train_iteration()
+        assert all(key.startswith("train/") and isinstance(value, float) for key, value in metrics.items())
+        assert agent.env_steps > 0 or name == "tabular" and cfg.agent.method == "value_iteration", done
+    # checkpoint round trip through bytes, as on disk
+    saved = io.BytesIO()
+    torch.save(agent.state_dict(), saved)
+    saved.seek(0)
+    restored = make(cfg)
+    restored.load_state_dict(torch.load(saved, weights_only=False))
+    assert restored.env_steps == agent.env_steps
+    assert same(restored.state_dict(), agent.state_dict())
+    # the TorchRL policies roll out, every UAV taking an allowed action
+    env_cfg = model_config(cfg)
+    for policy in agent.policies():
+        env = UAVSpectrumEnv(batch_size=4, config=env_cfg, seed=5)
+        if hasattr(policy, "bind_env"):
+            policy.bind_env(env)
+        td = env.rollout(6, policy)
+        actions = td["agents", "action"]
+        assert actions.shape == (4, 6, env_cfg.num_uavs)
+        assert td["agents", "action_mask"].gather(-1, actions.unsqueeze(-1)).all()  # each UAV's action allowed
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_agent_resumes_after_a_kill_exactly(name, agent_cfg, interrupt_at, tmp_path):
+    whole = train(agent_cfg(name, f"run_dir={tmp_path / 'whole'}"))
+    killed = tmp_path / "killed"
+    with interrupt_at(agent_class(name), 3):  # after the checkpoint of iteration 2
+        try:
+            train(agent_cfg(name, f"run_dir={killed}"))
+        except KeyboardInterrupt:
+            pass
+    interrupted = not (killed / "metrics.json").exists()
+    assert interrupted == (name in ("tabular", "dqn"))  # the baselines have no iteration to interrupt
+    if interrupted:
+        train(agent_cfg(name, f"resume={killed}"), overrides=[f"resume={killed}"])
+    a, b = (torch.load(d / "checkpoint.pt", weights_only=False) for d in (whole, killed))
+    assert a["iteration"] == b["iteration"] and same(a["agent"], b["agent"]) and a["final"] == b["final"]
