@@ -58,6 +58,7 @@ from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
+from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
 from uavrl.settings import RUN_SETTINGS, check
@@ -448,9 +449,19 @@ class DQNAgent(Agent):
                 1.0, self.iteration / self.num_iterations
             )
         u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
+        # kept: the collector's closing reset draws new random layouts before the batch is read
+        layout = (self.env.cell_contributions.clone(), self.env.direct.clone())
         batch = next(self._batches)  # [worlds, steps]
+
+        def mean_utility(td: TensorDictBase) -> torch.Tensor:
+            """``[W, T]`` mean-channel utility of the batch's configurations in the layouts they were played in."""
+            cells = td.get("positions")[..., 1] * self.env_cfg.grid[0] + td.get("positions")[..., 0]
+            contributions = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells]
+            r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], self.env_cfg)
+            return r_pu + r_se
+
         if self.settings.objective == "log_gap":
-            batch.set(("next", "reward"), self._log_gap_reward(batch, u_star))
+            batch.set(("next", "reward"), self._log_gap_reward(batch, u_star, mean_utility))
         self.buffer.extend(batch.reshape(-1).select(*self._keys))
         losses = (
             [self._update() for _ in range(int(self.settings.updates))]
@@ -461,11 +472,9 @@ class DQNAgent(Agent):
         self.iteration += 1
         nxt = batch.get("next")
         # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
-        mean_utility = (
-            self.env.utility(nxt.get("positions"), nxt.get("tasks"))[2] if self.env_cfg.fading != "none" else None
-        )
+        reach_utility = mean_utility(nxt) if self.env_cfg.fading != "none" else None
         per_world = episode_metrics(
-            nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, mean_utility
+            nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, reach_utility
         )
         out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
         out["train/epsilon"] = self.exploration.eps.item()
@@ -473,7 +482,7 @@ class DQNAgent(Agent):
             out["train/loss"] = torch.stack(losses).mean().item()
         return out
 
-    def _log_gap_reward(self, batch: TensorDictBase, u_star: torch.Tensor) -> torch.Tensor:
+    def _log_gap_reward(self, batch: TensorDictBase, u_star: torch.Tensor, mean_utility) -> torch.Tensor:
         """``[W, T, 1]`` the change of ``-log(1 - U / U* + agent.gap_floor)`` over each step, mean-channel ``U``.
 
         The delta reward's action gaps shrink with the distance to the optimum
@@ -484,7 +493,7 @@ class DQNAgent(Agent):
         floor = float(self.settings.gap_floor)
 
         def potential(td):
-            fraction = self.env.utility(td.get("positions"), td.get("tasks"))[2] / u_star.unsqueeze(-1)
+            fraction = mean_utility(td) / u_star.unsqueeze(-1)
             return -torch.log((1 - fraction).clamp(min=0) + floor)
 
         return (potential(batch.get("next")) - potential(batch)).unsqueeze(-1).to(batch.get(("next", "reward")).dtype)

@@ -284,3 +284,20 @@ def test_training_reward_of_each_objective(objective, make_agent):
         gap = lambda value: -torch.log((1 - value / u_star).clamp(min=0) + 1e-4)  # noqa: E731
         expected = gap(u_next) - gap(u)
     torch.testing.assert_close(reward, expected, rtol=1e-5, atol=1e-5)
+
+
+def test_log_gap_reward_uses_the_layouts_the_batch_was_played_in(make_agent):
+    # random layouts are redrawn by the collector's closing reset: the reward must not read the new ones
+    agent = make_agent("env.layout=random", "agent.objective=log_gap", "agent.learning_starts=100000")
+    seen = []
+    original = agent._log_gap_reward
+
+    def spy(batch, u_star, mean_utility):
+        seen.append((mean_utility(batch), batch.get("utility").double(), u_star))
+        return original(batch, u_star, mean_utility)
+
+    agent._log_gap_reward = spy
+    agent.train_iteration()
+    mine, recorded, u_star = seen[0]
+    torch.testing.assert_close(mine, recorded, rtol=1e-5, atol=1e-5)  # the env's own (float32) utility of each step
+    assert (mine <= u_star[:, None] * (1 + 1e-9)).all()
