@@ -9,6 +9,16 @@ from hydra import compose, initialize_config_dir
 
 from uavrl.config import config_dir
 
+_EPISODE_TAGS = {
+    "train/sum_utility",
+    "train/sum_r_pu",
+    "train/sum_r_se",
+    "train/task_switches",
+    "train/moves",
+    "train/steps_to_90",
+    "eval/optimality",
+}
+
 
 def _compose(*overrides: str, config_name: str = "config"):
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
@@ -19,6 +29,24 @@ def _compose(*overrides: str, config_name: str = "config"):
 def compose_cfg():
     """``compose_cfg(*overrides, config_name="config")``: the config ``python -m uavrl.train`` would run with."""
     return _compose
+
+
+@pytest.fixture
+def episode_tags():
+    """The per-episode TensorBoard scalars every agent writes (``uavrl.evaluation.episode_metrics``) and
+    ``eval/optimality``."""
+    return set(_EPISODE_TAGS)
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread for the test: small tensors run fastest so, and two threads crawl on a busy 2-core machine."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
 
 
 @pytest.fixture
