@@ -1,0 +1,109 @@
+"""Cost of one DQN training iteration (N = 6 on 10x10, the defaults) beside the same at an earlier commit.
+
+Each measurement is a whole process: build the agent, 3 warm-up iterations,
+then ``--iterations`` timed ones; it prints the median CPU and wall seconds per
+iteration.  ``--baseline REV`` checks REV out in a temporary git worktree and
+measures it the same way, alternating with this checkout ``--rounds`` times,
+so both see the same machine load; the ratio of the medians is the figure.
+One torch thread.
+
+Usage::
+
+    python benchmarks/dqn_iteration.py --baseline 3ffece7 --rounds 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+MEASURE = """
+import statistics, sys, time, torch
+torch.set_num_threads(1)
+from hydra import compose, initialize_config_dir
+from uavrl.config import config_dir, model_config
+from uavrl.agents.dqn import DQNAgent
+with initialize_config_dir(config_dir=config_dir(), version_base=None):
+    cfg = compose("config", overrides=["agent=dqn", "env.grid=[10,10]", "env.num_uavs=6"])
+agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+for _ in range(3):
+    agent.train_iteration()
+cpu, wall = [], []
+for _ in range(int(sys.argv[1])):
+    c, w = time.process_time(), time.perf_counter()
+    agent.train_iteration()
+    cpu.append(time.process_time() - c)
+    wall.append(time.perf_counter() - w)
+print(statistics.median(cpu), statistics.median(wall))
+"""
+
+
+def measure(checkout: Path, iterations: int) -> tuple[float, float]:
+    """Median (CPU, wall) seconds per iteration of the code in ``checkout`` (its folders on the import path)."""
+    code = "import sys\n" + _installed_names(checkout) + MEASURE
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(iterations)], capture_output=True, text=True, env={**os.environ}
+    )
+    if done.returncode != 0:
+        raise SystemExit(f"measuring {checkout} failed:\n{done.stderr}")
+    cpu, wall = map(float, done.stdout.split()[-2:])
+    return cpu, wall
+
+
+def _installed_names(checkout: Path) -> str:
+    """Make ``uavrl``, ``uavrl.envs``, ``uavrl.agents`` and ``uavrl.configs`` the folders of ``checkout`` (as
+    pyproject's package-dir does), whatever is installed: all four are registered before any of them runs."""
+    folders = {"uavrl": "uavrl", "uavrl.envs": "envs", "uavrl.agents": "agents", "uavrl.configs": "configs"}
+    return (
+        "import importlib.util\n"
+        "_modules = []\n"
+        f"for name, folder in {[(n, str(checkout / f)) for n, f in folders.items()]!r}:\n"
+        "    spec = importlib.util.spec_from_file_location(name, folder + '/__init__.py',"
+        " submodule_search_locations=[folder])\n"
+        "    sys.modules[name] = importlib.util.module_from_spec(spec)\n"
+        "    _modules.append((sys.modules[name], spec))\n"
+        "for module, spec in _modules:\n"
+        "    spec.loader.exec_module(module)\n"
+    )
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--baseline", help="a git revision to measure beside this checkout")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--iterations", type=int, default=12)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        checkouts = {"this checkout": ROOT}
+        if args.baseline:
+            worktree = Path(tmp) / "baseline"
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(worktree), args.baseline])
+            checkouts = {f"baseline {args.baseline}": worktree, **checkouts}
+        try:
+            print(f"load average at start: {os.getloadavg()[0]:.1f}")
+            results = {name: [] for name in checkouts}
+            for round_ in range(args.rounds):
+                for name, checkout in checkouts.items():
+                    results[name].append(measure(checkout, args.iterations))
+                    cpu, wall = results[name][-1]
+                    print(f"round {round_ + 1}  {name:<22} CPU {cpu:.3f} s/iteration  wall {wall:.3f} s", flush=True)
+            medians = {name: statistics.median(c for c, _ in runs) for name, runs in results.items()}
+            for name, cpu in medians.items():
+                print(f"median  {name:<22} CPU {cpu:.3f} s/iteration")
+            if args.baseline:
+                base, this = medians[f"baseline {args.baseline}"], medians["this checkout"]
+                print(f"this checkout / baseline: {this / base:.2f}x CPU per iteration")
+            print(f"load average at end: {os.getloadavg()[0]:.1f}")
+        finally:
+            if args.baseline:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(worktree)])
+
+
+if __name__ == "__main__":
+    main()
