@@ -24,6 +24,20 @@ def remove_orphans(path) -> None:
         orphan.unlink(missing_ok=True)
 
 
+def claim_dir(base) -> Path:
+    """Create and return ``base``, or ``base-1``, ``base-2``, ... if taken: one directory per caller, even for
+    processes that start in the same second (``mkdir`` either creates the directory or fails)."""
+    base = Path(base)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    candidate, n = base, 1
+    while True:
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            candidate, n = base.with_name(f"{base.name}-{n}"), n + 1
+
+
 def _atomic(path: Path, write, previous: Path | None = None):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
