@@ -68,5 +68,9 @@ def save_json(obj, path) -> None:
     _atomic(path, lambda f: f.write((json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()))
 
 
+def save_bytes(data: bytes, path) -> None:
+    _atomic(path, lambda f: f.write(data))
+
+
 def save_text(text: str, path) -> None:
     _atomic(path, lambda f: f.write(text.encode()))
