@@ -6,7 +6,7 @@ status 1, never a traceback.  Hydra's own flags (``--help``, ``--cfg job``,
 ``--multirun``, ...) go to Hydra's command line unchanged.
 
 A sweep (``-m``) of ``configs/config.yaml`` writes every job's run directory
-to ``<sweep_dir>/<its overrides>/seed=<seed>`` (:func:`sweep_command_line`,
+to ``<sweep_dir>/<its overrides>/seed=<seed>`` (:func:`split_sweep_dir`,
 :func:`claim_job_dir`): unique within the sweep, readable, and the same name
 for the same overrides whatever the launcher (basic, joblib, Ray).
 """
@@ -53,13 +53,9 @@ def run_command(
 
         sweeps_runs = config_name == "config" and any(arg in SWEEP_FLAGS for arg in overrides)
         if sweeps_runs:
-            overrides, sweep_dir = sweep_command_line(overrides)
-            sys.argv[1:] = overrides
-            try:
-                _reported(lambda _cfg, _overrides: check_sweep(overrides, check), None, [], option_settings)
-            except SystemExit:
-                remove_if_empty(sweep_dir)  # a new sweep directory, when the sweep is refused
-                raise
+            overrides, sweep_dir = split_sweep_dir(overrides)
+            _reported(lambda _cfg, _overrides: check_sweep(overrides, sweep_dir, check), None, [], option_settings)
+            sys.argv[1:] = [*overrides, sweep_dir_override(sweep_dir or new_sweep_dir())]
 
         @functools.wraps(command)  # Hydra names the app after the wrapped command
         def task(cfg: DictConfig) -> None:
@@ -80,9 +76,9 @@ def run_command(
 SWEEP_FLAGS = ("-m", "--multirun")
 
 
-def sweep_command_line(overrides: list[str]) -> tuple[list[str], Path]:
-    """The command line of a sweep with ``sweep_dir`` absolute, so jobs started anywhere agree on it, and that
-    directory; without ``sweep_dir``, a new ``runs/sweeps/<timestamp>`` (``-1``, ``-2``, ... when taken)."""
+def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
+    """A sweep's command line without ``sweep_dir``, and that directory made absolute (None when not given), so jobs
+    started anywhere agree on it."""
     keys = [arg.split("=", 1)[0].lstrip("+~") for arg in overrides]
     if "run_dir" in keys:
         raise SystemExit(
@@ -90,18 +86,18 @@ def sweep_command_line(overrides: list[str]) -> tuple[list[str], Path]:
             "set sweep_dir instead"
         )
     given = [arg.split("=", 1)[1] for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
-    if given:
-        sweep_dir = Path(given[-1]).expanduser().resolve()
-    else:
-        sweep_dir = claim_dir(Path("runs") / "sweeps" / datetime.now().strftime("%Y%m%d-%H%M%S")).resolve()
-    quoted = str(sweep_dir).replace("\\", "\\\\").replace("'", "\\'")
     rest = [arg for arg, key in zip(overrides, keys, strict=True) if key != "sweep_dir"]
-    return [*rest, f"sweep_dir='{quoted}'"], sweep_dir
+    return rest, Path(given[-1]).expanduser().resolve() if given else None
 
 
-def remove_if_empty(directory: Path) -> None:
-    if directory.is_dir() and not any(directory.iterdir()):
-        directory.rmdir()
+def new_sweep_dir() -> Path:
+    """A new ``runs/sweeps/<timestamp>`` (``-1``, ``-2``, ... when taken), absolute."""
+    return claim_dir(Path("runs") / "sweeps" / datetime.now().strftime("%Y%m%d-%H%M%S")).resolve()
+
+
+def sweep_dir_override(sweep_dir: Path) -> str:
+    quoted = str(sweep_dir).replace("\\", "\\\\").replace("'", "\\'")
+    return f"sweep_dir='{quoted}'"
 
 
 def claim_job_dir(output_dir: str, seed: int) -> str:
@@ -125,14 +121,14 @@ def sweep_jobs(overrides: list[str]) -> list[list[str]]:
     return BasicSweeper.split_arguments(parsed, max_batch_size=None)[0]
 
 
-def check_sweep(overrides: list[str], check: Callable[[DictConfig], None] | None) -> None:
-    """Every job of a sweep composed and checked, and its run directory free, before any job starts."""
+def check_sweep(overrides: list[str], sweep_dir: Path | None, check: Callable[[DictConfig], None] | None) -> None:
+    """Every job of a sweep composed and checked, and its run directory in ``sweep_dir`` free, before any starts."""
     from omegaconf import open_dict
 
     for job in sweep_jobs(overrides):
         cfg = compose_config("config", job, return_hydra_config=True)
-        run_dir = Path(cfg.sweep_dir) / cfg.hydra.job.override_dirname / f"seed={cfg.seed}"
-        if run_dir.exists():
+        run_dir = Path(sweep_dir or "") / cfg.hydra.job.override_dirname / f"seed={cfg.seed}"
+        if sweep_dir is not None and run_dir.exists():
             raise FileExistsError(f"{run_dir} already exists (an earlier sweep's job): give a new sweep_dir")
         if check is not None:
             with open_dict(cfg):
