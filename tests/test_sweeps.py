@@ -13,8 +13,6 @@ from uavrl.cli import check_sweep, split_sweep_dir, sweep_jobs
 from uavrl.io import claim_dir
 from uavrl.train import new_run_dir
 
-TINY_TABULAR = ["agent=tabular", "agent.episodes=2", "env.max_steps=20", "agent.runs=2", "eval.num_starts=4"]
-
 
 def test_runs_started_at_once_get_their_own_directories(tmp_path, compose_cfg, monkeypatch):
     """16 threads released together claim runs/<agent>/<env>/<timestamp>[-n]: 16 directories, each claimed once."""
@@ -87,17 +85,9 @@ def test_a_sweep_that_would_overwrite_a_job_is_refused(tmp_path):
         check_sweep(["agent=random", "seed=0,1"], tmp_path, None)
 
 
-def sweep(tmp_path, *overrides, timeout=600):
-    """``python -m uavrl.train -m <overrides>`` in ``tmp_path``; the run directories it wrote."""
-    argv = [sys.executable, "-m", "uavrl.train", "-m", "progress=false", *overrides]
-    result = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=timeout)
-    assert result.returncode == 0, result.stderr[-3000:]
-    return sorted(path.parent for path in tmp_path.rglob("metrics.json"))
-
-
 @pytest.mark.slow
-def test_a_sweep_on_the_basic_launcher_writes_one_run_per_job_under_runs(tmp_path):
-    runs = sweep(tmp_path, *TINY_TABULAR, "seed=0,1")
+def test_a_sweep_on_the_basic_launcher_writes_one_run_per_job_under_runs(tmp_path, run_sweep, tiny_tabular):
+    runs = run_sweep(tmp_path, *tiny_tabular, "seed=0,1")
     (sweep_dir,) = (tmp_path / "runs" / "sweeps").iterdir()
     job = "agent.episodes=2,agent.runs=2,agent=tabular,env.max_steps=20,eval.num_starts=4"
     assert runs == [sweep_dir / job / "seed=0", sweep_dir / job / "seed=1"]
