@@ -80,9 +80,9 @@ def test_sweep_jobs_are_named_from_their_overrides_and_seed(tmp_path):
 
 def test_a_sweep_that_would_overwrite_a_job_is_refused(tmp_path):
     (tmp_path / "agent=random" / "seed=1").mkdir(parents=True)
-    check_sweep(["agent=random", "seed=0"], tmp_path, None)
+    check_sweep("config", ["agent=random", "seed=0"], tmp_path, None)
     with pytest.raises(FileExistsError, match="agent=random/seed=1 already exists"):
-        check_sweep(["agent=random", "seed=0,1"], tmp_path, None)
+        check_sweep("config", ["agent=random", "seed=0,1"], tmp_path, None)
 
 
 @pytest.mark.slow

@@ -43,7 +43,9 @@ def run_command(
 
     ``option_settings`` names the model's options as the command's users type
     them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check``
-    refuses a bad config; a sweep runs it on every job before any starts.
+    refuses a bad config; a command that passes it writes run directories: in
+    a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
+    checked before any starts.
     """
     overrides = sys.argv[1:]
     if any(arg.startswith("-") for arg in overrides):
@@ -51,10 +53,15 @@ def run_command(
         from hydra.core.hydra_config import HydraConfig
         from hydra.types import RunMode
 
-        sweeps_runs = config_name == "config" and any(arg in SWEEP_FLAGS for arg in overrides)
+        sweeps_runs = check is not None and any(arg in SWEEP_FLAGS for arg in overrides)
         if sweeps_runs:
             overrides, sweep_dir = split_sweep_dir(overrides)
-            _reported(lambda _cfg, _overrides: check_sweep(overrides, sweep_dir, check), None, [], option_settings)
+            _reported(
+                lambda _cfg, _overrides: check_sweep(config_name, overrides, sweep_dir, check),
+                None,
+                [],
+                option_settings,
+            )
             sys.argv[1:] = [*overrides, sweep_dir_override(sweep_dir or new_sweep_dir())]
 
         @functools.wraps(command)  # Hydra names the app after the wrapped command
@@ -121,12 +128,12 @@ def sweep_jobs(overrides: list[str]) -> list[list[str]]:
     return BasicSweeper.split_arguments(parsed, max_batch_size=None)[0]
 
 
-def check_sweep(overrides: list[str], sweep_dir: Path | None, check: Callable[[DictConfig], None] | None) -> None:
+def check_sweep(config_name: str, overrides: list[str], sweep_dir: Path | None, check: Callable | None) -> None:
     """Every job of a sweep composed and checked, and its run directory in ``sweep_dir`` free, before any starts."""
     from omegaconf import open_dict
 
     for job in sweep_jobs(overrides):
-        cfg = compose_config("config", job, return_hydra_config=True)
+        cfg = compose_config(config_name, job, return_hydra_config=True)
         run_dir = Path(sweep_dir or "") / cfg.hydra.job.override_dirname / f"seed={cfg.seed}"
         if sweep_dir is not None and run_dir.exists():
             raise FileExistsError(f"{run_dir} already exists (an earlier sweep's job): give a new sweep_dir")
