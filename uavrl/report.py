@@ -247,27 +247,43 @@ def file_stem(label: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in label)
 
 
-def save_figure(figure, path: Path) -> None:
-    """PNG written atomically (a temporary file renamed over it)."""
-    import io
-
-    from uavrl.io import save_bytes
-
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
-    save_bytes(buffer.getvalue(), path)
-
-
-def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
+def pyplot():
+    """matplotlib's pyplot without a display."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def save_figure(figure, path: Path) -> Path:
+    """The figure as a PNG written atomically (a temporary file renamed over it), then closed."""
+    import io
+
+    from uavrl.io import save_bytes
+
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
+    save_bytes(buffer.getvalue(), path)
+    pyplot().close(figure)
+    return path
+
+
+def baseline_lines(ax, cells: list[Cell], value) -> None:
+    """The baselines' mean of ``value(run)`` as dashed and dotted reference lines."""
+    for cell, style in zip((c for c in cells if c.is_baseline), ("--", ":"), strict=False):
+        values = [value(run) for run in cell.runs if value(run) is not None]
+        if values:
+            ax.axhline(np.mean(values), linestyle=style, color="k", linewidth=1, label=cell.agent)
+
+
+def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
     learners = [c for c in cells if not c.is_baseline]
     baselines = [c for c in cells if c.is_baseline]
     shown = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
-    figure, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
+    figure, axes = pyplot().subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
     for ax, metric in zip(axes[0], shown, strict=True):
         for x, cell in enumerate(learners):
             values = cell.values(metric)
@@ -278,21 +294,14 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
             ax.plot([x] * len(values), values, "o", color="0.6", markersize=3)  # the seeds
             error = None if np.isnan(low) else [[mean - low], [high - mean]]
             ax.errorbar([x], [mean], yerr=error, fmt="s", color=f"C{x}", capsize=4)
-        for cell, style in zip(baselines, ("--", ":"), strict=False):
-            values = cell.values(metric)
-            if values:
-                ax.axhline(np.mean(values), linestyle=style, color="k", linewidth=1, label=cell.agent)
+        baseline_lines(ax, cells, lambda run, metric=metric: run.metrics.get(metric))
         ax.set_xticks(range(len(learners)), [c.agent for c in learners], rotation=20, ha="right")
         ax.set_xlim(-0.6, max(len(learners), 1) - 0.4)
         ax.set_title(METRICS[metric], fontsize=10)
         if baselines and ax is axes[0][0]:
             ax.legend(fontsize=8, loc="best")
     figure.suptitle(f"{label}: mean and 95% bootstrap CI over seeds (grey: seeds; lines: baselines)", fontsize=10)
-    figure.tight_layout()
-    path = out / f"{file_stem(label)}_metrics.png"
-    save_figure(figure, path)
-    plt.close(figure)
-    return path
+    return save_figure(figure, out / f"{file_stem(label)}_metrics.png")
 
 
 def eval_horizon(run: Run) -> int:
@@ -302,33 +311,26 @@ def eval_horizon(run: Run) -> int:
 
 
 def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path | None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     drawn = [(cell, curves(cell)) for cell in cells if not cell.is_baseline]
     drawn = [(cell, found) for cell, found in drawn if found is not None]
     if not drawn:
         return None
-    figure, ax = plt.subplots(figsize=(7, 4.2))
+    figure, ax = pyplot().subplots(figsize=(7, 4.2))
     for x, (cell, (steps, values)) in enumerate(drawn):
         low, high = bootstrap_band(values, seed=seed)
         ax.plot(steps, values.mean(axis=0), color=f"C{x}", label=f"{cell.agent} ({len(values)} seeds)")
         if not np.isnan(low).all():
             ax.fill_between(steps, low, high, color=f"C{x}", alpha=0.25)
-    for cell, style in zip((c for c in cells if c.is_baseline), ("--", ":"), strict=False):
-        per_step = [run.metrics["eval/sum_utility"] / eval_horizon(run) for run in cell.runs]
-        ax.axhline(np.mean(per_step), linestyle=style, color="k", linewidth=1, label=f"{cell.agent} (evaluation)")
+    baseline_lines(ax, cells, lambda run: run.metrics["eval/sum_utility"] / eval_horizon(run))  # evaluated, per step
     ax.set_xlabel("team steps")
     ax.set_ylabel("utility per step (bit/s/Hz)")
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(f"{label}: training episodes (exploration included), mean over seeds, 95% bootstrap band", fontsize=9)
-    figure.tight_layout()
-    path = out / f"{file_stem(label)}_curves.png"
-    save_figure(figure, path)
-    plt.close(figure)
-    return path
+    ax.set_title(
+        f"{label}: training episodes (exploration included), mean and 95% bootstrap band over seeds;\n"
+        "lines: the baselines' evaluation",
+        fontsize=9,
+    )
+    return save_figure(figure, out / f"{file_stem(label)}_curves.png")
 
 
 def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
