@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import subprocess
+import sys
 
 import pytest
 from hydra import compose, initialize_config_dir
@@ -84,3 +86,28 @@ def interrupt_at(monkeypatch):
             monkeypatch.setattr(agent_class, "train_iteration", original)
 
     return interrupted
+
+
+RAY_START_TIMEOUT = "The current node timed out during startup"
+
+
+@pytest.fixture(scope="session")
+def run_sweep():
+    """``run_sweep(directory, *overrides)``: ``python -m uavrl.train -m progress=false <overrides>`` run in
+    ``directory``; the run directories it holds then (those with a ``metrics.json``), sorted."""
+
+    def run(directory, *overrides, timeout=600):
+        argv = [sys.executable, "-m", "uavrl.train", "-m", "progress=false", *overrides]
+        result = subprocess.run(argv, cwd=directory, capture_output=True, text=True, timeout=timeout)
+        if RAY_START_TIMEOUT in result.stderr:  # before any job ran: Ray waits a fixed 30 s, too short under load
+            result = subprocess.run(argv, cwd=directory, capture_output=True, text=True, timeout=timeout)
+        assert result.returncode == 0, result.stderr[-3000:]
+        return sorted(path.parent for path in directory.rglob("metrics.json"))
+
+    return run
+
+
+@pytest.fixture(scope="session")
+def tiny_tabular():
+    """Overrides of a tabular run of a second or two (a sweep's job in the sweep tests)."""
+    return ["agent=tabular", "agent.episodes=2", "env.max_steps=20", "agent.runs=2", "eval.num_starts=4"]

@@ -4,6 +4,11 @@ A user's mistake (a bad setting, a missing or unreadable file, an unknown
 override) ends the command with ``error: <one line>`` on stderr and exit
 status 1, never a traceback.  Hydra's own flags (``--help``, ``--cfg job``,
 ``--multirun``, ...) go to Hydra's command line unchanged.
+
+A sweep (``-m``) of ``configs/config.yaml`` writes every job's run directory
+to ``<sweep_dir>/<its overrides>/seed=<seed>`` (:func:`split_sweep_dir`,
+:func:`claim_job_dir`): unique within the sweep, readable, and the same name
+for the same overrides whatever the launcher (basic, joblib, Ray).
 """
 
 from __future__ import annotations
@@ -11,6 +16,8 @@ from __future__ import annotations
 import functools
 import re
 import sys
+from datetime import datetime
+from pathlib import Path
 from typing import Callable
 
 from omegaconf import DictConfig
@@ -18,6 +25,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from uavrl.config import MOVED, config_dir
 from uavrl.envs.config import InvalidOption
+from uavrl.io import claim_dir
 from uavrl.settings import shown
 
 Command = Callable[[DictConfig, list], object]
@@ -25,27 +33,117 @@ Command = Callable[[DictConfig, list], object]
 RENAMED = MOVED
 
 
-def run_command(config_name: str, command: Command, option_settings: dict[str, str]) -> None:
+def run_command(
+    config_name: str,
+    command: Command,
+    option_settings: dict[str, str],
+    check: Callable[[DictConfig], None] | None = None,
+) -> None:
     """Compose ``config_name`` with the command line's overrides and run ``command(cfg, overrides)``.
 
     ``option_settings`` names the model's options as the command's users type
-    them (``grid`` -> ``env.grid``), for errors raised by the model.
+    them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check``
+    refuses a bad config; a command that passes it writes run directories: in
+    a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
+    checked before any starts.
     """
     overrides = sys.argv[1:]
     if any(arg.startswith("-") for arg in overrides):
         import hydra
         from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        sweeps_runs = check is not None and any(arg in SWEEP_FLAGS for arg in overrides)
+        if sweeps_runs:
+            overrides, sweep_dir = split_sweep_dir(overrides)
+            _reported(
+                lambda _cfg, _overrides: check_sweep(config_name, overrides, sweep_dir, check),
+                None,
+                [],
+                option_settings,
+            )
+            sys.argv[1:] = [*overrides, sweep_dir_override(sweep_dir or new_sweep_dir())]
 
         @functools.wraps(command)  # Hydra names the app after the wrapped command
         def task(cfg: DictConfig) -> None:
-            _reported(command, cfg, list(HydraConfig.get().overrides.task), option_settings)
+            hydra_cfg = HydraConfig.get()
+            if sweeps_runs and hydra_cfg.mode == RunMode.MULTIRUN:
+                # checked before the sweep started; what fails now is the launcher's to report, and a job that
+                # exits would take a Ray worker with it
+                cfg.run_dir = claim_job_dir(hydra_cfg.runtime.output_dir, cfg.seed)
+                command(cfg, list(hydra_cfg.overrides.task))
+                return
+            _reported(command, cfg, list(hydra_cfg.overrides.task), option_settings)
 
         hydra.main(config_path=config_dir(), config_name=config_name, version_base=None)(task)()
         return
     _reported(command, compose_config(config_name, overrides), overrides, option_settings)
 
 
-def compose_config(config_name: str, overrides: list[str]) -> DictConfig:
+SWEEP_FLAGS = ("-m", "--multirun")
+
+
+def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
+    """A sweep's command line without ``sweep_dir``, and that directory made absolute (None when not given), so jobs
+    started anywhere agree on it."""
+    keys = [arg.split("=", 1)[0].lstrip("+~") for arg in overrides]
+    if "run_dir" in keys:
+        raise SystemExit(
+            "error: run_dir is invalid in a sweep (-m): each job runs in <sweep_dir>/<its overrides>/seed=<seed>; "
+            "set sweep_dir instead"
+        )
+    given = [arg.split("=", 1)[1] for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
+    rest = [arg for arg, key in zip(overrides, keys, strict=True) if key != "sweep_dir"]
+    return rest, Path(given[-1]).expanduser().resolve() if given else None
+
+
+def new_sweep_dir() -> Path:
+    """A new ``runs/sweeps/<timestamp>`` (``-1``, ``-2``, ... when taken), absolute."""
+    return claim_dir(Path("runs") / "sweeps" / datetime.now().strftime("%Y%m%d-%H%M%S")).resolve()
+
+
+def sweep_dir_override(sweep_dir: Path) -> str:
+    quoted = str(sweep_dir).replace("\\", "\\\\").replace("'", "\\'")
+    return f"sweep_dir='{quoted}'"
+
+
+def claim_job_dir(output_dir: str, seed: int) -> str:
+    """``<output_dir>/seed=<seed>``, created here; refused if it exists (a sweep into the same ``sweep_dir`` ran these
+    overrides already: nothing it wrote is overwritten)."""
+    run_dir = Path(output_dir) / f"seed={seed}"
+    try:
+        run_dir.mkdir(parents=True)
+    except FileExistsError:
+        raise FileExistsError(f"{run_dir} already exists (an earlier sweep's job): give a new sweep_dir") from None
+    return str(run_dir)
+
+
+def sweep_jobs(overrides: list[str]) -> list[list[str]]:
+    """The overrides of each job of a sweep, as Hydra's basic sweeper splits them (Hydra's own flags dropped)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    task = [arg for arg in overrides if not arg.startswith("-") and not arg.lstrip("+~").startswith("hydra")]
+    parsed = OverridesParser.create().parse_overrides(task)
+    return BasicSweeper.split_arguments(parsed, max_batch_size=None)[0]
+
+
+def check_sweep(config_name: str, overrides: list[str], sweep_dir: Path | None, check: Callable | None) -> None:
+    """Every job of a sweep composed and checked, and its run directory in ``sweep_dir`` free, before any starts."""
+    from omegaconf import open_dict
+
+    for job in sweep_jobs(overrides):
+        cfg = compose_config(config_name, job, return_hydra_config=True)
+        run_dir = Path(sweep_dir or "") / cfg.hydra.job.override_dirname / f"seed={cfg.seed}"
+        if sweep_dir is not None and run_dir.exists():
+            raise FileExistsError(f"{run_dir} already exists (an earlier sweep's job): give a new sweep_dir")
+        if check is not None:
+            with open_dict(cfg):
+                del cfg["hydra"]
+            check(cfg)
+
+
+def compose_config(config_name: str, overrides: list[str], return_hydra_config: bool = False) -> DictConfig:
     """The config with ``overrides``, as ``@hydra.main`` composes it; Hydra's message in one line when it cannot."""
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
@@ -56,7 +154,7 @@ def compose_config(config_name: str, overrides: list[str]) -> DictConfig:
             raise SystemExit(f"error: {key} is now {RENAMED[key]}: write {override.replace(key, RENAMED[key], 1)}")
     try:
         with initialize_config_dir(config_dir=config_dir(), version_base=None):
-            return compose(config_name=config_name, overrides=overrides)
+            return compose(config_name=config_name, overrides=overrides, return_hydra_config=return_hydra_config)
     except (HydraException, OmegaConfBaseException) as err:
         raise SystemExit(f"error: {wrong_type(err) or hydra_message(err)}") from None
 

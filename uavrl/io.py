@@ -24,6 +24,20 @@ def remove_orphans(path) -> None:
         orphan.unlink(missing_ok=True)
 
 
+def claim_dir(base) -> Path:
+    """Create and return ``base``, or ``base-1``, ``base-2``, ... if taken: one directory per caller, even for
+    processes that start in the same second (``mkdir`` either creates the directory or fails)."""
+    base = Path(base)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    candidate, n = base, 1
+    while True:
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            candidate, n = base.with_name(f"{base.name}-{n}"), n + 1
+
+
 def _atomic(path: Path, write, previous: Path | None = None):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -52,6 +66,10 @@ def save_torch(obj, path, previous=None) -> None:
 
 def save_json(obj, path) -> None:
     _atomic(path, lambda f: f.write((json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()))
+
+
+def save_bytes(data: bytes, path) -> None:
+    _atomic(path, lambda f: f.write(data))
 
 
 def save_text(text: str, path) -> None:

@@ -115,6 +115,14 @@ class BaselineSchema:
 
 
 @dataclass
+class ScenarioSchema:
+    """``configs/scenario/<name>.yaml``: a named setting of the environment; its budgets are in ``budget/``."""
+
+    name: str = "paper_6x6"
+    agents: list[str] = field(default_factory=lambda: ["tabular", "dqn", "random", "oracle"])  # the agents it runs
+
+
+@dataclass
 class RunSchema:
     """``configs/config.yaml``: the run's settings; ``env`` and ``agent`` come from their groups."""
 
@@ -122,6 +130,7 @@ class RunSchema:
     device: str = "cpu"
     num_threads: int = 1
     run_dir: Optional[str] = None
+    sweep_dir: Optional[str] = None
     resume: Optional[str] = None
     checkpoint: Optional[str] = None
     progress: bool = True
@@ -129,6 +138,7 @@ class RunSchema:
     eval: EvalSchema = field(default_factory=EvalSchema)
     env: EnvSchema = field(default_factory=EnvSchema)
     agent: Any = None
+    scenario: Optional[ScenarioSchema] = None  # null: env and agent as given; scenario=<name>: configs/scenario/
 
 
 @dataclass
@@ -157,12 +167,13 @@ AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineS
 
 def register() -> None:
     """Store the schemas in Hydra's ConfigStore (before composing): ``run_schema``, ``reproduce_schema``,
-    ``schema/env``, ``schema/agent/<name>``."""
+    ``schema/env``, ``schema/scenario``, ``schema/agent/<name>``."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     store.store(name="run_schema", node=RunSchema)
     store.store(name="reproduce_schema", node=ReproduceSchema)
     store.store(group="schema", name="env", node=EnvSchema)
+    store.store(group="schema", name="scenario", node=ScenarioSchema)
     for name, schema in AGENT_SCHEMAS.items():
         store.store(group="schema/agent", name=name, node=schema)

@@ -77,6 +77,13 @@ def grid_sizes() -> Rule:
     return Rule(accepts, "give a list of grid sizes >= 1, e.g. [2,3,6]")
 
 
+def agent_names() -> Rule:
+    return Rule(
+        lambda v: isinstance(v, list) and len(v) > 0 and set(v) <= set(AGENTS),
+        f"give a list of agents among {', '.join(map(repr, AGENTS))}",
+    )
+
+
 SEED = Rule(lambda v: _is_whole(v) and 0 <= v < 2**63, "it must be a whole number in [0, 2^63)")
 DEVICE = Rule(
     lambda v: isinstance(v, str) and bool(re.fullmatch(r"cpu|cuda(:\d+)?", v)), "use 'cpu', 'cuda' or 'cuda:<index>'"
@@ -101,6 +108,8 @@ RUN_SETTINGS: dict[str, Rule] = {
     "eval.every": whole(0),
     "eval.gamma": interval(0.0, 1.0, low_open=True),
     "agent.name": one_of(*AGENTS, what="agents"),
+    "sweep_dir": optional(path(), "runs/sweeps/<timestamp> for a sweep (-m)"),
+    "scenario.agents": agent_names(),
     # agent=tabular
     "agent.method": one_of("q_learning", "value_iteration", what="methods"),
     "agent.alpha": interval(0.0, 1.0, low_open=True),
@@ -153,6 +162,14 @@ REPRODUCE_SETTINGS: dict[str, Rule] = {
     "num_threads": whole(1),
     "numba_threads": whole(0),
 }
+
+
+def check_scenario(cfg: DictConfig) -> None:
+    """A one-line ValueError when the chosen scenario (``configs/scenario/``) does not run the chosen agent."""
+    scenario = OmegaConf.select(cfg, "scenario")
+    if scenario is not None and cfg.agent.name not in scenario.agents:
+        allowed = ", ".join(map(repr, scenario.agents))
+        raise ValueError(f"agent={cfg.agent.name} is invalid with scenario={scenario.name}: its agents are {allowed}")
 
 
 def shown(value) -> str:

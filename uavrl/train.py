@@ -26,8 +26,8 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
-from uavrl.io import remove_orphans, save_json, save_text
-from uavrl.settings import RUN_SETTINGS, check
+from uavrl.io import claim_dir, remove_orphans, save_json, save_text
+from uavrl.settings import RUN_SETTINGS, check, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -36,6 +36,7 @@ RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
 def check_settings(cfg: DictConfig) -> None:
     """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
     check(cfg, RUN_SETTINGS)
+    check_scenario(cfg)
     model_config(cfg)
     if cfg.resume and not checkpoint_files(cfg.resume):
         raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory)")
@@ -65,13 +66,10 @@ def seed_everything(seed: int) -> None:
 
 
 def new_run_dir(cfg: DictConfig) -> Path:
+    """``run_dir`` if given (a sweep job gets one from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>``."""
     if cfg.run_dir:
         return Path(cfg.run_dir)
-    base = Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
-    run_dir, n = base, 1
-    while run_dir.exists():
-        run_dir, n = base.with_name(f"{base.name}-{n}"), n + 1
-    return run_dir
+    return claim_dir(Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S"))
 
 
 def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
@@ -227,4 +225,4 @@ def yardstick_line(cfg: DictConfig, result: dict) -> str:
 
 
 if __name__ == "__main__":
-    run_command("config", train, RUN_OPTION_SETTINGS)
+    run_command("config", train, RUN_OPTION_SETTINGS, check=check_settings)

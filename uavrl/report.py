@@ -1,0 +1,390 @@
+"""A study's report: ``python -m uavrl.report <run dirs or sweep dirs> [--out DIR]``.
+
+Every ``metrics.json`` under the given directories (with the run's
+``config.yaml`` and TensorBoard curves beside it) becomes one run; runs are
+grouped by setting (the scenario, else the environment) and by agent (with the
+settings that tell apart the runs of one agent in one setting, e.g.
+``dqn agent.mixer=qmix``).  Each cell's seeds give the mean of each yardstick
+metric with a 95% percentile-bootstrap confidence interval (numpy, a fixed
+seed: the same runs give the same report) and, with 5 seeds or more, the
+interquartile mean (rliable's recommendation).  ``report.md`` holds the tables,
+the number of seeds per cell (cells with fewer than 3 flagged) and, per
+setting, a PNG of the metrics (agents side by side, the random and oracle
+baselines as reference lines) and one of the learning curves (mean over seeds
+with a 95% bootstrap band).
+
+Example:
+    >>> iqm([1.0, 2.0, 3.0, 4.0, 100.0])
+    3.0
+    >>> bootstrap_ci([0.0, 1.0], resamples=1000, seed=0)
+    (0.0, 1.0)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from uavrl.io import save_text
+
+# the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
+METRICS = {
+    "eval/return_ratio": "return ratio",
+    "eval/reach_999": "reach 0.999 U*",
+    "eval/steps_to_999": "steps to 0.999 U*",
+    "eval/step_ratio_999": "steps / fewest (0.999 U*)",
+    "eval/optimality": "final U/U*",
+    "train_seconds": "training s",
+}
+BASELINES = ("random", "oracle")
+CONFIDENCE = 0.95
+FEW_SEEDS = 3  # cells with fewer seeds are flagged
+IQM_SEEDS = 5  # the interquartile mean is shown from this many seeds on
+# settings that never change a run's results (or are the seed itself): not used to tell runs apart
+IGNORED = {"seed", "run_dir", "sweep_dir", "resume", "checkpoint", "progress", "num_threads", "train.checkpoint_every"}
+CURVE_TAG = "train/sum_utility"  # per training episode; divided by env.max_steps: utility per step
+
+
+def iqm(values) -> float:
+    """Interquartile mean: the mean of the values left after dropping the lowest and highest 25% (as
+    ``scipy.stats.trim_mean(values, 0.25)``: ``floor(n / 4)`` values from each end)."""
+    ordered = np.sort(np.asarray(values, dtype=float))
+    cut = len(ordered) // 4
+    return float(ordered[cut : len(ordered) - cut].mean())
+
+
+def bootstrap_ci(values, resamples: int = 10_000, seed: int = 0, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean: ``resamples`` draws of ``n`` values with replacement, the
+    ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles (numpy's linear) of their means.  NaN for one
+    value."""
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return float("nan"), float("nan")
+    draws = np.random.default_rng(seed).integers(0, len(values), size=(resamples, len(values)))
+    means = values[draws].mean(axis=1)
+    low, high = np.quantile(means, [(1 - confidence) / 2, (1 + confidence) / 2])
+    return float(low), float(high)
+
+
+def bootstrap_band(curves: np.ndarray, resamples: int = 2_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Pointwise percentile-bootstrap band of the mean of ``curves`` ``[seeds, points]``; NaN for one curve."""
+    if len(curves) < 2:
+        nan = np.full(curves.shape[1], np.nan)
+        return nan, nan
+    draws = np.random.default_rng(seed).integers(0, len(curves), size=(resamples, len(curves)))
+    means = curves[draws].mean(axis=1)
+    return tuple(np.quantile(means, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2], axis=0))
+
+
+@dataclass
+class Run:
+    path: Path
+    config: dict  # flat: dotted setting -> value
+    metrics: dict
+
+    @property
+    def seed(self) -> int:
+        return self.config["seed"]
+
+    @property
+    def agent(self) -> str:
+        return self.config["agent.name"]
+
+    @property
+    def setting(self) -> str:
+        return self.config.get("scenario.name") or self.config["env.name"]
+
+
+@dataclass
+class Cell:
+    setting: str
+    agent: str  # the agent's name and what tells its runs apart
+    runs: list[Run] = field(default_factory=list)
+
+    @property
+    def is_baseline(self) -> bool:
+        return self.runs[0].agent in BASELINES
+
+    def values(self, metric: str) -> list[float]:
+        return [run.metrics[metric] for run in self.runs if metric in run.metrics]
+
+
+def flat(config: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out.update(flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = tuple(value) if isinstance(value, list) else value
+    return out
+
+
+def find_runs(paths) -> list[Run]:
+    """Every run directory (one holding ``metrics.json``) under ``paths``, in path order."""
+    runs = []
+    for given in paths:
+        given = Path(given)
+        if not given.is_dir():
+            raise FileNotFoundError(f"{given}: no such directory (give run directories or sweep directories)")
+        for metrics_file in sorted(given.rglob("metrics.json")):
+            run_dir = metrics_file.parent
+            if not (run_dir / "config.yaml").exists():
+                continue  # not a run directory of uavrl.train
+            config = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml"), resolve=True)
+            runs.append(Run(run_dir, flat(config), json.loads(metrics_file.read_text())))
+    if not runs:
+        raise FileNotFoundError(
+            f"no run directory (with metrics.json and config.yaml) under {', '.join(map(str, paths))}"
+        )
+    return runs
+
+
+def differing(runs: list[Run], keep) -> list[str]:
+    """The settings (``keep(name)`` true) whose values are not the same in all ``runs``."""
+    names = sorted({name for run in runs for name in run.config if keep(name) and name not in IGNORED})
+    return [name for name in names if len({repr(run.config.get(name)) for run in runs}) > 1]
+
+
+def shown_value(value) -> str:
+    if isinstance(value, tuple):
+        return "[" + ",".join(map(str, value)) + "]"
+    return "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def group(runs: list[Run]) -> dict[str, list[Cell]]:
+    """Cells by setting; within a setting, by agent and the settings that differ between that agent's runs."""
+    by_setting: dict[str, list[Run]] = {}
+    for run in runs:
+        by_setting.setdefault(run.setting, []).append(run)
+    cells = {}
+    for setting, setting_runs in by_setting.items():
+        # model and evaluation settings that differ split the setting (env.max_steps is an agent's training budget)
+        split = differing(setting_runs, lambda n: n.startswith(("env.", "eval.")) and n != "env.max_steps")
+        by_cell: dict[tuple, Cell] = {}
+        for run in setting_runs:
+            label = " ".join([setting, *(f"{n}={shown_value(run.config.get(n))}" for n in split)])
+            same_agent = [r for r in setting_runs if r.agent == run.agent]
+            variant = differing(same_agent, lambda n: not n.startswith(("env.", "eval.")) or n == "env.max_steps")
+            agent = " ".join([run.agent, *(f"{n}={shown_value(run.config.get(n))}" for n in variant)])
+            by_cell.setdefault((label, agent), Cell(label, agent)).runs.append(run)
+        for (label, _), cell in by_cell.items():
+            cells.setdefault(label, []).append(cell)
+    for label in cells:  # learners first, then the baselines; each by name
+        cells[label].sort(key=lambda c: (c.is_baseline, c.agent))
+        for cell in cells[label]:
+            cell.runs.sort(key=lambda r: (r.seed, str(r.path)))
+    return dict(sorted(cells.items()))
+
+
+def summary(values: list[float], resamples: int, seed: int) -> str:
+    """``mean [low, high]`` (and ``IQM x`` from 5 values); ``-`` without values."""
+    if not values:
+        return "-"
+    low, high = bootstrap_ci(values, resamples, seed)
+    text = f"{np.mean(values):.4g}" + ("" if np.isnan(low) else f" [{low:.4g}, {high:.4g}]")
+    if len(values) >= IQM_SEEDS:
+        text += f"; IQM {iqm(values):.4g}"
+    return text
+
+
+def seeds_cell(cell: Cell) -> str:
+    seeds = [run.seed for run in cell.runs]
+    text = f"{len(seeds)} ({', '.join(map(str, seeds))})"
+    return f"**{text} < {FEW_SEEDS}**" if len(seeds) < FEW_SEEDS else text
+
+
+def table(cells: list[Cell], resamples: int, seed: int) -> list[str]:
+    lines = [
+        "| agent | seeds | " + " | ".join(METRICS.values()) + " |",
+        "|---|---|" + "---|" * len(METRICS),
+    ]
+    for cell in cells:
+        row = [cell.agent + (" (baseline)" if cell.is_baseline else ""), seeds_cell(cell)]
+        for metric in METRICS:
+            values = cell.values(metric)
+            text = summary(values, resamples, seed)
+            if values and len(values) < len(cell.runs):
+                text += f" (n={len(values)})"  # the metric exists only where a start reached the level
+            row.append(text)
+        lines.append("| " + " | ".join(row) + " |")
+    return lines
+
+
+def describe(run: Run) -> str:
+    c = run.config
+    grid = "x".join(map(str, c["env.grid"]))
+    parts = [f"{grid} grid, {c['env.num_uavs']} UAVs, preset {c['env.preset']}"]
+    parts += [f"{key} {c[f'env.{key}']}" for key in ("layout", "fading") if c.get(f"env.{key}") is not None]
+    parts.append(f"evaluation: {c['eval.num_starts']} starts, gamma {c['eval.gamma']}")
+    return "; ".join(parts)
+
+
+def curves(cell: Cell) -> tuple[np.ndarray, np.ndarray] | None:
+    """Team steps and ``[seeds, points]`` utility per step of the training episodes, on the first run's steps."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    series = []
+    for run in cell.runs:
+        events = EventAccumulator(str(run.path), size_guidance={"scalars": 0})
+        events.Reload()
+        if CURVE_TAG not in events.Tags()["scalars"]:
+            continue
+        points = events.Scalars(CURVE_TAG)
+        steps = np.array([p.step for p in points], dtype=float)
+        series.append((steps, np.array([p.value for p in points]) / run.config["env.max_steps"]))
+    if not series:
+        return None
+    steps = series[0][0]
+    return steps, np.stack([np.interp(steps, s, v) for s, v in series])
+
+
+def file_stem(label: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in label)
+
+
+def pyplot():
+    """matplotlib's pyplot without a display."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(figure, path: Path) -> Path:
+    """The figure as a PNG written atomically (a temporary file renamed over it), then closed."""
+    import io
+
+    from uavrl.io import save_bytes
+
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
+    save_bytes(buffer.getvalue(), path)
+    pyplot().close(figure)
+    return path
+
+
+def baseline_lines(ax, cells: list[Cell], value) -> None:
+    """The baselines' mean of ``value(run)`` as dashed and dotted reference lines."""
+    for cell, style in zip((c for c in cells if c.is_baseline), ("--", ":"), strict=False):
+        values = [value(run) for run in cell.runs if value(run) is not None]
+        if values:
+            ax.axhline(np.mean(values), linestyle=style, color="k", linewidth=1, label=cell.agent)
+
+
+def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
+    learners = [c for c in cells if not c.is_baseline]
+    baselines = [c for c in cells if c.is_baseline]
+    shown = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
+    figure, axes = pyplot().subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
+    for ax, metric in zip(axes[0], shown, strict=True):
+        for x, cell in enumerate(learners):
+            values = cell.values(metric)
+            if not values:
+                continue
+            low, high = bootstrap_ci(values, resamples, seed)
+            mean = float(np.mean(values))
+            ax.plot([x] * len(values), values, "o", color="0.6", markersize=3)  # the seeds
+            error = None if np.isnan(low) else [[mean - low], [high - mean]]
+            ax.errorbar([x], [mean], yerr=error, fmt="s", color=f"C{x}", capsize=4)
+        baseline_lines(ax, cells, lambda run, metric=metric: run.metrics.get(metric))
+        ax.set_xticks(range(len(learners)), [c.agent for c in learners], rotation=20, ha="right")
+        ax.set_xlim(-0.6, max(len(learners), 1) - 0.4)
+        ax.set_title(METRICS[metric], fontsize=10)
+        if baselines and ax is axes[0][0]:
+            ax.legend(fontsize=8, loc="best")
+    figure.suptitle(f"{label}: mean and 95% bootstrap CI over seeds (grey: seeds; lines: baselines)", fontsize=10)
+    return save_figure(figure, out / f"{file_stem(label)}_metrics.png")
+
+
+def eval_horizon(run: Run) -> int:
+    """The evaluation's steps per rollout (``eval.horizon``, default ``max(20, 2 (L1 + L2))`` as in
+    ``uavrl.evaluation.default_horizon``)."""
+    return run.config["eval.horizon"] or max(20, 2 * sum(run.config["env.grid"]))
+
+
+def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path | None:
+    drawn = [(cell, curves(cell)) for cell in cells if not cell.is_baseline]
+    drawn = [(cell, found) for cell, found in drawn if found is not None]
+    if not drawn:
+        return None
+    figure, ax = pyplot().subplots(figsize=(7, 4.2))
+    for x, (cell, (steps, values)) in enumerate(drawn):
+        low, high = bootstrap_band(values, seed=seed)
+        ax.plot(steps, values.mean(axis=0), color=f"C{x}", label=f"{cell.agent} ({len(values)} seeds)")
+        if not np.isnan(low).all():
+            ax.fill_between(steps, low, high, color=f"C{x}", alpha=0.25)
+    baseline_lines(ax, cells, lambda run: run.metrics["eval/sum_utility"] / eval_horizon(run))  # evaluated, per step
+    ax.set_xlabel("team steps")
+    ax.set_ylabel("utility per step (bit/s/Hz)")
+    ax.legend(fontsize=8, loc="best")
+    ax.set_title(
+        f"{label}: training episodes (exploration included), mean and 95% bootstrap band over seeds;\n"
+        "lines: the baselines' evaluation",
+        fontsize=9,
+    )
+    return save_figure(figure, out / f"{file_stem(label)}_curves.png")
+
+
+def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
+    """Write ``report.md`` and the figures to ``out``; returns the path of ``report.md``."""
+    out = Path(out)
+    runs = find_runs(paths)
+    cells = group(runs)
+    lines = [
+        "# Study report",
+        "",
+        f"{len(runs)} runs from {', '.join(map(str, paths))}. Each cell: mean over seeds with its 95% "
+        f"percentile-bootstrap interval in brackets ({resamples:,} resamples, seed {seed}); from {IQM_SEEDS} "
+        f"seeds on, also the interquartile mean (IQM). Seed counts below {FEW_SEEDS} are in bold: their interval is "
+        "not to be trusted (with one seed there is none). `(n=k)`: the metric exists for k seeds only (steps are "
+        "counted over the starts that reach the level). The yardstick's metrics are described in the README "
+        "(The yardstick); random and oracle are the baselines.",
+    ]
+    for label, setting_cells in cells.items():
+        lines += ["", f"## {label}", "", describe(setting_cells[0].runs[0]), "", *table(setting_cells, resamples, seed)]
+        figure = metrics_figure(label, setting_cells, out, resamples, seed)
+        lines += ["", f"![{label}: metrics]({figure.name})"]
+        curve_figure = curves_figure(label, setting_cells, out, seed)
+        if curve_figure is not None:
+            lines += ["", f"![{label}: learning curves]({curve_figure.name})"]
+    lines += ["", "Runs:", "", *(f"- `{run.path}`" for cell in cells.values() for c in cell for run in c.runs)]
+    path = out / "report.md"
+    save_text("\n".join(lines) + "\n", path)
+    return path
+
+
+class OneLineParser(argparse.ArgumentParser):
+    def error(self, message: str):
+        raise SystemExit(f"error: {message} (python -m uavrl.report --help)")
+
+
+def main(argv=None) -> None:
+    parser = OneLineParser(prog="python -m uavrl.report", description=__doc__.split("\n\n")[0])
+    parser.add_argument("paths", nargs="+", help="run directories or sweep directories (searched for metrics.json)")
+    parser.add_argument("--out", help="where report.md and the PNGs go (default: the one directory given)")
+    parser.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (default 10000)")
+    parser.add_argument("--seed", type=int, default=0, help="the bootstrap's random seed (default 0)")
+    args = parser.parse_args(argv)
+    if args.out is None and len(args.paths) > 1:
+        parser.error("--out is needed with several directories")
+    if args.resamples < 1:
+        parser.error(f"--resamples={args.resamples} is invalid: it must be a whole number >= 1")
+    if args.seed < 0:
+        parser.error(f"--seed={args.seed} is invalid: it must be a whole number >= 0")
+    try:
+        path = report(args.paths, args.out or args.paths[0], args.resamples, args.seed)
+    except OSError as err:
+        raise SystemExit(f"error: {err}") from None
+    print(f"report: {path} (figures beside it)")
+
+
+if __name__ == "__main__":
+    main()
