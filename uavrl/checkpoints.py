@@ -41,7 +41,8 @@ def _read(path: Path) -> dict:
     except Exception as err:  # any failure to unpickle means an unreadable file, whatever the library raises
         with open(path, "rb") as f:
             kind = "truncated or damaged" if f.read(2) == b"PK" else "not a torch file"
-        raise CheckpointError(f"{kind} ({type(err).__name__}: {str(err).split('. ')[0].strip()})") from None
+        detail = " ".join(str(err).split()).split(". ")[0]  # the library's first sentence, on one line
+        raise CheckpointError(f"{kind} ({type(err).__name__}: {detail})") from None
     if not isinstance(state, dict) or not all(k in state for k in _ENTRIES):
         raise CheckpointError(f"not a uavrl checkpoint (a {type(state).__name__} without {', '.join(_ENTRIES)})")
     return state
