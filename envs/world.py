@@ -553,9 +553,12 @@ class World:
         deterministic (mean) channels.  See :func:`uavrl.envs.optimum.optimum`.
         """
         self._require_layout()
-        u, cells, tasks = exact_optimum(self.cell_contributions, self.direct, self.cfg, method=method)
-        L1 = self.cfg.grid[0]
-        return u, torch.stack([cells % L1, cells // L1], -1), tasks
+        # a fixed layout has one row of tables: solved once, the same answer for every world
+        u, cells, tasks = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+        B, L1 = self.num_worlds, self.cfg.grid[0]
+        if len(u) != B:
+            u, cells, tasks = u.expand(B), cells.expand(B, -1), tasks.expand(B, -1)
+        return u.clone(), torch.stack([cells % L1, cells // L1], -1), tasks.clone()
 
     def joint_action_mask(self, positions: torch.Tensor | None = None) -> torch.Tensor:
         """``[B, 6^N]`` valid joint actions (all cells on the grid and distinct) at ``positions`` (default: now)."""

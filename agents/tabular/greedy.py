@@ -21,12 +21,11 @@ from uavrl.evaluation import DEFAULT_GAMMA, EVAL_SEED, evaluation_starts, greedy
 OUTPUTS = ("positions", "tasks", "r_pu", "r_se", "task_switches", "moves")  # what the yardstick reads per step
 
 
-def greedy_joint_actions(q_rows, cells, neighbours, num_uavs: int, uniforms: torch.Tensor) -> torch.Tensor:
-    """Index of the greedy valid joint action of each Q row ``[W, 6^N]`` at ``cells`` ``[W, N]``.
+def greedy_joint_actions(q_rows: torch.Tensor, valid: torch.Tensor, uniforms: torch.Tensor) -> torch.Tensor:
+    """Index of the greedy joint action of each Q row ``[W, 6^N]`` among the ``valid`` ones ``[W, 6^N]``.
 
     Ties are broken uniformly at random: the tied action with the largest of ``uniforms`` ``[W, 6^N]``.
     """
-    valid = joint_action_valid(cells, neighbours, num_uavs)
     values = q_rows.masked_fill(~valid, -math.inf)
     ties = values == values.amax(-1, keepdim=True)
     return uniforms.masked_fill(~ties, -1.0).argmax(-1)
@@ -52,17 +51,21 @@ def evaluate_tables(
     """
     world, start, u_star, references, horizon = evaluation_starts(cfg, num_starts, horizon, seed, device, gamma)
     q = tables.to(world.device)
-    R, B, N, A = len(q), num_starts, cfg.num_uavs, cfg.num_joint_actions
+    R, B, N, A, C = len(q), num_starts, cfg.num_uavs, cfg.num_joint_actions, cfg.num_cells
+    neighbours = grid_neighbours(cfg.grid, world.device)
     play = World(world.cfg, R * B, world.device, seed)
     out = play.start_at(world.code.repeat(R, 1))
     table_of = torch.arange(R, device=world.device).repeat_interleave(B)
-    neighbours, joint_actions = grid_neighbours(cfg.grid, world.device), decode_joint_actions(N, world.device)
+    joint_actions, place = decode_joint_actions(N, world.device), C ** torch.arange(N, device=world.device)
+    # the valid joint actions of every placement p = sum_i c_i C^i, as in the learner's model tables
+    valid = joint_action_valid(torch.arange(C**N, device=world.device)[:, None] // place % C, neighbours, N)
     generator = torch.Generator(device=world.device).manual_seed(policy_seed)
     steps = []
     for _ in range(horizon):
         # every table's policy draws the same numbers as TabularPolicy does from its own generator
         uniforms = torch.rand((B, A), generator=generator, device=world.device).repeat(R, 1)
-        pick = greedy_joint_actions(q[table_of, out["state_index"]], play.code >> 1, neighbours, N, uniforms)
+        placement = ((play.code >> 1) * place).sum(-1)
+        pick = greedy_joint_actions(q[table_of, out["state_index"]], valid[placement], uniforms)
         out = play.step(joint_actions[pick])[0]
         steps.append({key: out[key] for key in OUTPUTS})
     per_table = {key: torch.stack([s[key] for s in steps], 1).unflatten(0, (R, B)) for key in OUTPUTS}

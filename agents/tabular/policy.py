@@ -7,7 +7,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.grid import decode_joint_actions, grid_neighbours
+from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
 from .greedy import greedy_joint_actions
 
@@ -43,6 +43,7 @@ class TabularPolicy(TensorDictModuleBase):
         cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
         values = self.q[td.get("state_index").to(self.q.device)]
         uniforms = torch.rand(values.shape, generator=self.generator, device=self.q.device)
-        pick = greedy_joint_actions(values, cells, self.neighbours, self.cfg.num_uavs, uniforms)
+        valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
+        pick = greedy_joint_actions(values, valid, uniforms)
         td.set(("agents", "action"), self.actions[pick].to(td.device or self.q.device))
         return td
