@@ -39,3 +39,23 @@ def test_the_probe_sees_torchrl_where_it_is_used(tmp_path):
     done = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "IMPORTED ['tensordict', 'torchrl']" in done.stdout
+
+
+def test_a_second_process_loads_the_learner_kernels_from_the_cache(tmp_path):
+    """numba's cache=True: once a process has compiled the learner's kernels, the next one loads them, compiling
+    nothing."""
+    learn = (
+        "import numba\n"
+        "from uavrl.agents.tabular import TeamQLearner, kernels\n"
+        "from uavrl.envs import make_config\n"
+        "for shared in (False, True):\n"
+        "    TeamQLearner(make_config('paper', grid=(3, 3), max_steps=20), runs=2, shared_table=shared).run_episode()\n"
+        "for kernel in (kernels._episode_per_run, kernels._episode_shared):\n"
+        "    hits, misses = (sum(counts.values()) for counts in (kernel.stats.cache_hits, kernel.stats.cache_misses))\n"
+        "    print(kernel.__name__, hits, 'hits', misses, 'misses')\n"
+    )
+    for _ in range(2):  # the first process may compile (a fresh checkout); the second must not
+        done = subprocess.run([sys.executable, "-c", learn], capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr[-2000:]
+    loaded = ["_episode_per_run 1 hits 0 misses", "_episode_shared 1 hits 0 misses"]
+    assert done.stdout.split("\n")[:2] == loaded, done.stdout
