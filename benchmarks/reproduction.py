@@ -15,14 +15,17 @@ building and compilation included, as a user meets them):
   grids (``python -m uavrl.reproduce table2``).
 
 The processes of a round run one after the other, rounds interleave them, and
-each figure is the median (and the best) over rounds; the machine's load
-average is printed beside them (other people's work shares its cores).
+each figure is the median (and the best) over rounds, as wall time and as CPU
+time (user + system: less moved by other work on the machine, but it counts
+both cores' work when ours runs its learners in parallel); the load average
+is printed beside them (other people's work shares the cores).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -66,9 +69,13 @@ def tables(contrib, direct, side, lease):
 
 @numba.njit(cache=True)
 def plain_protocol(r_pu, r_se, valid, next_cells, C, runs, episodes, steps, alpha, gamma, epsilon, seed):
+    """The learner the direct way: one uniform per step explores or breaks the greedy ties among the valid joint
+    actions (listed once per cell pair), a float32 table, the delta reward, the target's max by a second scan."""
     np.random.seed(seed)
     q = np.zeros((C * C, 36), np.float32)
-    actions = np.zeros(36, np.int64)
+    actions, n_valid = np.zeros((C * C, 36), np.int64), valid.sum(1)
+    for p in range(C * C):
+        actions[p, : n_valid[p]] = np.nonzero(valid[p])[0]
     for _ in range(runs):
         q[:] = 0
         for _ in range(episodes):
@@ -76,24 +83,25 @@ def plain_protocol(r_pu, r_se, valid, next_cells, C, runs, episodes, steps, alph
             c1 = (c0 + 1 + np.random.randint(C - 1)) % C
             k = (c0 * C + c1) * 4 + np.random.randint(4)
             for _ in range(steps):
-                p, t = k >> 2, k & 3
-                n = 0
-                for j in range(36):
-                    if valid[p, j]:
-                        actions[n] = j
-                        n += 1
-                if np.random.random() < epsilon:
-                    j = actions[np.random.randint(n)]
+                p, t, n, u = k >> 2, k & 3, n_valid[k >> 2], np.random.random()
+                if u < epsilon:
+                    j = actions[p, int(u / epsilon * n)]
                 else:
                     best, ties = -np.inf, 0
                     for i in range(n):
-                        v = q[p, actions[i]]
+                        v = q[p, actions[p, i]]
                         if v > best:
-                            best, ties, j = v, 1, actions[i]
+                            best, ties, j = v, 1, actions[p, i]
                         elif v == best:
                             ties += 1
-                            if np.random.randint(ties) == 0:
-                                j = actions[i]
+                    if ties > 1:  # the m-th of the tied actions
+                        m = int((u - epsilon) / (1 - epsilon) * ties)
+                        for i in range(n):
+                            if q[p, actions[p, i]] == best:
+                                if m == 0:
+                                    j = actions[p, i]
+                                    break
+                                m -= 1
                 a0, a1 = j % 6, j // 6
                 t2 = t
                 if a0 >= 4:
@@ -103,9 +111,8 @@ def plain_protocol(r_pu, r_se, valid, next_cells, C, runs, episodes, steps, alph
                 k2 = next_cells[p, j] * 4 + t2
                 reward = r_pu[k2] - r_pu[k] + r_se[k2] - r_se[k]
                 p2, target = k2 >> 2, -np.inf
-                for j2 in range(36):
-                    if valid[p2, j2] and q[p2, j2] > target:
-                        target = q[p2, j2]
+                for i in range(n_valid[p2]):
+                    target = max(target, q[p2, actions[p2, i]])
                 q[p, j] = (1 - alpha) * q[p, j] + alpha * (reward + gamma * target)
                 k = k2
     return q
@@ -131,10 +138,12 @@ def plain(grids: list[int], runs: int, episodes: int) -> None:
     print(f"plain loop: {time.perf_counter() - started:.2f} s inside the process", file=sys.stderr)
 
 
-def timed(command: list[str]) -> float:
-    started = time.perf_counter()
+def timed(command: list[str]) -> tuple[float, float]:
+    """Wall seconds and CPU seconds (user + system) of one whole process."""
+    before, started = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - started
+    wall, after = time.perf_counter() - started, resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
 
 
 def main() -> None:
@@ -161,20 +170,29 @@ def main() -> None:
         for _name, command in cases[:2]:
             timed(_command(command, out))
     print(f"# reproduction, whole processes; {args.rounds} interleaved rounds; {os.cpu_count()} CPUs")
-    seconds = {name: [] for name, _ in cases}
+    wall, cpu = {name: [] for name, _ in cases}, {name: [] for name, _ in cases}
     for round_ in range(args.rounds):
         for name, command in cases:
             with tempfile.TemporaryDirectory() as out:
-                seconds[name].append(timed(_command(command, out)))
-            print(f"round {round_ + 1}: {name:<15} {seconds[name][-1]:7.2f} s  (load {os.getloadavg()[0]:.2f})")
-    print(f"{'process':<15} {'median s':>9} {'best s':>8}")
-    for name, values in seconds.items():
-        print(f"{name:<15} {statistics.median(values):>9.2f} {min(values):>8.2f}")
+                seconds = timed(_command(command, out))
+            wall[name].append(seconds[0])
+            cpu[name].append(seconds[1])
+            print(f"round {round_ + 1}: {name:<15} wall {seconds[0]:7.2f} s  cpu {seconds[1]:7.2f} s  (load {_load()})")
+    print(f"{'process':<15} {'wall median':>12} {'wall best':>10} {'cpu median':>11} {'cpu best':>9}")
+    for name in wall:
+        figures = (statistics.median(wall[name]), min(wall[name]), statistics.median(cpu[name]), min(cpu[name]))
+        print(f"{name:<15} {figures[0]:>12.2f} {figures[1]:>10.2f} {figures[2]:>11.2f} {figures[3]:>9.2f}")
     for ours, baseline in (("ours 6x6", "plain 6x6"), ("ours Table II", "plain Table II")):
-        if ours in seconds:
-            ratio = statistics.median(seconds[ours]) / statistics.median(seconds[baseline])
-            best = min(seconds[ours]) / min(seconds[baseline])
-            print(f"{ours} / {baseline}: {ratio:.2f}x (medians), {best:.2f}x (bests)")
+        if ours in wall:
+            ratio = [f(by[ours]) / f(by[baseline]) for by in (wall, cpu) for f in (statistics.median, min)]
+            print(
+                f"{ours} / {baseline}: wall {ratio[0]:.2f}x (medians) {ratio[1]:.2f}x (bests), "
+                f"cpu {ratio[2]:.2f}x (medians) {ratio[3]:.2f}x (bests)"
+            )
+
+
+def _load() -> str:
+    return f"{os.getloadavg()[0]:.2f}"
 
 
 def _command(command: list[str], out_dir: str) -> list[str]:
