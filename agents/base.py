@@ -49,6 +49,16 @@ class Agent(abc.ABC):
     def policies(self) -> list:
         """Greedy TorchRL policies, one per independent run (read the env's keys, write ``("agents", "action")``)."""
 
+    def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
+        """:func:`uavrl.evaluation.evaluate` (``kwargs``: its settings) of each of :meth:`policies`.
+
+        An agent may override it with a faster evaluation of the same greedy
+        policies that gives the same numbers (the tabular agent reads its tables).
+        """
+        from uavrl.evaluation import evaluate
+
+        return [evaluate(policy, env_cfg, **kwargs) for policy in self.policies()]
+
     @abc.abstractmethod
     def state_dict(self) -> dict[str, Any]:
         """Everything a checkpoint needs to resume exactly."""

@@ -1,14 +1,21 @@
 """The UAV spectrum-sharing model: batched TorchRL environment, physics, exact optimum and exact solver.
 
 The model's options (:mod:`.config`) need only the standard library; the
-environment and the joint-action helpers (torch, TorchRL) load on first use,
-so the commands check their settings before those imports.  The optimum and
+environment (TorchRL), its physics :class:`World` (torch) and the joint-action
+helpers load on first use, so the commands check their settings before those
+imports.  The optimum and
 the solvers live in their modules: :mod:`.optimum`, :mod:`.exact`, :mod:`.bounds`.
 """
 
 from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, ModelConfig, make_config
 
-_LAZY = {"UAVSpectrumEnv": "env", "decode_joint_actions": "grid", "joint_action_valid": "grid", "joint_targets": "grid"}
+_LAZY = {
+    "UAVSpectrumEnv": "env",
+    "World": "world",
+    "decode_joint_actions": "grid",
+    "joint_action_valid": "grid",
+    "joint_targets": "grid",
+}
 __all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]
 
 

@@ -35,7 +35,6 @@ import math
 
 import numpy as np
 import torch
-from scipy.optimize import linear_sum_assignment
 
 from .channel import rates, rates_from_sums
 from .config import RELAYING, SENSING, ModelConfig
@@ -148,6 +147,8 @@ def best_assignment(costs: torch.Tensor) -> tuple[int, int, np.ndarray]:
     at cost ``m`` outweighs N pairs below ``m``), then how many UAVs need it, and
     so on: the bottleneck assignment, with the fewest UAVs on long paths.
     """
+    from scipy.optimize import linear_sum_assignment  # scipy (~0.7 s to import) only where an assignment is solved
+
     costs = costs.cpu().numpy()
     weights = float(costs.shape[1] + 1) ** costs
     best = None

@@ -560,8 +560,10 @@ def test_two_uav_pair_tables_agree_with_the_generic_path(options):
     acts = torch.randint(0, 6, (12, 6, 2), generator=torch.Generator().manual_seed(4))
     fast = UAVSpectrumEnv(batch_size=6, grid=(4, 3), num_uavs=2, seed=8, max_steps=5, **options)
     generic = UAVSpectrumEnv(batch_size=6, grid=(4, 3), num_uavs=2, seed=8, max_steps=5, **options)
-    assert fast._pair_obs is not None
-    generic._pair_obs = generic._pair_state = generic._pair_rates = None  # white box: force the generic assembly
+    assert fast.world._pair_obs is not None
+    generic.world._pair_obs = generic.world._pair_state = generic.world._pair_rates = (
+        None  # white box: force the generic assembly
+    )
     for a, b in zip(trajectory(fast, lambda t: acts[t], 12), trajectory(generic, lambda t: acts[t], 12), strict=True):
         assert (a == b).all()
 
@@ -718,7 +720,7 @@ def test_collector_with_partial_resets():
     collector = Collector(
         env, policy, frames_per_batch=B * 10, total_frames=B * 20, auto_register_policy_transforms=False
     )
-    base._s.steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
+    base.world._s.steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
     batches = [b.clone() for b in collector]
     collector.shutdown()
     data = torch.cat(batches, 1)

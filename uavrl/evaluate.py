@@ -54,7 +54,7 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
 
-    from uavrl.envs.env import resolve_device
+    from uavrl.envs.world import resolve_device
     from uavrl.evaluation import evaluate_agent
 
     torch.set_num_threads(int(cfg.num_threads))

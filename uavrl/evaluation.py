@@ -37,9 +37,10 @@ import functools
 
 import torch
 
-from uavrl.envs import ModelConfig, UAVSpectrumEnv, exact
+from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
+from uavrl.envs.world import World
 
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
 DEFAULT_GAMMA = 0.9
@@ -92,7 +93,7 @@ def _space(grid: tuple[int, int], num_uavs: int, device: str) -> exact.Configura
     return exact.ConfigurationSpace(grid, num_uavs, device)
 
 
-def start_references(env: UAVSpectrumEnv, start, u_star: torch.Tensor, horizon: int, gamma: float) -> dict:
+def start_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float) -> dict:
     """Per start ``[B]``: the exact best return ``V*_H`` (or ``None``) and the fewest steps to each level.
 
     Exact where the configuration space fits (:func:`uavrl.envs.exact.fits`),
@@ -100,20 +101,22 @@ def start_references(env: UAVSpectrumEnv, start, u_star: torch.Tensor, horizon: 
     level, and for the optimum also the bottleneck assignment to every
     optimal configuration.
     """
-    cfg, B = env.cfg, env.num_worlds
+    cfg, B = world.cfg, world.num_worlds
     cells, tasks = cells_of(start["positions"], cfg.grid[0]), start["tasks"]
-    contributions, direct = env.cell_contributions, env.direct
+    contributions, direct = world.cell_contributions, world.direct
     thresholds = torch.stack([q * u_star for q in LEVELS.values()], -1)  # [B, L]
     if exact.fits(cfg):
         per_world = cfg.layout == "random"  # one layout for all worlds otherwise
         tables = slice(None) if per_world else slice(0, 1)
-        space = _space(cfg.grid, cfg.num_uavs, str(env.device))
+        space = _space(cfg.grid, cfg.num_uavs, str(world.device))
         potential = space.utility(cfg, contributions[tables], direct[tables])
-        world = torch.arange(B, device=env.device) if per_world else torch.zeros(B, dtype=torch.long, device=env.device)
+        which = (
+            torch.arange(B, device=world.device) if per_world else torch.zeros(B, dtype=torch.long, device=world.device)
+        )
         start_index = space.index(cells, tasks)
-        best_return = exact.optimal_values(space, potential, gamma, horizon)[world, start_index]
+        best_return = exact.optimal_values(space, potential, gamma, horizon)[which, start_index]
         fewest = [
-            exact.min_steps(space, potential >= thresholds[tables, level, None])[world, start_index].long()
+            exact.min_steps(space, potential >= thresholds[tables, level, None])[which, start_index].long()
             for level in range(len(LEVELS))
         ]
         return {"best_return": best_return, "min_steps": torch.stack(fewest, -1), "exact": True}
@@ -167,24 +170,53 @@ def evaluate(
 ) -> dict[str, float]:
     """Greedy rollouts of ``policy`` from ``num_starts`` fixed, seeded starts, measured by the yardstick.
 
-    ``policy`` is any TorchRL policy for :class:`UAVSpectrumEnv` (reads the
+    ``policy`` is any TorchRL policy for :class:`~uavrl.envs.env.UAVSpectrumEnv` (reads the
     observation keys, writes ``("agents", "action")``); one with a ``bind_env``
     method (the oracle) is first given the evaluation's environment.
     """
+    from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
+
     check_settings(gamma, horizon, num_starts)
     horizon = horizon or default_horizon(cfg)
     env = UAVSpectrumEnv(batch_size=num_starts, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     start = env.reset()
     u_star = env.optimum()[0]
-    references = _references(env, start, u_star, horizon, gamma)
+    references = _references(env.world, start, u_star, horizon, gamma)
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
     rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
-    nxt = rollout["next"]
-    positions = torch.cat([start["positions"].unsqueeze(1), nxt["positions"]], 1)
-    tasks = torch.cat([start["tasks"].unsqueeze(1), nxt["tasks"]], 1)
-    utility = env.utility(positions, tasks)[2]  # [B, H + 1], mean channels
-    per_episode = episode_metrics(nxt["r_pu"], nxt["r_se"], nxt["task_switches"], nxt["moves"], u_star, utility[:, 1:])
+    return greedy_metrics(env.world, start, rollout["next"], u_star, references, gamma)
+
+
+def evaluation_starts(cfg: ModelConfig, num_starts: int, horizon: int | None, seed: int, device, gamma: float):
+    """What :func:`evaluate` measures every policy from, for evaluations that step a world themselves.
+
+    Returns the world of the ``num_starts`` starts (reset), its outputs at the
+    start, ``U*`` ``[B]``, the start references and the horizon.
+    """
+    check_settings(gamma, horizon, num_starts)
+    horizon = horizon or default_horizon(cfg)
+    world = World(cfg.replace(max_steps=horizon), num_starts, device, seed)
+    start = world.reset()
+    u_star = world.optimum()[0]
+    return world, start, u_star, _references(world, start, u_star, horizon, gamma), horizon
+
+
+def greedy_metrics(
+    world: World, start, steps, u_star: torch.Tensor, references: dict, gamma: float
+) -> dict[str, float]:
+    """The ``eval/...`` scalars of greedy episodes from the starts of ``world``.
+
+    ``start`` holds the start's ``positions`` and ``tasks``, ``steps`` each
+    step's ``positions``, ``tasks``, ``r_pu``, ``r_se``, ``task_switches`` and
+    ``moves``, ``[B, H, ...]`` (a TorchRL rollout's ``"next"`` or a dict).
+    """
+    positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
+    tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
+    utility = world.utility(positions, tasks)[2]  # [B, H + 1], mean channels
+    per_episode = episode_metrics(
+        steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], u_star, utility[:, 1:]
+    )
     optimality = utility[:, -1] / u_star
     out = {f"eval/{k}": v.mean().item() for k, v in per_episode.items()}
     out["eval/optimality"] = optimality.mean().item()
@@ -197,27 +229,28 @@ def evaluate(
 _REFERENCE_CACHE: dict = {}
 
 
-def _references(env, start, u_star, horizon, gamma) -> dict:
+def _references(world, start, u_star, horizon, gamma) -> dict:
     """:func:`start_references`, kept for the last few settings (every run of an agent shares the starts)."""
     key = (
-        env.cfg,
-        env.num_worlds,
+        world.cfg,
+        world.num_worlds,
         horizon,
         gamma,
-        str(env.device),
+        str(world.device),
         start["positions"].cpu().numpy().tobytes(),
         start["tasks"].cpu().numpy().tobytes(),
     )
     if key not in _REFERENCE_CACHE:
         if len(_REFERENCE_CACHE) >= 4:
             _REFERENCE_CACHE.pop(next(iter(_REFERENCE_CACHE)))
-        _REFERENCE_CACHE[key] = start_references(env, start, u_star, horizon, gamma)
+        _REFERENCE_CACHE[key] = start_references(world, start, u_star, horizon, gamma)
     return _REFERENCE_CACHE[key]
 
 
 def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
-    """Average :func:`evaluate` over an agent's policies (one per independent run); the worst start's optimality."""
-    results = [evaluate(policy, cfg, **kwargs) for policy in agent.policies()]
+    """Average :func:`evaluate` over an agent's greedy policies (one per independent run; ``agent.evaluate``);
+    the worst start's optimality."""
+    results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):
         values = [r[key] for r in results if key in r]

@@ -107,7 +107,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     from tqdm import tqdm
 
     from uavrl.agents import agent_class
-    from uavrl.envs.env import resolve_device
+    from uavrl.envs.world import resolve_device
     from uavrl.evaluation import evaluate_agent
     from uavrl.logger import RunLogger
 

@@ -29,7 +29,8 @@ The package, one job a module, each read top to bottom:
 - :mod:`.tables`: the model as lookup tables (:class:`TabularModel`) and the exact table (:func:`exact_q_table`);
 - :mod:`.kernels`: the compiled (numba) episode loops and their batched torch twin;
 - :mod:`.learner`: :class:`TeamQLearner`, one episode of learning on either backend;
-- :mod:`.policy`: :class:`TabularPolicy`, the greedy TorchRL policy of a table;
+- :mod:`.greedy`: the greedy choice of a table in plain torch, and the evaluation of many tables at once;
+- :mod:`.policy`: :class:`TabularPolicy`, the greedy TorchRL policy of a table (imported on first use: TorchRL);
 - :mod:`.agent`: :class:`TabularAgent`, the learner behind ``python -m uavrl.train agent=tabular``.
 
 Example:
@@ -42,7 +43,6 @@ Example:
 
 from .agent import METHODS, TabularAgent
 from .learner import TeamQLearner
-from .policy import TabularPolicy
 from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, exact_q_table, table_bytes
 
 __all__ = [
@@ -55,3 +55,11 @@ __all__ = [
     "exact_q_table",
     "table_bytes",
 ]
+
+
+def __getattr__(name):
+    if name != "TabularPolicy":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from .policy import TabularPolicy  # tensordict: only where the TorchRL policy is used
+
+    return TabularPolicy

@@ -11,7 +11,6 @@ from uavrl.envs import ModelConfig
 from uavrl.evaluation import episode_metrics
 
 from .learner import TeamQLearner
-from .policy import TabularPolicy
 from .tables import exact_q_table
 
 METHODS = ("q_learning", "value_iteration")
@@ -71,9 +70,17 @@ class TabularAgent(Agent):
         self.last_episode = per_run  # [R] each, for figures
         return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
 
-    def policies(self) -> list[TabularPolicy]:
+    def policies(self) -> list:
+        from .policy import TabularPolicy  # TorchRL (tensordict), only where a TorchRL policy is asked for
+
         tables = self.learner.q if self.learner is not None else [self.q]
         return [TabularPolicy(q, self.env_cfg) for q in tables]
+
+    def evaluate(self, env_cfg: ModelConfig, **kwargs) -> list[dict[str, float]]:
+        """The evaluation of :meth:`policies`, read from the tables in one batched world (no TorchRL rollouts)."""
+        from .greedy import evaluate_tables
+
+        return evaluate_tables(self.learner.q if self.learner is not None else self.q[None], env_cfg, **kwargs)
 
     def state_dict(self) -> dict:
         return (

@@ -38,52 +38,108 @@ _delta = numba.njit(delta_reward)
 
 
 @numba.njit(cache=True, inline="always")
-def _scan(q_row, actions, n_valid):
-    """Best value over the ``n_valid`` valid joint ``actions``, how many tie for it, and the first of them."""
+def _scan(q, table, s, valid, p, n_valid):
+    """Best value of row ``q[table, s]`` over the first ``n_valid`` valid joint actions ``valid[p]``, how many tie
+    for it, and the first of them.  (Indices, not row views: a view costs an atomic reference count.)"""
     best, ties, best_j = -np.inf, 0, -1
     for i in range(n_valid):
-        value = q_row[actions[i]]
+        j = valid[p, i]
+        value = q[table, s, j]
         if value > best:
-            best, ties, best_j = value, 1, actions[i]
+            best, ties, best_j = value, 1, j
         elif value == best:
             ties += 1
     return best, ties, best_j
 
 
 @numba.njit(cache=True, inline="always")
-def _choose(q_row, actions, n_valid, u, epsilon, best, ties, best_j):
-    """Epsilon-greedy action among the valid ``actions`` (ascending) from one uniform ``u``, given the row's
-    :func:`_scan`.
+def _choose(q, table, s, valid, p, n_valid, u, epsilon, best, ties, best_j):
+    """Epsilon-greedy action among the valid ``valid[p, :n_valid]`` (ascending) from one uniform ``u``, given the
+    row's :func:`_scan`.
 
     ``u < epsilon`` explores, and then ``u / epsilon`` is a fresh uniform that
     picks the valid action; otherwise ``(u - epsilon) / (1 - epsilon)`` picks
     among the tied best ones.
     """
     if u < epsilon:
-        return actions[int(u / epsilon * n_valid)]
+        return valid[p, int(u / epsilon * n_valid)]
     if ties == 1:
         return best_j
     n = int((u - epsilon) / (1 - epsilon) * ties)
     for i in range(n_valid):
-        if q_row[actions[i]] == best:
+        if q[table, s, valid[p, i]] == best:
             if n == 0:
-                return actions[i]
+                return valid[p, i]
             n -= 1
     return -1
 
 
 @numba.njit(cache=True, inline="always")
-def _transition(w, cfg_k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2):
-    """Apply joint action ``j`` in configuration ``cfg_k`` of world ``w``; return (next configuration, reward)."""
-    k2 = next_cells[cfg_k // T2, j] * T2 + next_tasks[cfg_k % T2, j]
-    r_pu, r_se = r_pu_t[k2], r_se_t[k2]
-    if use_best:
-        reward = _best_so_far(r_pu + r_se, best[w])
-        best[w] = max(best[w], r_pu + r_se)
-    else:
-        reward = _delta(r_pu, r_se, prev[w, 0], prev[w, 1], beta1, beta2)
-    prev[w, 0], prev[w, 1] = r_pu, r_se
-    return k2, reward
+def _log2(power_of_two):
+    """``N`` of ``2^N``: configurations are ``k = p 2^N + t``, so ``p = k >> N`` and ``t = k & (2^N - 1)``."""
+    n = 0
+    while (1 << n) < power_of_two:
+        n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _run_episode(
+    q,
+    r,
+    k,
+    uniforms,
+    r_pu_t,
+    r_se_t,
+    row_t,
+    valid,
+    n_valid,
+    next_cells,
+    next_tasks,
+    moves_t,
+    switches_t,
+    alpha,
+    gamma,
+    epsilon,
+    beta1,
+    beta2,
+    use_best,
+    out,
+):
+    """Run ``r``'s episode on table ``q[r]`` from configuration ``k``; ``out[r, t]`` = (R_PU, R_SE, moves,
+    switches).  Returns the last configuration.
+
+    The scan of the next state's row that gives the target's max is also the
+    next step's greedy choice, so each step scans one row (two when it stays
+    in the row it just updated).  The run's state lives in locals, not in
+    arrays shared with the other runs' threads.
+    """
+    T, T2 = uniforms.shape[1], next_tasks.shape[0]
+    shift, task_mask = _log2(T2), T2 - 1
+    prev_pu, prev_se, best = r_pu_t[k], r_se_t[k], 0.0
+    p = k >> shift
+    v_best, ties, best_j = _scan(q, r, row_t[k], valid, p, n_valid[p])
+    for step in range(T):
+        s, p, t = row_t[k], k >> shift, k & task_mask
+        j = _choose(q, r, s, valid, p, n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
+        k2 = next_cells[p, j] * T2 + next_tasks[t, j]
+        r_pu, r_se = r_pu_t[k2], r_se_t[k2]
+        if use_best:
+            reward = _best_so_far(r_pu + r_se, best)
+            best = max(best, r_pu + r_se)
+        else:
+            reward = _delta(r_pu, r_se, prev_pu, prev_se, beta1, beta2)
+        prev_pu, prev_se = r_pu, r_se
+        s2, p2 = row_t[k2], k2 >> shift
+        v_best, ties, best_j = _scan(q, r, s2, valid, p2, n_valid[p2])
+        q[r, s, j] = (1 - alpha) * q[r, s, j] + alpha * (reward + gamma * v_best)
+        if s2 == s:
+            v_best, ties, best_j = _scan(q, r, s2, valid, p2, n_valid[p2])
+        out[r, step, 0], out[r, step, 1] = r_pu, r_se
+        out[r, step, 2] = moves_t[p, j]
+        out[r, step, 3] = switches_t[t, j]
+        k = k2
+    return k
 
 
 @numba.njit(cache=True, parallel=True)
@@ -108,39 +164,30 @@ def _episode_per_run(
     use_best,
     out,
 ):
-    """One episode of ``R`` independent runs, run ``r`` on table ``q[r]``; ``out[r, t]`` = (R_PU, R_SE, moves,
-    switches).
-
-    The scan of the next state's row that gives the target's max is also the
-    next step's greedy choice, so each step scans one row (two when it stays
-    in the row it just updated).
-    """
-    R, T = uniforms.shape[0], uniforms.shape[1]
-    T2 = next_tasks.shape[0]
-    prev = np.empty((R, 2))
-    best = np.zeros(R)
-    for r in numba.prange(R):
-        qr = q[r]
-        k = k0[r]
-        prev[r, 0], prev[r, 1] = r_pu_t[k], r_se_t[k]
-        p = k // T2
-        v_best, ties, best_j = _scan(qr[row_t[k]], valid[p], n_valid[p])
-        for step in range(T):
-            s, p = row_t[k], k // T2
-            j = _choose(qr[s], valid[p], n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
-            k2, reward = _transition(
-                r, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2
-            )
-            s2, p2 = row_t[k2], k2 // T2
-            v_best, ties, best_j = _scan(qr[s2], valid[p2], n_valid[p2])
-            qr[s, j] = (1 - alpha) * qr[s, j] + alpha * (reward + gamma * v_best)
-            if s2 == s:
-                v_best, ties, best_j = _scan(qr[s2], valid[p2], n_valid[p2])
-            out[r, step, 0], out[r, step, 1] = prev[r, 0], prev[r, 1]
-            out[r, step, 2] = moves_t[p, j]
-            out[r, step, 3] = switches_t[k % T2, j]
-            k = k2
-        k0[r] = k
+    """One episode of ``R`` independent runs in parallel, run ``r`` on table ``q[r]`` (:func:`_run_episode`)."""
+    for r in numba.prange(uniforms.shape[0]):
+        k0[r] = _run_episode(
+            q,
+            r,
+            k0[r],
+            uniforms,
+            r_pu_t,
+            r_se_t,
+            row_t,
+            valid,
+            n_valid,
+            next_cells,
+            next_tasks,
+            moves_t,
+            switches_t,
+            alpha,
+            gamma,
+            epsilon,
+            beta1,
+            beta2,
+            use_best,
+            out,
+        )
 
 
 @numba.njit(cache=True)
@@ -166,10 +213,9 @@ def _episode_shared(
     out,
 ):
     """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc)."""
-    R, T = uniforms.shape[0], uniforms.shape[1]
-    T2 = next_tasks.shape[0]
+    R, T, T2 = uniforms.shape[0], uniforms.shape[1], next_tasks.shape[0]
+    shift, task_mask = _log2(T2), T2 - 1
     A = q.shape[2]
-    qt = q[0]
     prev = np.empty((R, 2))
     best = np.zeros(R)
     s_w = np.empty(R, np.int64)
@@ -182,17 +228,23 @@ def _episode_shared(
     for step in range(T):
         for w in range(R):
             k = k0[w]
-            s, p = row_t[k], k // T2
-            v_best, ties, best_j = _scan(qt[s], valid[p], n_valid[p])
-            j = _choose(qt[s], valid[p], n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
-            k2, reward = _transition(
-                w, k, j, r_pu_t, r_se_t, next_cells, next_tasks, prev, best, beta1, beta2, use_best, T2
-            )
+            s, p, t = row_t[k], k >> shift, k & task_mask
+            v_best, ties, best_j = _scan(q, 0, s, valid, p, n_valid[p])
+            j = _choose(q, 0, s, valid, p, n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
+            k2 = next_cells[p, j] * T2 + next_tasks[t, j]
+            r_pu, r_se = r_pu_t[k2], r_se_t[k2]
+            if use_best:
+                reward = _best_so_far(r_pu + r_se, best[w])
+                best[w] = max(best[w], r_pu + r_se)
+            else:
+                reward = _delta(r_pu, r_se, prev[w, 0], prev[w, 1], beta1, beta2)
+            prev[w, 0], prev[w, 1] = r_pu, r_se
             s_w[w], j_w[w], k0[w] = s, j, k2
-            target_w[w] = reward + gamma * _scan(qt[row_t[k2]], valid[k2 // T2], n_valid[k2 // T2])[0]
-            out[w, step, 0], out[w, step, 1] = prev[w, 0], prev[w, 1]
+            p2 = k2 >> shift
+            target_w[w] = reward + gamma * _scan(q, 0, row_t[k2], valid, p2, n_valid[p2])[0]
+            out[w, step, 0], out[w, step, 1] = r_pu, r_se
             out[w, step, 2] = moves_t[p, j]
-            out[w, step, 3] = switches_t[k % T2, j]
+            out[w, step, 3] = switches_t[t, j]
         for w in range(R):
             f = s_w[w] * A + j_w[w]
             total[f] += target_w[w]
@@ -200,7 +252,7 @@ def _episode_shared(
         for w in range(R):
             f = s_w[w] * A + j_w[w]
             if count[f] > 0:
-                qt[s_w[w], j_w[w]] = (1 - alpha) * qt[s_w[w], j_w[w]] + alpha * (total[f] / count[f])
+                q[0, s_w[w], j_w[w]] = (1 - alpha) * q[0, s_w[w], j_w[w]] + alpha * (total[f] / count[f])
                 total[f] = 0.0
                 count[f] = 0
 

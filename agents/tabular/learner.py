@@ -7,8 +7,9 @@ import math
 import numpy as np
 import torch
 
-from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs import ModelConfig
 from uavrl.envs.channel import best_so_far_reward, delta_reward
+from uavrl.envs.world import World
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
 from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, table_bytes
@@ -75,7 +76,7 @@ class TeamQLearner:
         self._start_block, self._block_starts = -1, None
 
     def _episode_starts(self) -> torch.Tensor:
-        """``[R]`` start configurations: run ``r``'s episode ``e`` starts where the environment's reset puts
+        """``[R]`` start configurations: run ``r``'s episode ``e`` starts where the world's (the env's) reset puts
         world ``seed + e R + r``; drawn for blocks of episodes in one batched reset."""
         if self.cfg.reset_positions == "keep" and self._configuration is not None:
             return self._configuration.clone()
@@ -83,9 +84,8 @@ class TeamQLearner:
         if block != self._start_block:
             worlds = _START_BLOCK * self.runs
             first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
-            env = UAVSpectrumEnv(batch_size=worlds, config=self.cfg, seed=first_world, device=self.device)
-            td = env.reset()
-            self._block_starts = self.model.configuration_ids(td["positions"], td["tasks"]).view(
+            start = World(self.cfg, worlds, self.device, first_world).reset()
+            self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
                 _START_BLOCK, self.runs
             )
             self._start_block = block

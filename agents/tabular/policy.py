@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
@@ -11,9 +9,11 @@ from tensordict.nn import TensorDictModuleBase
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
+from .greedy import greedy_joint_actions
+
 
 class TabularPolicy(TensorDictModuleBase):
-    """Greedy valid joint action from a Q table ``[S, 6^N]``, as a TorchRL policy.
+    """Greedy valid joint action from a Q table ``[S, 6^N]``, as a TorchRL policy (:mod:`.greedy` in plain torch).
 
     Reads ``state_index`` and ``positions``; writes ``("agents", "action")``.
     Ties are broken uniformly at random (SPEC section 6) from the policy's own
@@ -41,11 +41,9 @@ class TabularPolicy(TensorDictModuleBase):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         positions = td.get("positions").to(self.q.device)
         cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
+        values = self.q[td.get("state_index").to(self.q.device)]
+        uniforms = torch.rand(values.shape, generator=self.generator, device=self.q.device)
         valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
-        values = self.q[td.get("state_index").to(self.q.device)].masked_fill(~valid, -math.inf)
-        ties = values == values.amax(-1, keepdim=True)
-        pick = (
-            torch.rand(ties.shape, generator=self.generator, device=self.q.device).masked_fill(~ties, -1.0).argmax(-1)
-        )
+        pick = greedy_joint_actions(values, valid, uniforms)
         td.set(("agents", "action"), self.actions[pick].to(td.device or self.q.device))
         return td

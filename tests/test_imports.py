@@ -1,0 +1,61 @@
+"""The tabular commands run without TorchRL: the physics is a world layer with no TorchRL import (issue 14)."""
+
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("torchrl", "tensordict")
+# runs a command's module in this process, then prints which of HEAVY it imported
+PROBE = """
+import runpy, sys
+sys.argv = sys.argv[1:]
+try:
+    runpy.run_module(sys.argv[0], run_name="__main__", alter_sys=True)
+finally:
+    print("IMPORTED", sorted({m.split(".")[0] for m in sys.modules} & {%s}))
+""" % ", ".join(map(repr, HEAVY))
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["uavrl.reproduce", "table2", "grids=[2]", "runs=2", "episodes=2", "eval_starts=4", "out_dir={out}"],
+        ["uavrl.train", "agent=tabular", "env.grid=[3,3]", "agent.episodes=2", "env.max_steps=50", "run_dir={out}"],
+    ],
+    ids=["reproduce", "train-tabular"],
+)
+def test_tabular_commands_import_neither_torchrl_nor_tensordict(command, tmp_path):
+    args = [arg.format(out=tmp_path / "out") for arg in command] + ["progress=false"]
+    done = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "IMPORTED []" in done.stdout, done.stdout[-500:]
+
+
+def test_the_probe_sees_torchrl_where_it_is_used(tmp_path):
+    """The probe itself: a command that does use TorchRL (the DQN) is reported."""
+    args = ["uavrl.train", "agent=dqn", "env.grid=[3,3]", "agent.iterations=1", "agent.worlds=2"]
+    args += ["agent.learning_starts=1000", "eval.num_starts=2", "progress=false", f"run_dir={tmp_path / 'out'}"]
+    done = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "IMPORTED ['tensordict', 'torchrl']" in done.stdout
+
+
+def test_a_second_process_loads_the_learner_kernels_from_the_cache(tmp_path):
+    """numba's cache=True: once a process has compiled the learner's kernels, the next one loads them, compiling
+    nothing."""
+    learn = (
+        "import numba\n"
+        "from uavrl.agents.tabular import TeamQLearner, kernels\n"
+        "from uavrl.envs import make_config\n"
+        "for shared in (False, True):\n"
+        "    TeamQLearner(make_config('paper', grid=(3, 3), max_steps=20), runs=2, shared_table=shared).run_episode()\n"
+        "for kernel in (kernels._episode_per_run, kernels._episode_shared):\n"
+        "    hits, misses = (sum(counts.values()) for counts in (kernel.stats.cache_hits, kernel.stats.cache_misses))\n"
+        "    print(kernel.__name__, hits, 'hits', misses, 'misses')\n"
+    )
+    for _ in range(2):  # the first process may compile (a fresh checkout); the second must not
+        done = subprocess.run([sys.executable, "-c", learn], capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr[-2000:]
+    loaded = ["_episode_per_run 1 hits 0 misses", "_episode_shared 1 hits 0 misses"]
+    assert done.stdout.split("\n")[:2] == loaded, done.stdout
