@@ -57,6 +57,7 @@ from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, 
 from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
+from uavrl.compat import load_buffer_state, make_collector, written_into
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
 from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
@@ -242,16 +243,16 @@ class DoubleQMixerLoss(QMixerLoss):
     def _team_value(self, td: TensorDictBase, action: torch.Tensor, params, mixer_params) -> torch.Tensor:
         """``[*, 1]`` mixed value of the per-UAV actions ``[*, N]`` at ``td``, under online or target parameters."""
         net, mixer = self.local_value_network.module[0].module, self.mixer_network.module
-        with params.to_module(self.local_value_network, preserve_module_state=False):
+        with written_into(params, self.local_value_network):
             chosen = net(td.get(("agents", "observation")), td.get("positions")).gather(-1, action.unsqueeze(-1))
-        with mixer_params.to_module(self.mixer_network, preserve_module_state=False):
+        with written_into(mixer_params, self.mixer_network):
             return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         k, nxt = self.tensor_keys, td.get("next")
         value = self._team_value(td, td.get(k.action), self.local_value_network_params, self.mixer_network_params)
         with torch.no_grad():
-            with self.local_value_network_params.data.to_module(self.local_value_network, preserve_module_state=False):
+            with written_into(self.local_value_network_params.data, self.local_value_network):
                 next_action = self.local_value_network(nxt.clone(False)).get(k.action)  # the online greedy valid action
             next_value = self._team_value(
                 nxt, next_action, self.target_local_value_network_params, self.target_mixer_network_params
@@ -392,13 +393,8 @@ def transition_keys(a, action_keys: list) -> list:
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:
     """One episode of every world of ``env`` per batch."""
-    return Collector(
-        env,
-        policy,
-        frames_per_batch=env.num_worlds * env.cfg.max_steps,
-        total_frames=-1,
-        device=env.device,
-        auto_register_policy_transforms=False,
+    return make_collector(
+        env, policy, frames_per_batch=env.num_worlds * env.cfg.max_steps, total_frames=-1, device=env.device
     )
 
 
@@ -532,7 +528,7 @@ class DQNAgent(Agent):
         if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
             self._load_filled_slots(state["buffer"], state["buffer_writes"])
         else:
-            self.buffer.load_state_dict(state["buffer"])
+            load_buffer_state(self.buffer, state["buffer"])
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:
