@@ -91,7 +91,7 @@ class UAVTask(TaskClass):
 class YardstickCallback(Callback):
     """At each of BenchMARL's evaluations, the shared evaluation (:func:`uavrl.evaluation.evaluate`) of its greedy
     policy, logged with our TensorBoard tags against collected frames; ``curve`` keeps each point with the seconds
-    BenchMARL had trained by then (our evaluations not counted).  The TensorBoard writer opens in ``on_setup``:
+    BenchMARL had trained by then (:meth:`training_seconds`).  The TensorBoard writer opens in ``on_setup``:
     BenchMARL pickles its callbacks with the experiment's config before."""
 
     def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, run_dir):
@@ -99,24 +99,30 @@ class YardstickCallback(Callback):
         self.env_cfg, self.eval_kwargs, self.run_dir = env_cfg, eval_kwargs, run_dir
         self.logger = None
         self.curve: list[dict] = []
-        self.started = time.perf_counter()
-        self.evaluating_seconds = 0.0
+        self.started, self.started_cpu = time.perf_counter(), time.process_time()
+        self.evaluating_seconds = self.evaluating_cpu_seconds = 0.0
 
     def on_setup(self) -> None:
         self.logger = RunLogger(self.run_dir, resume_step=0)
 
-    def training_seconds(self) -> float:
-        return time.perf_counter() - self.started - self.evaluating_seconds
+    def training_seconds(self) -> dict[str, float]:
+        """Wall-clock and CPU seconds of this process since the start, our evaluations not counted (CPU seconds
+        measure the work where other processes share the cores)."""
+        return {
+            "train_seconds": time.perf_counter() - self.started - self.evaluating_seconds,
+            "train_cpu_seconds": time.process_time() - self.started_cpu - self.evaluating_cpu_seconds,
+        }
 
     def measure(self) -> dict[str, float]:
-        began = time.perf_counter()
+        began, began_cpu = time.perf_counter(), time.process_time()
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             metrics = evaluate(self.experiment.policy, self.env_cfg, **self.eval_kwargs)
         self.evaluating_seconds += time.perf_counter() - began
+        self.evaluating_cpu_seconds += time.process_time() - began_cpu
         return metrics
 
     def on_evaluation_end(self, rollouts) -> None:
         frames, seconds = self.experiment.total_frames, self.training_seconds()
         metrics = self.measure()
         self.logger.log(metrics, frames)
-        self.curve.append({"frames": frames, "train_seconds": seconds, **metrics})
+        self.curve.append({"frames": frames, **seconds, **metrics})

@@ -106,7 +106,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         "task": f"uavrl/{cfg.task.name}",
         "env_steps": experiment.total_frames,
         "iterations": experiment.n_iters_performed,
-        "train_seconds": train_seconds,
+        **train_seconds,
         "total_seconds": time.perf_counter() - started,
         **final,
         "curve": yardstick.curve,
@@ -115,7 +115,8 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     grid = f"{env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs"
     print(
         f"trained BenchMARL {algorithm} on uavrl/{cfg.task.name} ({grid}): {result['env_steps']:,} frames in "
-        f"{train_seconds:.1f} s; optimality {final['eval/optimality']:.4f} from {cfg.eval.num_starts} fixed starts"
+        f"{result['train_seconds']:.1f} s; optimality {final['eval/optimality']:.4f} "
+        f"from {cfg.eval.num_starts} fixed starts"
     )
     print(yardstick_line(cfg, result))
     print(f"run directory: {run_dir} (config.yaml, metrics.json, TensorBoard events, BenchMARL's {experiment.name}/)")
