@@ -93,7 +93,9 @@ def score(point: dict) -> float | None:
 
 def load(run_dir: Path, row: str) -> dict:
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    if row not in BENCHMARL:
+    if row in BENCHMARL:
+        metrics["curve"] = json.loads((run_dir / "curve.json").read_text())
+    else:
         metrics["curve"] = dqn_curve(run_dir)
         metrics["train_cpu_seconds"] = metrics["curve"][-1]["train_cpu_seconds"]  # the final evaluation's event
     return metrics

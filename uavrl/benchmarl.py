@@ -6,7 +6,8 @@ composes our ``env`` (the model's options, typed as for ``uavrl.train``: ``env.f
 ``model`` configs.  BenchMARL's :class:`~benchmarl.experiment.Experiment` trains as it always does; the run
 directory ``runs/benchmarl_<algorithm>/<env>/<timestamp>/`` holds ``config.yaml``, our TensorBoard ``eval/...``
 scalars (the shared evaluation of BenchMARL's greedy policy at each of its evaluations), ``metrics.json`` (the
-final evaluation, training seconds and the curve), and BenchMARL's own folder (its logs and final checkpoint).
+final evaluation and the training seconds, as every agent's), ``curve.json`` (each evaluation with the frames and
+seconds at which it was taken), and BenchMARL's own folder (its logs and final checkpoint).
 """
 
 from __future__ import annotations
@@ -109,8 +110,8 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         **train_seconds,
         "total_seconds": time.perf_counter() - started,
         **final,
-        "curve": yardstick.curve,
     }
+    save_json(yardstick.curve, run_dir / "curve.json")
     save_json(result, run_dir / "metrics.json")
     grid = f"{env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs"
     print(
@@ -119,7 +120,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         f"from {cfg.eval.num_starts} fixed starts"
     )
     print(yardstick_line(cfg, result))
-    print(f"run directory: {run_dir} (config.yaml, metrics.json, TensorBoard events, BenchMARL's {experiment.name}/)")
+    print(f"run directory: {run_dir} (config.yaml, metrics.json, curve.json, TensorBoard events, {experiment.name}/)")
     return run_dir
 
 
