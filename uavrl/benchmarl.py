@@ -21,7 +21,7 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.cli import run_command
-from uavrl.config import RUN_OPTION_SETTINGS, model_config
+from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
 from uavrl.io import save_json, save_text
 from uavrl.settings import RUN_SETTINGS, check
 
@@ -124,9 +124,22 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     return run_dir
 
 
+def tasks() -> list[str]:
+    """The tasks of ``configs/task/uavrl/``, as ``task=`` takes them."""
+    return sorted(f"uavrl/{path.stem}" for path in (Path(config_dir()) / "task" / "uavrl").glob("*.yaml"))
+
+
+def check_task(arguments: list[str]) -> None:
+    """A task we do not have is refused with ours (Hydra would list BenchMARL's task schemas)."""
+    for argument in arguments:
+        if argument.startswith("task=") and argument.removeprefix("task=") not in tasks():
+            raise SystemExit(f"error: {argument} is invalid: allowed tasks are {', '.join(tasks())}")
+
+
 def main() -> None:
     if importlib.util.find_spec("benchmarl") is None:
         raise SystemExit(f"error: BenchMARL is not installed: {INSTALL}")
+    check_task(sys.argv[1:])
     import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
 
     run_command("benchmarl", train, RUN_OPTION_SETTINGS)
