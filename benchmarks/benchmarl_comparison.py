@@ -66,15 +66,15 @@ def cpu_at(samples: list[tuple[float, float]], wall: float) -> float:
     return samples[-1][1] if wall > samples[-1][0] else samples[0][1]
 
 
-def dqn_curve(run_dir: Path) -> list[dict]:
-    """The DQN's periodic evaluations from its TensorBoard events, with the CPU seconds it had used by then."""
+def event_curve(run_dir: Path) -> list[dict]:
+    """The evaluations of a run from its TensorBoard events, with the CPU seconds the process had used by then."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     events = EventAccumulator(str(run_dir)).Reload()
     samples = [tuple(map(float, line.split())) for line in (run_dir / "cpu_samples.txt").read_text().splitlines()]
     tags = set(events.Tags()["scalars"])
     curve = {}
-    for tag in ("eval/return_ratio", "eval/reach_999", "eval/step_ratio_999"):
+    for tag in ("eval/return_ratio", "eval/optimality", "eval/reach_999", "eval/step_ratio_999"):
         for event in events.Scalars(tag) if tag in tags else []:
             seconds = cpu_at(samples, event.wall_time)
             point = curve.setdefault(event.step, {"frames": event.step, "train_cpu_seconds": seconds})
@@ -91,14 +91,27 @@ def score(point: dict) -> float | None:
     return None
 
 
-def load(run_dir: Path, row: str) -> dict:
-    metrics = json.loads((run_dir / "metrics.json").read_text())
-    if row in BENCHMARL:
-        metrics["curve"] = json.loads((run_dir / "curve.json").read_text())
-    else:
-        metrics["curve"] = dqn_curve(run_dir)
-        metrics["train_cpu_seconds"] = metrics["curve"][-1]["train_cpu_seconds"]  # the final evaluation's event
-    return metrics
+def load(run_dir: Path, row: str) -> dict | None:
+    """A run's final metrics and its curve; a run that did not finish (killed) shows its last evaluation."""
+    finished = (run_dir / "metrics.json").exists()
+    if row in BENCHMARL and finished:
+        return {
+            **json.loads((run_dir / "metrics.json").read_text()),
+            "curve": json.loads((run_dir / "curve.json").read_text()),
+        }
+    if not (run_dir / "cpu_samples.txt").exists():
+        return None
+    curve = event_curve(run_dir)
+    if not curve:
+        return None
+    last = json.loads((run_dir / "metrics.json").read_text()) if finished else {"env_steps": curve[-1]["frames"]}
+    return {
+        **curve[-1],
+        **last,
+        "train_cpu_seconds": curve[-1]["train_cpu_seconds"],
+        "curve": curve,
+        "finished": finished,
+    }
 
 
 def cell(metrics: dict, key: str, fmt: str) -> str:
@@ -107,7 +120,8 @@ def cell(metrics: dict, key: str, fmt: str) -> str:
 
 def print_row(task: str, row: str, seed: int, m: dict) -> None:
     print(
-        f"| {task} | {row} | {seed} | {m['env_steps']:,} | {m['train_seconds']:.0f} | {m['train_cpu_seconds']:.0f} | "
+        f"| {task} | {row}{'' if m.get('finished', True) else ' (killed)'} | {seed} | {m['env_steps']:,} | "
+        f"{cell(m, 'train_seconds', '.0f')} | {m['train_cpu_seconds']:.0f} | "
         f"{cell(m, 'eval/return_ratio', '.4f')} | {cell(m, 'eval/optimality', '.4f')} | "
         f"{cell(m, 'eval/reach_999', '.2f')} | {cell(m, 'eval/step_ratio_999', '.3f')} |",
         flush=True,
@@ -117,7 +131,7 @@ def print_row(task: str, row: str, seed: int, m: dict) -> None:
 def verdict(task: str, results: dict) -> None:
     """BenchMARL's best point against the first point of each of our DQN runs that matches it."""
     theirs = [
-        (score(p), p["train_seconds"], row, seed)
+        (score(p), p["train_cpu_seconds"], row, seed)
         for (row, seed), m in results.items()
         if row in BENCHMARL
         for p in m["curve"]
@@ -167,9 +181,10 @@ def main():
                     )
                     if done.returncode != 0:
                         raise SystemExit(f"{task} {row} seed {seed} failed:\n{done.stderr[-2000:]}")
-                if (run_dir / "metrics.json").exists():
-                    results[row, seed] = load(run_dir, row)
-                    print_row(task, row, seed, results[row, seed])
+                metrics = load(run_dir, row)
+                if metrics is not None:
+                    results[row, seed] = metrics
+                    print_row(task, row, seed, metrics)
         verdict(task, results)
 
 
