@@ -12,6 +12,7 @@ collector imports each file by its installed name instead.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import tomllib
 from pathlib import Path
 
@@ -20,6 +21,8 @@ from _pytest.doctest import DoctestModule
 ROOT = Path(__file__).resolve().parent
 _PACKAGE_DIRS = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
 FOLDERS = {ROOT / folder: package for package, folder in _PACKAGE_DIRS.items() if package.count(".") <= 1}
+# modules of an optional extra: their examples run where the extra is installed (pip install -e ".[benchmarl]")
+NEEDS = {"uavrl.agents.benchmarl": "benchmarl", "uavrl.benchmarl": "benchmarl"}
 
 
 def installed_name(path: Path) -> str | None:
@@ -37,6 +40,7 @@ class InstalledDoctestModule(DoctestModule):
 
 
 def pytest_collect_file(file_path: Path, parent):
-    if file_path.suffix == ".py" and installed_name(file_path) is not None:
+    name = installed_name(file_path) if file_path.suffix == ".py" else None
+    if name is not None and (name not in NEEDS or importlib.util.find_spec(NEEDS[name]) is not None):
         return InstalledDoctestModule.from_parent(parent, path=file_path)
     return None

@@ -57,6 +57,7 @@ from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, 
 from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
+from uavrl.compat import load_buffer_state, make_collector, written_into
 from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
 from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
@@ -266,8 +267,8 @@ class DoubleQMixerLoss(QMixerLoss):
             next_values = net(observation, positions)
             next_action = greedy(next_values, nxt.get(("agents", "action_mask")), positions, nxt.get("tasks"))
             with (
-                self.target_local_value_network_params.to_module(self.local_value_network, preserve_module_state=False),
-                self.target_mixer_network_params.to_module(self.mixer_network, preserve_module_state=False),
+                written_into(self.target_local_value_network_params, self.local_value_network),
+                written_into(self.target_mixer_network_params, self.mixer_network),
             ):
                 next_value = team_value(nxt, next_action)  # the online greedy valid action, valued by the target
             target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
@@ -406,13 +407,8 @@ def transition_keys(a, action_keys: list) -> list:
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:
     """One episode of every world of ``env`` per batch."""
-    return Collector(
-        env,
-        policy,
-        frames_per_batch=env.num_worlds * env.cfg.max_steps,
-        total_frames=-1,
-        device=env.device,
-        auto_register_policy_transforms=False,
+    return make_collector(
+        env, policy, frames_per_batch=env.num_worlds * env.cfg.max_steps, total_frames=-1, device=env.device
     )
 
 
@@ -546,7 +542,7 @@ class DQNAgent(Agent):
         if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
             self._load_filled_slots(state["buffer"], state["buffer_writes"])
         else:
-            self.buffer.load_state_dict(state["buffer"])
+            load_buffer_state(self.buffer, state["buffer"])
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:

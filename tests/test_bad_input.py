@@ -196,3 +196,12 @@ def test_python_api_mistakes_are_one_line(call, error, words, tiny_env, compose_
 
 def test_enough_bad_inputs_are_checked():
     assert len(CLI_CASES) + len(API_CASES) >= 40
+
+
+@pytest.mark.skipif(importlib.util.find_spec("benchmarl") is not None, reason="BenchMARL is installed here")
+def test_benchmarl_command_without_the_extra_says_how_to_install(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "uavrl.benchmarl", "algorithm=qmix"], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert done.returncode == 1
+    assert done.stderr.strip() == 'error: BenchMARL is not installed: pip install torch==2.13.0 -e ".[benchmarl]"'

@@ -241,7 +241,9 @@ def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, tin
         train(tiny_cfg(*run, f"run_dir={tmp_path / 'killed'}"))
     train(tiny_cfg(*run, f"resume={tmp_path / 'killed'}"), overrides=[f"resume={tmp_path / 'killed'}"])
     a, b = (torch.load(d / "checkpoint.pt", weights_only=False)["agent"]["loss"] for d in (whole, tmp_path / "killed"))
-    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    assert a.keys() == b.keys()
+    # torchrl 0.11's loss also keeps non-tensor entries (shapes) in its state
+    assert all(torch.equal(a[k], b[k]) if torch.is_tensor(a[k]) else a[k] == b[k] for k in a)
 
 
 def test_same_seed_same_training(make_agent):

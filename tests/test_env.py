@@ -706,7 +706,7 @@ def test_rollout_shapes_and_transforms():
 
 def test_collector_with_partial_resets():
     """torchrl Collector: worlds end episodes at different times and are reset alone."""
-    from torchrl.collectors import Collector
+    from uavrl.compat import make_collector
 
     B, T = 3, 4
     base = UAVSpectrumEnv(batch_size=B, grid=(3, 3), num_uavs=2, max_steps=T, seed=5)
@@ -717,9 +717,7 @@ def test_collector_with_partial_resets():
         td.set(("agents", "action"), masked_random_actions(td, gen))
         return td
 
-    collector = Collector(
-        env, policy, frames_per_batch=B * 10, total_frames=B * 20, auto_register_policy_transforms=False
-    )
+    collector = make_collector(env, policy, frames_per_batch=B * 10, total_frames=B * 20)
     base.world._s.steps += torch.tensor([0, 1, 2])  # desynchronise the episode clocks (white box)
     batches = [b.clone() for b in collector]
     collector.shutdown()

@@ -4,9 +4,9 @@ import math
 
 import pytest
 import torch
-from torchrl.collectors import Collector
 
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
+from uavrl.compat import make_collector
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.evaluation import evaluate
 
@@ -103,13 +103,7 @@ def test_policy_runs_in_rollout_and_collector():
     env = UAVSpectrumEnv(batch_size=4, config=cfg)
     rollout = env.rollout(5, policy)
     assert rollout["agents", "action"].shape == (4, 5, 2)
-    collector = Collector(
-        UAVSpectrumEnv(batch_size=4, config=cfg),
-        policy,
-        frames_per_batch=40,
-        total_frames=80,
-        auto_register_policy_transforms=False,
-    )
+    collector = make_collector(UAVSpectrumEnv(batch_size=4, config=cfg), policy, frames_per_batch=40, total_frames=80)
     batches = [b for b in collector]
     collector.shutdown()
     assert len(batches) == 2 and batches[0]["next", "done"].any()

@@ -142,6 +142,28 @@ class RunSchema:
 
 
 @dataclass
+class BenchmarlTaskSchema:
+    name: str = "paper_6x6"
+
+
+@dataclass
+class BenchmarlSchema:
+    """``configs/benchmarl.yaml``: our settings, the model's options and the task's name; BenchMARL's own groups
+    (``experiment``, ``algorithm``, ``model``, ``critic_model``) bring their schemas from BenchMARL."""
+
+    seed: int = 0
+    num_threads: int = 1
+    run_dir: Optional[str] = None
+    eval: EvalSchema = field(default_factory=EvalSchema)
+    env: EnvSchema = field(default_factory=EnvSchema)
+    task: BenchmarlTaskSchema = field(default_factory=BenchmarlTaskSchema)
+    experiment: Any = None
+    algorithm: Any = None
+    model: Any = None
+    critic_model: Any = None
+
+
+@dataclass
 class ReproduceSchema:
     """``configs/reproduce.yaml``."""
 
@@ -167,12 +189,13 @@ AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineS
 
 def register() -> None:
     """Store the schemas in Hydra's ConfigStore (before composing): ``run_schema``, ``reproduce_schema``,
-    ``schema/env``, ``schema/scenario``, ``schema/agent/<name>``."""
+    ``benchmarl_schema``, ``schema/env``, ``schema/scenario``, ``schema/agent/<name>``."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     store.store(name="run_schema", node=RunSchema)
     store.store(name="reproduce_schema", node=ReproduceSchema)
+    store.store(name="benchmarl_schema", node=BenchmarlSchema)
     store.store(group="schema", name="env", node=EnvSchema)
     store.store(group="schema", name="scenario", node=ScenarioSchema)
     for name, schema in AGENT_SCHEMAS.items():

@@ -1,0 +1,128 @@
+"""BenchMARL on the UAV task: its task class for :class:`UAVSpectrumEnv`, and the callback that measures its policy.
+
+BenchMARL (``pip install torch==2.13.0 -e ".[benchmarl]"``) runs its own experiments, algorithms, losses and
+loggers; this module only tells it what the environment is (:class:`UAVTask`) and evaluates the policy it trains
+with the shared evaluation (:class:`YardstickCallback`), so its runs carry the same ``eval/...`` metrics as ours.
+The command is ``python -m uavrl.benchmarl`` (:mod:`uavrl.benchmarl`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+from benchmarl.environments.common import TaskClass
+from benchmarl.experiment.callback import Callback
+from torchrl.data import Composite
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.evaluation import evaluate
+from uavrl.logger import RunLogger
+
+GROUP = "agents"
+
+
+class UAVTask(TaskClass):
+    """A BenchMARL task of :class:`UAVSpectrumEnv`; ``config`` holds the fields of a :class:`ModelConfig`.
+
+    One group, ``"agents"``, of the N UAVs; per UAV the ``observation`` and the ``action_mask`` (a UAV's move off
+    the grid is masked), the global ``state`` for mixers and critics, one shared team reward at the root. The
+    environment is batched, so BenchMARL's ``n_envs_per_worker`` worlds run in one tensor program.
+
+    >>> from uavrl.envs import make_config
+    >>> task = UAVTask.from_model_config("tiny", make_config("paper", grid=(3, 3), num_uavs=2, max_steps=5))
+    >>> env = task.get_env_fun(num_envs=4, continuous_actions=False, seed=0, device="cpu")()
+    >>> task.group_map(env), task.max_steps(env), sorted(task.observation_spec(env)["agents"].keys())
+    ({'agents': ['uav_0', 'uav_1']}, 5, ['observation'])
+    """
+
+    @classmethod
+    def from_model_config(cls, name: str, cfg: ModelConfig) -> UAVTask:
+        return cls(name=name, config=dataclasses.asdict(cfg))
+
+    @property
+    def model_config(self) -> ModelConfig:
+        return ModelConfig(**{**self.config, "grid": tuple(self.config["grid"])})
+
+    def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: int | None, device):
+        cfg = self.model_config
+        return lambda: UAVSpectrumEnv(batch_size=num_envs, config=cfg, seed=seed, device=device)
+
+    def supports_continuous_actions(self) -> bool:
+        return False
+
+    def supports_discrete_actions(self) -> bool:
+        return True
+
+    def max_steps(self, env) -> int:
+        return self.model_config.max_steps
+
+    def has_render(self, env) -> bool:
+        return False
+
+    def group_map(self, env) -> dict[str, list[str]]:
+        return {GROUP: [f"uav_{i}" for i in range(self.model_config.num_uavs)]}
+
+    def _group_entry(self, env, key: str) -> Composite:
+        group = env.full_observation_spec_unbatched[GROUP]
+        return Composite({GROUP: Composite({key: group[key].clone()}, shape=group.shape)})
+
+    def observation_spec(self, env) -> Composite:
+        return self._group_entry(env, "observation")
+
+    def action_mask_spec(self, env) -> Composite:
+        return self._group_entry(env, "action_mask")
+
+    def state_spec(self, env) -> Composite:
+        return Composite({"state": env.full_observation_spec_unbatched["state"].clone()})
+
+    def info_spec(self, env) -> None:
+        return None
+
+    def action_spec(self, env) -> Composite:
+        return env.full_action_spec_unbatched.clone()
+
+    @staticmethod
+    def env_name() -> str:
+        return "uavrl"
+
+
+class YardstickCallback(Callback):
+    """At each of BenchMARL's evaluations, the shared evaluation (:func:`uavrl.evaluation.evaluate`) of its greedy
+    policy, logged with our TensorBoard tags against collected frames; ``curve`` keeps each point with the seconds
+    BenchMARL had trained by then (:meth:`training_seconds`).  The TensorBoard writer opens in ``on_setup``:
+    BenchMARL pickles its callbacks with the experiment's config before."""
+
+    def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, run_dir):
+        super().__init__()
+        self.env_cfg, self.eval_kwargs, self.run_dir = env_cfg, eval_kwargs, run_dir
+        self.logger = None
+        self.curve: list[dict] = []
+        self.started, self.started_cpu = time.perf_counter(), time.process_time()
+        self.evaluating_seconds = self.evaluating_cpu_seconds = 0.0
+
+    def on_setup(self) -> None:
+        self.logger = RunLogger(self.run_dir, resume_step=0)
+
+    def training_seconds(self) -> dict[str, float]:
+        """Wall-clock and CPU seconds of this process since the start, our evaluations not counted (CPU seconds
+        measure the work where other processes share the cores)."""
+        return {
+            "train_seconds": time.perf_counter() - self.started - self.evaluating_seconds,
+            "train_cpu_seconds": time.process_time() - self.started_cpu - self.evaluating_cpu_seconds,
+        }
+
+    def measure(self) -> dict[str, float]:
+        began, began_cpu = time.perf_counter(), time.process_time()
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            metrics = evaluate(self.experiment.policy, self.env_cfg, **self.eval_kwargs)
+        self.evaluating_seconds += time.perf_counter() - began
+        self.evaluating_cpu_seconds += time.process_time() - began_cpu
+        return metrics
+
+    def on_evaluation_end(self, rollouts) -> None:
+        frames, seconds = self.experiment.total_frames, self.training_seconds()
+        metrics = self.measure()
+        self.logger.log(metrics, frames)
+        self.curve.append({"frames": frames, **seconds, **metrics})

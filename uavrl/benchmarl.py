@@ -1,0 +1,150 @@
+"""BenchMARL's algorithms on the UAV task: ``python -m uavrl.benchmarl algorithm=mappo task=uavrl/paper_6x6 seed=0``.
+
+Needs the extra: ``pip install torch==2.13.0 -e ".[benchmarl]"``.  The config (``configs/benchmarl.yaml``)
+composes our ``env`` (the model's options, typed as for ``uavrl.train``: ``env.fading=rayleigh``), a task of
+``configs/task/uavrl/`` (the scenario: grid and UAVs), and BenchMARL's own ``experiment``, ``algorithm`` and
+``model`` configs.  BenchMARL's :class:`~benchmarl.experiment.Experiment` trains as it always does; the run
+directory ``runs/benchmarl_<algorithm>/<env>/<timestamp>/`` holds ``config.yaml``, our TensorBoard ``eval/...``
+scalars (the shared evaluation of BenchMARL's greedy policy at each of its evaluations), ``metrics.json`` (the
+final evaluation and the training seconds, as every agent's), ``curve.json`` (each evaluation with the frames and
+seconds at which it was taken), and BenchMARL's own folder (its logs and final checkpoint).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from uavrl.cli import run_command
+from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
+from uavrl.io import save_json, save_text
+from uavrl.settings import RUN_SETTINGS, check
+
+INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
+
+
+def algorithm_name(cfg: DictConfig) -> str:
+    """The name of ``cfg.algorithm`` in BenchMARL's registry (``qmix``, ``mappo``, ...)."""
+    from benchmarl.algorithms import algorithm_config_registry
+
+    kind = OmegaConf.get_type(cfg.algorithm)
+    return next(name for name, config in algorithm_config_registry.items() if config is kind)
+
+
+def check_settings(cfg: DictConfig) -> str:
+    """Every setting refused in one line before anything is built; returns the algorithm's name."""
+    from benchmarl.algorithms import algorithm_config_registry
+
+    check(cfg, RUN_SETTINGS)
+    model_config(cfg)
+    name = algorithm_name(cfg)
+    if not algorithm_config_registry[name].supports_discrete_actions():
+        discrete = [n for n, c in algorithm_config_registry.items() if c.supports_discrete_actions()]
+        raise ValueError(
+            f"algorithm={name} is invalid: it acts in continuous action spaces only, and the UAVs' actions are "
+            f"discrete; allowed algorithms are {', '.join(discrete)}"
+        )
+    if cfg.run_dir and (Path(cfg.run_dir) / "metrics.json").exists():
+        raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a finished run: pick another run_dir")
+    return name
+
+
+def new_run_dir(cfg: DictConfig, algorithm: str) -> Path:
+    if cfg.run_dir:
+        return Path(cfg.run_dir)
+    base = Path("runs") / f"benchmarl_{algorithm}" / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
+    run_dir, n = base, 1
+    while run_dir.exists():
+        run_dir, n = base.with_name(f"{base.name}-{n}"), n + 1
+    return run_dir
+
+
+def train(cfg: DictConfig, overrides=()) -> Path:
+    """Run BenchMARL's experiment as configured, evaluate its policy with ours; returns the run directory."""
+    algorithm = check_settings(cfg)
+    import torch
+    from benchmarl.experiment import Experiment
+    from benchmarl.hydra_config import (
+        load_algorithm_config_from_hydra,
+        load_experiment_config_from_hydra,
+        load_model_config_from_hydra,
+    )
+
+    from uavrl.agents.benchmarl import UAVTask, YardstickCallback
+    from uavrl.train import eval_settings, yardstick_line
+
+    torch.set_num_threads(int(cfg.num_threads))
+    env_cfg = model_config(cfg)
+    run_dir = new_run_dir(cfg, algorithm)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
+    experiment_config = load_experiment_config_from_hydra(cfg.experiment)
+    experiment_config.save_folder = str(run_dir.resolve())
+    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), run_dir)
+    experiment = Experiment(
+        task=UAVTask.from_model_config(cfg.task.name, env_cfg),
+        algorithm_config=load_algorithm_config_from_hydra(cfg.algorithm),
+        model_config=load_model_config_from_hydra(cfg.model),
+        critic_model_config=load_model_config_from_hydra(cfg.critic_model),
+        seed=int(cfg.seed),
+        config=experiment_config,
+        callbacks=[yardstick],
+    )
+    started = time.perf_counter()
+    experiment.run()
+    train_seconds = yardstick.training_seconds()
+    final = yardstick.measure()
+    yardstick.logger.log(final, experiment.total_frames)
+    yardstick.logger.close()
+    result = {
+        "agent": f"benchmarl_{algorithm}",
+        "env": cfg.env.name,
+        "task": f"uavrl/{cfg.task.name}",
+        "env_steps": experiment.total_frames,
+        "iterations": experiment.n_iters_performed,
+        **train_seconds,
+        "total_seconds": time.perf_counter() - started,
+        **final,
+    }
+    save_json(yardstick.curve, run_dir / "curve.json")
+    save_json(result, run_dir / "metrics.json")
+    grid = f"{env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs"
+    print(
+        f"trained BenchMARL {algorithm} on uavrl/{cfg.task.name} ({grid}): {result['env_steps']:,} frames in "
+        f"{result['train_seconds']:.1f} s; optimality {final['eval/optimality']:.4f} "
+        f"from {cfg.eval.num_starts} fixed starts"
+    )
+    print(yardstick_line(cfg, result))
+    print(f"run directory: {run_dir} (config.yaml, metrics.json, curve.json, TensorBoard events, {experiment.name}/)")
+    return run_dir
+
+
+def tasks() -> list[str]:
+    """The tasks of ``configs/task/uavrl/``, as ``task=`` takes them."""
+    return sorted(f"uavrl/{path.stem}" for path in (Path(config_dir()) / "task" / "uavrl").glob("*.yaml"))
+
+
+def check_task(arguments: list[str]) -> None:
+    """A task we do not have is refused with ours (Hydra would list BenchMARL's task schemas)."""
+    for argument in arguments:
+        if argument.startswith("task=") and argument.removeprefix("task=") not in tasks():
+            raise SystemExit(f"error: {argument} is invalid: allowed tasks are {', '.join(tasks())}")
+
+
+def main() -> None:
+    if importlib.util.find_spec("benchmarl") is None:
+        raise SystemExit(f"error: BenchMARL is not installed: {INSTALL}")
+    check_task(sys.argv[1:])
+    import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
+
+    run_command("benchmarl", train, RUN_OPTION_SETTINGS)
+
+
+if __name__ == "__main__":
+    main()
+    sys.exit(0)
