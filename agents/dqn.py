@@ -169,38 +169,49 @@ class ValidGreedy(nn.Module):
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
+    def _target_table(self) -> torch.Tensor:
+        """``[C, 6]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
+        out, but two UAVs given it would still collide there)."""
+        cells = len(self.neighbours)
+        stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, 2)
+        return torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
+
     def forward(
         self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
     ) -> torch.Tensor:
         cells = _cells(positions, self.width)
-        targets = torch.cat([self.neighbours[cells], cells.unsqueeze(-1).expand(*cells.shape, 2)], -1)  # [*, N, 6]
-        claimed = cells.clone()
-        switched_to = torch.zeros(*cells.shape[:-1], 2, dtype=torch.bool, device=cells.device)  # per task
+        batch = cells.shape[:-1]
+        # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
+        table = self._target_table()
+        targets = table.index_select(0, cells.reshape(-1)).view(*cells.shape, 6).movedim(-2, 0).contiguous()
+        values, allowed = action_value.movedim(-2, 0).contiguous(), action_mask.movedim(-2, 0).contiguous()
+        switches = (tasks.unsqueeze(-1) != self.task_ids).movedim(-2, 0)  # [N, *, 2]: actions 4, 5 change the task
+        # occupied[..., c]: cell c is held or claimed by a UAV (while a UAV chooses, its own cell is left out)
+        occupied = torch.zeros(*batch, len(table) + 1, dtype=torch.bool, device=cells.device)
+        occupied.scatter_(-1, cells, True)
+        switched_to = torch.zeros(*batch, 2, dtype=torch.bool, device=cells.device)  # a task switched to this step
+        claimed = list(cells.movedim(-1, 0).unsqueeze(-1))  # [*, 1] per UAV
         actions = []
-        for i in range(cells.shape[-1]):
-            others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
-            free = (targets[..., i, :, None] != others[..., None, :]).all(-1) & action_mask[..., i, :]
-            switches = tasks[..., i, None] != self.task_ids  # [*, 2]: actions 4, 5 change this UAV's task
-            free = torch.cat([free[..., :4], free[..., 4:] & ~(switches & switched_to)], -1)
-            action = action_value[..., i, :].masked_fill(~free, -math.inf).argmax(-1)
-            claimed[..., i] = targets[..., i, :].gather(-1, action.unsqueeze(-1)).squeeze(-1)
-            switched_to |= switches & (action.unsqueeze(-1) == self.task_ids + 4)
+        for i in range(len(values)):
+            occupied.scatter_(-1, claimed[i], False)
+            blocked = occupied.gather(-1, targets[i]) | ~allowed[i]
+            blocked[..., 4:] |= switches[i] & switched_to
+            action = values[i].masked_fill(blocked, -math.inf).argmax(-1, keepdim=True)
+            claimed[i] = targets[i].gather(-1, action)
+            occupied.scatter_(-1, claimed[i], True)
+            switched_to |= switches[i] & (action == self.task_ids + 4)
             actions.append(action)
-        actions = torch.stack(actions, -1)
         # second pass: a UAV that kept its cell because a later UAV still held the cell it wanted takes that move
         # now if the holder has left it (UAVs following one another move together)
-        for i in range(cells.shape[-1]):
-            others = torch.cat([claimed[..., :i], claimed[..., i + 1 :]], -1)
-            free = (targets[..., i, :4, None] != others[..., None, :]).all(-1) & action_mask[..., i, :4]
-            value, move = action_value[..., i, :4].masked_fill(~free, -math.inf).max(-1)
-            better = (actions[..., i] >= 4) & (
-                value > action_value[..., i, :].gather(-1, actions[..., i, None]).squeeze(-1)
-            )
-            actions[..., i] = torch.where(better, move, actions[..., i])
-            claimed[..., i] = torch.where(
-                better, targets[..., i, :].gather(-1, move.unsqueeze(-1)).squeeze(-1), claimed[..., i]
-            )
-        return actions
+        for i in range(len(values)):
+            occupied.scatter_(-1, claimed[i], False)
+            blocked = occupied.gather(-1, targets[i][..., :4]) | ~allowed[i][..., :4]
+            value, move = values[i][..., :4].masked_fill(blocked, -math.inf).max(-1, keepdim=True)
+            better = (actions[i] >= 4) & (value > values[i].gather(-1, actions[i]))
+            actions[i] = torch.where(better, move, actions[i])
+            claimed[i] = torch.where(better, targets[i].gather(-1, move), claimed[i])
+            occupied.scatter_(-1, claimed[i], True)
+        return torch.cat(actions, -1)
 
 
 class JointActionMask(nn.Module):
@@ -239,23 +250,26 @@ class DoubleQMixerLoss(QMixerLoss):
         super().__init__(greedy, mixer, action_space=action_spec, loss_function="smooth_l1")
         self.gamma = gamma
 
-    def _team_value(self, td: TensorDictBase, action: torch.Tensor, params, mixer_params) -> torch.Tensor:
-        """``[*, 1]`` mixed value of the per-UAV actions ``[*, N]`` at ``td``, under online or target parameters."""
-        net, mixer = self.local_value_network.module[0].module, self.mixer_network.module
-        with params.to_module(self.local_value_network, preserve_module_state=False):
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        # The online parameters are the modules' own (the optimizer steps them in place): called directly, without
+        # the parameter swap of to_module.  The target parameters are swapped in.
+        net, greedy = (m.module for m in self.local_value_network.module)
+        mixer, k, nxt = self.mixer_network.module, self.tensor_keys, td.get("next")
+
+        def team_value(td: TensorDictBase, action: torch.Tensor) -> torch.Tensor:
             chosen = net(td.get(("agents", "observation")), td.get("positions")).gather(-1, action.unsqueeze(-1))
-        with mixer_params.to_module(self.mixer_network, preserve_module_state=False):
             return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
 
-    def forward(self, td: TensorDictBase) -> TensorDictBase:
-        k, nxt = self.tensor_keys, td.get("next")
-        value = self._team_value(td, td.get(k.action), self.local_value_network_params, self.mixer_network_params)
+        value = team_value(td, td.get(k.action))
         with torch.no_grad():
-            with self.local_value_network_params.data.to_module(self.local_value_network, preserve_module_state=False):
-                next_action = self.local_value_network(nxt.clone(False)).get(k.action)  # the online greedy valid action
-            next_value = self._team_value(
-                nxt, next_action, self.target_local_value_network_params, self.target_mixer_network_params
-            )
+            observation, positions = nxt.get(("agents", "observation")), nxt.get("positions")
+            next_values = net(observation, positions)
+            next_action = greedy(next_values, nxt.get(("agents", "action_mask")), positions, nxt.get("tasks"))
+            with (
+                self.target_local_value_network_params.to_module(self.local_value_network, preserve_module_state=False),
+                self.target_mixer_network_params.to_module(self.mixer_network, preserve_module_state=False),
+            ):
+                next_value = team_value(nxt, next_action)  # the online greedy valid action, valued by the target
             target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
 

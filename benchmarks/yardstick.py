@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import tempfile
@@ -49,7 +50,7 @@ DETERMINISTIC = ("oracle", "vi")  # one seed is enough
 def run_row(name: str, seed: int, starts: int, out: Path) -> dict:
     overrides = [*ROWS[name], f"seed={seed}", f"eval.num_starts={starts}"]
     run_dir = out / f"{name}-seed{seed}"
-    started = time.perf_counter()
+    started, cpu_before = time.perf_counter(), _children_cpu_seconds()
     done = subprocess.run(
         [sys.executable, "-m", "uavrl.train", *overrides, f"run_dir={run_dir}", "progress=false"],
         capture_output=True,
@@ -63,8 +64,15 @@ def run_row(name: str, seed: int, starts: int, out: Path) -> dict:
         "seed": seed,
         "command": "python -m uavrl.train " + " ".join(overrides),
         "wall_seconds": time.perf_counter() - started,
+        # the command's CPU time: on a shared machine, close to its wall time on an idle one (one torch thread)
+        "cpu_seconds": _children_cpu_seconds() - cpu_before,
         **metrics,
     }
+
+
+def _children_cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def cell(metrics: dict, key: str, fmt: str) -> str:
@@ -79,7 +87,8 @@ def row(m: dict) -> str:
         f"{cell(m, 'eval/min_steps_to_999', '.2f')} ({fewest}) "
         f"| {cell(m, 'eval/step_ratio_999', '.3f')} | {cell(m, 'eval/reach_optimum', '.2f')} | "
         f"{cell(m, 'eval/step_ratio_optimum', '.3f')} "
-        f"| {m['train_seconds']:.0f} | {m.get('wall_seconds', m['total_seconds']):.0f} |"
+        f"| {m['train_seconds']:.0f} | {m.get('wall_seconds', m['total_seconds']):.0f} "
+        f"| {cell(m, 'cpu_seconds', '.0f')} |"
     )
 
 
@@ -95,9 +104,9 @@ def main():
     args = parser.parse_args()
     print(
         "| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 "
-        "| reach U* | step ratio U* | train s | wall s |"
+        "| reach U* | step ratio U* | train s | wall s | cpu s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     if args.collect:  # metrics.json has no wall time of the command: the column shows the run's total_seconds
         for name in ROWS:
             for path in sorted(args.collect.glob(f"{name}-seed*/metrics.json")):
@@ -115,11 +124,6 @@ def main():
     if not rows:
         parser.error("give --table or --rows")
     out = args.out or Path(tempfile.mkdtemp(prefix="yardstick_"))
-    print(
-        "| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 | "
-        "reach U* | step ratio U* | train s | wall s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     results = []
     for name in rows:
         for seed in args.seeds[:1] if any(k in name for k in DETERMINISTIC) else args.seeds:

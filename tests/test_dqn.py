@@ -93,6 +93,41 @@ def test_valid_greedy_respects_masks_never_collides_and_switches_each_task_once(
     assert torch.equal(greedy(values[:, :1], lone["agents", "action_mask"], lone["positions"], lone["tasks"]), masked)
 
 
+def greedy_rule(values, mask, cells, tasks, neighbours):
+    """ValidGreedy's rule for one world, written out plainly: ``values``/``mask`` [N][6], ``cells``/``tasks`` [N]."""
+    targets = [[*neighbours[c], c, c] for c in cells]
+    claimed, switched_to, actions = list(cells), set(), []
+
+    def best(i, options):  # first of the highest values among the options not claimed by another UAV (or None)
+        free = [a for a in options if mask[i][a] and targets[i][a] not in claimed[:i] + claimed[i + 1 :]]
+        return max(free, key=lambda a: (values[i][a], -a), default=None)
+
+    for i in range(len(cells)):
+        options = [a for a in range(6) if not (a >= 4 and tasks[i] != a - 4 and a - 4 in switched_to)]
+        actions.append(best(i, options))
+        claimed[i] = targets[i][actions[i]]
+        if actions[i] >= 4 and tasks[i] != actions[i] - 4:
+            switched_to.add(actions[i] - 4)
+    for i in range(len(cells)):  # second pass: a UAV that kept its cell takes its best move if it is worth more now
+        move = best(i, range(4))
+        if move is not None and actions[i] >= 4 and values[i][move] > values[i][actions[i]]:
+            actions[i], claimed[i] = move, targets[i][move]
+    return actions
+
+
+@pytest.mark.parametrize("grid, num_uavs", [((3, 3), 2), ((4, 3), 4), ((3, 2), 5), ((10, 10), 6)])
+def test_valid_greedy_follows_its_rule_world_by_world(grid, num_uavs):
+    env = UAVSpectrumEnv(batch_size=64, grid=grid, num_uavs=num_uavs, seed=5)
+    td = env.reset()
+    greedy = ValidGreedy(env.neighbours, width=grid[0])
+    values = torch.randint(0, 3, (64, num_uavs, 6), generator=torch.Generator().manual_seed(0)).float()  # many ties
+    actions = greedy(values, td["agents", "action_mask"], td["positions"], td["tasks"])
+    cells, neighbours = env.cells_of(td["positions"]).tolist(), env.neighbours.tolist()
+    for w in range(64):
+        mask, tasks = td["agents", "action_mask"][w].tolist(), td["tasks"][w].tolist()
+        assert actions[w].tolist() == greedy_rule(values[w].tolist(), mask, cells[w], tasks, neighbours)
+
+
 def online_and_target(make_agent, *overrides):
     """An agent, its first transitions, and Q values under its online and its (perturbed) target parameters."""
     agent = make_agent(*overrides, "agent.learning_starts=100000")  # no gradient step
