@@ -8,7 +8,14 @@ the solvers live in their modules: :mod:`.optimum`, :mod:`.exact`, :mod:`.bounds
 
 from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, ModelConfig, make_config
 
-_LAZY = {"UAVSpectrumEnv": "env", "decode_joint_actions": "grid", "joint_action_valid": "grid", "joint_targets": "grid"}
+_LAZY = {
+    "UAVSpectrumEnv": "env",
+    "decode_joint_actions": "grid",
+    "joint_action_valid": "grid",
+    "joint_targets": "grid",
+    "NODE_FEATURES": "world",
+    "observation_with_nodes": "world",
+}
 __all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]
 
 

@@ -88,8 +88,10 @@ class UAVSpectrumEnv(EnvBase):
     # ------------------------------------------------------------------ specs
     @property
     def observation_size(self) -> int:
-        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task),
-        the 4 nodes."""
+        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task).
+
+        The 4 nodes' positions, the same for every UAV of a world, are the last 12 entries of ``state``
+        (:func:`~uavrl.envs.world.observation_with_nodes` appends them to each UAV's observation)."""
         return self.world.observation_size
 
     @property

@@ -17,7 +17,7 @@ from tensordict import TensorDict
 from torchrl.envs import ActionMask, Compose, RewardSum, StepCounter, TransformedEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs import UAVSpectrumEnv, observation_with_nodes
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
 OUTPUT_KEYS = [
@@ -293,13 +293,15 @@ def test_state_index_and_observation_layout():
             base = 2 * C if with_tasks else C
             assert td["state_index"][w].item() == sum(d * base**i for i, d in enumerate(digits))
             obs, state = td["agents", "observation"][w], td["state"][w]
-            assert obs.shape == (N, 3 + 10 + 3 * (N - 1) + 12) and state.shape == (5 * N + 12,)
+            assert obs.shape == (N, 3 + 10 + 3 * (N - 1)) and state.shape == (5 * N + 12,)
+            with_nodes = observation_with_nodes(obs, state)  # the layout before issue 17: nodes after the observation
+            assert torch.equal(with_nodes[:, : obs.shape[-1]], obs) and with_nodes.shape == (N, obs.shape[-1] + 12)
             xyt = [(x / (L1 - 1), y / (L2 - 1), float(t)) for (x, y), t in zip(xy_list(td, w), tasks, strict=True)]
             for i in range(N):
                 assert obs[i, :3].tolist() == pytest.approx(xyt[i])
                 others = [v for j in list(range(i + 1, N)) + list(range(i)) for v in xyt[j]]
                 assert obs[i, 13 : 13 + 3 * (N - 1)].tolist() == pytest.approx(others)
-                assert obs[i, -12:].tolist() == state[-12:].tolist()
+                assert with_nodes[i, -12:].tolist() == state[-12:].tolist()
                 assert state[5 * i : 5 * i + 3].tolist() == pytest.approx(xyt[i])
                 assert state[5 * i + 3 : 5 * i + 5].tolist() == obs[i, 3:5].tolist()
                 x, y = xy_list(td, w)[i]
@@ -692,7 +694,7 @@ def test_rollout_shapes_and_transforms():
     )
     check_env_specs(env, seed=0)
     td = env.rollout(T, break_when_any_done=False)
-    assert td.batch_size == (B, T) and td["agents", "observation"].shape == (B, T, N, 28)
+    assert td.batch_size == (B, T) and td["agents", "observation"].shape == (B, T, N, 16)
     # ActionMask: every sampled action is allowed by the mask
     chosen = td["agents", "action_mask"].gather(-1, td["agents", "action"].unsqueeze(-1))
     assert chosen.all()
