@@ -52,7 +52,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.collectors import Collector
-from torchrl.data import Categorical, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, VDNMixer
 from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
@@ -336,7 +336,15 @@ def build_policies(env: UAVSpectrumEnv, a, q: TensorDictModule, eps: dict) -> Po
 
 
 def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
-    spec = env.full_action_spec_unbatched
+    # TorchRL's own Categorical: the exploration draws as they were before the env's cheaper MaskedCategorical
+    spec = Composite(
+        agents=Composite(
+            action=Categorical(NUM_ACTIONS, (env.num_uavs,), dtype=torch.long, device=env.device),
+            shape=(env.num_uavs,),
+            device=env.device,
+        ),
+        device=env.device,
+    )
     greedy_action = TensorDictModule(
         ValidGreedy(env.neighbours, env.cfg.grid[0]),
         in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],

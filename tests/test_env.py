@@ -18,6 +18,7 @@ from torchrl.envs import ActionMask, Compose, RewardSum, StepCounter, Transforme
 from torchrl.envs.utils import check_env_specs, step_mdp
 
 from uavrl.envs import UAVSpectrumEnv, observation_with_nodes
+from uavrl.envs.env import MaskedCategorical
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
 OUTPUT_KEYS = [
@@ -797,3 +798,25 @@ def test_outputs_are_finite(grid, N, options):
         if value.dtype.is_floating_point:
             assert torch.isfinite(value).all(), key
     assert torch.isfinite(env.cell_contributions).all() and torch.isfinite(env.optimum()[0]).all()
+
+
+def test_masked_random_actions_are_uniform_over_the_allowed_ones():
+    """MaskedCategorical.rand (what ActionMask's random actions call): only allowed actions, each equally likely."""
+    torch.manual_seed(0)
+    patterns = torch.tensor([[1, 1, 1, 1, 1, 1], [0, 1, 0, 1, 1, 1], [1, 0, 0, 0, 0, 1], [0, 0, 0, 0, 1, 0]]).bool()
+    spec = MaskedCategorical(6, (4, 20_000), dtype=torch.long)
+    spec.update_mask(patterns[:, None].expand(4, 20_000, 6))
+    draws = spec.rand()
+    assert draws.shape == (4, 20_000) and draws.dtype == torch.long
+    for pattern, drawn in zip(patterns, draws, strict=True):
+        counts = torch.bincount(drawn, minlength=6).double()
+        assert (counts[~pattern] == 0).all()
+        k = int(pattern.sum())
+        expected, sd = 20_000 / k, math.sqrt(20_000 * (1 / k) * (1 - 1 / k))
+        assert ((counts[pattern] - expected).abs() <= 5 * sd).all()
+    spec.update_mask(None)
+    assert spec.rand().unique().tolist() == list(range(6))
+    mask = ActionMask(action_key=("agents", "action"), mask_key=("agents", "action_mask"))
+    env = TransformedEnv(UAVSpectrumEnv(batch_size=64, grid=(3, 3), num_uavs=2), mask)
+    td = env.rollout(20)
+    assert td["agents", "action_mask"].gather(-1, td["agents", "action"].unsqueeze(-1)).all()
