@@ -26,14 +26,17 @@ Usage::
 
     python benchmarks/env_vs_vmas.py                      # B = 4096, T = 50, N = 2 and 6, 1 thread
     python benchmarks/env_vs_vmas.py --uavs 2 --repeats 3
+    git archive <rev> envs | tar -x -C /tmp/before && python benchmarks/env_vs_vmas.py --before /tmp/before/envs
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import platform
 import statistics
+import sys
 import time
 
 PATHS = ("rollout+mask", "rollout", "step loop")
@@ -45,8 +48,15 @@ def parse_args(argv=None):
     p.add_argument("--steps", type=int, default=50, help="steps T per timed run (default 50)")
     p.add_argument("--uavs", type=int, nargs="+", default=[2, 6], help="agents N (default 2 6)")
     p.add_argument("--grid", type=int, nargs=2, default=[6, 6], help="our grid (default 6 6)")
-    p.add_argument("--scenarios", nargs="+", default=["simple_spread", "navigation"], help="VMAS scenarios")
+    p.add_argument(
+        "--scenarios", nargs="*", default=["simple_spread", "navigation"], help="VMAS scenarios (none: ours only)"
+    )
     p.add_argument("--paths", nargs="+", default=list(PATHS), choices=PATHS)
+    p.add_argument(
+        "--before",
+        metavar="ENVS_DIR",
+        help="also time the envs/ folder of another uavrl version (e.g. from git archive) in the same runs",
+    )
     p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (default 5)")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs first (default 1)")
     p.add_argument("--threads", type=int, default=1, help="torch.set_num_threads (default 1)")
@@ -63,6 +73,14 @@ def main(argv=None):
 
     from uavrl.envs import UAVSpectrumEnv
 
+    def load_before(envs_dir):
+        """``UAVSpectrumEnv`` of another version's ``envs/`` folder (relative imports only), as package ``before``."""
+        spec = importlib.util.spec_from_file_location("before", os.path.join(envs_dir, "__init__.py"))
+        package = importlib.util.module_from_spec(spec)
+        sys.modules["before"] = package
+        spec.loader.exec_module(package)
+        return importlib.import_module("before.env").UAVSpectrumEnv
+
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
     B, T = args.batch_size, args.steps
@@ -78,15 +96,20 @@ def main(argv=None):
     print(
         f"# uavrl env vs VMAS {vmas.__version__}: {time.strftime('%Y-%m-%d %H:%M')}, torch {torch.__version__}, "
         f"torchrl {torchrl.__version__}, threads {torch.get_num_threads()}, {os.cpu_count()} CPUs "
-        f"({platform.processor() or platform.machine()})"
+        f"({platform.processor() or platform.machine()}); before: {args.before}"
     )
     print(
         f"# B = {B}, T = {T}, our grid {args.grid[0]}x{args.grid[1]}, VMAS discrete actions; medians of "
         f"{args.repeats} interleaved runs after {args.warmup}; world-steps/s; load average at start "
         f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}"
     )
-    width = max(len(s) for s in args.scenarios)
-    print(f"{'N':>2}  {'path':<13} {'uavrl':>11}  " + "  ".join(f"{s:>{width}} {'ratio':>6}" for s in args.scenarios))
+    Before = load_before(args.before) if args.before else None
+    columns = (["before"] if Before else []) + args.scenarios
+    width = max(len(s) for s in columns + ["uavrl"])
+    print(
+        f"{'N':>2}  {'path':<13} {'uavrl':>{width + 2}}  "
+        + "  ".join(f"{s:>{width + 2}} {'ratio':>6}" for s in columns)
+    )
     for N in args.uavs:
         ours = UAVSpectrumEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
         masked = TransformedEnv(ours, ActionMask(("agents", "action"), ("agents", "action_mask")))
@@ -94,8 +117,13 @@ def main(argv=None):
             s: VmasEnv(s, num_envs=B, n_agents=N, continuous_actions=False, device="cpu", seed=0)
             for s in args.scenarios
         }
+        if Before:
+            before = Before(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
+            masked_before = TransformedEnv(before, ActionMask(("agents", "action"), ("agents", "action_mask")))
         for path in args.paths:
             contenders = {"uavrl": masked if path == "rollout+mask" else ours, **peers}
+            if Before:
+                contenders["before"] = masked_before if path == "rollout+mask" else before
             names = list(contenders)
             times = {name: [] for name in names}
             for i in range(args.warmup + args.repeats):
@@ -106,8 +134,8 @@ def main(argv=None):
                     if i >= args.warmup:
                         times[name].append(time.perf_counter() - start)
             rate = {name: B * T / statistics.median(t) for name, t in times.items()}
-            cells = "  ".join(f"{rate[s] / 1e6:>{width - 2}.2f} M {rate['uavrl'] / rate[s]:>5.2f}x" for s in peers)
-            print(f"{N:>2}  {path:<13} {rate['uavrl'] / 1e6:>9.2f} M  {cells}", flush=True)
+            cells = "  ".join(f"{rate[s] / 1e6:>{width}.3f} M {rate['uavrl'] / rate[s]:>5.2f}x" for s in columns)
+            print(f"{N:>2}  {path:<13} {rate['uavrl'] / 1e6:>{width}.3f} M  {cells}", flush=True)
     print(f"# load average at end {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
