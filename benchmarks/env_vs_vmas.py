@@ -67,7 +67,11 @@ def main(argv=None):
     args = parse_args(argv)
     import torch
     import torchrl
-    import vmas
+
+    try:
+        import vmas
+    except ImportError:
+        sys.exit("benchmarks/env_vs_vmas.py needs VMAS: pip install vmas (--dry-run first: it must keep your torch)")
     from torchrl.envs import ActionMask, TransformedEnv
     from torchrl.envs.libs.vmas import VmasEnv
 
