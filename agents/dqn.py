@@ -52,13 +52,21 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.collectors import Collector
-from torchrl.data import Categorical, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, VDNMixer
 from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
 from uavrl.compat import load_buffer_state, make_collector, written_into
-from uavrl.envs import NUM_ACTIONS, ModelConfig, UAVSpectrumEnv, decode_joint_actions, joint_action_valid
+from uavrl.envs import (
+    NODE_FEATURES,
+    NUM_ACTIONS,
+    ModelConfig,
+    UAVSpectrumEnv,
+    decode_joint_actions,
+    joint_action_valid,
+    observation_with_nodes,
+)
 from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
@@ -67,6 +75,7 @@ from uavrl.settings import RUN_SETTINGS, check
 MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
+Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
 
 
 # ----------------------------------------------------------------------------- networks
@@ -75,10 +84,12 @@ def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
 
 
 class TeamQNet(nn.Module):
-    """Action values from the joint observation ``[*, N, F]`` and the positions ``[*, N, 2]``.
+    """Action values from the joint observation ``[*, N, F]``, the positions ``[*, N, 2]`` and the state.
 
-    The torso (a centralised ``MultiAgentMLP``) embeds all N observations at
-    once.  ``factored``: a shared per-UAV head reads that embedding, the UAV's
+    Each UAV's input is its observation followed by the node positions (the
+    last 12 entries of ``state``, :func:`~uavrl.envs.world.observation_with_nodes`).
+    The torso (a centralised ``MultiAgentMLP``) embeds all N inputs at once.
+    ``factored``: a shared per-UAV head reads that embedding, the UAV's
     own observation, its one-hot id and which of its 4 neighbouring cells
     another UAV holds, and returns ``[*, N, 6]``.  ``joint``: a linear head
     returns ``[*, 6^N]``.
@@ -86,15 +97,15 @@ class TeamQNet(nn.Module):
     Example:
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
         >>> td = env.reset()
-        >>> TeamQNet(env, "factored", hidden=16, depth=1)(td["agents", "observation"], td["positions"]).shape
+        >>> TeamQNet(env, "factored", hidden=16, depth=1)(*(td[k] for k in Q_INPUTS)).shape
         torch.Size([3, 2, 6])
-        >>> TeamQNet(env, "joint", hidden=16, depth=1)(td["agents", "observation"], td["positions"]).shape
+        >>> TeamQNet(env, "joint", hidden=16, depth=1)(*(td[k] for k in Q_INPUTS)).shape
         torch.Size([3, 36])
     """
 
     def __init__(self, env: UAVSpectrumEnv, head: str, hidden: int, depth: int):
         super().__init__()
-        N, F, dev = env.num_uavs, env.observation_size, env.device
+        N, F, dev = env.num_uavs, env.observation_size + NODE_FEATURES, env.device
         self.joint, self.width = head == "joint", env.cfg.grid[0]
         self.torso = MultiAgentMLP(
             F,
@@ -125,7 +136,8 @@ class TeamQNet(nn.Module):
         self.register_buffer("ids", torch.eye(N, device=dev))
         self.register_buffer("neighbours", env.neighbours.clone())
 
-    def forward(self, observation: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+    def forward(self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        observation = observation_with_nodes(observation, state)
         embedding = self.torso(observation)  # [*, N, hidden], the same row for every UAV
         if self.joint:
             return self.head(embedding[..., 0, :])
@@ -258,14 +270,15 @@ class DoubleQMixerLoss(QMixerLoss):
         mixer, k, nxt = self.mixer_network.module, self.tensor_keys, td.get("next")
 
         def team_value(td: TensorDictBase, action: torch.Tensor) -> torch.Tensor:
-            chosen = net(td.get(("agents", "observation")), td.get("positions")).gather(-1, action.unsqueeze(-1))
+            chosen = net(*(td.get(k) for k in Q_INPUTS)).gather(-1, action.unsqueeze(-1))
             return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
 
         value = team_value(td, td.get(k.action))
         with torch.no_grad():
-            observation, positions = nxt.get(("agents", "observation")), nxt.get("positions")
-            next_values = net(observation, positions)
-            next_action = greedy(next_values, nxt.get(("agents", "action_mask")), positions, nxt.get("tasks"))
+            next_values = net(*(nxt.get(k) for k in Q_INPUTS))
+            next_action = greedy(
+                next_values, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks")
+            )
             with (
                 written_into(self.target_local_value_network_params, self.local_value_network),
                 written_into(self.target_mixer_network_params, self.mixer_network),
@@ -304,7 +317,7 @@ class Policies:
 def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
     """:class:`TeamQNet` as a module writing ``("agents", "action_value")`` (factored) or ``"joint_action_value"``."""
     net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
-    return TensorDictModule(net, in_keys=[("agents", "observation"), "positions"], out_keys=[_values_key(a)])
+    return TensorDictModule(net, in_keys=list(Q_INPUTS), out_keys=[_values_key(a)])
 
 
 def _values_key(a):
@@ -324,7 +337,15 @@ def build_policies(env: UAVSpectrumEnv, a, q: TensorDictModule, eps: dict) -> Po
 
 
 def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
-    spec = env.full_action_spec_unbatched
+    # TorchRL's own Categorical: the exploration draws as they were before the env's cheaper MaskedCategorical
+    spec = Composite(
+        agents=Composite(
+            action=Categorical(NUM_ACTIONS, (env.num_uavs,), dtype=torch.long, device=env.device),
+            shape=(env.num_uavs,),
+            device=env.device,
+        ),
+        device=env.device,
+    )
     greedy_action = TensorDictModule(
         ValidGreedy(env.neighbours, env.cfg.grid[0]),
         in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],
@@ -399,9 +420,7 @@ def build_replay_buffer(a, device) -> TensorDictReplayBuffer:
 
 def transition_keys(a, action_keys: list) -> list:
     """The entries of a transition the replay buffer keeps (the loss reads no others)."""
-    inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks"]
-    if a.head == "factored" and a.mixer == "qmix":
-        inputs.append("state")
+    inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
     return inputs + action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
 
 
@@ -410,6 +429,28 @@ def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collec
     return make_collector(
         env, policy, frames_per_batch=env.num_worlds * env.cfg.max_steps, total_frames=-1, device=env.device
     )
+
+
+def _nodes_out_of_observation(transitions, observation_size: int) -> None:
+    """A replay buffer saved before issue 17 (the node positions in every UAV's observation, the state only with
+    QMIX) becomes today's in place, so an old run resumes bit for bit.
+
+    ``transitions``: the storage of a buffer's ``state_dict`` (a flat dict, keys joined by dots) or the
+    ``TensorDict`` of the oldest checkpoints.
+    """
+    dotted = isinstance(transitions, dict)
+    for step in ((), ("next",)):
+
+        def key(*names, step=step):
+            return ".".join(step + names) if dotted else step + names
+
+        observation = transitions[key("agents", "observation")]
+        if observation.shape[-1] != observation_size + NODE_FEATURES:
+            return
+        transitions[key("agents", "observation")] = observation[..., :observation_size].contiguous()
+        if key("state") not in transitions.keys():  # per UAV its first 5 entries, then the nodes (World._assemble)
+            own, nodes = observation[..., :5].flatten(-2), observation[..., 0, observation_size:]
+            transitions[key("state")] = torch.cat([own, nodes], -1)
 
 
 # ----------------------------------------------------------------------------- the agent
@@ -539,6 +580,9 @@ class DQNAgent(Agent):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.exploration.load_state_dict(state["exploration"])
+        transitions = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
+        if transitions is not None:
+            _nodes_out_of_observation(transitions, self.env.observation_size)
         if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
             self._load_filled_slots(state["buffer"], state["buffer_writes"])
         else:

@@ -15,6 +15,8 @@ _LAZY = {
     "decode_joint_actions": "grid",
     "joint_action_valid": "grid",
     "joint_targets": "grid",
+    "NODE_FEATURES": "world",
+    "observation_with_nodes": "world",
 }
 __all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]
 

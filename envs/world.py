@@ -18,7 +18,7 @@ Example:
     >>> first = world.reset()
     >>> out, reward, truncated = world.step(torch.full((4, 2), 5))
     >>> out["utility"].shape, reward.shape, first["observation"].shape
-    (torch.Size([4]), torch.Size([4]), torch.Size([4, 2, 28]))
+    (torch.Size([4]), torch.Size([4]), torch.Size([4, 2, 16]))
 """
 
 from __future__ import annotations
@@ -45,6 +45,17 @@ from .optimum import optimum as exact_optimum
 
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
 SEED_LIMIT = 2**63  # world seeds are int64
+NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
+
+
+def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+    """``[*, N, F + 12]``: each UAV's observation followed by its world's node positions (the last 12 of ``state``).
+
+    The observation carried the nodes for every UAV and step until issue 17; a
+    network that wants them builds this input (bit for bit the old observation).
+    """
+    nodes = state[..., None, -NODE_FEATURES:]
+    return torch.cat([observation, nodes.expand(*observation.shape[:-1], NODE_FEATURES)], -1)
 
 
 def resolve_device(device) -> torch.device:
@@ -160,7 +171,7 @@ class World:
         self._code_rate = torch.zeros(
             Bt, 2 * C, 3, dtype=f64, device=dev
         )  # what a UAV adds to (sum PU, sum SE, relaying count)
-        self._node_obs = torch.zeros(Bt, 12, dtype=torch.float32, device=dev)
+        self._node_obs = torch.zeros(Bt, NODE_FEATURES, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
         # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
@@ -183,13 +194,16 @@ class World:
     # ---------------------------------------------------------- sizes
     @property
     def observation_size(self) -> int:
-        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task),
-        the 4 nodes."""
-        return 3 + 10 + 3 * (self.num_uavs - 1) + 12
+        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task).
+
+        The 4 nodes' positions are the same for every UAV of a world: they are the last
+        :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
+        return 3 + 10 + 3 * (self.num_uavs - 1)
 
     @property
     def state_size(self) -> int:
-        return 5 * self.num_uavs + 12
+        """Per UAV (x, y, task) and its contributions at its cell, then the 4 nodes' (x, y, z)."""
+        return 5 * self.num_uavs + NODE_FEATURES
 
     def set_seed(self, seed: int | None):
         """World ``i`` draws from the stream of seed ``seed + i``; the episode counters restart."""
@@ -228,7 +242,7 @@ class World:
             "_cell_contrib": contrib,
             "_code_obs": code_obs,
             "_code_rate": code_rate,
-            "_node_obs": (nodes / self._node_scale).flatten(1).float(),
+            "_node_obs": (nodes / self._node_scale).flatten(1).float(),  # [k, NODE_FEATURES]
             "_direct": direct_terms(nodes, cfg),
         }
         if self._cell_gains is not None:
@@ -311,7 +325,6 @@ class World:
         layout)."""
         W, N = code.shape
         own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
-        nodes = self._node_obs.unsqueeze(1).expand(W, N, 12)
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
             parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
@@ -319,8 +332,8 @@ class World:
             # the others' (x, y, task), for UAV i in the order i+1, ..., i+N-1 (mod N): a window over the codes twice
             xyt = self._code_xyt.index_select(0, torch.cat([code, code], 1).view(-1))  # [2 W N, 3]
             parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
-        observation = torch.cat([*parts, nodes], -1)
-        state = torch.cat([own[..., :5].reshape(W, 5 * N), nodes[:, 0]], -1)
+        observation = torch.cat(parts, -1) if len(parts) > 1 else own
+        state = torch.cat([own[..., :5].reshape(W, 5 * N), self._node_obs.expand(W, NODE_FEATURES)], -1)
         return observation, state
 
     def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:

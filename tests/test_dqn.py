@@ -1,5 +1,6 @@
 """Factored deep Q-network: learning, double-DQN targets over valid actions, masks, checkpoints, errors."""
 
+import copy
 import io
 import math
 
@@ -10,7 +11,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from uavrl.agents.baselines import RandomPolicy
 from uavrl.agents.dqn import DQNAgent, ValidGreedy
 from uavrl.config import model_config
-from uavrl.envs import UAVSpectrumEnv, joint_action_valid
+from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
 from uavrl.evaluation import evaluate
 from uavrl.train import train
 
@@ -139,7 +140,7 @@ def online_and_target(make_agent, *overrides):
     net = agent.greedy[0 if factored else 1].module
 
     def online(td):
-        return net(td["agents", "observation"], td["positions"])
+        return net(td["agents", "observation"], td["positions"], td["state"])
 
     def target(td):
         with params.to_module(module):
@@ -228,6 +229,32 @@ def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
         for a in (agent, restored)
     ]
     assert torch.equal(*actions)
+
+
+@pytest.mark.parametrize("overrides", [["agent.mixer=vdn"], ["agent.mixer=qmix", "env.num_uavs=3"]])
+def test_checkpoint_with_nodes_in_the_observation_resumes_identically(overrides, make_agent):
+    """A replay buffer saved before issue 17 (nodes in every observation, state only for QMIX) loads as today's."""
+    agent = make_agent(*overrides, "agent.buffer_size=300", seed=2)
+    for _ in range(2):
+        agent.train_iteration()
+    state = agent.state_dict()
+    old = copy.copy(state["buffer"]["_storage"]["_storage"])  # a flat OrderedDict, keys joined by dots
+    for step in ("", "next."):
+        key = f"{step}agents.observation"
+        old[key] = observation_with_nodes(old[key], old[f"{step}state"])
+        if "qmix" not in overrides[0]:
+            del old[f"{step}state"]
+    saved = io.BytesIO()
+    storage = {**state["buffer"]["_storage"], "_storage": old}
+    torch.save({**state, "buffer": {**state["buffer"], "_storage": storage}}, saved)
+    saved.seek(0)
+    restored = make_agent(*overrides, "agent.buffer_size=300", seed=2)
+    restored.load_state_dict(torch.load(saved, weights_only=False))
+    assert (agent.buffer.storage._storage == restored.buffer.storage._storage).all()
+    torch.set_rng_state(state["rng"])
+    metrics = agent.train_iteration()
+    torch.set_rng_state(state["rng"])
+    assert restored.train_iteration() == metrics
 
 
 def test_training_command_logs_the_shared_tags_and_resumes_exactly(tmp_path, tiny_cfg, interrupt_at, episode_tags):

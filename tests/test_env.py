@@ -17,7 +17,8 @@ from tensordict import TensorDict
 from torchrl.envs import ActionMask, Compose, RewardSum, StepCounter, TransformedEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs import UAVSpectrumEnv, observation_with_nodes
+from uavrl.envs.env import MaskedCategorical
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
 OUTPUT_KEYS = [
@@ -293,13 +294,15 @@ def test_state_index_and_observation_layout():
             base = 2 * C if with_tasks else C
             assert td["state_index"][w].item() == sum(d * base**i for i, d in enumerate(digits))
             obs, state = td["agents", "observation"][w], td["state"][w]
-            assert obs.shape == (N, 3 + 10 + 3 * (N - 1) + 12) and state.shape == (5 * N + 12,)
+            assert obs.shape == (N, 3 + 10 + 3 * (N - 1)) and state.shape == (5 * N + 12,)
+            with_nodes = observation_with_nodes(obs, state)  # the layout before issue 17: nodes after the observation
+            assert torch.equal(with_nodes[:, : obs.shape[-1]], obs) and with_nodes.shape == (N, obs.shape[-1] + 12)
             xyt = [(x / (L1 - 1), y / (L2 - 1), float(t)) for (x, y), t in zip(xy_list(td, w), tasks, strict=True)]
             for i in range(N):
                 assert obs[i, :3].tolist() == pytest.approx(xyt[i])
                 others = [v for j in list(range(i + 1, N)) + list(range(i)) for v in xyt[j]]
                 assert obs[i, 13 : 13 + 3 * (N - 1)].tolist() == pytest.approx(others)
-                assert obs[i, -12:].tolist() == state[-12:].tolist()
+                assert with_nodes[i, -12:].tolist() == state[-12:].tolist()
                 assert state[5 * i : 5 * i + 3].tolist() == pytest.approx(xyt[i])
                 assert state[5 * i + 3 : 5 * i + 5].tolist() == obs[i, 3:5].tolist()
                 x, y = xy_list(td, w)[i]
@@ -692,7 +695,7 @@ def test_rollout_shapes_and_transforms():
     )
     check_env_specs(env, seed=0)
     td = env.rollout(T, break_when_any_done=False)
-    assert td.batch_size == (B, T) and td["agents", "observation"].shape == (B, T, N, 28)
+    assert td.batch_size == (B, T) and td["agents", "observation"].shape == (B, T, N, 16)
     # ActionMask: every sampled action is allowed by the mask
     chosen = td["agents", "action_mask"].gather(-1, td["agents", "action"].unsqueeze(-1))
     assert chosen.all()
@@ -793,3 +796,25 @@ def test_outputs_are_finite(grid, N, options):
         if value.dtype.is_floating_point:
             assert torch.isfinite(value).all(), key
     assert torch.isfinite(env.cell_contributions).all() and torch.isfinite(env.optimum()[0]).all()
+
+
+def test_masked_random_actions_are_uniform_over_the_allowed_ones():
+    """MaskedCategorical.rand (what ActionMask's random actions call): only allowed actions, each equally likely."""
+    torch.manual_seed(0)
+    patterns = torch.tensor([[1, 1, 1, 1, 1, 1], [0, 1, 0, 1, 1, 1], [1, 0, 0, 0, 0, 1], [0, 0, 0, 0, 1, 0]]).bool()
+    spec = MaskedCategorical(6, (4, 20_000), dtype=torch.long)
+    spec.update_mask(patterns[:, None].expand(4, 20_000, 6))
+    draws = spec.rand()
+    assert draws.shape == (4, 20_000) and draws.dtype == torch.long
+    for pattern, drawn in zip(patterns, draws, strict=True):
+        counts = torch.bincount(drawn, minlength=6).double()
+        assert (counts[~pattern] == 0).all()
+        k = int(pattern.sum())
+        expected, sd = 20_000 / k, math.sqrt(20_000 * (1 / k) * (1 - 1 / k))
+        assert ((counts[pattern] - expected).abs() <= 5 * sd).all()
+    spec.update_mask(None)
+    assert spec.rand().unique().tolist() == list(range(6))
+    mask = ActionMask(action_key=("agents", "action"), mask_key=("agents", "action_mask"))
+    env = TransformedEnv(UAVSpectrumEnv(batch_size=64, grid=(3, 3), num_uavs=2), mask)
+    td = env.rollout(20)
+    assert td["agents", "action_mask"].gather(-1, td["agents", "action"].unsqueeze(-1)).all()
