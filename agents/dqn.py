@@ -435,22 +435,31 @@ def _nodes_out_of_observation(transitions, observation_size: int) -> None:
     """A replay buffer saved before issue 17 (the node positions in every UAV's observation, the state only with
     QMIX) becomes today's in place, so an old run resumes bit for bit.
 
-    ``transitions``: the storage of a buffer's ``state_dict`` (a flat dict, keys joined by dots) or the
-    ``TensorDict`` of the oldest checkpoints.
+    ``transitions``: the storage of a buffer's ``state_dict`` or the ``TensorDict`` of the oldest checkpoints.
     """
-    dotted = isinstance(transitions, dict)
     for step in ((), ("next",)):
-
-        def key(*names, step=step):
-            return ".".join(step + names) if dotted else step + names
-
-        observation = transitions[key("agents", "observation")]
+        holder, key = _stored_entry(transitions, (*step, "agents", "observation"))
+        observation = holder[key]
         if observation.shape[-1] != observation_size + NODE_FEATURES:
             return
-        transitions[key("agents", "observation")] = observation[..., :observation_size].contiguous()
-        if key("state") not in transitions.keys():  # per UAV its first 5 entries, then the nodes (World._assemble)
+        holder[key] = observation[..., :observation_size].contiguous()
+        holder, key = _stored_entry(transitions, (*step, "state"))
+        if key not in holder.keys():  # per UAV its first 5 entries, then the nodes (World._assemble)
             own, nodes = observation[..., :5].flatten(-2), observation[..., 0, observation_size:]
-            transitions[key("state")] = torch.cat([own, nodes], -1)
+            holder[key] = torch.cat([own, nodes], -1)
+
+
+def _stored_entry(transitions, names: tuple):
+    """``(mapping, key)`` of the entry ``names`` of a stored buffer: a ``TensorDict`` (tuple keys), torchrl 0.14's
+    flat ``state_dict`` (keys joined by dots) or torchrl 0.11's nested dicts."""
+    if not isinstance(transitions, dict):
+        return transitions, names
+    if ".".join(names) in transitions or names[0] not in transitions:
+        return transitions, ".".join(names)
+    holder = transitions
+    for name in names[:-1]:
+        holder = holder[name]
+    return holder, names[-1]
 
 
 # ----------------------------------------------------------------------------- the agent

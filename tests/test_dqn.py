@@ -9,7 +9,7 @@ import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from uavrl.agents.baselines import RandomPolicy
-from uavrl.agents.dqn import DQNAgent, ValidGreedy
+from uavrl.agents.dqn import DQNAgent, ValidGreedy, _stored_entry
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
 from uavrl.evaluation import evaluate
@@ -238,12 +238,13 @@ def test_checkpoint_with_nodes_in_the_observation_resumes_identically(overrides,
     for _ in range(2):
         agent.train_iteration()
     state = agent.state_dict()
-    old = copy.copy(state["buffer"]["_storage"]["_storage"])  # a flat OrderedDict, keys joined by dots
-    for step in ("", "next."):
-        key = f"{step}agents.observation"
-        old[key] = observation_with_nodes(old[key], old[f"{step}state"])
+    old = copy.deepcopy(state["buffer"]["_storage"]["_storage"])  # flat (torchrl 0.14) or nested dicts (0.11)
+    for step in ((), ("next",)):
+        holder, key = _stored_entry(old, (*step, "agents", "observation"))
+        states, state_key = _stored_entry(old, (*step, "state"))
+        holder[key] = observation_with_nodes(holder[key], states[state_key])
         if "qmix" not in overrides[0]:
-            del old[f"{step}state"]
+            del states[state_key]
     saved = io.BytesIO()
     storage = {**state["buffer"]["_storage"], "_storage": old}
     torch.save({**state, "buffer": {**state["buffer"], "_storage": storage}}, saved)
