@@ -12,6 +12,7 @@ import numbers
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Categorical, Composite, Unbounded
+from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
 from .config import NUM_ACTIONS, ModelConfig, make_config
@@ -34,6 +35,10 @@ class MaskedCategorical(Categorical):
         mask = self.mask if shape is None else self.mask.expand(*shape, *self.mask.shape)
         noise = torch.rand(mask.shape, device=mask.device).masked_fill_(~mask, -1.0)
         return noise.argmax(-1).to(self.dtype)
+
+
+# TorchRL looks action spaces up by exact type (QValueModule, DQN losses, BenchMARL's Q-learners)
+ACTION_SPACE_MAP.setdefault(MaskedCategorical, "categorical")
 
 
 class UAVSpectrumEnv(EnvBase):

@@ -798,6 +798,15 @@ def test_outputs_are_finite(grid, N, options):
     assert torch.isfinite(env.cell_contributions).all() and torch.isfinite(env.optimum()[0]).all()
 
 
+def test_q_value_modules_accept_the_action_spec():
+    """TorchRL finds action spaces by exact type: the env's MaskedCategorical must be known as categorical."""
+    from torchrl.modules import QValueModule
+
+    spec = UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_uavs=2).full_action_spec_unbatched["agents", "action"]
+    module = QValueModule(spec=spec, action_value_key="values", action_mask_key="mask")
+    assert module.action_space == "categorical"
+
+
 def test_masked_random_actions_are_uniform_over_the_allowed_ones():
     """MaskedCategorical.rand (what ActionMask's random actions call): only allowed actions, each equally likely."""
     torch.manual_seed(0)
