@@ -270,12 +270,12 @@ class DoubleQMixerLoss(QMixerLoss):
         mixer, k, nxt = self.mixer_network.module, self.tensor_keys, td.get("next")
 
         def team_value(td: TensorDictBase, action: torch.Tensor) -> torch.Tensor:
-            chosen = net(*(td.get(k) for k in Q_INPUTS)).gather(-1, action.unsqueeze(-1))
+            chosen = net(*(td.get(key) for key in Q_INPUTS)).gather(-1, action.unsqueeze(-1))
             return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
 
         value = team_value(td, td.get(k.action))
         with torch.no_grad():
-            next_values = net(*(nxt.get(k) for k in Q_INPUTS))
+            next_values = net(*(nxt.get(key) for key in Q_INPUTS))
             next_action = greedy(
                 next_values, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks")
             )
