@@ -12,19 +12,17 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from uavrl.reproduce import reproduce
 
 
-def test_table2_and_figures_subset(tmp_path):
-    common = [
-        "grids=[2,3]",
-        "runs=2",
-        "episodes=4",
-        "eval_starts=4",
-        "progress=false",
-        f"out_dir={tmp_path}",
-        "figure_grid=3",
-    ]
-    table = subprocess.run(
-        [sys.executable, "-m", "uavrl.reproduce", "table2", *common], capture_output=True, text=True, check=True
+def run_reproduce(command: str, tmp_path, *overrides: str) -> subprocess.CompletedProcess:
+    """``python -m uavrl.reproduce <command>`` at a tiny budget (4 evaluation starts, no progress bar) into tmp_path."""
+    settings = ["eval_starts=4", "progress=false", f"out_dir={tmp_path}", *overrides]
+    return subprocess.run(
+        [sys.executable, "-m", "uavrl.reproduce", command, *settings], capture_output=True, text=True, check=True
     )
+
+
+def test_table2_and_figures_subset(tmp_path):
+    common = ["grids=[2,3]", "runs=2", "episodes=4", "figure_grid=3"]
+    table = run_reproduce("table2", tmp_path, *common)
     assert "| 2x2 | 16 | 576 | 120 |" in table.stdout and "| 3x3 | 81 | 2,916 | 800 |" in table.stdout
     assert "sum utility per episode rises" in table.stdout
     assert (
@@ -34,9 +32,7 @@ def test_table2_and_figures_subset(tmp_path):
     rows = json.loads((tmp_path / "table2.json").read_text())
     assert [r["grid"] for r in rows] == [2, 3] and all(0 < r["optimality"] <= 1 for r in rows)
     assert list((tmp_path / "tensorboard" / "grid3x3").glob("events.out.tfevents.*"))
-    subprocess.run(
-        [sys.executable, "-m", "uavrl.reproduce", "figures", *common], capture_output=True, text=True, check=True
-    )
+    run_reproduce("figures", tmp_path, *common)
     for name in ("fig3_sum_utility.png", "fig4_switches_moves.png", "fig5_steps_to_90.png"):
         with Image.open(tmp_path / name) as image:
             assert image.size[0] > 300
@@ -54,18 +50,7 @@ def test_unknown_command_and_grid_fail_clearly(tmp_path):
 
 
 def test_state_with_tasks_widens_the_table(tmp_path):
-    args = [
-        "grids=[2]",
-        "runs=1",
-        "episodes=2",
-        "eval_starts=4",
-        "progress=false",
-        f"out_dir={tmp_path}",
-        "state_includes_tasks=true",
-    ]
-    table = subprocess.run(
-        [sys.executable, "-m", "uavrl.reproduce", "table2", *args], capture_output=True, text=True, check=True
-    )
+    table = run_reproduce("table2", tmp_path, "grids=[2]", "runs=1", "episodes=2", "state_includes_tasks=true")
     assert "| 2x2 | 64 | 2,304 | 120 |" in table.stdout
 
 
