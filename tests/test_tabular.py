@@ -8,7 +8,7 @@ import torch
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
 from uavrl.compat import make_collector
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.evaluation import evaluate
+from uavrl.evaluation import EPISODE_METRICS, episode_metrics, evaluate
 
 
 def test_q_update_matches_hand_worked_step():
@@ -26,7 +26,7 @@ def test_q_update_matches_hand_worked_step():
     reward = r_after - r_before  # delta reward, beta = 1
     expected = 0.9 * 5.0 + 0.1 * (reward + 0.3 * 4.0)  # best valid action in cell 1 is 'left' (4.0)
     assert learner.q[0, 0, 3].item() == pytest.approx(expected.item(), rel=1e-12)
-    assert steps["moves"].item() == 1 and steps["task_switches"].item() == 0
+    assert steps["moves"].item() == 1 and steps["task_switches"].item() == 0  # one step: the episode's counts
     # untouched entries stay
     assert learner.q[0, 0, 5].item() == 2.0 and learner.q[0, 1, 0].item() == 9.0
 
@@ -46,12 +46,32 @@ def test_numba_and_torch_loops_give_identical_tables(shared, options):
     cfg = make_config(options.pop("preset"), max_steps=150, **options)
     fast = TeamQLearner(cfg, runs=3, seed=4, shared_table=shared, backend="numba")
     plain = TeamQLearner(cfg, runs=3, seed=4, shared_table=shared, backend="torch")
-    for _ in range(3):
-        a, b = fast.run_episode(), plain.run_episode()
-        for key in a:
+    for episode in range(3):
+        a, b = fast.run_episode(record_steps=episode == 1), plain.run_episode(record_steps=episode == 1)
+        assert a.keys() == b.keys()
+        for key in EPISODE_METRICS:
             assert torch.equal(a[key], b[key]), key
+        for key in a.get("steps", {}):
+            assert torch.equal(a["steps"][key], b["steps"][key]), key
     assert torch.equal(fast.q, plain.q)
     assert fast.q.abs().sum() > 0
+
+
+@pytest.mark.parametrize("backend", ["numba", "torch"])
+def test_episode_metrics_are_those_of_the_shared_definition(backend):
+    """The learner sums its metrics while it steps; they are what uavrl.evaluation.episode_metrics makes of the
+    episode's steps (the sums up to rounding: added in step order there, pairwise here)."""
+    cfg = make_config("paper", grid=(3, 3), num_uavs=2, max_steps=40)
+    learner = TeamQLearner(cfg, runs=4, seed=1, backend=backend)
+    for _ in range(3):
+        out = learner.run_episode(record_steps=True)
+        u_star = torch.full((4,), learner.model.u_star, dtype=torch.float64)
+        steps = out["steps"]
+        expected = episode_metrics(steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], u_star)
+        assert list(expected) == list(EPISODE_METRICS)
+        for key, value in expected.items():
+            torch.testing.assert_close(out[key], value, rtol=1e-12, atol=0)
+        assert (out["steps_to_90"] < 40).any() and torch.equal(out["moves"], out["moves"].round())
 
 
 def test_same_seed_same_tables_and_different_seed_differs():
@@ -83,7 +103,7 @@ def test_model_tables_agree_with_the_environment():
         assert torch.equal(model.next_cells[k_before // 4, joint].long(), k_after // 4)
         assert torch.equal(model.next_tasks[k_before % 4, joint].long(), k_after % 4)
         assert torch.allclose(model.r_pu[k_after].float(), nxt["r_pu"])
-        assert torch.equal(model.row[k_after], nxt["state_index"])
+        assert torch.equal(model.row[k_after].long(), nxt["state_index"])
         td = env.step_mdp(td)
 
 

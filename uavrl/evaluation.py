@@ -33,7 +33,9 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import time
 
 import torch
 
@@ -45,6 +47,8 @@ from uavrl.envs.world import World
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
 DEFAULT_GAMMA = 0.9
 NINETY_PERCENT = 0.9
+# the per-episode metrics of every agent's training (SPEC section 7; train/<name>), in the order of episode_metrics
+EPISODE_METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
@@ -78,7 +82,7 @@ def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> d
     T = sum_utility.shape[-1]
     reached = reach_utility >= NINETY_PERCENT * u_star.double().unsqueeze(-1)
     first = torch.where(reached.any(-1), reached.double().argmax(-1) + 1, torch.full_like(u_star.double(), T))
-    return {
+    return {  # the order of EPISODE_METRICS
         "sum_r_pu": r_pu.double().sum(-1),
         "sum_r_se": r_se.double().sum(-1),
         "sum_utility": sum_utility.sum(-1),
@@ -224,6 +228,32 @@ def greedy_metrics(
     out["eval/optimal_fraction"] = (optimality >= 0.99).double().mean().item()
     out.update(yardstick_metrics(utility, u_star, references, gamma))
     return out
+
+
+class TrainingClock:
+    """Seconds spent training so far in this process, wall and CPU, with the evaluations taken along the way left
+    out (run them inside :meth:`paused`): a learning curve against time (``time/train_seconds`` and
+    ``time/train_cpu_seconds`` beside each evaluation's ``eval/...``) then shows what the training itself cost,
+    however often it was measured, for every agent (BenchMARL's too)."""
+
+    def __init__(self):
+        self.started, self.started_cpu = time.perf_counter(), time.process_time()
+        self.paused_seconds = self.paused_cpu_seconds = 0.0
+
+    @contextlib.contextmanager
+    def paused(self):
+        began, began_cpu = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.paused_seconds += time.perf_counter() - began
+            self.paused_cpu_seconds += time.process_time() - began_cpu
+
+    def read(self) -> dict[str, float]:
+        return {
+            "time/train_seconds": time.perf_counter() - self.started - self.paused_seconds,
+            "time/train_cpu_seconds": time.process_time() - self.started_cpu - self.paused_cpu_seconds,
+        }
 
 
 _REFERENCE_CACHE: dict = {}

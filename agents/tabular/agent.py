@@ -8,7 +8,6 @@ import torch
 
 from uavrl.agents.base import Agent
 from uavrl.envs import ModelConfig
-from uavrl.evaluation import episode_metrics
 
 from .learner import TeamQLearner
 from .tables import exact_q_table
@@ -51,7 +50,6 @@ class TabularAgent(Agent):
             memory_budget=float(a.memory_budget),
         )
         self.num_iterations = int(a.episodes)
-        self._u_star = torch.full((self.learner.runs,), self.learner.model.u_star, dtype=torch.float64)
 
     @property
     def env_steps(self) -> int:
@@ -63,11 +61,8 @@ class TabularAgent(Agent):
             started = time.perf_counter()
             self.q = exact_q_table(self.env_cfg, self.gamma, self.device, self.memory_budget)
             return {"train/solve_seconds": time.perf_counter() - started}
-        steps = self.learner.run_episode()
-        per_run = episode_metrics(
-            steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], self._u_star.to(steps["r_pu"].device)
-        )
-        self.last_episode = per_run  # [R] each, for figures
+        per_run = self.learner.run_episode()  # [R] each: the metrics of evaluation.episode_metrics
+        self.last_episode = per_run  # for figures
         return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
 
     def policies(self) -> list:

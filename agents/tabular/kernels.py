@@ -83,47 +83,44 @@ def _log2(power_of_two):
     return n
 
 
-@numba.njit(cache=True)
-def _run_episode(
-    q,
-    r,
-    k,
-    uniforms,
-    r_pu_t,
-    r_se_t,
-    row_t,
-    valid,
-    n_valid,
-    next_cells,
-    next_tasks,
-    moves_t,
-    switches_t,
-    alpha,
-    gamma,
-    epsilon,
-    beta1,
-    beta2,
-    use_best,
-    out,
-):
-    """Run ``r``'s episode on table ``q[r]`` from configuration ``k``; ``out[r, t]`` = (R_PU, R_SE, moves,
-    switches).  Returns the last configuration.
+@numba.njit(cache=True, inline="always")
+def _record(out, r, first, r_pu, r_se, moves, switches, u90):
+    """Add one step to run ``r``'s episode metrics ``out[r]`` (the columns of :data:`EPISODE_METRICS`, in that
+    order); ``first`` is the step number (from 1) of this step.  Sums in step order, as the torch loop adds them."""
+    utility = r_pu + r_se
+    out[r, 0] += r_pu
+    out[r, 1] += r_se
+    out[r, 2] += utility
+    out[r, 3] += switches
+    out[r, 4] += moves
+    if out[r, 5] < 0 and utility >= u90:
+        out[r, 5] = first
 
-    The scan of the next state's row that gives the target's max is also the
-    next step's greedy choice, so each step scans one row (two when it stays
-    in the row it just updated).  The run's state lives in locals, not in
-    arrays shared with the other runs' threads.
+
+@numba.njit(cache=True)
+def _run_episode(q, r, k, uniforms, model, learning, out, steps_out):
+    """Run ``r``'s episode on table ``q[r]`` from configuration ``k``; its metrics go to ``out[r]``
+    (:func:`_record`), and when ``steps_out`` has the episode's length, each step's (R_PU, R_SE, moves, switches)
+    to ``steps_out[r, t]``.  Returns the last configuration.
+
+    ``model`` holds the tables of :meth:`TabularModel.kernel_tables`, ``learning`` the constants
+    ``(alpha, gamma, epsilon, beta1, beta2, use_best_so_far, 0.9 U*)``.  The scan of the next state's row that
+    gives the target's max is also the next step's greedy choice, so each step scans one row (two when it stays
+    in the row it just updated).  The run's state lives in locals, not in arrays shared with the other runs'
+    threads.
     """
-    T, T2 = uniforms.shape[1], next_tasks.shape[0]
+    rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
+    alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
+    T, T2, record_steps = uniforms.shape[1], next_tasks.shape[0], steps_out.shape[1] > 0
     shift, task_mask = _log2(T2), T2 - 1
-    prev_pu, prev_se, best = r_pu_t[k], r_se_t[k], 0.0
+    prev_pu, prev_se, best = rates[k, 0], rates[k, 1], 0.0
     p = k >> shift
     v_best, ties, best_j = _scan(q, r, row_t[k], valid, p, n_valid[p])
     for step in range(T):
         s, p, t = row_t[k], k >> shift, k & task_mask
         j = _choose(q, r, s, valid, p, n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
-        k2 = next_cells[p, j] * T2 + next_tasks[t, j]
-        r_pu, r_se = r_pu_t[k2], r_se_t[k2]
+        k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
+        r_pu, r_se = rates[k2, 0], rates[k2, 1]
         if use_best:
             reward = _best_so_far(r_pu + r_se, best)
             best = max(best, r_pu + r_se)
@@ -135,85 +132,28 @@ def _run_episode(
         q[r, s, j] = (1 - alpha) * q[r, s, j] + alpha * (reward + gamma * v_best)
         if s2 == s:
             v_best, ties, best_j = _scan(q, r, s2, valid, p2, n_valid[p2])
-        out[r, step, 0], out[r, step, 1] = r_pu, r_se
-        out[r, step, 2] = moves_t[p, j]
-        out[r, step, 3] = switches_t[t, j]
+        _record(out, r, step + 1, r_pu, r_se, moves_t[p, j], switches_t[t, j], u90)
+        if record_steps:
+            steps_out[r, step, 0], steps_out[r, step, 1] = r_pu, r_se
+            steps_out[r, step, 2], steps_out[r, step, 3] = moves_t[p, j], switches_t[t, j]
         k = k2
     return k
 
 
 @numba.njit(cache=True, parallel=True)
-def _episode_per_run(
-    q,
-    k0,
-    uniforms,
-    r_pu_t,
-    r_se_t,
-    row_t,
-    valid,
-    n_valid,
-    next_cells,
-    next_tasks,
-    moves_t,
-    switches_t,
-    alpha,
-    gamma,
-    epsilon,
-    beta1,
-    beta2,
-    use_best,
-    out,
-):
+def _episode_per_run(q, k0, uniforms, model, learning, out, steps_out):
     """One episode of ``R`` independent runs in parallel, run ``r`` on table ``q[r]`` (:func:`_run_episode`)."""
     for r in numba.prange(uniforms.shape[0]):
-        k0[r] = _run_episode(
-            q,
-            r,
-            k0[r],
-            uniforms,
-            r_pu_t,
-            r_se_t,
-            row_t,
-            valid,
-            n_valid,
-            next_cells,
-            next_tasks,
-            moves_t,
-            switches_t,
-            alpha,
-            gamma,
-            epsilon,
-            beta1,
-            beta2,
-            use_best,
-            out,
-        )
+        k0[r] = _run_episode(q, r, k0[r], uniforms, model, learning, out, steps_out)
 
 
 @numba.njit(cache=True)
-def _episode_shared(
-    q,
-    k0,
-    uniforms,
-    r_pu_t,
-    r_se_t,
-    row_t,
-    valid,
-    n_valid,
-    next_cells,
-    next_tasks,
-    moves_t,
-    switches_t,
-    alpha,
-    gamma,
-    epsilon,
-    beta1,
-    beta2,
-    use_best,
-    out,
-):
-    """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc)."""
-    R, T, T2 = uniforms.shape[0], uniforms.shape[1], next_tasks.shape[0]
+def _episode_shared(q, k0, uniforms, model, learning, out, steps_out):
+    """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc); arguments as
+    :func:`_run_episode`'s."""
+    rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
+    alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
+    R, T, T2, record_steps = uniforms.shape[0], uniforms.shape[1], next_tasks.shape[0], steps_out.shape[1] > 0
     shift, task_mask = _log2(T2), T2 - 1
     A = q.shape[2]
     prev = np.empty((R, 2))
@@ -224,15 +164,15 @@ def _episode_shared(
     total = np.zeros(q.shape[1] * A)
     count = np.zeros(q.shape[1] * A, np.int64)
     for w in range(R):
-        prev[w, 0], prev[w, 1] = r_pu_t[k0[w]], r_se_t[k0[w]]
+        prev[w, 0], prev[w, 1] = rates[k0[w], 0], rates[k0[w], 1]
     for step in range(T):
         for w in range(R):
             k = k0[w]
             s, p, t = row_t[k], k >> shift, k & task_mask
             v_best, ties, best_j = _scan(q, 0, s, valid, p, n_valid[p])
             j = _choose(q, 0, s, valid, p, n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
-            k2 = next_cells[p, j] * T2 + next_tasks[t, j]
-            r_pu, r_se = r_pu_t[k2], r_se_t[k2]
+            k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
+            r_pu, r_se = rates[k2, 0], rates[k2, 1]
             if use_best:
                 reward = _best_so_far(r_pu + r_se, best[w])
                 best[w] = max(best[w], r_pu + r_se)
@@ -242,9 +182,10 @@ def _episode_shared(
             s_w[w], j_w[w], k0[w] = s, j, k2
             p2 = k2 >> shift
             target_w[w] = reward + gamma * _scan(q, 0, row_t[k2], valid, p2, n_valid[p2])[0]
-            out[w, step, 0], out[w, step, 1] = r_pu, r_se
-            out[w, step, 2] = moves_t[p, j]
-            out[w, step, 3] = switches_t[t, j]
+            _record(out, w, step + 1, r_pu, r_se, moves_t[p, j], switches_t[t, j], u90)
+            if record_steps:
+                steps_out[w, step, 0], steps_out[w, step, 1] = r_pu, r_se
+                steps_out[w, step, 2], steps_out[w, step, 3] = moves_t[p, j], switches_t[t, j]
         for w in range(R):
             f = s_w[w] * A + j_w[w]
             total[f] += target_w[w]

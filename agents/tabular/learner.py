@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from uavrl.envs import ModelConfig
 from uavrl.envs.channel import best_so_far_reward, delta_reward
 from uavrl.envs.world import World
+from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
 from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, table_bytes
@@ -96,17 +96,30 @@ class TeamQLearner:
         g = torch.Generator().manual_seed((self.seed * 1_000_003 + self.episode) % 2**64)  # any seed below 2^63
         return torch.rand(self.runs, self.cfg.max_steps, generator=g, dtype=torch.float64).to(self.device)
 
-    def run_episode(self) -> dict[str, torch.Tensor]:
-        """Learn for one episode; returns per-step ``r_pu``, ``r_se``, ``moves``, ``task_switches`` ``[R, T]``."""
+    def run_episode(self, record_steps: bool = False) -> dict[str, torch.Tensor]:
+        """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
+        :data:`~uavrl.evaluation.EPISODE_METRICS`, as :func:`~uavrl.evaluation.episode_metrics` defines them), and
+        with ``record_steps`` also ``"steps"``: each step's ``r_pu``, ``r_se``, ``moves``, ``task_switches``
+        ``[R, T]``."""
         k0 = self._episode_starts()
         u = self._uniforms()
-        out = (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, u)
+        metrics = torch.zeros(self.runs, len(EPISODE_METRICS), dtype=torch.float64, device=self.device)
+        metrics[:, -1] = -1  # steps to 90% of U*: not reached yet
+        steps = torch.empty(self.runs, self.cfg.max_steps if record_steps else 0, 4, dtype=torch.float64)
+        steps = steps.to(self.device)
+        (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, u, metrics, steps)
+        metrics[:, -1].masked_fill_(metrics[:, -1] < 0, self.cfg.max_steps)
         self.episode += 1
-        return {"r_pu": out[..., 0], "r_se": out[..., 1], "moves": out[..., 2], "task_switches": out[..., 3]}
+        out = dict(zip(EPISODE_METRICS, metrics.unbind(-1), strict=True))
+        if record_steps:
+            out["steps"] = dict(zip(("r_pu", "r_se", "moves", "task_switches"), steps.unbind(-1), strict=True))
+        return out
 
-    def _episode_numba(self, k0, u):
-        m, cfg = self.model, self.cfg
-        out = np.empty((self.runs, cfg.max_steps, 4))
+    def _learning_constants(self) -> tuple:
+        cfg, u90 = self.cfg, NINETY_PERCENT * self.model.u_star
+        return (self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", u90)
+
+    def _episode_numba(self, k0, u, metrics, steps):
         k = k0.numpy().copy()
         kernel = _episode_shared if self.shared_table else _episode_per_run
         use_workqueue_threads()
@@ -114,27 +127,14 @@ class TeamQLearner:
             self.q.numpy(),
             k,
             u.numpy(),
-            m.r_pu.numpy(),
-            m.r_se.numpy(),
-            m.row.numpy(),
-            m.valid_actions.numpy(),
-            m.num_valid.numpy(),
-            m.next_cells.numpy(),
-            m.next_tasks.numpy(),
-            m.moves.numpy(),
-            m.switches.numpy(),
-            self.alpha,
-            self.gamma,
-            self.epsilon,
-            cfg.beta1,
-            cfg.beta2,
-            cfg.reward == "best_so_far",
-            out,
+            self.model.kernel_tables(),
+            self._learning_constants(),
+            metrics.numpy(),
+            steps.numpy(),
         )
         self._configuration = torch.from_numpy(k)
-        return torch.from_numpy(out)
 
-    def _episode_torch(self, k0, u):
+    def _episode_torch(self, k0, u, metrics, steps):
         m, cfg, q = self.model, self.cfg, self.q
         R, T, T2, A = self.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
         tables = (
@@ -142,23 +142,23 @@ class TeamQLearner:
             if self.shared_table
             else torch.arange(R, device=self.device)
         )
-        out = torch.empty(R, T, 4, dtype=torch.float64, device=self.device)
         k = k0.to(self.device)
-        prev = torch.stack([m.r_pu[k], m.r_se[k]], -1)
+        prev = m.rates[k]
         best = torch.zeros(R, dtype=torch.float64, device=self.device)
+        u90 = self._learning_constants()[-1]
         for step in range(T):
             p, t = k // T2, k % T2
             s = m.row[k]
             j = _choose_batched(q[tables, s], m.valid[p], u[:, step], self.epsilon)
             p2, t2 = m.next_cells[p, j].long(), m.next_tasks[t, j].long()
             k2 = p2 * T2 + t2
-            r_pu, r_se = m.r_pu[k2], m.r_se[k2]
+            r_pu, r_se = m.rates[k2].unbind(-1)
             if cfg.reward == "best_so_far":
                 reward = best_so_far_reward(r_pu + r_se, best)
                 best = torch.maximum(best, r_pu + r_se)
             else:
                 reward = delta_reward(r_pu, r_se, prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
-            prev = torch.stack([r_pu, r_se], -1)
+            prev = m.rates[k2]
             next_q = q[tables, m.row[k2]].masked_fill(~m.valid[p2], -math.inf).amax(-1)
             target = reward + self.gamma * next_q
             if self.shared_table:
@@ -171,11 +171,19 @@ class TeamQLearner:
                 q0[flat] = (1 - self.alpha) * q0[flat] + self.alpha * (total[flat] / count[flat])
             else:
                 q[tables, s, j] = (1 - self.alpha) * q[tables, s, j] + self.alpha * target
-            out[:, step, 0], out[:, step, 1] = r_pu, r_se
-            out[:, step, 2], out[:, step, 3] = m.moves[p, j].double(), m.switches[t, j].double()
+            moves, switches = m.moves[p, j].double(), m.switches[t, j].double()
+            # the kernel's _record, in the same order: the sums come out bit for bit the same
+            utility = r_pu + r_se
+            metrics[:, 0] += r_pu
+            metrics[:, 1] += r_se
+            metrics[:, 2] += utility
+            metrics[:, 3] += switches
+            metrics[:, 4] += moves
+            metrics[:, 5].masked_fill_((metrics[:, 5] < 0) & (utility >= u90), step + 1)
+            if steps.shape[1]:
+                steps[:, step] = torch.stack([r_pu, r_se, moves, switches], -1)
             k = k2
         self._configuration = k
-        return out
 
     # checkpoints
     def state_dict(self) -> dict:

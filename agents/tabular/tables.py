@@ -27,7 +27,20 @@ def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
     A = cfg.num_joint_actions
     positions = cfg.num_cells**cfg.num_uavs
     configs = positions * 2**cfg.num_uavs
-    return num_tables * cfg.num_states * A * 8 + positions * A * (4 + 4 + 1 + 1) + configs * (8 + 8 + 8)
+    # per placement and joint action: next cells (int32), valid flag, moves, the valid list; per configuration:
+    # both rates (float64) and the Q row (int32 or int64)
+    per_action, per_configuration = 4 + 1 + 1 + _valid_list_dtype(A).itemsize, 8 + 8 + _row_dtype(cfg).itemsize
+    return num_tables * cfg.num_states * A * 8 + positions * A * per_action + configs * per_configuration
+
+
+def _valid_list_dtype(num_joint_actions: int) -> torch.dtype:
+    """The smallest integer type of a joint action index: the learner's valid-action lists are read every step, and
+    the smaller they are, the fewer cache lines a step touches."""
+    return torch.uint8 if num_joint_actions <= 256 else torch.int16 if num_joint_actions <= 2**15 else torch.int32
+
+
+def _row_dtype(cfg: ModelConfig) -> torch.dtype:
+    return torch.int32 if cfg.num_states < 2**31 else torch.int64
 
 
 class TabularModel:
@@ -40,9 +53,11 @@ class TabularModel:
 
     Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
     the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
-    ``r_pu[k]``, ``r_se[k]``, ``row[k]`` (the Q row: the env's ``state_index``),
-    ``valid[p, j]`` (and the same as lists: ``valid_actions[p, :num_valid[p]]``),
-    ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``, ``switches[t, j]``.
+    ``rates[k]`` = (R_PU, R_SE) (also as ``r_pu[k]``, ``r_se[k]``), ``row[k]`` (the Q row: the env's
+    ``state_index``), ``valid[p, j]`` (and the same as lists: ``valid_actions[p, :num_valid[p]]``),
+    ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``, ``switches[t, j]``.  The tables a learning step
+    reads together are stored together and in the smallest integer types (``rates``, ``row``, ``valid_actions``):
+    on a 10x10 grid that makes the compiled step ~1.5x faster (BENCHMARKS.md, Team Q-learning).
     """
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
@@ -74,9 +89,9 @@ class TabularModel:
         self.valid = torch.empty(C**N, A, dtype=torch.bool, device=dev)
         self.next_cells = torch.empty(C**N, A, dtype=torch.int32, device=dev)
         self.moves = torch.empty(C**N, A, dtype=torch.int8, device=dev)
-        self.r_pu = torch.empty(C**N * 2**N, dtype=torch.float64, device=dev)
-        self.r_se = torch.empty_like(self.r_pu)
-        self.row = torch.empty(C**N * 2**N, dtype=torch.long, device=dev)
+        self.rates = torch.empty(C**N * 2**N, 2, dtype=torch.float64, device=dev)
+        self.r_pu, self.r_se = self.rates.unbind(-1)
+        self.row = torch.empty(C**N * 2**N, dtype=_row_dtype(cfg), device=dev)
         base = 2 * C if cfg.state_includes_tasks else C
         row_place = torch.tensor([base**i for i in range(N)], device=dev)
         step = max(1, _TABLE_CHUNK // (A * N))
@@ -91,16 +106,22 @@ class TabularModel:
             cells_k = cells[:, None].expand(-1, 2**N, -1).reshape(1, -1, N)
             tasks_k = tasks[None].expand(len(p), -1, -1).reshape(1, -1, N)
             r_pu, r_se = rates(contributions[0][cells_k], tasks_k, direct.view(1, 1, 2), cfg)
-            self.r_pu[k], self.r_se[k] = r_pu[0], r_se[0]
+            self.rates[k] = torch.stack([r_pu[0], r_se[0]], -1)
             digits = (
                 2 * cells[:, None, :] + tasks[None]
                 if cfg.state_includes_tasks
                 else cells[:, None, :].expand(-1, 2**N, -1)
             )
-            self.row[k] = (digits * row_place).sum(-1).reshape(-1)
+            self.row[k] = (digits * row_place).sum(-1).reshape(-1).to(self.row.dtype)
         self.num_valid = self.valid.sum(-1).int()
-        self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).int()
+        self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).to(_valid_list_dtype(A))
         self.u_star = optimum(contributions, direct, cfg)[0].item()
+
+    def kernel_tables(self) -> tuple:
+        """The tables of a compiled learning step, as numpy views of this model's tensors (the order
+        :func:`~uavrl.agents.tabular.kernels._run_episode` unpacks)."""
+        tables = (self.rates, self.row, self.valid_actions, self.num_valid, self.next_cells, self.next_tasks)
+        return tuple(t.numpy() for t in (*tables, self.moves, self.switches))
 
     def configuration_ids(self, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
         """``k`` of ``[..., N, 2]`` positions and ``[..., N]`` tasks."""
