@@ -89,10 +89,14 @@ class TeamQNet(nn.Module):
     Each UAV's input is its observation followed by the node positions (the
     last 12 entries of ``state``, :func:`~uavrl.envs.world.observation_with_nodes`).
     The torso (a centralised ``MultiAgentMLP``) embeds all N inputs at once.
-    ``factored``: a shared per-UAV head reads that embedding, the UAV's
-    own observation, its one-hot id and which of its 4 neighbouring cells
-    another UAV holds, and returns ``[*, N, 6]``.  ``joint``: a linear head
-    returns ``[*, 6^N]``.
+    ``factored``: a shared per-UAV head (a ``MultiAgentMLP`` with one hidden
+    layer) reads that embedding, the UAV's own observation, its one-hot id and
+    which of its 4 neighbouring cells another UAV holds, and returns
+    ``[*, N, 6]``.  The embedding is the same for every UAV of a world, so the
+    head's first layer is applied in two parts: to the embedding once per
+    world, to the rest once per UAV (the same function and parameters as the
+    layer on the whole input, at 40% fewer multiplications with 6 UAVs).
+    ``joint``: a linear head returns ``[*, 6^N]``.
 
     Example:
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
@@ -143,8 +147,12 @@ class TeamQNet(nn.Module):
             return self.head(embedding[..., 0, :])
         cells = _cells(positions, self.width)
         held = (self.neighbours[cells].unsqueeze(-1) == cells[..., None, None, :]).any(-1)  # [*, N, 4]
-        ids = self.ids.expand(*observation.shape[:-1], -1)
-        return self.head(torch.cat([embedding, observation, ids, held.to(observation.dtype)], -1))
+        own = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1), held.to(observation.dtype)], -1)
+        first, last = self.head.params["0"], self.head.params["2"]  # the head's layers (Linear, ReLU, Linear)
+        split = embedding.shape[-1]
+        hidden = nn.functional.linear(embedding[..., :1, :], first["weight"][:, :split], first["bias"])
+        hidden = torch.relu(hidden + nn.functional.linear(own, first["weight"][:, split:]))
+        return nn.functional.linear(hidden, last["weight"], last["bias"])
 
 
 class ValidGreedy(nn.Module):

@@ -9,7 +9,7 @@ import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from uavrl.agents.baselines import RandomPolicy
-from uavrl.agents.dqn import DQNAgent, ValidGreedy, _stored_entry
+from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy, _stored_entry
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
 from uavrl.evaluation import evaluate
@@ -150,6 +150,21 @@ def online_and_target(make_agent, *overrides):
 
 
 @torch.no_grad()
+def test_factored_head_is_its_mlp_on_the_whole_input():
+    """The head's first layer, applied to the embedding once per world and to the rest per UAV, is the head's
+    MultiAgentMLP on the concatenated input."""
+    env = UAVSpectrumEnv(batch_size=5, grid=(4, 4), num_uavs=3)
+    torch.manual_seed(0)
+    net = TeamQNet(env, "factored", hidden=16, depth=2)
+    td = env.reset()
+    observation = observation_with_nodes(td["agents", "observation"], td["state"])
+    embedding = net.torso(observation)
+    cells = td["positions"][..., 1] * 4 + td["positions"][..., 0]
+    held = (net.neighbours[cells].unsqueeze(-1) == cells[..., None, None, :]).any(-1).float()
+    whole = torch.cat([embedding, observation, net.ids.expand(5, -1, -1), held], -1)
+    torch.testing.assert_close(net(*(td[k] for k in Q_INPUTS)), net.head(whole), rtol=1e-5, atol=1e-6)
+
+
 def test_factored_target_is_double_dqn_over_valid_actions(make_agent):
     agent, data, online, target = online_and_target(make_agent, "agent.mixer=vdn", "agent.gamma=0.7")
     nxt = data["next"]
