@@ -9,7 +9,6 @@ The command is ``python -m uavrl.benchmarl`` (:mod:`uavrl.benchmarl`).
 from __future__ import annotations
 
 import dataclasses
-import time
 
 from benchmarl.environments.common import TaskClass
 from benchmarl.experiment.callback import Callback
@@ -17,7 +16,7 @@ from torchrl.data import Composite
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
-from uavrl.evaluation import evaluate
+from uavrl.evaluation import TrainingClock, evaluate
 from uavrl.logger import RunLogger
 
 GROUP = "agents"
@@ -90,39 +89,29 @@ class UAVTask(TaskClass):
 
 class YardstickCallback(Callback):
     """At each of BenchMARL's evaluations, the shared evaluation (:func:`uavrl.evaluation.evaluate`) of its greedy
-    policy, logged with our TensorBoard tags against collected frames; ``curve`` keeps each point with the seconds
-    BenchMARL had trained by then (:meth:`training_seconds`).  The TensorBoard writer opens in ``on_setup``:
-    BenchMARL pickles its callbacks with the experiment's config before."""
+    policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had trained by
+    then (``time/...``, :class:`~uavrl.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
+    point.  The TensorBoard writer opens in ``on_setup``: BenchMARL pickles its callbacks with the experiment's
+    config before."""
 
     def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, run_dir):
         super().__init__()
         self.env_cfg, self.eval_kwargs, self.run_dir = env_cfg, eval_kwargs, run_dir
         self.logger = None
         self.curve: list[dict] = []
-        self.started, self.started_cpu = time.perf_counter(), time.process_time()
-        self.evaluating_seconds = self.evaluating_cpu_seconds = 0.0
+        self.clock = TrainingClock()
 
     def on_setup(self) -> None:
         self.logger = RunLogger(self.run_dir, resume_step=0)
 
-    def training_seconds(self) -> dict[str, float]:
-        """Wall-clock and CPU seconds of this process since the start, our evaluations not counted (CPU seconds
-        measure the work where other processes share the cores)."""
-        return {
-            "train_seconds": time.perf_counter() - self.started - self.evaluating_seconds,
-            "train_cpu_seconds": time.process_time() - self.started_cpu - self.evaluating_cpu_seconds,
-        }
-
     def measure(self) -> dict[str, float]:
-        began, began_cpu = time.perf_counter(), time.process_time()
-        with set_exploration_type(ExplorationType.DETERMINISTIC):
+        """The shared evaluation of BenchMARL's greedy policy now, and the training seconds so far."""
+        trained = self.clock.read()
+        with self.clock.paused(), set_exploration_type(ExplorationType.DETERMINISTIC):
             metrics = evaluate(self.experiment.policy, self.env_cfg, **self.eval_kwargs)
-        self.evaluating_seconds += time.perf_counter() - began
-        self.evaluating_cpu_seconds += time.process_time() - began_cpu
-        return metrics
+        return {**metrics, **trained}
 
     def on_evaluation_end(self, rollouts) -> None:
-        frames, seconds = self.experiment.total_frames, self.training_seconds()
-        metrics = self.measure()
+        frames, metrics = self.experiment.total_frames, self.measure()
         self.logger.log(metrics, frames)
-        self.curve.append({"frames": frames, **seconds, **metrics})
+        self.curve.append({"frames": frames, **metrics})

@@ -12,6 +12,11 @@ Usage::
     python benchmarks/yardstick.py --table n2 --seeds 0 1 2      # N = 2 on 6x6
     python benchmarks/yardstick.py --table n6 --seeds 0 1 2      # N = 6 on 10x10
     python benchmarks/yardstick.py --rows n6-dqn n6-oracle --seeds 0
+    python benchmarks/yardstick.py --paired runs/dqn/n6_10x10/<stamp> ...   # against the oracle, start by start
+
+``--paired`` plays each saved run's greedy policy and the oracle planner from
+the same held-out starts (the evaluation's) and compares their steps to 0.999
+U* over the starts both reach: the ratio of the mean steps.
 """
 
 from __future__ import annotations
@@ -75,6 +80,46 @@ def _children_cpu_seconds() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def steps_to_level(policy, cfg, starts: int, level: float = 0.999):
+    """``[starts]`` first step at which the greedy ``policy`` reaches ``level`` U* from the evaluation's starts
+    (``-1``: never within the horizon), and whether it did."""
+    import torch
+
+    from uavrl.envs import UAVSpectrumEnv
+    from uavrl.evaluation import EVAL_SEED, default_horizon
+
+    horizon = default_horizon(cfg)
+    env = UAVSpectrumEnv(batch_size=starts, config=cfg.replace(max_steps=horizon), seed=EVAL_SEED)
+    start = env.reset()
+    if hasattr(policy, "bind_env"):
+        policy.bind_env(env)
+    with torch.no_grad():
+        steps = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)["next"]
+    positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
+    tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
+    at = env.utility(positions, tasks)[2] >= level * env.optimum()[0].unsqueeze(-1)
+    return torch.where(at.any(-1), at.double().argmax(-1), -1.0), at.any(-1)
+
+
+def paired(run_dirs: list[Path], starts: int) -> None:
+    """Each run's steps to 0.999 U* against the oracle planner's, over the same starts (those both reach)."""
+    from uavrl import load_policy
+    from uavrl.agents.baselines import OraclePolicy
+
+    print("| run | starts both reach | mean steps | oracle's mean steps, same starts | ratio |")
+    print("|---|---|---|---|---|")
+    for run_dir in run_dirs:
+        policy, cfg = load_policy(run_dir)
+        mine, mine_reached = steps_to_level(policy, cfg, starts)
+        oracle, oracle_reached = steps_to_level(OraclePolicy(cfg), cfg, starts)
+        both = mine_reached & oracle_reached
+        ratio = mine[both].mean() / oracle[both].mean()
+        print(
+            f"| {run_dir} | {int(both.sum())}/{starts} | {mine[both].mean():.3f} | {oracle[both].mean():.3f} "
+            f"| {ratio:.3f} |"
+        )
+
+
 def cell(metrics: dict, key: str, fmt: str) -> str:
     return format(metrics[key], fmt) if key in metrics else "-"
 
@@ -101,7 +146,11 @@ def main():
     parser.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary directory)")
     parser.add_argument("--json", type=Path, default=None, help="also write every result here")
     parser.add_argument("--collect", type=Path, default=None, help="only print the rows of the runs in this directory")
+    parser.add_argument("--paired", type=Path, nargs="+", help="saved runs to play against the oracle, start by start")
     args = parser.parse_args()
+    if args.paired:
+        paired(args.paired, args.starts)
+        return
     print(
         "| row | seed | final U/U* | return ratio | reach 0.999 | steps to 0.999 | fewest | step ratio 0.999 "
         "| reach U* | step ratio U* | train s | wall s | cpu s |"

@@ -57,7 +57,7 @@ def test_short_run_completes_masked_and_reported(tmp_path, algorithm, masked_cho
     assert metrics["env_steps"] == 2400 and metrics["task"] == "uavrl/tiny_4x4"
     assert 0 < metrics["eval/optimality"] <= 1 and "eval/return_ratio" in metrics  # exact on 4x4
     curve = json.loads((run_dir / "curve.json").read_text())
-    assert [point["frames"] for point in curve] == [1200, 2400] and curve[-1]["train_cpu_seconds"] > 0
+    assert [point["frames"] for point in curve] == [1200, 2400] and curve[-1]["time/train_cpu_seconds"] > 0
     assert masked_choices == [True, True]
     tags = set(EventAccumulator(str(run_dir)).Reload().Tags()["scalars"])
     assert {"eval/return_ratio", "eval/optimality", "eval/reach_999"} <= tags

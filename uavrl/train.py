@@ -108,7 +108,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
 
     from uavrl.agents import agent_class
     from uavrl.envs.world import resolve_device
-    from uavrl.evaluation import evaluate_agent
+    from uavrl.evaluation import TrainingClock, evaluate_agent
     from uavrl.logger import RunLogger
 
     checkpoint, newest_is_readable = None, True
@@ -143,6 +143,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
     started = time.perf_counter()
+    clock = TrainingClock()
     bar = tqdm(
         range(start, agent.num_iterations),
         initial=start,
@@ -162,15 +163,17 @@ def train(cfg: DictConfig, overrides=()) -> Path:
                     per_step = metrics["train/sum_utility"] / env_cfg.max_steps
                     bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
             if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
-                logger.log(evaluate_agent(agent, env_cfg, **eval_kwargs), agent.env_steps)
+                with clock.paused():
+                    logger.log({**evaluate_agent(agent, env_cfg, **eval_kwargs), **clock.read()}, agent.env_steps)
             if done % every == 0 and done < agent.num_iterations:
                 save_checkpoint(done)
         train_seconds = time.perf_counter() - started
+        trained = clock.read()
         if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
             final = checkpoint["final"]
         else:
             final = evaluate_agent(agent, env_cfg, **eval_kwargs)
-            logger.log(final, agent.env_steps)
+            logger.log({**final, **trained}, agent.env_steps)
             save_checkpoint(agent.num_iterations, final)
     except KeyboardInterrupt as err:
         err.add_note(f"continue the run with: python -m uavrl.train resume={run_dir}")
@@ -183,6 +186,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         "env_steps": agent.env_steps,
         "iterations": agent.num_iterations,
         "train_seconds": train_seconds,
+        "train_cpu_seconds": trained["time/train_cpu_seconds"],
         "total_seconds": time.perf_counter() - started,
         **final,
     }
