@@ -45,8 +45,8 @@ class UAVTask(TaskClass):
         return ModelConfig(**{**self.config, "grid": tuple(self.config["grid"])})
 
     def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: int | None, device):
-        cfg = self.model_config
-        return lambda: UAVSpectrumEnv(batch_size=num_envs, config=cfg, seed=seed, device=device)
+        cfg = self.model_config  # BenchMARL reads the observation, mask, state and reward: no diagnostics carried
+        return lambda: UAVSpectrumEnv(batch_size=num_envs, config=cfg, seed=seed, device=device, diagnostics=False)
 
     def supports_continuous_actions(self) -> bool:
         return False

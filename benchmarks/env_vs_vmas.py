@@ -16,6 +16,13 @@ larger than T.  Neither resets a world during a timed run.  Paths:
 * ``step loop``: ``td = env.reset()``, then ``T`` times ``td =
   env.step_mdp(env.step(env.rand_action(td)))``, outputs dropped.
 
+``--lean`` adds a column for ours with ``diagnostics=False`` (the keys an
+agent acts and learns from, as BenchMARL's task builds it).  ``--stub`` adds
+a column for a stub of ours: the same specs and keys, every step a copy of
+one output with no physics at all (every action allowed), so its figures are
+the most any environment with our keys can get from TorchRL's machinery on
+these paths.
+
 A world-step is one step of one world (all its N agents): figures are
 ``B * T / wall time``.  Each timed run measures ours and every VMAS scenario
 one after the other (the order rotates between runs), so load from other jobs
@@ -57,6 +64,8 @@ def parse_args(argv=None):
         metavar="ENVS_DIR",
         help="also time the envs/ folder of another uavrl version (e.g. from git archive) in the same runs",
     )
+    p.add_argument("--lean", action="store_true", help="also time ours with diagnostics=False")
+    p.add_argument("--stub", action="store_true", help="also time a stub with our keys and no physics")
     p.add_argument("--repeats", type=int, default=5, help="timed runs per figure (default 5)")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs first (default 1)")
     p.add_argument("--threads", type=int, default=1, help="torch.set_num_threads (default 1)")
@@ -85,6 +94,19 @@ def main(argv=None):
         spec.loader.exec_module(package)
         return importlib.import_module("before.env").UAVSpectrumEnv
 
+    class Stub(UAVSpectrumEnv):
+        """Our specs and keys; every step returns a copy of one output: no physics, every action allowed."""
+
+        def _step(self, td):
+            if not hasattr(self, "_output"):
+                self._output = (
+                    self.full_observation_spec.zero()
+                    .update(self.full_reward_spec.zero())
+                    .update(self.full_done_spec.zero())
+                )
+                self._output["agents", "action_mask"].fill_(True)
+            return self._output.clone()
+
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
     B, T = args.batch_size, args.steps
@@ -108,7 +130,8 @@ def main(argv=None):
         f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}"
     )
     Before = load_before(args.before) if args.before else None
-    columns = (["before"] if Before else []) + args.scenarios
+    extra = ["before"] * bool(Before) + ["lean"] * args.lean + ["stub"] * args.stub
+    columns = extra + args.scenarios
     width = max(len(s) for s in columns + ["uavrl"])
     print(
         f"{'N':>2}  {'path':<13} {'uavrl':>{width + 2}}  "
@@ -121,6 +144,12 @@ def main(argv=None):
             s: VmasEnv(s, num_envs=B, n_agents=N, continuous_actions=False, device="cpu", seed=0)
             for s in args.scenarios
         }
+        if args.lean:
+            lean = UAVSpectrumEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9, diagnostics=False)
+            masked_lean = TransformedEnv(lean, ActionMask(("agents", "action"), ("agents", "action_mask")))
+        if args.stub:
+            stub = Stub(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
+            masked_stub = TransformedEnv(stub, ActionMask(("agents", "action"), ("agents", "action_mask")))
         if Before:
             before = Before(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
             masked_before = TransformedEnv(before, ActionMask(("agents", "action"), ("agents", "action_mask")))
@@ -128,6 +157,10 @@ def main(argv=None):
             contenders = {"uavrl": masked if path == "rollout+mask" else ours, **peers}
             if Before:
                 contenders["before"] = masked_before if path == "rollout+mask" else before
+            if args.lean:
+                contenders["lean"] = masked_lean if path == "rollout+mask" else lean
+            if args.stub:
+                contenders["stub"] = masked_stub if path == "rollout+mask" else stub
             names = list(contenders)
             times = {name: [] for name in names}
             for i in range(args.warmup + args.repeats):

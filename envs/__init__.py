@@ -16,6 +16,7 @@ _LAZY = {
     "joint_action_valid": "grid",
     "joint_targets": "grid",
     "NODE_FEATURES": "world",
+    "DIAGNOSTICS": "world",
     "observation_with_nodes": "world",
 }
 __all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]

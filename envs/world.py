@@ -46,6 +46,8 @@ from .optimum import optimum as exact_optimum
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
 SEED_LIMIT = 2**63  # world seeds are int64
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
+# outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
+DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index")
 
 
 def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
@@ -114,11 +116,15 @@ class World:
     it behaves exactly like world 0 of a batch of one seeded ``seed + i``.
     :meth:`reset` and :meth:`step` return the outputs of every world as a dict
     of tensors named as the environment's keys (``observation`` and
-    ``action_mask`` ``[B, N, ...]``, the rest ``[B, ...]``).
+    ``action_mask`` ``[B, N, ...]``, the rest ``[B, ...]``); with
+    ``diagnostics=False`` they leave out those of :data:`DIAGNOSTICS` (the
+    step's rates, counts and the tabular state index), which nothing that
+    acts or learns from the observation needs.
     """
 
-    def __init__(self, cfg: ModelConfig, batch_size: int = 1, device="cpu", seed: int = 0):
+    def __init__(self, cfg: ModelConfig, batch_size: int = 1, device="cpu", seed: int = 0, diagnostics: bool = True):
         B = _check_batch_size(batch_size)
+        self.diagnostics = bool(diagnostics)  # the outputs of DIAGNOSTICS too
         self.device = resolve_device(device)
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.num_uavs
@@ -363,8 +369,9 @@ class World:
             self._sum_rates(pairs),
         )
 
-    def _observe(self, code: torch.Tensor, cells: torch.Tensor, moves: torch.Tensor, switches: torch.Tensor) -> dict:
-        """The outputs of configurations ``code`` ``[B, N]`` (``cells`` its cells) after a step's moves and switches."""
+    def _observe(self, code: torch.Tensor, cells: torch.Tensor, moves, switches) -> dict:
+        """The outputs of configurations ``code`` ``[B, N]`` (``cells`` its cells) after a step; ``moves()`` and
+        ``switches()`` count the step's moves and task switches ``[B]`` (called for the diagnostics only)."""
         B, N = self.num_worlds, self.num_uavs
         if self._pair_obs is not None:
             pair = torch.add(code.flip(-1), code, alpha=2 * self.cfg.num_cells)  # [B, 2]: rows (a, b) and (b, a)
@@ -373,19 +380,17 @@ class World:
         else:
             observation, state = self._assemble(code)
         flat = code.view(-1)
-        r = self._s.r.float()
         out = {
             "observation": observation,
             "action_mask": self._code_mask.index_select(0, flat).view(B, N, NUM_ACTIONS),
             "state": state,
             "positions": self._code_xy.index_select(0, flat).view(B, N, 2),
             "tasks": code & 1,
-            "r_pu": r[:, 0],
-            "r_se": r[:, 1],
-            "utility": r[:, 0] + r[:, 1],
-            "moves": moves,
-            "task_switches": switches,
         }
+        if not self.diagnostics:
+            return out
+        r = self._s.r.float()
+        out.update(r_pu=r[:, 0], r_se=r[:, 1], utility=r[:, 0] + r[:, 1], moves=moves(), task_switches=switches())
         if self._state_base is not None:
             digits = code if self.cfg.state_includes_tasks else cells
             index = digits[:, N - 1]
@@ -440,15 +445,14 @@ class World:
         s.best[worlds] = 0.0
         s.r[worlds] = self._current_rates(s.code[worlds], worlds)
         s.was_reset = True
-        zeros = torch.zeros(B, dtype=torch.long, device=dev)
-        return self._observe(self._s.code, self._s.code >> 1, zeros, zeros.clone())
+        return self._observe(self._s.code, self._s.code >> 1, self._no_counts, self._no_counts)
 
     def start_at(self, code: torch.Tensor) -> dict:
         """Start every world's episode at the configurations ``code`` ``[B, N]`` (``2 cell + task``) chosen elsewhere,
         e.g. another world's starts repeated; a fixed layout only.  The outputs of every world, as :meth:`reset`'s."""
         if self.cfg.layout == "random":
             raise ValueError("World.start_at needs a fixed layout: with layout='random' a reset draws the layout")
-        s, zeros = self._s, torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
+        s = self._s
         s.counters += 1
         s.code = code.to(self.device).clone()
         s.started.fill_(True)
@@ -456,7 +460,11 @@ class World:
         s.best.zero_()
         s.r = self._current_rates(s.code)
         s.was_reset = True
-        return self._observe(s.code, s.code >> 1, zeros, zeros.clone())
+        return self._observe(s.code, s.code >> 1, self._no_counts, self._no_counts)
+
+    def _no_counts(self) -> torch.Tensor:
+        """``[B]`` zero moves or switches (a reset)."""
+        return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
     def _resolve_moves(self, cells: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """Target cells made valid as SPEC section 2 decides (off-grid moves already stay).
@@ -506,8 +514,6 @@ class World:
         target = self._resolve_moves(cells, proposed >> 1)
         tasks = proposed & 1
         new_code = torch.add(tasks, target, alpha=2)
-        moves = (target != cells).sum(-1)
-        switches = ((proposed ^ code) & 1).sum(-1)
         self._s.code = new_code
         self._s.counters += 1
         prev = self._s.r
@@ -519,7 +525,10 @@ class World:
             reward = best_so_far_reward(total, self._s.best)
             self._s.best = torch.maximum(self._s.best, total)
         self._s.steps += 1
-        return self._observe(new_code, target, moves, switches), reward, self._s.steps >= cfg.max_steps
+        out = self._observe(
+            new_code, target, lambda: (target != cells).sum(-1), lambda: ((proposed ^ code) & 1).sum(-1)
+        )
+        return out, reward, self._s.steps >= cfg.max_steps
 
     # ------------------------------------------------------ shared helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:

@@ -17,7 +17,8 @@ from tensordict import TensorDict
 from torchrl.envs import ActionMask, Compose, RewardSum, StepCounter, TransformedEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from uavrl.envs import UAVSpectrumEnv, observation_with_nodes
+from uavrl.agents.baselines import RandomPolicy
+from uavrl.envs import DIAGNOSTICS, UAVSpectrumEnv, observation_with_nodes
 from uavrl.envs.env import MaskedCategorical
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
@@ -827,3 +828,20 @@ def test_masked_random_actions_are_uniform_over_the_allowed_ones():
     env = TransformedEnv(UAVSpectrumEnv(batch_size=64, grid=(3, 3), num_uavs=2), mask)
     td = env.rollout(20)
     assert td["agents", "action_mask"].gather(-1, td["agents", "action"].unsqueeze(-1)).all()
+
+
+@pytest.mark.parametrize("options", [dict(num_uavs=2), dict(num_uavs=3, layout="random", fading="rayleigh")])
+def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(options):
+    """diagnostics=False: the specs hold, the diagnostic keys are gone, and every other key is what the full env
+    returns for the same seed and actions."""
+    lean = UAVSpectrumEnv(batch_size=16, grid=(4, 4), seed=3, diagnostics=False, **options)
+    check_env_specs(lean, seed=0)
+    full = UAVSpectrumEnv(batch_size=16, grid=(4, 4), seed=3, **options)
+    lean.set_seed(3), full.set_seed(3)
+    policy = RandomPolicy(seed=0)
+    lean_steps = lean.rollout(12, policy, break_when_any_done=False)
+    full_steps = full.rollout(12, RandomPolicy(seed=0), break_when_any_done=False)
+    diagnostics = {*DIAGNOSTICS} - {"state_index"} if lean.world._state_base is None else {*DIAGNOSTICS}
+    assert {*full_steps["next"].keys()} - {*lean_steps["next"].keys()} == diagnostics
+    for key in lean_steps.keys(include_nested=True, leaves_only=True):
+        assert torch.equal(lean_steps[key], full_steps[key]), key
