@@ -37,14 +37,28 @@ def world_keys(seed: int, num_worlds: int, device=None) -> torch.Tensor:
     return _mix32(_mix32(world_seed & _M32) ^ ((world_seed >> 32) & _M32))
 
 
+def stream_heads(keys: torch.Tensor, counters: torch.Tensor, purpose: int) -> torch.Tensor:
+    """``[B]`` the hash of ``(key, counter, purpose)`` that lane ``l`` of a draw mixes with ``l``
+    (:func:`lane_bits`): compiled loops can make a draw's lanes themselves from it."""
+    h = _mix32((keys + (counters & _M32) * _GOLDEN) & _M32)
+    return _mix32((h + purpose * _GOLDEN) & _M32)
+
+
+def lane_bits(heads, lanes):
+    """Uniform 32-bit integers (int64) of lanes ``lanes`` of draws with heads ``heads`` (tensors, or ints in a
+    compiled loop: the same operations)."""
+    return _mix32((heads + lanes * _GOLDEN) & _M32)
+
+
 def random_bits(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int) -> torch.Tensor:
     """``[B, n]`` uniform 32-bit integers (as int64) for event ``counters`` ``[B]`` of each world."""
     lanes = torch.arange(n, dtype=torch.long, device=keys.device)
-    h = _mix32((keys + (counters & _M32) * _GOLDEN) & _M32)
-    h = _mix32((h + purpose * _GOLDEN) & _M32)
-    return _mix32((h.unsqueeze(-1) + lanes * _GOLDEN) & _M32)
+    return lane_bits(stream_heads(keys, counters, purpose).unsqueeze(-1), lanes)
+
+
+UNIFORM_SCALE = 1.0 / 2**32  # a uniform is its 32 random bits times this
 
 
 def uniform(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int, dtype=torch.float64) -> torch.Tensor:
     """``[B, n]`` uniforms in ``[0, 1)`` with 32 bits of resolution."""
-    return random_bits(keys, counters, purpose, n).to(dtype) * (1.0 / 2**32)
+    return random_bits(keys, counters, purpose, n).to(dtype) * UNIFORM_SCALE

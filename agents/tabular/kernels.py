@@ -17,6 +17,7 @@ import numba
 import numpy as np
 import torch
 
+from uavrl.envs import streams
 from uavrl.envs.channel import best_so_far_reward, delta_reward
 
 
@@ -35,6 +36,14 @@ def use_workqueue_threads() -> None:
 
 _best_so_far = numba.njit(best_so_far_reward)
 _delta = numba.njit(delta_reward)
+_mix32 = numba.njit(streams._mix32)  # the random streams' mixer, compiled for ints: bit for bit the torch one
+
+
+@numba.njit(cache=True, inline="always")
+def _lane_uniform(head, lane):
+    """Lane ``lane`` of the random stream with head ``head`` as a uniform: :func:`uavrl.envs.streams.lane_bits`
+    times ``UNIFORM_SCALE``, the numbers the torch loop draws."""
+    return _mix32((head + lane * streams._GOLDEN) & streams._M32) * streams.UNIFORM_SCALE
 
 
 @numba.njit(cache=True, inline="always")
@@ -98,8 +107,10 @@ def _record(out, r, first, r_pu, r_se, moves, switches, u90):
 
 
 @numba.njit(cache=True)
-def _run_episode(q, r, k, uniforms, model, learning, out, steps_out):
-    """Run ``r``'s episode on table ``q[r]`` from configuration ``k``; its metrics go to ``out[r]``
+def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
+    """Run ``r``'s episode of ``T`` steps on table ``q[r]`` from configuration ``k``; step ``t`` draws the
+    uniform of lane ``t`` of the random stream with head ``heads[r]`` (:func:`uavrl.envs.streams.stream_heads`);
+    its metrics go to ``out[r]``
     (:func:`_record`), and when ``steps_out`` has the episode's length, each step's (R_PU, R_SE, moves, switches)
     to ``steps_out[r, t]``.  Returns the last configuration.
 
@@ -111,14 +122,15 @@ def _run_episode(q, r, k, uniforms, model, learning, out, steps_out):
     """
     rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
     alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
-    T, T2, record_steps = uniforms.shape[1], next_tasks.shape[0], steps_out.shape[1] > 0
+    T2, record_steps, head = next_tasks.shape[0], steps_out.shape[1] > 0, heads[r]
     shift, task_mask = _log2(T2), T2 - 1
     prev_pu, prev_se, best = rates[k, 0], rates[k, 1], 0.0
     p = k >> shift
     v_best, ties, best_j = _scan(q, r, row_t[k], valid, p, n_valid[p])
     for step in range(T):
         s, p, t = row_t[k], k >> shift, k & task_mask
-        j = _choose(q, r, s, valid, p, n_valid[p], uniforms[r, step], epsilon, v_best, ties, best_j)
+        u = _lane_uniform(head, step)
+        j = _choose(q, r, s, valid, p, n_valid[p], u, epsilon, v_best, ties, best_j)
         k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
         r_pu, r_se = rates[k2, 0], rates[k2, 1]
         if use_best:
@@ -141,19 +153,19 @@ def _run_episode(q, r, k, uniforms, model, learning, out, steps_out):
 
 
 @numba.njit(cache=True, parallel=True)
-def _episode_per_run(q, k0, uniforms, model, learning, out, steps_out):
+def _episode_per_run(q, k0, heads, T, model, learning, out, steps_out):
     """One episode of ``R`` independent runs in parallel, run ``r`` on table ``q[r]`` (:func:`_run_episode`)."""
-    for r in numba.prange(uniforms.shape[0]):
-        k0[r] = _run_episode(q, r, k0[r], uniforms, model, learning, out, steps_out)
+    for r in numba.prange(len(heads)):
+        k0[r] = _run_episode(q, r, k0[r], heads, T, model, learning, out, steps_out)
 
 
 @numba.njit(cache=True)
-def _episode_shared(q, k0, uniforms, model, learning, out, steps_out):
+def _episode_shared(q, k0, heads, T, model, learning, out, steps_out):
     """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc); arguments as
     :func:`_run_episode`'s."""
     rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
     alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
-    R, T, T2, record_steps = uniforms.shape[0], uniforms.shape[1], next_tasks.shape[0], steps_out.shape[1] > 0
+    R, T2, record_steps = len(heads), next_tasks.shape[0], steps_out.shape[1] > 0
     shift, task_mask = _log2(T2), T2 - 1
     A = q.shape[2]
     prev = np.empty((R, 2))
@@ -170,7 +182,8 @@ def _episode_shared(q, k0, uniforms, model, learning, out, steps_out):
             k = k0[w]
             s, p, t = row_t[k], k >> shift, k & task_mask
             v_best, ties, best_j = _scan(q, 0, s, valid, p, n_valid[p])
-            j = _choose(q, 0, s, valid, p, n_valid[p], uniforms[w, step], epsilon, v_best, ties, best_j)
+            u = _lane_uniform(heads[w], step)
+            j = _choose(q, 0, s, valid, p, n_valid[p], u, epsilon, v_best, ties, best_j)
             k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
             r_pu, r_se = rates[k2, 0], rates[k2, 1]
             if use_best:

@@ -6,7 +6,7 @@ import math
 
 import torch
 
-from uavrl.envs import ModelConfig
+from uavrl.envs import ModelConfig, streams
 from uavrl.envs.channel import best_so_far_reward, delta_reward
 from uavrl.envs.world import World
 from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT
@@ -15,6 +15,7 @@ from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_wor
 from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, table_bytes
 
 _START_BLOCK = 256  # episodes whose starts are drawn together
+_LEARNER_STREAM = 1 << 20  # the purpose of the learner's draws in the random streams (the world's are small numbers)
 
 
 class TeamQLearner:
@@ -91,10 +92,12 @@ class TeamQLearner:
             self._start_block = block
         return self._block_starts[offset]
 
-    def _uniforms(self) -> torch.Tensor:
-        """``[R, T]`` uniforms of this episode, one per step and world, a pure function of (seed, episode)."""
-        g = torch.Generator().manual_seed((self.seed * 1_000_003 + self.episode) % 2**64)  # any seed below 2^63
-        return torch.rand(self.runs, self.cfg.max_steps, generator=g, dtype=torch.float64).to(self.device)
+    def _stream_heads(self) -> torch.Tensor:
+        """``[R]`` this episode's random stream of each run (:func:`uavrl.envs.streams.stream_heads`): step ``t``
+        draws its lane ``t``.  Run ``r`` has the stream key of world ``seed + r``, the episode is the counter: a pure
+        function of (seed, episode, run)."""
+        episode = torch.full((self.runs,), self.episode, dtype=torch.long, device=self.device)
+        return streams.stream_heads(streams.world_keys(self.seed, self.runs, self.device), episode, _LEARNER_STREAM)
 
     def run_episode(self, record_steps: bool = False) -> dict[str, torch.Tensor]:
         """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
@@ -102,12 +105,12 @@ class TeamQLearner:
         with ``record_steps`` also ``"steps"``: each step's ``r_pu``, ``r_se``, ``moves``, ``task_switches``
         ``[R, T]``."""
         k0 = self._episode_starts()
-        u = self._uniforms()
+        heads = self._stream_heads()
         metrics = torch.zeros(self.runs, len(EPISODE_METRICS), dtype=torch.float64, device=self.device)
         metrics[:, -1] = -1  # steps to 90% of U*: not reached yet
         steps = torch.empty(self.runs, self.cfg.max_steps if record_steps else 0, 4, dtype=torch.float64)
         steps = steps.to(self.device)
-        (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, u, metrics, steps)
+        (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, heads, metrics, steps)
         metrics[:, -1].masked_fill_(metrics[:, -1] < 0, self.cfg.max_steps)
         self.episode += 1
         out = dict(zip(EPISODE_METRICS, metrics.unbind(-1), strict=True))
@@ -119,14 +122,15 @@ class TeamQLearner:
         cfg, u90 = self.cfg, NINETY_PERCENT * self.model.u_star
         return (self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", u90)
 
-    def _episode_numba(self, k0, u, metrics, steps):
+    def _episode_numba(self, k0, heads, metrics, steps):
         k = k0.numpy().copy()
         kernel = _episode_shared if self.shared_table else _episode_per_run
         use_workqueue_threads()
         kernel(
             self.q.numpy(),
             k,
-            u.numpy(),
+            heads.numpy(),
+            self.cfg.max_steps,
             self.model.kernel_tables(),
             self._learning_constants(),
             metrics.numpy(),
@@ -134,7 +138,7 @@ class TeamQLearner:
         )
         self._configuration = torch.from_numpy(k)
 
-    def _episode_torch(self, k0, u, metrics, steps):
+    def _episode_torch(self, k0, heads, metrics, steps):
         m, cfg, q = self.model, self.cfg, self.q
         R, T, T2, A = self.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
         tables = (
@@ -143,6 +147,8 @@ class TeamQLearner:
             else torch.arange(R, device=self.device)
         )
         k = k0.to(self.device)
+        lanes = torch.arange(T, device=self.device)
+        u = streams.lane_bits(heads.unsqueeze(-1), lanes).double() * streams.UNIFORM_SCALE  # the kernel's uniforms
         prev = m.rates[k]
         best = torch.zeros(R, dtype=torch.float64, device=self.device)
         u90 = self._learning_constants()[-1]
