@@ -178,13 +178,11 @@ def _best_successor(space: ConfigurationSpace, table: torch.Tensor, reduce: str)
     """``[B, K]`` max (or min) of ``table`` ``[B, K]`` over each configuration's valid successors."""
     B, K = table.shape
     fill = -math.inf if reduce == "max" else UNREACHABLE
-    padded = torch.cat([table, table.new_full((B, 1), fill)], 1)  # invalid actions point at the fill column
+    padded = torch.cat([table, table.new_full((B, 1), fill)], 1)  # invalid actions (-1) index the last: the fill
     out = torch.empty_like(table)
     step = max(1, _CHUNK_ELEMENTS // (B * space.successors.shape[1]))
     for start in range(0, K, step):
-        succ = space.successors[start : start + step].long()
-        succ = torch.where(succ < 0, K, succ)
-        gathered = padded[:, succ]  # [B, k, A]
+        gathered = padded[:, space.successors[start : start + step]]  # [B, k, A]
         out[:, start : start + step] = gathered.amax(-1) if reduce == "max" else gathered.amin(-1)
     return out
 
