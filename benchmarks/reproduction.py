@@ -14,6 +14,11 @@ building and compilation included, as a user meets them):
 * ``plain Table II`` and ``ours Table II``: the same over all of Table II's
   grids (``python -m uavrl.reproduce table2``).
 
+``--kernel`` instead times the learning loops alone, in one process, one
+thread each: the plain loop against ours (``TeamQLearner``'s compiled kernel
+with one numba thread, its episode metrics included), the same protocol per
+grid, alternating, best of ``--rounds``: team steps per second per thread.
+
 The processes of a round run one after the other, rounds interleave them, and
 each figure is the median (and the best) over rounds, as wall time and as CPU
 time (user + system: less moved by other work on the machine, but it counts
@@ -118,24 +123,61 @@ def plain_protocol(r_pu, r_se, valid, next_cells, C, runs, episodes, steps, alph
     return q
 
 
-def plain(grids: list[int], runs: int, episodes: int) -> None:
-    """The plain loop's process: tables in numpy, the whole protocol in one compiled call per grid."""
+def plain_tables(side: int) -> tuple:
+    """The plain loop's tables for N = 2 on ``side x side``, in numpy."""
     from uavrl.envs.config import make_config  # the model's constants (standard library only)
 
+    cfg = make_config("paper", grid=(side, side), num_uavs=2)
+    L1, L2, h = side, side, cfg.height
+    nodes = np.array([(0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)])
+    cells = np.array([(c % L1, c // L1, h) for c in range(L1 * L2)], float)
+    gains = cfg.g0 * (np.linalg.norm(cells[:, None] - nodes[None], axis=-1) * cfg.cell_size) ** -cfg.alpha
+    g1 = gains[:, [0, 2]] * np.array([cfg.p_pt, cfg.p_s]) / cfg.noise
+    g2 = gains[:, [1, 3]] * cfg.p_u / cfg.noise
+    contrib = g1 * g2 / (1 + g1 + g2)
+    return tables(contrib, np.zeros(2), side, cfg.lease_rule)
+
+
+def plain(grids: list[int], runs: int, episodes: int) -> None:
+    """The plain loop's process: tables in numpy, the whole protocol in one compiled call per grid."""
     numba.set_num_threads(1)
     started = time.perf_counter()
     for side in grids:
-        cfg = make_config("paper", grid=(side, side), num_uavs=2)
-        L1, L2, h = side, side, cfg.height
-        nodes = np.array([(0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)])
-        cells = np.array([(c % L1, c // L1, h) for c in range(L1 * L2)], float)
-        gains = cfg.g0 * (np.linalg.norm(cells[:, None] - nodes[None], axis=-1) * cfg.cell_size) ** -cfg.alpha
-        g1 = gains[:, [0, 2]] * np.array([cfg.p_pt, cfg.p_s]) / cfg.noise
-        g2 = gains[:, [1, 3]] * cfg.p_u / cfg.noise
-        contrib = g1 * g2 / (1 + g1 + g2)
-        r_pu, r_se, valid, next_cells = tables(contrib, np.zeros(2), side, cfg.lease_rule)
+        r_pu, r_se, valid, next_cells = plain_tables(side)
         plain_protocol(r_pu, r_se, valid, next_cells, side * side, runs, episodes, TABLE2_STEPS[side], 0.1, 0.3, 0.1, 0)
     print(f"plain loop: {time.perf_counter() - started:.2f} s inside the process", file=sys.stderr)
+
+
+def kernels(grids: list[int], rounds: int, episodes: int = 20) -> None:
+    """Team steps/s per thread of the plain loop and of ours, one process, alternating, best of ``rounds``."""
+    import torch
+
+    from uavrl.agents.tabular import TeamQLearner
+    from uavrl.agents.tabular.kernels import use_workqueue_threads
+    from uavrl.envs.config import make_config
+
+    torch.set_num_threads(1)
+    use_workqueue_threads()
+    numba.set_num_threads(1)
+    print(f"# learning loops, one thread each, 10 runs x {episodes} episodes per grid; best of {rounds} rounds")
+    for side in grids:
+        steps, tables_ = TABLE2_STEPS[side], plain_tables(side)
+        learner = TeamQLearner(make_config("paper", grid=(side, side), num_uavs=2, max_steps=steps), runs=10, seed=0)
+        plain_protocol(*tables_, side * side, 1, 1, 10, 0.1, 0.3, 0.1, 0)  # compiled (or loaded) before timing
+        learner.run_episode()
+        best = {"plain": 0.0, "ours": 0.0}
+        for _ in range(rounds):
+            started = time.perf_counter()
+            plain_protocol(*tables_, side * side, 10, episodes, steps, 0.1, 0.3, 0.1, 0)
+            best["plain"] = max(best["plain"], 10 * episodes * steps / (time.perf_counter() - started))
+            started = time.perf_counter()
+            for _ in range(episodes):
+                learner.run_episode()
+            best["ours"] = max(best["ours"], 10 * episodes * steps / (time.perf_counter() - started))
+        print(
+            f"{side}x{side}: plain {best['plain'] / 1e6:.2f} M team steps/s, ours {best['ours'] / 1e6:.2f} M "
+            f"({best['ours'] / best['plain']:.2f}x)  (load {_load()})"
+        )
 
 
 def timed(command: list[str]) -> tuple[float, float]:
@@ -150,10 +192,14 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--skip-table", action="store_true", help="only the 6x6 protocol")
+    p.add_argument("--kernel", action="store_true", help="time the learning loops alone, one thread each")
     p.add_argument("--plain", nargs="+", type=int, help=argparse.SUPPRESS)  # the plain loop's process: its grids
     args = p.parse_args()
     if args.plain:
         plain(args.plain, runs=10, episodes=200)
+        return
+    if args.kernel:
+        kernels(sorted(TABLE2_STEPS), args.rounds)
         return
     grids = sorted(TABLE2_STEPS)
     cases = [

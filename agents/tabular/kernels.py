@@ -114,7 +114,7 @@ def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
     (:func:`_record`), and when ``steps_out`` has the episode's length, each step's (R_PU, R_SE, moves, switches)
     to ``steps_out[r, t]``.  Returns the last configuration.
 
-    ``model`` holds the tables of :meth:`TabularModel.kernel_tables`, ``learning`` the constants
+    ``model`` holds the tables of :attr:`TabularModel.kernel_tables`, ``learning`` the constants
     ``(alpha, gamma, epsilon, beta1, beta2, use_best_so_far, 0.9 U*)``.  The scan of the next state's row that
     gives the target's max is also the next step's greedy choice, so each step scans one row (two when it stays
     in the row it just updated).  The run's state lives in locals, not in arrays shared with the other runs'

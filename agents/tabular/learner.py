@@ -75,6 +75,7 @@ class TeamQLearner:
         self.episode = 0
         self._configuration = None  # end of the last episode, for reset_positions="keep"
         self._start_block, self._block_starts = -1, None
+        self._run_keys = streams.world_keys(self.seed, self.runs, self.device)  # run r: the stream of world seed + r
 
     def _episode_starts(self) -> torch.Tensor:
         """``[R]`` start configurations: run ``r``'s episode ``e`` starts where the world's (the env's) reset puts
@@ -97,7 +98,7 @@ class TeamQLearner:
         draws its lane ``t``.  Run ``r`` has the stream key of world ``seed + r``, the episode is the counter: a pure
         function of (seed, episode, run)."""
         episode = torch.full((self.runs,), self.episode, dtype=torch.long, device=self.device)
-        return streams.stream_heads(streams.world_keys(self.seed, self.runs, self.device), episode, _LEARNER_STREAM)
+        return streams.stream_heads(self._run_keys, episode, _LEARNER_STREAM)
 
     def run_episode(self, record_steps: bool = False) -> dict[str, torch.Tensor]:
         """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
@@ -131,7 +132,7 @@ class TeamQLearner:
             k,
             heads.numpy(),
             self.cfg.max_steps,
-            self.model.kernel_tables(),
+            self.model.kernel_tables,
             self._learning_constants(),
             metrics.numpy(),
             steps.numpy(),

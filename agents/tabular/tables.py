@@ -8,6 +8,7 @@ graph (:mod:`uavrl.envs.exact`).  This module uses no TorchRL (the package still
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -117,6 +118,7 @@ class TabularModel:
         self.valid_actions = (~self.valid).to(torch.int8).argsort(dim=-1, stable=True).to(_valid_list_dtype(A))
         self.u_star = optimum(contributions, direct, cfg)[0].item()
 
+    @functools.cached_property
     def kernel_tables(self) -> tuple:
         """The tables of a compiled learning step, as numpy views of this model's tensors (the order
         :func:`~uavrl.agents.tabular.kernels._run_episode` unpacks)."""
