@@ -108,11 +108,12 @@ def _record(out, r, first, r_pu, r_se, moves, switches, u90):
 
 @numba.njit(cache=True)
 def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
-    """Run ``r``'s episode of ``T`` steps on table ``q[r]`` from configuration ``k``; step ``t`` draws the
-    uniform of lane ``t`` of the random stream with head ``heads[r]`` (:func:`uavrl.envs.streams.stream_heads`);
-    its metrics go to ``out[r]``
-    (:func:`_record`), and when ``steps_out`` has the episode's length, each step's (R_PU, R_SE, moves, switches)
-    to ``steps_out[r, t]``.  Returns the last configuration.
+    """Run ``r``'s episode of ``T`` steps on table ``q[r]`` from configuration ``k``; returns the last configuration.
+
+    Step ``t`` draws lane ``t`` of the random stream with head ``heads[r]``
+    (:func:`uavrl.envs.streams.stream_heads`).  The episode's metrics go to
+    ``out[r]`` (:func:`_record`); when ``steps_out`` has the episode's length,
+    each step's (R_PU, R_SE, moves, switches) also goes to ``steps_out[r, t]``.
 
     ``model`` holds the tables of :attr:`TabularModel.kernel_tables`, ``learning`` the constants
     ``(alpha, gamma, epsilon, beta1, beta2, use_best_so_far, 0.9 U*)``.  The scan of the next state's row that
