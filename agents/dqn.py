@@ -67,7 +67,7 @@ from uavrl.envs import (
     joint_action_valid,
     observation_with_nodes,
 )
-from uavrl.envs.channel import rates
+from uavrl.envs.channel import log_gap_potential, rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.evaluation import episode_metrics
 from uavrl.settings import RUN_SETTINGS, check
@@ -561,8 +561,7 @@ class DQNAgent(Agent):
         floor = float(self.settings.gap_floor)
 
         def potential(td):
-            fraction = mean_utility(td) / u_star.unsqueeze(-1)
-            return -torch.log((1 - fraction).clamp(min=0) + floor)
+            return log_gap_potential(mean_utility(td), u_star.unsqueeze(-1), floor)
 
         return (potential(batch.get("next")) - potential(batch)).unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
 

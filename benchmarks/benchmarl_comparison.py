@@ -19,6 +19,7 @@ Usage::
 
     python benchmarks/benchmarl_comparison.py --tasks paper_6x6 n6_10x10 --seeds 0 1 2 --jobs 2 --out runs/comparison
     python benchmarks/benchmarl_comparison.py --collect --out runs/comparison     # only print the finished runs
+    python benchmarks/benchmarl_comparison.py --rows vdn mappo --benchmarl-overrides env.reward=log_gap --out ...
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def command(task: str, row: str, seed: int, args, run_dir: Path) -> list[str]:
     if row in BENCHMARL:
         frames = args.frames[TASKS.index(task)] if len(args.frames) > 1 else args.frames[0]
         budget = [f"experiment.max_n_frames={frames}", f"experiment.evaluation_interval={args.eval_frames}"]
-        return ["-m", "uavrl.benchmarl", f"algorithm={row}", f"task=uavrl/{task}", *budget, *common]
+        extra = args.benchmarl_overrides
+        return ["-m", "uavrl.benchmarl", f"algorithm={row}", f"task=uavrl/{task}", *budget, *extra, *common]
     every = f"eval.every={args.dqn_eval_every}"
     return ["-m", "uavrl.train", "agent=dqn", f"scenario={task}", *DQN[row], every, "progress=false", *common]
 
@@ -131,6 +133,9 @@ def main():
         "--frames", nargs="+", type=int, default=[300_000], help="BenchMARL's budget (one, or one per task)"
     )
     parser.add_argument("--eval-frames", type=int, default=30_000, help="frames between BenchMARL's evaluations")
+    parser.add_argument(
+        "--benchmarl-overrides", nargs="*", default=[], help="more overrides of the BenchMARL rows (env.reward=log_gap)"
+    )
     parser.add_argument("--dqn-eval-every", type=int, default=25, help="iterations between the DQN's evaluations")
     parser.add_argument("--starts", type=int, default=200, help="held-out evaluation starts")
     parser.add_argument("--jobs", type=int, default=1, help="processes at once (one torch thread each)")

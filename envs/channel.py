@@ -128,6 +128,15 @@ def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
     return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
 
 
+LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
+
+
+def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
+    """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
+    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
+    return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
+
+
 def best_so_far_reward(total, best):
     """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
 

@@ -26,7 +26,7 @@ NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
 FADINGS = ("none", "rayleigh")
-REWARDS = ("delta", "best_so_far")
+REWARDS = ("delta", "best_so_far", "log_gap")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
 RESET_POSITIONS = ("random", "keep")

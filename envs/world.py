@@ -35,6 +35,7 @@ from .channel import (
     direct_terms,
     fixed_layout,
     link_gains,
+    log_gap_potential,
     rates,
     rates_from_sums,
     relay_contributions,
@@ -179,6 +180,7 @@ class World:
         )  # what a UAV adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, NODE_FEATURES, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
+        self._u_star = torch.zeros(Bt, dtype=f64, device=dev)  # reward="log_gap" only: each layout's exact U*
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
         # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
         self._pairs = N == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16
@@ -253,6 +255,8 @@ class World:
         }
         if self._cell_gains is not None:
             tables["_cell_gains"] = gains
+        if cfg.reward == "log_gap":
+            tables["_u_star"] = exact_optimum(contrib, tables["_direct"], cfg)[0]
         for name, rows in tables.items():
             if k == len(getattr(self, name)):  # every world: a new table (no scatter)
                 setattr(self, name, rows)
@@ -520,6 +524,9 @@ class World:
         self._s.r = r = self._current_rates(new_code)
         if cfg.reward == "delta":
             reward = delta_reward(r[:, 0], r[:, 1], prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
+        elif cfg.reward == "log_gap":  # of the mean-channel utility, as the yardstick measures it
+            mean = (r, prev) if cfg.fading == "none" else (self._sum_rates(new_code), self._sum_rates(code))
+            reward = log_gap_potential(mean[0].sum(-1), self._u_star) - log_gap_potential(mean[1].sum(-1), self._u_star)
         else:
             total = r.sum(-1)
             reward = best_so_far_reward(total, self._s.best)

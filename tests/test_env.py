@@ -845,3 +845,18 @@ def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(o
     assert {*full_steps["next"].keys()} - {*lean_steps["next"].keys()} == diagnostics
     for key in lean_steps.keys(include_nested=True, leaves_only=True):
         assert torch.equal(lean_steps[key], full_steps[key]), key
+
+
+@pytest.mark.parametrize("options", [dict(num_uavs=2), dict(num_uavs=3, layout="random", fading="rayleigh")])
+def test_log_gap_reward_is_the_change_of_the_potential_of_the_mean_channel_utility(options):
+    """reward='log_gap': each step's reward is the change of -log(1 - U/U* + floor), U the mean-channel utility of
+    the configuration and U* the exact optimum of the world's layout, whatever the fading draws."""
+    from uavrl.envs.channel import log_gap_potential
+
+    env = UAVSpectrumEnv(batch_size=8, grid=(4, 4), reward="log_gap", seed=1, **options)
+    td = env.rollout(10, RandomPolicy(seed=2), break_when_any_done=False)
+    u_star = env.optimum()[0]
+    positions = torch.cat([td["positions"][:, :1], td["next", "positions"]], 1)
+    tasks = torch.cat([td["tasks"][:, :1], td["next", "tasks"]], 1)
+    potential = log_gap_potential(env.utility(positions, tasks)[2], u_star[:, None])
+    torch.testing.assert_close(td["next", "reward"][..., 0], potential.diff(dim=1).float())

@@ -154,6 +154,8 @@ def test_too_large_table_and_bad_settings_are_refused():
         TeamQLearner(make_config("paper", grid=(3, 3)), epsilon=1.5)
     with pytest.raises(ValueError, match="backend='jax' is invalid"):
         TeamQLearner(make_config("paper", grid=(3, 3)), backend="jax")
+    with pytest.raises(ValueError, match="env.reward='log_gap' is invalid for agent=tabular"):
+        TeamQLearner(make_config("paper", grid=(3, 3), reward="log_gap"))
     assert math.isfinite(TeamQLearner(make_config("paper", grid=(2, 2))).model.u_star)
 
 

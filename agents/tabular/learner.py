@@ -54,6 +54,11 @@ class TeamQLearner:
                 raise ValueError(
                     f"{name}={value} is invalid: it must lie in {'(0, 1]' if name == 'alpha' else '[0, 1]'}"
                 )
+        if cfg.reward == "log_gap":
+            raise ValueError(
+                "env.reward='log_gap' is invalid for agent=tabular: its table learns the paper's reward 'delta' or the "
+                "authors' 'best_so_far'; log_gap is for agent=dqn and BenchMARL's algorithms"
+            )
         num_tables = 1 if shared_table else int(runs)
         if not cfg.has_state_index:
             raise ValueError(

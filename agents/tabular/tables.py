@@ -151,8 +151,8 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     """
     if cfg.reward != "delta":
         raise ValueError(
-            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: the best_so_far reward depends "
-            "on the episode's past, not on the configuration; use env.reward=delta"
+            f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: it solves the paper's reward "
+            "(the best_so_far reward depends on the episode's past, not on the configuration); use env.reward=delta"
         )
     if cfg.layout == "random" or cfg.fading != "none":
         raise ValueError(
