@@ -125,7 +125,9 @@ class World:
 
     def __init__(self, cfg: ModelConfig, batch_size: int = 1, device="cpu", seed: int = 0, diagnostics: bool = True):
         B = _check_batch_size(batch_size)
-        self.diagnostics = bool(diagnostics)  # the outputs of DIAGNOSTICS too
+        if not isinstance(diagnostics, bool):
+            raise ValueError(f"diagnostics={diagnostics!r} is invalid: give True or False")
+        self.diagnostics = diagnostics  # the outputs of DIAGNOSTICS too
         self.device = resolve_device(device)
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.num_uavs

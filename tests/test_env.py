@@ -845,6 +845,8 @@ def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(o
     assert {*full_steps["next"].keys()} - {*lean_steps["next"].keys()} == diagnostics
     for key in lean_steps.keys(include_nested=True, leaves_only=True):
         assert torch.equal(lean_steps[key], full_steps[key]), key
+    with pytest.raises(ValueError, match="diagnostics='no' is invalid: give True or False"):
+        UAVSpectrumEnv(diagnostics="no")
 
 
 @pytest.mark.parametrize("options", [dict(num_uavs=2), dict(num_uavs=3, layout="random", fading="rayleigh")])
