@@ -44,6 +44,7 @@ def masked_choices(monkeypatch):
     def on_batch_collected(self, batch):
         mask, action = batch["agents", "action_mask"], batch["agents", "action"]
         allowed.append(mask.gather(-1, action.unsqueeze(-1)).all().item())
+        assert "utility" not in batch["next"].keys()  # the task's env carries no diagnostics
 
     monkeypatch.setattr(YardstickCallback, "on_batch_collected", on_batch_collected, raising=False)
     return allowed
