@@ -140,6 +140,50 @@ def verdict(task: str, results: dict) -> None:
                 print(f"  {row} seed {seed}: never reached it")
 
 
+def plot(task: str, results: dict, path: Path) -> None:
+    """Each run's score against its training CPU seconds (log scale), one colour per row, one line per seed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    exact = any("eval/return_ratio" in p for m in results.values() for p in m["curve"])
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=110)
+    rows = list(dict.fromkeys(row for row, _ in results))
+    for i, row in enumerate(rows):
+        for seed, m in sorted((seed, m) for (r, seed), m in results.items() if r == row):
+            points = [p for p in m["curve"] if score(p) is not None]
+            label = (
+                f"{'ours: ' if row in DQN else 'BenchMARL '}{row}"
+                if seed == min(s for r, s in results if r == row)
+                else None
+            )
+            ax.plot(
+                [p[TIME_TAGS[1]] for p in points],
+                [score(p) for p in points],
+                color=f"C{i}",
+                lw=1.2 if row in BENCHMARL else 2.5,
+                alpha=0.8,
+                marker="o" if row in BENCHMARL else None,
+                ms=3,
+                label=label,
+            )
+    ax.set_xscale("log")
+    ax.set(
+        xlabel="training CPU seconds (one thread; evaluations left out)",
+        ylabel="return ratio (exact optimum = 1)" if exact else "discounted gain eval/return (gamma 0.9)",
+        title=f"{task}: the yardstick during training, every seed (200 held-out starts)",
+    )
+    if exact:
+        ax.set_ylim(max(-0.1, ax.get_ylim()[0]), 1.02)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    print(f"{task}: curves in {path}")
+
+
 def run(argv: list[str], log: Path) -> int:
     log.parent.mkdir(parents=True, exist_ok=True)
     with log.open("w") as out:
@@ -163,6 +207,7 @@ def main():
     parser.add_argument("--jobs", type=int, default=1, help="processes at once (one torch thread each)")
     parser.add_argument("--out", type=Path, default=Path("runs/benchmarl_comparison"))
     parser.add_argument("--collect", action="store_true", help="only print the runs under --out")
+    parser.add_argument("--plot", type=Path, help="also draw each task's curves as <dir>/benchmarl_<task>.png")
     args = parser.parse_args()
     runs = [(task, row, seed) for task in args.tasks for seed in args.seeds for row in args.rows]
     if not args.collect:
@@ -189,6 +234,9 @@ def main():
                 results[row, seed] = metrics
                 print_row(task, row, seed, metrics)
         verdict(task, results)
+        if args.plot and results:
+            args.plot.mkdir(parents=True, exist_ok=True)
+            plot(task, results, args.plot / f"benchmarl_{task}.png")
 
 
 if __name__ == "__main__":
