@@ -35,6 +35,31 @@ def test_run_directory_has_everything(tmp_path, compose_cfg, episode_tags):
     assert len(events.Scalars("train/sum_utility")) == 6
 
 
+def test_periodic_evaluations_come_with_the_training_time_they_leave_out(tmp_path, compose_cfg, monkeypatch):
+    """eval.every: each evaluation is logged with time/train_seconds and time/train_cpu_seconds, which grow by the
+    training between evaluations and leave the evaluations out (here made to take 0.3 s each)."""
+    import time
+
+    import uavrl.evaluation
+
+    evaluate_agent = uavrl.evaluation.evaluate_agent
+
+    def slow_evaluation(*args, **kwargs):
+        time.sleep(0.3)
+        return evaluate_agent(*args, **kwargs)
+
+    monkeypatch.setattr(uavrl.evaluation, "evaluate_agent", slow_evaluation)
+    run_dir = train(compose_cfg(*SMALL, "eval.every=2", f"run_dir={tmp_path / 'run'}"))
+    events = EventAccumulator(str(run_dir)).Reload()
+    wall = [e.value for e in events.Scalars("time/train_seconds")]
+    cpu = [e.value for e in events.Scalars("time/train_cpu_seconds")]
+    assert [e.step for e in events.Scalars("time/train_seconds")] == [200, 400, 600]  # iterations 2, 4 and the end
+    assert wall == sorted(wall) and cpu == sorted(cpu) and 0 < cpu[0]
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["train_seconds"] == pytest.approx(wall[-1]) and metrics["train_cpu_seconds"] == pytest.approx(cpu[-1])
+    assert metrics["total_seconds"] - metrics["train_seconds"] >= 0.6  # the two periodic evaluations' sleeps
+
+
 def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path, compose_cfg, interrupt_at):
     make_cfg = compose_cfg
     whole = train(make_cfg(*SMALL, f"run_dir={tmp_path / 'whole'}"))

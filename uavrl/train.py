@@ -163,11 +163,11 @@ def train(cfg: DictConfig, overrides=()) -> Path:
                     per_step = metrics["train/sum_utility"] / env_cfg.max_steps
                     bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
             if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
+                trained = clock.read()  # before the evaluation, which the clock leaves out
                 with clock.paused():
-                    logger.log({**evaluate_agent(agent, env_cfg, **eval_kwargs), **clock.read()}, agent.env_steps)
+                    logger.log({**evaluate_agent(agent, env_cfg, **eval_kwargs), **trained}, agent.env_steps)
             if done % every == 0 and done < agent.num_iterations:
                 save_checkpoint(done)
-        train_seconds = time.perf_counter() - started
         trained = clock.read()
         if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
             final = checkpoint["final"]
@@ -185,7 +185,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         "env": cfg.env.name,
         "env_steps": agent.env_steps,
         "iterations": agent.num_iterations,
-        "train_seconds": train_seconds,
+        "train_seconds": trained["time/train_seconds"],  # the periodic evaluations left out, as for BenchMARL's runs
         "train_cpu_seconds": trained["time/train_cpu_seconds"],
         "total_seconds": time.perf_counter() - started,
         **final,
