@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-N6 = ["env.grid=[10,10]", "env.num_uavs=6"]
+N6, N6_RANDOM_LAYOUTS = ["scenario=n6_10x10"], ["scenario=random_layouts"]  # 6 UAVs on 10x10, and their budgets
 ROWS = {
     "n2-random": ["agent=random"],
     "n2-oracle": ["agent=oracle"],
@@ -44,9 +44,9 @@ ROWS = {
     "n6-oracle": ["agent=oracle", *N6],
     "n6-dqn": ["agent=dqn", *N6],
     "n6-dqn-qmix": ["agent=dqn", *N6, "agent.mixer=qmix"],
-    "n6-random-layouts-random": ["agent=random", *N6, "env.layout=random"],
-    "n6-random-layouts-oracle": ["agent=oracle", *N6, "env.layout=random"],
-    "n6-random-layouts-dqn": ["agent=dqn", *N6, "env.layout=random"],
+    "n6-random-layouts-random": ["agent=random", *N6_RANDOM_LAYOUTS],
+    "n6-random-layouts-oracle": ["agent=oracle", *N6_RANDOM_LAYOUTS],
+    "n6-random-layouts-dqn": ["agent=dqn", *N6_RANDOM_LAYOUTS],
 }
 TABLES = {name: [row for row in ROWS if row.startswith(name + "-")] for name in ("n2", "n6")}
 DETERMINISTIC = ("oracle", "vi")  # one seed is enough
