@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +34,15 @@ from pathlib import Path
 TASKS = ("paper_6x6", "n6_10x10")
 BENCHMARL = ("qmix", "vdn", "iql", "mappo")
 DQN = {"dqn": [], "dqn-qmix": ["agent.mixer=qmix"]}
-CURVE_TAGS = ("eval/return_ratio", "eval/return", "eval/optimality", "eval/reach_999", "eval/step_ratio_999")
+CURVE_TAGS = (
+    "eval/return_ratio",
+    "eval/return",
+    "eval/optimality",
+    "eval/reach_999",
+    "eval/steps_to_999",
+    "eval/step_ratio_999",
+)
+HORIZONS = {"paper_6x6": 24, "n6_10x10": 40}  # the evaluation's horizon, max(20, 2 (L1 + L2))
 TIME_TAGS = ("time/train_seconds", "time/train_cpu_seconds")
 
 
@@ -93,45 +100,37 @@ def print_row(task: str, row: str, seed: int, m: dict) -> None:
     )
 
 
-def reach_and_steps(point: dict) -> tuple[float, float]:
-    """``(share of starts reaching 0.999 U*, steps / fewest over them)``; the step ratio is inf where none reach."""
-    return point.get("eval/reach_999", 0.0), point.get("eval/step_ratio_999", math.inf)
-
-
-def at_least(point: dict, best: dict, criterion: str) -> bool:
-    """Is ``point`` at least as good as ``best``: a score as high, or as many starts reaching 0.999 U* in as few
-    steps (both)?"""
-    if criterion == "score":
-        return score(point) is not None and score(point) >= score(best)
-    (reach, steps), (best_reach, best_steps) = reach_and_steps(point), reach_and_steps(best)
-    return reach >= best_reach and steps <= best_steps
+def steps_to_optimum(point: dict, horizon: int) -> float:
+    """Mean over all starts of the steps to 0.999 U*, a start that never gets there counted as the horizon: one
+    number for how many starts reach it and how fast (lower is better)."""
+    reach = point.get("eval/reach_999", 0.0)
+    return reach * point.get("eval/steps_to_999", horizon) + (1 - reach) * horizon
 
 
 def verdict(task: str, results: dict) -> None:
     """Per criterion, BenchMARL's best point (any algorithm, any seed) against the first point of each DQN run that is
-    at least as good: the score, and at N = 6 (no exact return there) also 0.999 U*'s reach and step ratio."""
+    at least as good: the score, and at N = 6 (no exact return there) also the steps to 0.999 U* over all starts."""
     theirs = [(p, row, seed) for (row, seed), m in results.items() if row in BENCHMARL for p in m["curve"]]
     if not theirs:
         print(f"{task}: no BenchMARL evaluation")
         return
     exact = any("eval/return_ratio" in p for p, _, _ in theirs)
-    criteria = {
-        "score": lambda p: (score(p), -p[TIME_TAGS[1]]),
-        "reach and steps": lambda p: (reach_and_steps(p)[0], -reach_and_steps(p)[1], -p[TIME_TAGS[1]]),
+    horizon = HORIZONS[task]
+    criteria = {  # (higher is better, shown as)
+        "score": (lambda p: score(p), "{:.4f}"),
+        f"steps to 0.999 U* (never: {horizon})": (lambda p: -steps_to_optimum(p, horizon), "{:.2f} steps"),
     }
-    for criterion, key in list(criteria.items())[: 1 if exact else 2]:
-        best, best_row, best_seed = max(theirs, key=lambda t: key(t[0]))
-        shown = (
-            f"{score(best):.4f}"
-            if criterion == "score"
-            else "reach 0.999 U* {:.2f}, step ratio {:.3f}".format(*reach_and_steps(best))
+    for criterion, (value, shown) in list(criteria.items())[: 1 if exact else 2]:
+        best, best_row, best_seed = max(theirs, key=lambda t: (value(t[0]), -t[0][TIME_TAGS[1]]))
+        seconds, best_value = best[TIME_TAGS[1]], value(best)
+        print(
+            f"{task}: BenchMARL's best {criterion}: {shown.format(abs(best_value))} ({best_row}, seed {best_seed}) "
+            f"after {seconds:.0f} CPU s"
         )
-        seconds = best[TIME_TAGS[1]]
-        print(f"{task}: BenchMARL's best {criterion}: {shown} ({best_row}, seed {best_seed}) after {seconds:.0f} CPU s")
         for (row, seed), m in results.items():
             if row in BENCHMARL:
                 continue
-            reached = [p[TIME_TAGS[1]] for p in m["curve"] if at_least(p, best, criterion)]
+            reached = [p[TIME_TAGS[1]] for p in m["curve"] if value(p) is not None and value(p) >= best_value]
             if reached:
                 ratio = reached[0] / seconds
                 met = "met" if ratio <= 1 / 3 else "not met"
