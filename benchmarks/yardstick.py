@@ -42,8 +42,8 @@ ROWS = {
     "n2-dqn-joint": ["agent=dqn", "agent.head=joint"],
     "n6-random": ["agent=random", *N6],
     "n6-oracle": ["agent=oracle", *N6],
-    "n6-dqn": ["agent=dqn", *N6],
-    "n6-dqn-qmix": ["agent=dqn", *N6, "agent.mixer=qmix"],
+    "n6-dqn": ["agent=dqn", *N6],  # the scenario's mixer, QMIX
+    "n6-dqn-vdn": ["agent=dqn", *N6, "agent.mixer=vdn"],
     "n6-random-layouts-random": ["agent=random", *N6_RANDOM_LAYOUTS],
     "n6-random-layouts-oracle": ["agent=oracle", *N6_RANDOM_LAYOUTS],
     "n6-random-layouts-dqn": ["agent=dqn", *N6_RANDOM_LAYOUTS],

@@ -46,7 +46,7 @@ def test_each_scenario_sets_its_model_and_agents(name, compose_cfg):
     "overrides, budget",
     [
         (["agent=tabular", "scenario=paper_6x6"], {"agent.episodes": 200, "agent.runs": 10, "env.max_steps": 12000}),
-        (["agent=dqn", "scenario=n6_10x10"], {"agent.iterations": 900, "env.max_steps": 30}),
+        (["agent=dqn", "scenario=n6_10x10"], {"agent.iterations": 800, "agent.mixer": "qmix", "env.max_steps": 30}),
         (["agent=dqn", "scenario=large_20x20"], {"agent.iterations": 500, "env.max_steps": 40}),
         (["agent=dqn", "scenario=large_20x20", "agent.iterations=7", "env.max_steps=9"], {"agent.iterations": 7}),
         (["agent=oracle", "scenario=large_20x20"], {"env.max_steps": 100}),  # nothing to train: the env's default
