@@ -17,7 +17,8 @@ For every batch size B and UAV count N this prints, in world-steps per second
   reward, observation), outputs kept as a rollout keeps them.
 * ``policy``: the masked random policy alone, for reference.
 * ``stub rollout``: a stub env with exactly the same keys, shapes and dtypes
-  that only writes zeros: what ``env.rollout`` costs for this output volume.
+  that only copies one output (zeros, every action allowed): what ``env.rollout``
+  costs for this output volume.
 * ``trivial rollout``: a minimal EnvBase (one float observation, one action)
   with a random policy: TorchRL's floor.
 
@@ -63,6 +64,26 @@ def parse_args(argv=None):
         help=f"re-run with GLIBC_TUNABLES={HUGETLB} (transparent huge pages for malloc)",
     )
     return p.parse_args(argv)
+
+
+def stub_env(**kwargs):
+    """A ``UAVSpectrumEnv(**kwargs)`` whose every step returns a fresh copy of one output (zeros, every action
+    allowed): the same specs, keys, shapes and dtypes with no physics, so its rollout costs what TorchRL's machinery
+    costs for our output volume (also used by ``env_vs_vmas.py --stub``)."""
+    from uavrl.envs import UAVSpectrumEnv
+
+    class StubEnv(UAVSpectrumEnv):
+        def _step(self, td):
+            if not hasattr(self, "_output"):
+                self._output = (
+                    self.full_observation_spec.zero()
+                    .update(self.full_reward_spec.zero())
+                    .update(self.full_done_spec.zero())
+                )
+                self._output["agents", "action_mask"].fill_(True)
+            return self._output.clone()
+
+    return StubEnv(**kwargs)
 
 
 def main(argv=None):
@@ -116,18 +137,6 @@ def main(argv=None):
         def _set_seed(self, seed):
             return seed
 
-    class StubEnv(UAVSpectrumEnv):
-        """UAVSpectrumEnv's specs, keys, shapes and dtypes; every step returns a fresh copy of one zero output."""
-
-        def _step(self, td):
-            if not hasattr(self, "_zeros"):
-                self._zeros = (
-                    self.full_observation_spec.zero()
-                    .update(self.full_reward_spec.zero())
-                    .update(self.full_done_spec.zero())
-                )
-            return self._zeros.clone()
-
     gen = torch.Generator().manual_seed(0)
 
     def masked_random(td):
@@ -164,7 +173,7 @@ def main(argv=None):
         for B in args.batch_sizes:
             T = max(100, min(2000, args.world_steps // B))
             env = UAVSpectrumEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
-            stub = StubEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
+            stub = stub_env(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
             trivial = TrivialEnv(B)
             start = env.reset()
             actions = torch.stack([masked_random(start.clone())[("agents", "action")] for _ in range(T)])

@@ -81,6 +81,7 @@ def main(argv=None):
         import vmas
     except ImportError:
         sys.exit("benchmarks/env_vs_vmas.py needs VMAS: pip install vmas (--dry-run first: it must keep your torch)")
+    from env_throughput import stub_env  # this folder is on sys.path when run as a script
     from torchrl.envs import ActionMask, TransformedEnv
     from torchrl.envs.libs.vmas import VmasEnv
 
@@ -93,19 +94,6 @@ def main(argv=None):
         sys.modules["before"] = package
         spec.loader.exec_module(package)
         return importlib.import_module("before.env").UAVSpectrumEnv
-
-    class Stub(UAVSpectrumEnv):
-        """Our specs and keys; every step returns a copy of one output: no physics, every action allowed."""
-
-        def _step(self, td):
-            if not hasattr(self, "_output"):
-                self._output = (
-                    self.full_observation_spec.zero()
-                    .update(self.full_reward_spec.zero())
-                    .update(self.full_done_spec.zero())
-                )
-                self._output["agents", "action_mask"].fill_(True)
-            return self._output.clone()
 
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
@@ -137,30 +125,23 @@ def main(argv=None):
         f"{'N':>2}  {'path':<13} {'uavrl':>{width + 2}}  "
         + "  ".join(f"{s:>{width + 2}} {'ratio':>6}" for s in columns)
     )
+    makers = {"uavrl": UAVSpectrumEnv, "before": Before, "lean": UAVSpectrumEnv, "stub": stub_env}
     for N in args.uavs:
-        ours = UAVSpectrumEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
-        masked = TransformedEnv(ours, ActionMask(("agents", "action"), ("agents", "action_mask")))
+        kwargs = dict(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
+        ours = {
+            name: makers[name](**kwargs, **({"diagnostics": False} if name == "lean" else {}))
+            for name in ["uavrl", *extra]
+        }
+        masked = {
+            name: TransformedEnv(env, ActionMask(("agents", "action"), ("agents", "action_mask")))
+            for name, env in ours.items()
+        }
         peers = {
             s: VmasEnv(s, num_envs=B, n_agents=N, continuous_actions=False, device="cpu", seed=0)
             for s in args.scenarios
         }
-        if args.lean:
-            lean = UAVSpectrumEnv(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9, diagnostics=False)
-            masked_lean = TransformedEnv(lean, ActionMask(("agents", "action"), ("agents", "action_mask")))
-        if args.stub:
-            stub = Stub(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
-            masked_stub = TransformedEnv(stub, ActionMask(("agents", "action"), ("agents", "action_mask")))
-        if Before:
-            before = Before(batch_size=B, grid=tuple(args.grid), num_uavs=N, max_steps=10**9)
-            masked_before = TransformedEnv(before, ActionMask(("agents", "action"), ("agents", "action_mask")))
         for path in args.paths:
-            contenders = {"uavrl": masked if path == "rollout+mask" else ours, **peers}
-            if Before:
-                contenders["before"] = masked_before if path == "rollout+mask" else before
-            if args.lean:
-                contenders["lean"] = masked_lean if path == "rollout+mask" else lean
-            if args.stub:
-                contenders["stub"] = masked_stub if path == "rollout+mask" else stub
+            contenders = {**(masked if path == "rollout+mask" else ours), **peers}
             names = list(contenders)
             times = {name: [] for name in names}
             for i in range(args.warmup + args.repeats):
