@@ -142,6 +142,24 @@ def test_vector_env_is_uavspectrumenv():
         assert np.array_equal(infos["utility"], td["utility"].double().numpy())
 
 
+def test_gymnasiums_vector_wrappers_run_on_the_vector_env():
+    """Gymnasium's vector wrappers read the autoreset mode (``NormalizeObservation`` refuses all but next-step and
+    disabled) and the episode ends: the episode statistics are each world's return over its ``max_steps`` steps."""
+    from gymnasium.wrappers.vector import NormalizeObservation, RecordEpisodeStatistics
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = RecordEpisodeStatistics(NormalizeObservation(UAVSpectrumVectorEnv(num_envs=3, max_steps=4)))
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        returns = np.zeros(3)
+        for _ in range(4):
+            _, reward, _, truncated, infos = env.step(env.action_space.sample())
+            returns += reward
+    assert truncated.all() and infos["_episode"].all()
+    assert np.array_equal(infos["episode"]["l"], [4, 4, 4]) and np.allclose(infos["episode"]["r"], returns)
+
+
 def test_vector_env_autoresets_the_next_step():
     env = UAVSpectrumVectorEnv(num_envs=2, grid=(3, 3), max_steps=2)
     env.reset(seed=0)
