@@ -21,8 +21,14 @@ from _pytest.doctest import DoctestModule
 ROOT = Path(__file__).resolve().parent
 _PACKAGE_DIRS = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
 FOLDERS = {ROOT / folder: package for package, folder in _PACKAGE_DIRS.items() if package.count(".") <= 1}
-# modules of an optional extra: their examples run where the extra is installed (pip install -e ".[benchmarl]")
-NEEDS = {"uavrl.agents.benchmarl": "benchmarl", "uavrl.benchmarl": "benchmarl"}
+# modules of an optional extra: their examples run where the extra is installed (pip install -e ".[benchmarl]",
+# pip install -e ".[gym]")
+NEEDS = {
+    "uavrl.agents.benchmarl": "benchmarl",
+    "uavrl.benchmarl": "benchmarl",
+    "uavrl.envs.gym_env": "gymnasium",
+    "uavrl.envs.pettingzoo_env": "pettingzoo",
+}
 
 
 def installed_name(path: Path) -> str | None:

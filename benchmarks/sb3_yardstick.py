@@ -1,0 +1,83 @@
+"""Stable-Baselines3's PPO trained on the Gymnasium adapter, measured by the yardstick beside random and the oracle.
+
+A user's code: ``PPO("MlpPolicy", UAVSpectrumGymEnv(...))`` with SB3's defaults, ``learn(--timesteps)``, then the
+deterministic policy evaluated through ``uavrl.evaluation.evaluate`` (``TeamActionPolicy``), the evaluation of
+every agent: ``--starts`` held-out starts, the default horizon (24 greedy steps on 6x6), ``eval.gamma`` 0.9.
+The random policy (``agent=random``'s, seeded like the PPO run) and the oracle planner are evaluated on the same
+starts.  Prints one BENCHMARKS.md row per policy and seed.
+
+Usage::
+
+    python benchmarks/sb3_yardstick.py                                # N = 2 on 6x6, 50,000 steps, seed 0
+    python benchmarks/sb3_yardstick.py --timesteps 200000 --seeds 0 1 2 --reward log_gap
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--timesteps", type=int, default=50_000, help="PPO's environment steps")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--starts", type=int, default=200, help="held-out evaluation starts")
+    p.add_argument("--grid", type=int, nargs=2, default=[6, 6])
+    p.add_argument("--uavs", type=int, default=2)
+    p.add_argument("--max-steps", type=int, default=30, help="training episode length (the DQN's on 6x6)")
+    p.add_argument("--reward", default="delta", help="the model's reward option PPO trains on")
+    return p.parse_args(argv)
+
+
+def row(name: str, seed, metrics: dict, train_seconds) -> str:
+    def value(key, digits):
+        return f"{metrics[key]:.{digits}f}" if key in metrics else "-"
+
+    return (
+        f"| {name} | {seed} | {value('eval/optimality', 4)} | {value('eval/return_ratio', 4)} | "
+        f"{value('eval/reach_999', 2)} | {value('eval/steps_to_999', 2)} | {value('eval/min_steps_to_999', 2)} | "
+        f"{value('eval/step_ratio_999', 3)} | {train_seconds} |"
+    )
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    import torch
+    from stable_baselines3 import PPO
+
+    from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+    from uavrl.envs.gym_env import TeamActionPolicy, UAVSpectrumGymEnv
+    from uavrl.evaluation import evaluate
+
+    torch.set_num_threads(1)
+    print(
+        f"# SB3 PPO on UAVSpectrumGymEnv: {time.strftime('%Y-%m-%d %H:%M')}, {args.uavs} UAVs on "
+        f"{args.grid[0]}x{args.grid[1]}, reward={args.reward}, {args.timesteps} steps of episodes of {args.max_steps}, "
+        f"{args.starts} held-out starts, one torch thread"
+    )
+    print(
+        "| row | seed | final U/U\\* | return ratio | reach 0.999 U\\* | steps to 0.999 U\\* | fewest (exact) "
+        "| step ratio 0.999 | train s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    cfg = None
+    for seed in args.seeds:
+        env = UAVSpectrumGymEnv(grid=tuple(args.grid), num_uavs=args.uavs, max_steps=args.max_steps, reward=args.reward)
+        env.reset(seed=seed)
+        started = time.perf_counter()
+        model = PPO("MlpPolicy", env, seed=seed, device="cpu")
+        model.learn(total_timesteps=args.timesteps)
+        seconds = time.perf_counter() - started
+        cfg = env.cfg.replace(reward="delta")  # the yardstick reads utilities, not the training reward
+        policy = TeamActionPolicy(lambda obs, mask, model=model: model.predict(obs, deterministic=True)[0])
+        name = f"SB3 PPO, defaults, {args.timesteps:,} steps (`UAVSpectrumGymEnv`, reward={args.reward})"
+        print(row(name, seed, evaluate(policy, cfg, num_starts=args.starts), f"{seconds:.0f}"))
+        print(
+            row("uniform random (`agent=random`)", seed, evaluate(RandomPolicy(seed), cfg, num_starts=args.starts), 0)
+        )
+    print(row("oracle planner (`agent=oracle`)", "-", evaluate(OraclePolicy(cfg), cfg, num_starts=args.starts), 0))
+
+
+if __name__ == "__main__":
+    main()

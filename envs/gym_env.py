@@ -1,0 +1,361 @@
+"""Gymnasium adapters of the model (``pip install -e ".[gym]"``): a team-level ``Env`` and a ``VectorEnv`` of B worlds.
+
+Both wrap the batched physics, a :class:`~uavrl.envs.world.World`, as :class:`~uavrl.envs.env.UAVSpectrumEnv`
+does, with no TorchRL on the way: the same observations, action masks, rewards and seeds.
+
+- :class:`UAVSpectrumGymEnv`: one world; the team acts with one action per UAV, ``MultiDiscrete([6] * N)``.
+- :class:`UAVSpectrumVectorEnv`: ``num_envs`` worlds stepped together as one ``World`` of that batch (a step
+  costs a few tensor operations whatever the batch, no loop over worlds); next-step autoreset, as
+  Gymnasium's own vector envs.
+- :class:`TeamActionPolicy`: a function of these observations (a Stable-Baselines3 model's ``predict``) as a
+  TorchRL policy of ``UAVSpectrumEnv``, so :func:`uavrl.evaluation.evaluate` measures it on the yardstick
+  from the same held-out starts as every agent.
+
+Actions are ``MultiDiscrete([6] * N)`` rather than the joint action ``Discrete(6^N)``: the space grows as
+``6 N`` where the joint one grows as ``6^N`` (46,656 at N = 6); the per-UAV masks apply to it as they are
+(MaskablePPO reads the mask of a ``MultiDiscrete`` space as the per-dimension masks side by side); and every
+one of its actions is legal, since a move off the grid leaves the UAV in place and clashing moves are
+repaired (docs/model.md, "What a UAV can do in one step"). Stable-Baselines3's PPO, A2C and MaskablePPO
+take it; its DQN takes ``Discrete`` spaces only.
+
+The observation is, per UAV, its observation followed by the four nodes' positions
+(:func:`~uavrl.envs.world.observation_with_nodes`, what the project's DQN reads): ``Box`` ``[N, F + 12]``
+float32, whose bounds hold every layout the config allows.  The reward is the team reward (float32, as
+``UAVSpectrumEnv``'s); nothing terminates an episode, it is truncated after ``max_steps``.  The info holds
+``action_mask`` ``[N, 6]`` int8 (1 where the move stays on the grid) and the step's ``r_pu``, ``r_se``,
+``utility``, ``moves``, ``task_switches``; :meth:`UAVSpectrumGymEnv.action_masks` is the mask flat, as
+MaskablePPO asks for it.
+
+Seeds: ``reset(seed=s)`` seeds the world's stream ``s``; the vector env seeds its world ``i`` with ``s + i``,
+as ``gymnasium.vector.SyncVectorEnv`` seeds its ``i``-th env, so world ``i`` of the vector env is the single
+env seeded ``s + i``.  Before the first seeded reset the worlds are seeded 0, ``UAVSpectrumEnv``'s default:
+the same result run after run.  The physics draws from the worlds' own streams, never from ``np_random``.
+
+Rendering: ``metadata["render_modes"]`` lists the modes these envs draw, none so far; ``render_mode`` is
+checked against it (the place for ``"rgb_array"``, drawn from the wrapped world).
+
+Example:
+    >>> env = UAVSpectrumGymEnv(grid=(6, 6), num_uavs=2, max_steps=10)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs.shape, info["action_mask"].shape, env.action_space
+    ((2, 28), (2, 6), MultiDiscrete([6 6]))
+    >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    >>> vec = UAVSpectrumVectorEnv(num_envs=4, grid=(6, 6), num_uavs=2, max_steps=10)
+    >>> obs, infos = vec.reset(seed=0)
+    >>> obs.shape, vec.action_space.shape
+    ((4, 2, 28), (4, 2))
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import torch
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from .channel import fixed_layout
+from .config import NUM_ACTIONS, ModelConfig, make_config
+from .world import NODE_FEATURES, World, check_seed, observation_with_nodes, resolve_device
+
+__all__ = [
+    "ENV_ID",
+    "TeamActionPolicy",
+    "UAVSpectrumGymEnv",
+    "UAVSpectrumVectorEnv",
+    "observation_bounds",
+    "state_bounds",
+]
+
+ENV_ID = "uavrl/UAVSpectrum-v0"  # gymnasium.make(ENV_ID, ...) and gymnasium.make_vec(ENV_ID, num_envs=B, ...)
+INFO_KEYS = ("r_pu", "r_se", "utility", "moves", "task_switches")  # the step's diagnostics, in every info
+RENDER_MODES: list[str] = []  # the modes the adapters draw (metadata["render_modes"])
+
+
+def model_config(config: ModelConfig | None, preset, grid, num_uavs, max_steps, overrides: dict) -> ModelConfig:
+    """The model an adapter wraps, from a complete config or from ``UAVSpectrumEnv``'s arguments."""
+    if config is not None and overrides:
+        raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
+    return config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
+
+
+def check_render_mode(render_mode) -> None:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode={render_mode!r} is invalid: the render modes are {RENDER_MODES} or None")
+
+
+def _node_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``[12]`` bounds of the nodes' ``(x / L1, y / L2, z / h)``: a random layout's range (within half a grid of the
+    grid, on the ground or at UAV altitude; docs/model.md, "Where the four nodes are"), widened to hold a fixed
+    layout's nodes (the authors' absolute layout lies outside it on small grids)."""
+    nodes = NODE_FEATURES // 3
+    low, high = np.tile(np.float32([-0.5, -0.5, 0.0]), nodes), np.tile(np.float32([1.5, 1.5, 1.0]), nodes)
+    layout = fixed_layout(cfg)
+    if layout is not None:  # scaled exactly as World does it
+        L1, L2 = cfg.grid
+        scaled = (layout / torch.tensor([L1, L2, cfg.height], dtype=layout.dtype)).flatten().float().numpy()
+        low, high = np.minimum(low, scaled), np.maximum(high, scaled)
+    return low, high
+
+
+def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
+    and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid, then the nodes."""
+    others = 3 * (cfg.num_uavs - 1)
+    node_low, node_high = _node_bounds(cfg)
+    low = np.concatenate([np.zeros(3), np.full(10, -1.0), np.zeros(others), node_low]).astype(np.float32)
+    high = np.concatenate([np.ones(3), np.ones(10), np.ones(others), node_high]).astype(np.float32)
+    return np.tile(low, (cfg.num_uavs, 1)), np.tile(high, (cfg.num_uavs, 1))
+
+
+def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
+    then the nodes."""
+    node_low, node_high = _node_bounds(cfg)
+    per_uav = 5 * cfg.num_uavs
+    return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
+        [np.ones(per_uav, np.float32), node_high]
+    )
+
+
+def team_observation_space(cfg: ModelConfig) -> spaces.Box:
+    low, high = observation_bounds(cfg)
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def check_actions(actions, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``actions`` as an int64 array of ``shape``; a one-line error naming ``name`` otherwise."""
+    array = np.asarray(actions)
+    if array.shape != shape:
+        raise ValueError(f"{name} has shape {array.shape}: expected {shape} (one action 0..5 per UAV)")
+    if not np.issubdtype(array.dtype, np.integer):
+        raise TypeError(f"{name} has dtype {array.dtype}: expected integers 0..5")
+    lo, hi = array.min(), array.max()
+    if lo < 0 or hi >= NUM_ACTIONS:
+        bad = lo if lo < 0 else hi
+        raise ValueError(f"{name} holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
+    return array.astype(np.int64, copy=False)
+
+
+class NumpyWorlds:
+    """A :class:`~uavrl.envs.world.World` of ``num_worlds`` worlds whose outputs come back as NumPy arrays: what
+    the Gymnasium and PettingZoo adapters share.
+
+    :meth:`reset` and :meth:`step` return ``observation`` ``[B, N, F + 12]`` float32 (the team observation),
+    ``action_mask`` ``[B, N, 6]`` int8, ``state`` ``[B, 5 N + 12]`` float32 and the :data:`INFO_KEYS` ``[B]``,
+    every array new (Gymnasium's checker asks that no two calls share data).
+    """
+
+    def __init__(self, cfg: ModelConfig, num_worlds: int, device):
+        self.cfg = cfg
+        self.world = World(cfg, num_worlds, resolve_device(device), seed=0)
+        self.was_reset = False
+
+    def _numpy(self, out: dict) -> dict[str, np.ndarray]:
+        arrays = {key: out[key].numpy(force=True) for key in INFO_KEYS}
+        arrays["observation"] = observation_with_nodes(out["observation"], out["state"]).numpy(force=True)
+        arrays["action_mask"] = out["action_mask"].to(torch.int8).numpy(force=True)
+        arrays["state"] = out["state"].numpy(force=True)
+        return arrays
+
+    def reset(self, seed: int | None) -> dict[str, np.ndarray]:
+        if seed is not None:
+            self.world.set_seed(check_seed(seed))
+        self.was_reset = True
+        return self._numpy(self.world.reset())
+
+    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+        """Every world takes ``actions`` ``[B, N]`` (checked); the outputs, the team reward ``[B]`` (float32 values,
+        as ``UAVSpectrumEnv`` gives them, in float64) and truncation ``[B]``."""
+        if not self.was_reset:
+            raise RuntimeError("step() before any reset: call reset() first (the worlds have no UAV positions yet)")
+        out, reward, truncated = self.world.step(torch.from_numpy(actions).to(self.world.device))
+        return self._numpy(out), reward.float().double().numpy(force=True), truncated.numpy(force=True)
+
+
+def world_info(arrays: dict[str, np.ndarray], world: int) -> dict:
+    """The info of one world: its action mask and the step's diagnostics as Python numbers."""
+    info = {key: arrays[key][world].item() for key in INFO_KEYS}
+    info["action_mask"] = arrays["action_mask"][world]
+    return info
+
+
+class UAVSpectrumGymEnv(gymnasium.Env):
+    """One world of the model as a Gymnasium env; the team's action is ``MultiDiscrete([6] * N)``.
+
+    Args (as :class:`~uavrl.envs.env.UAVSpectrumEnv`'s): ``grid``, ``num_uavs``, ``preset``, ``max_steps``,
+    ``device``, ``config`` (a complete :class:`~uavrl.envs.config.ModelConfig`) or ``**overrides`` (any model
+    option); ``render_mode`` one of ``metadata["render_modes"]`` or None.  Seed with ``reset(seed=...)``.
+    """
+
+    metadata = {"render_modes": RENDER_MODES}
+
+    def __init__(
+        self,
+        grid=(6, 6),
+        num_uavs=2,
+        preset="paper",
+        max_steps=100,
+        device="cpu",
+        render_mode=None,
+        *,
+        config: ModelConfig | None = None,
+        **overrides,
+    ):
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
+        self._worlds = NumpyWorlds(self.cfg, 1, device)
+        self.observation_space = team_observation_space(self.cfg)
+        self.action_space = spaces.MultiDiscrete([NUM_ACTIONS] * self.cfg.num_uavs)
+        self._mask = None
+
+    @property
+    def world(self) -> World:
+        """The wrapped physics (its ``utility``, ``optimum``, ``code``...)."""
+        return self._worlds.world
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=None if seed is None else check_seed(seed))
+        if options:
+            raise ValueError(f"options={options!r} is invalid: this env takes no reset options (give None or {{}})")
+        out = self._worlds.reset(seed)
+        self._mask = out["action_mask"][0]
+        return out["observation"][0], world_info(out, 0)
+
+    def step(self, action):
+        actions = check_actions(action, (self.cfg.num_uavs,), "action")
+        out, reward, truncated = self._worlds.step(actions[None])
+        self._mask = out["action_mask"][0]
+        return out["observation"][0], reward[0].item(), False, bool(truncated[0]), world_info(out, 0)
+
+    def action_masks(self) -> np.ndarray:
+        """``[6 N]`` bool: each UAV's action mask, side by side (what sb3-contrib's MaskablePPO reads)."""
+        if self._mask is None:
+            raise RuntimeError("action_masks() before any reset: call reset() first")
+        return self._mask.reshape(-1).astype(bool)
+
+
+class UAVSpectrumVectorEnv(VectorEnv):
+    """``num_envs`` worlds of the model as one Gymnasium ``VectorEnv``, stepped together as one ``World``.
+
+    Observations ``[B, N, F + 12]``, actions ``[B, N]`` (``MultiDiscrete``), rewards, terminations and truncations
+    ``[B]``; infos as Gymnasium's vector envs batch them (each key ``[B, ...]`` beside its ``_key`` mask).
+    Autoreset is ``NEXT_STEP``: the step after an episode ends resets the worlds, ignores their actions and
+    returns their first observation with reward 0.  ``reset(seed=s)`` seeds world ``i`` with ``s + i``.
+    Arguments as :class:`UAVSpectrumGymEnv`'s, plus ``num_envs`` (the batch).
+    """
+
+    metadata = {"render_modes": RENDER_MODES, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs=1,
+        grid=(6, 6),
+        num_uavs=2,
+        preset="paper",
+        max_steps=100,
+        device="cpu",
+        render_mode=None,
+        *,
+        config: ModelConfig | None = None,
+        **overrides,
+    ):
+        if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} is invalid: give the number of worlds B >= 1")
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
+        self.num_envs = num_envs
+        self._worlds = NumpyWorlds(self.cfg, num_envs, device)
+        self.single_observation_space = team_observation_space(self.cfg)
+        self.single_action_space = spaces.MultiDiscrete([NUM_ACTIONS] * self.cfg.num_uavs)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._autoreset = False
+        self._mask = None
+
+    @property
+    def world(self) -> World:
+        """The wrapped physics: world ``i`` is sub-environment ``i``."""
+        return self._worlds.world
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None and not isinstance(seed, int):
+            raise ValueError(f"seed={seed!r} is invalid: give one int (world i is seeded seed + i) or None")
+        super().reset(seed=None if seed is None else check_seed(seed))
+        if options:
+            raise ValueError(
+                f"options={options!r} is invalid: this env takes no reset options (give None or {{}}); "
+                "every reset starts all worlds, so there is no reset_mask"
+            )
+        self._autoreset = False
+        out = self._worlds.reset(seed)
+        return out["observation"], self._infos(out)
+
+    def step(self, actions):
+        B = self.num_envs
+        if self._autoreset:  # next-step autoreset: the actions of worlds whose episode ended are ignored
+            out = self._worlds.reset(None)
+            reward, truncated = np.zeros(B), np.zeros(B, dtype=bool)
+        else:
+            out, reward, truncated = self._worlds.step(check_actions(actions, (B, self.cfg.num_uavs), "actions"))
+        # every reset starts all worlds and episodes have one length, so the worlds end their episodes together
+        self._autoreset = bool(truncated[0])
+        return out["observation"], reward, np.zeros(B, dtype=bool), truncated, self._infos(out)
+
+    def _infos(self, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        self._mask = out["action_mask"]
+        infos = {}
+        for key in (*INFO_KEYS, "action_mask"):
+            infos[key], infos[f"_{key}"] = out[key], np.ones(self.num_envs, dtype=bool)
+        for key in ("r_pu", "r_se", "utility"):  # Python floats in the single env's info, float64 when batched
+            infos[key] = infos[key].astype(np.float64)
+        return infos
+
+    def action_masks(self) -> np.ndarray:
+        """``[B, 6 N]`` bool: per world, each UAV's action mask side by side."""
+        if self._mask is None:
+            raise RuntimeError("action_masks() before any reset: call reset() first")
+        return self._mask.reshape(self.num_envs, -1).astype(bool)
+
+
+class TeamActionPolicy(TensorDictModuleBase):
+    """A function of the Gymnasium team observation as a TorchRL policy of :class:`~uavrl.envs.env.UAVSpectrumEnv`.
+
+    ``act(observation, action_mask)`` gets, for the env's worlds, the team observations ``[*, N, F + 12]``
+    float32 and action masks ``[*, N, 6]`` int8 exactly as :class:`UAVSpectrumVectorEnv` returns them, and
+    returns ``[*, N]`` integer actions.  :func:`uavrl.evaluation.evaluate` then measures it as it measures every
+    agent (the same starts and yardstick).
+
+    Example (a Stable-Baselines3 model trained on :class:`UAVSpectrumGymEnv`)::
+
+        policy = TeamActionPolicy(lambda obs, mask: model.predict(obs, deterministic=True)[0])
+        metrics = uavrl.evaluation.evaluate(policy, env.cfg)
+    """
+
+    in_keys = [("agents", "observation"), ("agents", "action_mask"), "state"]
+    out_keys = [("agents", "action")]
+
+    def __init__(self, act):
+        super().__init__()
+        if not callable(act):
+            raise TypeError(f"act={act!r} is not callable: give a function (observation, action_mask) -> actions")
+        self.act = act
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        observation = observation_with_nodes(td.get(("agents", "observation")), td.get("state"))
+        mask = td.get(("agents", "action_mask"))
+        actions = self.act(observation.numpy(force=True), mask.to(torch.int8).numpy(force=True))
+        actions = check_actions(actions, tuple(mask.shape[:-1]), "the policy's actions")
+        td.set(("agents", "action"), torch.from_numpy(actions).to(mask.device))
+        return td
+
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(
+        ENV_ID, entry_point=f"{__name__}:UAVSpectrumGymEnv", vector_entry_point=f"{__name__}:UAVSpectrumVectorEnv"
+    )

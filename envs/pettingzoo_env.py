@@ -1,0 +1,140 @@
+"""The PettingZoo adapter of the model (``pip install -e ".[gym]"``): one world as a ``ParallelEnv``, one agent per UAV.
+
+Agents ``uav_0 .. uav_{N-1}`` act at once, as in the model.  Each agent observes a dict, as PettingZoo's own
+environments with action masks do: ``"observation"``, its row of the team observation of
+:mod:`uavrl.envs.gym_env` (its observation followed by the four nodes' positions, ``[F + 12]`` float32), and
+``"action_mask"`` ``[6]`` int8 (1 where the move stays on the grid).  Every agent receives the team reward;
+nothing terminates an episode, every agent is truncated after ``max_steps``, and then ``agents`` is empty
+until the next reset.  ``state()`` is the world's state ``[5 N + 12]`` (``state_space``).  The infos hold the
+step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches`` (the team's, in every agent's info).
+
+The physics is a :class:`~uavrl.envs.world.World` of one world: the same observations, masks, rewards and
+seeds as :class:`~uavrl.envs.env.UAVSpectrumEnv` and :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`
+(``reset(seed=s)`` is the Gymnasium env's ``reset(seed=s)``; before the first seeded reset the world is seeded
+0).  ``reset`` accepts PettingZoo's ``options`` and ignores them: the model defines none.
+
+Example:
+    >>> env = UAVSpectrumParallelEnv(grid=(6, 6), num_uavs=2, max_steps=10)
+    >>> observations, infos = env.reset(seed=0)
+    >>> env.agents, observations["uav_0"]["observation"].shape, observations["uav_0"]["action_mask"].dtype
+    (['uav_0', 'uav_1'], (28,), dtype('int8'))
+    >>> actions = {agent: env.action_space(agent).sample(observations[agent]["action_mask"]) for agent in env.agents}
+    >>> observations, rewards, terminations, truncations, infos = env.step(actions)
+    >>> rewards["uav_0"] == rewards["uav_1"]
+    True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from .config import NUM_ACTIONS, ModelConfig
+from .gym_env import (
+    RENDER_MODES,
+    NumpyWorlds,
+    check_actions,
+    check_render_mode,
+    model_config,
+    observation_bounds,
+    state_bounds,
+    world_info,
+)
+from .world import World
+
+__all__ = ["UAVSpectrumParallelEnv"]
+
+
+class UAVSpectrumParallelEnv(ParallelEnv):
+    """One world of the model as a PettingZoo ``ParallelEnv``: agent ``uav_i`` is UAV ``i``.
+
+    Arguments as :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`'s.
+    """
+
+    metadata = {"name": "uavrl_uav_spectrum_v0", "render_modes": RENDER_MODES, "is_parallelizable": True}
+
+    def __init__(
+        self,
+        grid=(6, 6),
+        num_uavs=2,
+        preset="paper",
+        max_steps=100,
+        device="cpu",
+        render_mode=None,
+        *,
+        config: ModelConfig | None = None,
+        **overrides,
+    ):
+        check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
+        self._worlds = NumpyWorlds(self.cfg, 1, device)
+        self.possible_agents = [f"uav_{i}" for i in range(self.cfg.num_uavs)]
+        self.agents: list[str] = []
+        low, high = observation_bounds(self.cfg)
+        # one space object per agent, so seeding one agent's space leaves the others' alone
+        self.observation_spaces = {
+            agent: spaces.Dict(
+                {
+                    "observation": spaces.Box(low[i], high[i], dtype=np.float32),
+                    "action_mask": spaces.Box(0, 1, (NUM_ACTIONS,), dtype=np.int8),
+                }
+            )
+            for i, agent in enumerate(self.possible_agents)
+        }
+        self.action_spaces = {agent: spaces.Discrete(NUM_ACTIONS) for agent in self.possible_agents}
+        self.state_space = spaces.Box(*state_bounds(self.cfg), dtype=np.float32)
+        self._state = None
+
+    @property
+    def world(self) -> World:
+        """The wrapped physics."""
+        return self._worlds.world
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Discrete:
+        return self.action_spaces[agent]
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        out = self._worlds.reset(seed)
+        self.agents = self.possible_agents[:]
+        return self._observations(out), self._infos(out)
+
+    def step(self, actions: dict):
+        if not self.agents:
+            raise RuntimeError("step() with no live agents: call reset() first (the episode ended or never began)")
+        unknown = sorted(set(actions) - set(self.agents), key=str)
+        if unknown:
+            raise ValueError(f"actions names {unknown[0]!r}: the agents are {self.agents}")
+        missing = [agent for agent in self.agents if agent not in actions]
+        if missing:
+            raise ValueError(f"actions has no action for {missing[0]!r}: every live agent acts each step")
+        joint = check_actions([actions[agent] for agent in self.possible_agents], (self.cfg.num_uavs,), "actions")
+        out, reward, truncated = self._worlds.step(joint[None])
+        observations, infos = self._observations(out), self._infos(out)
+        rewards = dict.fromkeys(self.agents, reward[0].item())
+        terminations = dict.fromkeys(self.agents, False)
+        truncations = dict.fromkeys(self.agents, bool(truncated[0]))
+        if truncated[0]:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        if self._state is None:
+            raise RuntimeError("state() before any reset: call reset() first")
+        return self._state.copy()
+
+    def _observations(self, out: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
+        self._state = out["state"][0]
+        return {
+            agent: {"observation": out["observation"][0, i], "action_mask": out["action_mask"][0, i]}
+            for i, agent in enumerate(self.possible_agents)
+        }
+
+    def _infos(self, out: dict[str, np.ndarray]) -> dict[str, dict]:
+        team = world_info(out, 0)
+        del team["action_mask"]  # in each agent's observation
+        return {agent: dict(team) for agent in self.possible_agents}
