@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import re
+import shlex
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -31,6 +32,9 @@ from uavrl.settings import shown
 Command = Callable[[DictConfig, list], object]
 # settings that moved: an override of the old name says the new one
 RENAMED = MOVED
+# settings that hold a file system path (every command's): a path Hydra's override grammar cannot read unquoted
+# (letters beyond ASCII, ~ # & ' ( ) [ ] =) is quoted for it, so a path works as the shell passes it
+PATH_SETTINGS = ("run_dir", "sweep_dir", "resume", "checkpoint", "out_dir")
 
 
 def run_command(
@@ -47,7 +51,7 @@ def run_command(
     a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
     checked before any starts.
     """
-    overrides = sys.argv[1:]
+    overrides = sys.argv[1:] = readable(sys.argv[1:])
     if any(arg.startswith("-") for arg in overrides):
         import hydra
         from hydra.core.hydra_config import HydraConfig
@@ -83,18 +87,85 @@ def run_command(
 SWEEP_FLAGS = ("-m", "--multirun")
 
 
+def hydra_quoted(value: str) -> str:
+    """``value`` as a single-quoted string of Hydra's override grammar (which reads it back unchanged): a quote is
+    escaped, and so are the backslashes before a quote or at the end."""
+    escaped = re.sub(r"(\\*)('|\Z)", lambda m: m.group(1) * 2 + ("\\'" if m.group(2) else ""), value)
+    return f"'{escaped}'"
+
+
+def shell_word(text: str) -> str:
+    """``text`` as one word to paste into a POSIX shell: double quotes where they suffice (``key="'a b'"``), else
+    :func:`shlex.quote`."""
+    if shlex.quote(text) == text:
+        return text
+    key, _, value = text.partition("=")
+    if value and re.fullmatch(r"[\w.+~]+", key) and not re.search(r'["$`\\!]', value):
+        return f'{key}="{value}"'
+    return shlex.quote(text)
+
+
+def typed(setting: str, value) -> str:
+    """The override that sets ``setting`` to the string ``value``, quoted for Hydra when it needs it and for the
+    shell: ``checkpoint='/tmp/my runs/x'``, ``checkpoint="'/tmp/a,b'"``."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    plain = f"{setting}={value}"
+    try:
+        reads_as_typed = OverridesParser.create().parse_override(plain).value() == str(value)
+    except HydraException:
+        reads_as_typed = False
+    return shell_word(plain if reads_as_typed else f"{setting}={hydra_quoted(str(value))}")
+
+
+def readable(args: list[str]) -> list[str]:
+    """The command line's overrides as Hydra's grammar reads them: a path setting's value that it cannot read
+    unquoted is quoted for it; another setting's value with a character the grammar refuses is one line that says
+    how to quote it."""
+    from antlr4.error.Errors import LexerNoViableAltException
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    parser = OverridesParser.create()
+    readable_args = []
+    for arg in args:
+        key, equals, value = arg.partition("=")
+        if arg.startswith("-") or not equals:  # Hydra's flags and their values
+            readable_args.append(arg)
+            continue
+        try:
+            parser.parse_override(arg)
+        except HydraException as err:
+            if key.lstrip("+~") in PATH_SETTINGS:
+                arg = f"{key}={hydra_quoted(value)}"
+            elif isinstance(err.__cause__, LexerNoViableAltException):
+                refused = str(err).splitlines()[0].rpartition("at: ")[2]
+                raise SystemExit(
+                    f"error: {arg} cannot be read: {refused} is not allowed in an unquoted value of Hydra's override "
+                    f"grammar; quote the value: {shell_word(f'{key}={hydra_quoted(value)}')}"
+                ) from None
+        readable_args.append(arg)
+    return readable_args
+
+
 def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
     """A sweep's command line without ``sweep_dir``, and that directory made absolute (None when not given), so jobs
     started anywhere agree on it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
     keys = [arg.split("=", 1)[0].lstrip("+~") for arg in overrides]
     if "run_dir" in keys:
         raise SystemExit(
             "error: run_dir is invalid in a sweep (-m): each job runs in <sweep_dir>/<its overrides>/seed=<seed>; "
             "set sweep_dir instead"
         )
-    given = [arg.split("=", 1)[1] for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
+    parser = OverridesParser.create()
+    given = [parser.parse_override(arg).value() for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
     rest = [arg for arg, key in zip(overrides, keys, strict=True) if key != "sweep_dir"]
-    return rest, Path(given[-1]).expanduser().resolve() if given else None
+    if given and not isinstance(given[-1], (str, type(None))):
+        raise SystemExit(f"error: sweep_dir={shown(given[-1])} is invalid: it must be a path")
+    return rest, Path(given[-1]).expanduser().resolve() if given and given[-1] else None
 
 
 def new_sweep_dir() -> Path:
@@ -103,8 +174,7 @@ def new_sweep_dir() -> Path:
 
 
 def sweep_dir_override(sweep_dir: Path) -> str:
-    quoted = str(sweep_dir).replace("\\", "\\\\").replace("'", "\\'")
-    return f"sweep_dir='{quoted}'"
+    return f"sweep_dir={hydra_quoted(str(sweep_dir))}"
 
 
 def claim_job_dir(output_dir: str, seed: int) -> str:
