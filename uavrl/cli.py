@@ -120,9 +120,10 @@ def typed(setting: str, value) -> str:
 
 
 def readable(args: list[str]) -> list[str]:
-    """The command line's overrides as Hydra's grammar reads them: a path setting's value that it cannot read
-    unquoted is quoted for it; another setting's value with a character the grammar refuses is one line that says
-    how to quote it."""
+    """The command line's overrides as Hydra's grammar reads them.  A value with a character the grammar refuses
+    unquoted (a letter beyond ASCII, # & ' ; ...), and a path setting's value it cannot read unquoted (also ( ) [ ] =),
+    is quoted for it: it cannot have meant anything else, and the setting's rule then judges it.  An override that
+    stays unreadable is one line."""
     from antlr4.error.Errors import LexerNoViableAltException
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
@@ -137,16 +138,20 @@ def readable(args: list[str]) -> list[str]:
         try:
             parser.parse_override(arg)
         except HydraException as err:
-            if key.lstrip("+~") in PATH_SETTINGS:
-                arg = f"{key}={hydra_quoted(value)}"
-            elif isinstance(err.__cause__, LexerNoViableAltException):
-                refused = str(err).splitlines()[0].rpartition("at: ")[2]
-                raise SystemExit(
-                    f"error: {arg} cannot be read: {refused} is not allowed in an unquoted value of Hydra's override "
-                    f"grammar; quote the value: {shell_word(f'{key}={hydra_quoted(value)}')}"
-                ) from None
+            if key.lstrip("+~") not in PATH_SETTINGS and not isinstance(err.__cause__, LexerNoViableAltException):
+                raise SystemExit(unreadable(arg, err)) from None
+            try:
+                parser.parse_override(f"{key}={hydra_quoted(value)}")
+            except HydraException as still:  # the setting's name itself
+                raise SystemExit(unreadable(arg, still)) from None
+            arg = f"{key}={hydra_quoted(value)}"
         readable_args.append(arg)
     return readable_args
+
+
+def unreadable(arg: str, err: Exception) -> str:
+    reason = str(err).strip().splitlines()[0]
+    return f"error: {arg} cannot be read: {reason} (type setting=value, e.g. agent.episodes=50 or env.grid=[6,6])"
 
 
 def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
