@@ -113,6 +113,8 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
     "argv, words",
     [
         (["{tmp}/nowhere"], "nowhere: no such directory"),
+        (["{tmp}/no where"], "/no where': no such directory"),
+        (["{tmp}/damaged"], "damaged (1 with damaged files, skipped)"),
         (["{tmp}/empty"], "no run directory"),
         (["{tmp}/empty", "{tmp}/empty"], "--out is needed with several directories"),
         (["{tmp}/empty", "--resamples", "0"], "--resamples=0 is invalid"),
@@ -121,6 +123,9 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
 )
 def test_report_mistakes_are_one_line(argv, words, tmp_path):
     (tmp_path / "empty").mkdir()
+    (tmp_path / "damaged" / "run").mkdir(parents=True)
+    (tmp_path / "damaged" / "run" / "metrics.json").write_text("[]")
+    (tmp_path / "damaged" / "run" / "config.yaml").write_text(GOOD_CONFIG)
     with pytest.raises(SystemExit) as refused:
         main([arg.format(tmp=tmp_path) for arg in argv])
     message = str(refused.value.code)

@@ -13,6 +13,14 @@ setting, a PNG of the metrics (agents side by side, the random and oracle
 baselines as reference lines) and one of the learning curves (mean over seeds
 with a 95% bootstrap band).
 
+A run whose files cannot be used (``metrics.json`` or ``config.yaml``
+truncated, empty, not an object, a metric or setting of the wrong type, an
+interpolation ``${...}``) is skipped: one ``warning:`` line on stderr names
+it and why, ``report.md`` lists it, and the other runs are reported.  Saved
+files are read as plain data: YAML without tags or aliases, interpolations
+never resolved.  A NaN, infinite or null metric is missing (``-``, or
+``(n=k)`` beside the seeds that have it), never ``nan``.
+
 Example:
     >>> iqm([1.0, 2.0, 3.0, 4.0, 100.0])
     3.0
@@ -295,7 +303,9 @@ def find_runs(paths) -> tuple[list[Run], list[tuple[Path, str]]]:
     for given in paths:
         given = Path(given)
         if not given.is_dir():
-            raise FileNotFoundError(f"{given}: no such directory (give run directories or sweep directories)")
+            raise FileNotFoundError(
+                f"{shlex.quote(str(given))}: no such directory (give run directories or sweep directories)"
+            )
         for metrics_file in sorted(given.rglob("metrics.json")):
             run_dir = metrics_file.parent
             if not (run_dir / "config.yaml").exists():
@@ -510,7 +520,8 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     if not runs:
         damaged = f" ({len(skipped)} with damaged files, skipped)" if skipped else ""
         raise FileNotFoundError(
-            f"no run directory (with metrics.json and config.yaml) under {', '.join(map(str, paths))}{damaged}"
+            f"no run directory (with metrics.json and config.yaml) under {' '.join(shlex.quote(str(p)) for p in paths)}"
+            f"{damaged}"
         )
     cells = group(runs)
     lines = [
