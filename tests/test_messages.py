@@ -5,12 +5,13 @@ import importlib.util
 import runpy
 import shlex
 import sys
+from pathlib import Path
 
 import pytest
 import torch
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-from uavrl.cli import hydra_quoted, readable, typed
+from uavrl.cli import hydra_quoted, readable, split_sweep_dir, sweep_dir_override, typed
 from uavrl.train import summary
 
 ODD = "my runs/ünï (copy) #1 ~x 'q'"  # a directory name Hydra cannot read unquoted; {odd} below is tmp/ODD
@@ -31,6 +32,7 @@ CASES = [
     (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï': no checkpoint.pt in that directory"),
     (["train", "run_dir={run}"], "error: run_dir={run!r} already holds a run"),
     (["train", "-m", "seed=0,1", "sweep_dir={odd}", "env.grid=[0,3]"], "error: env.grid=(0, 3) is invalid"),
+    (["train", "-m", "sweep_dir=a,b", "seed=0,1"], "error: sweep_dir=a,b is invalid: give one sweep_dir"),
     (["evaluate", "checkpoint={odd}"], "error: checkpoint={odd!r} does not exist"),
     (["evaluate", "checkpoint={tmp}/my runs/x"], "error: checkpoint='{tmp}/my runs/x' does not exist"),
     (["evaluate", "checkpoint=/tmp/ünï"], "error: checkpoint='/tmp/ünï' does not exist"),
@@ -91,6 +93,15 @@ def test_a_printed_override_pastes_back_as_the_path(path):
     (override,) = readable([word])
     assert OverridesParser.create().parse_override(override).value() == path
     assert OverridesParser.create().parse_override(f"checkpoint={hydra_quoted(path)}").value() == path
+
+
+@pytest.mark.parametrize("path", [path for path in PATHS if "," not in path])  # a,b typed unquoted: a sweep
+def test_a_sweep_dir_is_read_as_the_path(path, tmp_path):
+    """``sweep_dir`` as typed (quoted for Hydra by the command line), then as uavrl passes it on to Hydra."""
+    given = str(tmp_path / path.lstrip("/"))
+    rest, sweep_dir = split_sweep_dir(readable(["seed=0,1", f"sweep_dir={given}"]))
+    assert rest == ["seed=0,1"] and sweep_dir == Path(given)
+    assert OverridesParser.create().parse_override(sweep_dir_override(sweep_dir)).value() == given
 
 
 def test_the_end_of_run_lines_paste(compose_cfg, tmp_path):

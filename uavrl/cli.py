@@ -165,12 +165,14 @@ def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
             "error: run_dir is invalid in a sweep (-m): each job runs in <sweep_dir>/<its overrides>/seed=<seed>; "
             "set sweep_dir instead"
         )
-    parser = OverridesParser.create()
-    given = [parser.parse_override(arg).value() for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
+    given = [arg for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
     rest = [arg for arg, key in zip(overrides, keys, strict=True) if key != "sweep_dir"]
-    if given and not isinstance(given[-1], (str, type(None))):
-        raise SystemExit(f"error: sweep_dir={shown(given[-1])} is invalid: it must be a path")
-    return rest, Path(given[-1]).expanduser().resolve() if given and given[-1] else None
+    value = OverridesParser.create().parse_override(given[-1]).value() if given else None
+    if value is None:
+        return rest, None
+    if not isinstance(value, (str, int, float)):  # a sweep over sweep_dir (a,b) or a list
+        raise SystemExit(f"error: {given[-1]} is invalid: give one sweep_dir")
+    return rest, Path(str(value)).expanduser().resolve()
 
 
 def new_sweep_dir() -> Path:
