@@ -155,7 +155,8 @@ DAMAGED_RUNS = [
     ("metrics string", '{"eval/return_ratio": "0.5"}', None, "metrics.json: eval/return_ratio='0.5' is not a number"),
     ("metrics object", '{"eval/optimality": {"v": 1}}', None, "eval/optimality={'v': 1} is not a number"),
     ("metrics bool", '{"eval/optimality": true}', None, "metrics.json: eval/optimality=true is not a number"),
-    ("metrics nested", "[" * 100_000, None, "metrics.json is not valid JSON"),
+    ("metrics nested", "[" * 100_000, None, "metrics.json nests deeper than uavrl ever writes"),
+    ("metrics 5000 digits", '{"eval/optimality": ' + "9" * 5000 + "}", None, "Exceeds the limit (4300 digits)"),
     ("metrics huge", " " * (1 << 20) + "{}", None, "metrics.json holds 1,048,578 bytes, more than uavrl writes"),
     ("metrics not utf-8", b"\xff\xfe{}", None, "metrics.json is not UTF-8 text"),
     ("metrics fifo", "fifo", None, "metrics.json is not a regular file"),
@@ -171,6 +172,7 @@ DAMAGED_RUNS = [
     ("bad agent", None, GOOD_CONFIG.replace("name: tabular", "name: '| x |'"), "agent.name='| x |' is invalid"),
     ("python tag", None, "seed: !!python/object/apply:os.system [touch marker]\n", "config.yaml is not valid YAML"),
     ("yaml aliases", None, LAUGHS, "an alias (*name), which uavrl never writes"),
+    ("yaml nested", None, "seed: " + "[" * 100_000, "config.yaml nests deeper than uavrl ever writes"),
 ]
 
 
@@ -206,12 +208,15 @@ def test_nan_infinite_and_null_metrics_are_shown_missing(tmp_path):
     write_run(root / "a", "dqn", 0, {"eval/return_ratio": 0.5, "eval/optimality": float("nan")})
     write_run(root / "b", "dqn", 1, {"eval/return_ratio": float("inf"), "eval/optimality": None})
     write_run(root / "c", "oracle", 0, {"eval/return_ratio": float("-inf"), "eval/sum_utility": float("nan")})
+    write_run(root / "d", "random", 0, {})  # beyond float's range: as infinite
+    (root / "d" / "metrics.json").write_text('{"eval/return_ratio": 1e400, "eval/optimality": ' + "9" * 400 + "}")
     text = report([root], tmp_path / "out", resamples=200).read_text()
     rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in text.splitlines() if line.startswith("| ")}
     header = rows["agent"]
     ratio, optimality = header.index("return ratio"), header.index("final U/U*")
     assert rows["dqn"][ratio] == "0.5 (n=1)" and rows["dqn"][optimality] == "-"
     assert rows["oracle (baseline)"][ratio] == "-"
+    assert rows["random (baseline)"][ratio] == "-" and rows["random (baseline)"][optimality] == "-"
     table = "\n".join(line for line in text.splitlines() if line.startswith("| ")).lower()
     assert "nan" not in table and "inf" not in table
 

@@ -225,8 +225,10 @@ def read_config(path: Path) -> dict:
     except yaml.MarkedYAMLError as err:
         where = f" at line {err.problem_mark.line + 1}" if err.problem_mark else ""
         raise DamagedRun(f"config.yaml is not valid YAML ({' '.join(str(err.problem).split())}{where})") from None
-    except (yaml.YAMLError, RecursionError) as err:
-        raise DamagedRun(f"config.yaml is not valid YAML ({type(err).__name__})") from None
+    except RecursionError:
+        raise DamagedRun("config.yaml nests deeper than uavrl ever writes") from None
+    except yaml.YAMLError as err:
+        raise DamagedRun(f"config.yaml is not valid YAML ({' '.join(str(err).split())})") from None
     if not isinstance(data, dict):
         raise DamagedRun(f"config.yaml holds {kind(data)}, not a mapping of settings")
     config = flat(data)
@@ -251,8 +253,10 @@ def read_metrics(path: Path) -> tuple[dict, object]:
         raise DamagedRun(
             f"metrics.json is not valid JSON, truncated or damaged ({err.msg} at line {err.lineno})"
         ) from None
-    except (ValueError, RecursionError) as err:  # an integer of over 4,300 digits; nesting deeper than Python's stack
-        raise DamagedRun(f"metrics.json is not valid JSON ({type(err).__name__})") from None
+    except RecursionError:
+        raise DamagedRun("metrics.json nests deeper than uavrl ever writes") from None
+    except ValueError as err:  # an integer of over 4,300 digits
+        raise DamagedRun(f"metrics.json cannot be read ({str(err).split(':')[0]})") from None
     if not isinstance(data, dict):
         raise DamagedRun(f"metrics.json holds {kind(data)}, not an object of metrics")
     if not any(name in data for name in METRICS):
