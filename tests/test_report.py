@@ -2,6 +2,7 @@
 
 import json
 import math
+import shlex
 
 import numpy as np
 import pytest
@@ -112,6 +113,8 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
     "argv, words",
     [
         (["{tmp}/nowhere"], "nowhere: no such directory"),
+        (["{tmp}/no where"], "/no where': no such directory"),
+        (["{tmp}/damaged"], "damaged (1 with damaged files, skipped)"),
         (["{tmp}/empty"], "no run directory"),
         (["{tmp}/empty", "{tmp}/empty"], "--out is needed with several directories"),
         (["{tmp}/empty", "--resamples", "0"], "--resamples=0 is invalid"),
@@ -120,7 +123,109 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
 )
 def test_report_mistakes_are_one_line(argv, words, tmp_path):
     (tmp_path / "empty").mkdir()
+    (tmp_path / "damaged" / "run").mkdir(parents=True)
+    (tmp_path / "damaged" / "run" / "metrics.json").write_text("[]")
+    (tmp_path / "damaged" / "run" / "config.yaml").write_text(GOOD_CONFIG)
     with pytest.raises(SystemExit) as refused:
         main([arg.format(tmp=tmp_path) for arg in argv])
     message = str(refused.value.code)
     assert message.startswith("error: ") and "\n" not in message and words in message, message
+
+
+GOOD_METRICS = json.dumps({"eval/return_ratio": 0.5, "eval/sum_utility": 200.0})
+GOOD_CONFIG = yaml.safe_dump(
+    {
+        "seed": 7,
+        "env": {"name": "paper", "preset": "paper", "grid": [6, 6], "num_uavs": 2, "max_steps": 30},
+        "eval": {"num_starts": 64, "gamma": 0.9, "horizon": None},
+        "agent": {"name": "tabular"},
+        "scenario": None,
+    }
+)
+LAUGHS = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 10)}]\n" for i in range(8)
+)
+
+# (case, metrics.json, config.yaml, the reason the one-line warning gives); None: the good file
+DAMAGED_RUNS = [
+    ("truncated metrics", '{"eval/return_ratio": 0.5, "eval/op', None, "metrics.json is not valid JSON"),
+    ("empty metrics", "", None, "metrics.json is empty"),
+    ("metrics {}", "{}", None, "metrics.json holds none of the report's metrics"),
+    ("metrics list", "[0.5, 1.0]", None, "metrics.json holds a list, not an object of metrics"),
+    ("metrics string", '{"eval/return_ratio": "0.5"}', None, "metrics.json: eval/return_ratio='0.5' is not a number"),
+    ("metrics object", '{"eval/optimality": {"v": 1}}', None, "eval/optimality={'v': 1} is not a number"),
+    ("metrics bool", '{"eval/optimality": true}', None, "metrics.json: eval/optimality=true is not a number"),
+    ("metrics nested", "[" * 100_000, None, "metrics.json nests deeper than uavrl ever writes"),
+    ("metrics 5000 digits", '{"eval/optimality": ' + "9" * 5000 + "}", None, "Exceeds the limit (4300 digits)"),
+    ("metrics huge", " " * (1 << 20) + "{}", None, "metrics.json holds 1,048,578 bytes, more than uavrl writes"),
+    ("metrics not utf-8", b"\xff\xfe{}", None, "metrics.json is not UTF-8 text"),
+    ("metrics fifo", "fifo", None, "metrics.json is not a regular file"),
+    ("invalid yaml", None, "seed: [1\nenv: {", "config.yaml is not valid YAML"),
+    ("config list", None, "- seed\n- env\n", "config.yaml holds a list, not a mapping of settings"),
+    ("empty config", None, "", "config.yaml holds null, not a mapping of settings"),
+    ("undefined ${...}", None, GOOD_CONFIG.replace("name: paper", "name: ${nowhere}", 1), "env.name='${nowhere}'"),
+    ("${oc.env:HOME}", None, GOOD_CONFIG.replace("preset: paper", "preset: ${oc.env:HOME}"), "is an interpolation"),
+    ("seed abc", None, GOOD_CONFIG.replace("seed: 7", "seed: abc"), "config.yaml: seed='abc' is invalid: it must be"),
+    ("seed float", None, GOOD_CONFIG.replace("seed: 7", "seed: 7.5"), "config.yaml: seed=7.5 is invalid"),
+    ("grid", None, GOOD_CONFIG.replace("- 6\n", "- 0\n", 1), "config.yaml: env.grid=[0, 6] is invalid"),
+    ("no env", None, "seed: 1\nagent: {name: dqn}\n", "config.yaml has no env.name"),
+    ("bad agent", None, GOOD_CONFIG.replace("name: tabular", "name: '| x |'"), "agent.name='| x |' is invalid"),
+    ("python tag", None, "seed: !!python/object/apply:os.system [touch marker]\n", "config.yaml is not valid YAML"),
+    ("yaml aliases", None, LAUGHS, "an alias (*name), which uavrl never writes"),
+    ("yaml nested", None, "seed: " + "[" * 100_000, "config.yaml nests deeper than uavrl ever writes"),
+]
+
+
+@pytest.mark.parametrize("metrics, config, why", [case[1:] for case in DAMAGED_RUNS], ids=[c[0] for c in DAMAGED_RUNS])
+def test_report_skips_a_damaged_run_in_one_line(metrics, config, why, study, tmp_path, monkeypatch, capsys):
+    """The study's good runs are reported; the damaged one is named, quoted, with why, on one line of stderr."""
+    import os
+
+    bad = study / "damaged run" / "seed=7"
+    bad.mkdir(parents=True)
+    for name, content, good in (("metrics.json", metrics, GOOD_METRICS), ("config.yaml", config, GOOD_CONFIG)):
+        content = good if content is None else content
+        if content == "fifo":
+            os.mkfifo(bad / name)
+        else:
+            (bad / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    monkeypatch.chdir(tmp_path)
+    main([str(study), "--out", str(tmp_path / "out"), "--resamples", "200"])
+    out, err = capsys.readouterr()
+    assert out == f"report: {tmp_path / 'out' / 'report.md'} (figures beside it)\n"
+    assert err.startswith(f"warning: skipped {shlex.quote(str(bad))}: ") and err.count("\n") == 1, err
+    assert why in err, err
+    text = (tmp_path / "out" / "report.md").read_text()
+    assert "6 runs from" not in text and "9 runs from" in text  # the study's nine, not the damaged one
+    assert "| dqn agent.mixer=vdn |" in text and "## rayleigh" in text and "| tabular |" not in text
+    skipped = text.split("Skipped")[1].strip().splitlines()[-1]
+    assert skipped.startswith(f"- `{bad}`: ") and why in skipped
+    assert os.environ["HOME"] not in text and not (tmp_path / "marker").exists()
+
+
+def test_nan_infinite_and_null_metrics_are_shown_missing(tmp_path):
+    root = tmp_path / "study"
+    write_run(root / "a", "dqn", 0, {"eval/return_ratio": 0.5, "eval/optimality": float("nan")})
+    write_run(root / "b", "dqn", 1, {"eval/return_ratio": float("inf"), "eval/optimality": None})
+    write_run(root / "c", "oracle", 0, {"eval/return_ratio": float("-inf"), "eval/sum_utility": float("nan")})
+    write_run(root / "d", "random", 0, {})  # beyond float's range: as infinite
+    (root / "d" / "metrics.json").write_text('{"eval/return_ratio": 1e400, "eval/optimality": ' + "9" * 400 + "}")
+    text = report([root], tmp_path / "out", resamples=200).read_text()
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in text.splitlines() if line.startswith("| ")}
+    header = rows["agent"]
+    ratio, optimality = header.index("return ratio"), header.index("final U/U*")
+    assert rows["dqn"][ratio] == "0.5 (n=1)" and rows["dqn"][optimality] == "-"
+    assert rows["oracle (baseline)"][ratio] == "-"
+    assert rows["random (baseline)"][ratio] == "-" and rows["random (baseline)"][optimality] == "-"
+    table = "\n".join(line for line in text.splitlines() if line.startswith("| ")).lower()
+    assert "nan" not in table and "inf" not in table
+
+
+def test_a_benchmarl_run_is_reported_under_its_algorithm(tmp_path):
+    run = tmp_path / "study" / "benchmarl"
+    write_run(run, "dqn", 0, {"eval/return_ratio": 0.7, "agent": "benchmarl_qmix"})
+    saved = yaml.safe_load((run / "config.yaml").read_text())
+    del saved["agent"]
+    (run / "config.yaml").write_text(yaml.safe_dump(saved))
+    text = report([tmp_path / "study"], tmp_path / "out", resamples=200).read_text()
+    assert "| benchmarl_qmix | **1 (0) < 3** | 0.7 |" in text

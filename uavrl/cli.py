@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import re
+import shlex
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -31,6 +32,9 @@ from uavrl.settings import shown
 Command = Callable[[DictConfig, list], object]
 # settings that moved: an override of the old name says the new one
 RENAMED = MOVED
+# settings that hold a file system path (every command's): a path Hydra's override grammar cannot read unquoted
+# (letters beyond ASCII, ~ # & ' ( ) [ ] =) is quoted for it, so a path works as the shell passes it
+PATH_SETTINGS = ("run_dir", "sweep_dir", "resume", "checkpoint", "out_dir")
 
 
 def run_command(
@@ -47,7 +51,7 @@ def run_command(
     a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
     checked before any starts.
     """
-    overrides = sys.argv[1:]
+    overrides = sys.argv[1:] = readable(sys.argv[1:])
     if any(arg.startswith("-") for arg in overrides):
         import hydra
         from hydra.core.hydra_config import HydraConfig
@@ -83,18 +87,92 @@ def run_command(
 SWEEP_FLAGS = ("-m", "--multirun")
 
 
+def hydra_quoted(value: str) -> str:
+    """``value`` as a single-quoted string of Hydra's override grammar (which reads it back unchanged): a quote is
+    escaped, and so are the backslashes before a quote or at the end."""
+    escaped = re.sub(r"(\\*)('|\Z)", lambda m: m.group(1) * 2 + ("\\'" if m.group(2) else ""), value)
+    return f"'{escaped}'"
+
+
+def shell_word(text: str) -> str:
+    """``text`` as one word to paste into a POSIX shell: double quotes where they suffice (``key="'a b'"``), else
+    :func:`shlex.quote`."""
+    if shlex.quote(text) == text:
+        return text
+    key, _, value = text.partition("=")
+    if value and re.fullmatch(r"[\w.+~]+", key) and not re.search(r'["$`\\!]', value):
+        return f'{key}="{value}"'
+    return shlex.quote(text)
+
+
+def typed(setting: str, value) -> str:
+    """The override that sets ``setting`` to the string ``value``, quoted for Hydra when it needs it and for the
+    shell: ``checkpoint='/tmp/my runs/x'``, ``checkpoint="'/tmp/a,b'"``."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    plain = f"{setting}={value}"
+    try:
+        reads_as_typed = OverridesParser.create().parse_override(plain).value() == str(value)
+    except HydraException:
+        reads_as_typed = False
+    return shell_word(plain if reads_as_typed else f"{setting}={hydra_quoted(str(value))}")
+
+
+def readable(args: list[str]) -> list[str]:
+    """The command line's overrides as Hydra's grammar reads them.  A value with a character the grammar refuses
+    unquoted (a letter beyond ASCII, # & ' ; ...), and a path setting's value it cannot read unquoted (also ( ) [ ] =),
+    is quoted for it: it cannot have meant anything else, and the setting's rule then judges it.  An override that
+    stays unreadable is one line."""
+    from antlr4.error.Errors import LexerNoViableAltException
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    parser = OverridesParser.create()
+    readable_args = []
+    for arg in args:
+        key, equals, value = arg.partition("=")
+        if arg.startswith("-") or not equals:  # Hydra's flags and their values
+            readable_args.append(arg)
+            continue
+        try:
+            parser.parse_override(arg)
+        except HydraException as err:
+            if key.lstrip("+~") not in PATH_SETTINGS and not isinstance(err.__cause__, LexerNoViableAltException):
+                raise SystemExit(unreadable(arg, err)) from None
+            try:
+                parser.parse_override(f"{key}={hydra_quoted(value)}")
+            except HydraException as still:  # the setting's name itself
+                raise SystemExit(unreadable(arg, still)) from None
+            arg = f"{key}={hydra_quoted(value)}"
+        readable_args.append(arg)
+    return readable_args
+
+
+def unreadable(arg: str, err: Exception) -> str:
+    reason = str(err).strip().splitlines()[0]
+    return f"error: {arg} cannot be read: {reason} (type setting=value, e.g. agent.episodes=50 or env.grid=[6,6])"
+
+
 def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
     """A sweep's command line without ``sweep_dir``, and that directory made absolute (None when not given), so jobs
     started anywhere agree on it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
     keys = [arg.split("=", 1)[0].lstrip("+~") for arg in overrides]
     if "run_dir" in keys:
         raise SystemExit(
             "error: run_dir is invalid in a sweep (-m): each job runs in <sweep_dir>/<its overrides>/seed=<seed>; "
             "set sweep_dir instead"
         )
-    given = [arg.split("=", 1)[1] for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
+    given = [arg for arg, key in zip(overrides, keys, strict=True) if key == "sweep_dir"]
     rest = [arg for arg, key in zip(overrides, keys, strict=True) if key != "sweep_dir"]
-    return rest, Path(given[-1]).expanduser().resolve() if given else None
+    value = OverridesParser.create().parse_override(given[-1]).value() if given else None
+    if value is None:
+        return rest, None
+    if not isinstance(value, (str, int, float)):  # a sweep over sweep_dir (a,b) or a list
+        raise SystemExit(f"error: {given[-1]} is invalid: give one sweep_dir")
+    return rest, Path(str(value)).expanduser().resolve()
 
 
 def new_sweep_dir() -> Path:
@@ -103,8 +181,7 @@ def new_sweep_dir() -> Path:
 
 
 def sweep_dir_override(sweep_dir: Path) -> str:
-    quoted = str(sweep_dir).replace("\\", "\\\\").replace("'", "\\'")
-    return f"sweep_dir='{quoted}'"
+    return f"sweep_dir={hydra_quoted(str(sweep_dir))}"
 
 
 def claim_job_dir(output_dir: str, seed: int) -> str:

@@ -13,6 +13,14 @@ setting, a PNG of the metrics (agents side by side, the random and oracle
 baselines as reference lines) and one of the learning curves (mean over seeds
 with a 95% bootstrap band).
 
+A run whose files cannot be used (``metrics.json`` or ``config.yaml``
+truncated, empty, not an object, a metric or setting of the wrong type, an
+interpolation ``${...}``) is skipped: one ``warning:`` line on stderr names
+it and why, ``report.md`` lists it, and the other runs are reported.  Saved
+files are read as plain data: YAML without tags or aliases, interpolations
+never resolved.  A NaN, infinite or null metric is missing (``-``, or
+``(n=k)`` beside the seeds that have it), never ``nan``.
+
 Example:
     >>> iqm([1.0, 2.0, 3.0, 4.0, 100.0])
     3.0
@@ -24,13 +32,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
+import shlex
+import stat
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
+import yaml
 
 from uavrl.io import save_text
+from uavrl.settings import SEED, Rule, interval, optional, shown, whole
 
 # the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
 METRICS = {
@@ -84,16 +98,13 @@ def bootstrap_band(curves: np.ndarray, resamples: int = 2_000, seed: int = 0) ->
 @dataclass
 class Run:
     path: Path
-    config: dict  # flat: dotted setting -> value
-    metrics: dict
+    config: dict  # flat: dotted setting -> value, as saved (never resolved)
+    metrics: dict  # metric -> finite float; a NaN, infinite or null metric is missing
+    agent: str  # agent.name, or for a BenchMARL run its metrics' "agent" (benchmarl_<algorithm>)
 
     @property
     def seed(self) -> int:
         return self.config["seed"]
-
-    @property
-    def agent(self) -> str:
-        return self.config["agent.name"]
 
     @property
     def setting(self) -> str:
@@ -124,24 +135,190 @@ def flat(config: dict, prefix: str = "") -> dict:
     return out
 
 
-def find_runs(paths) -> list[Run]:
-    """Every run directory (one holding ``metrics.json``) under ``paths``, in path order."""
-    runs = []
+class DamagedRun(ValueError):
+    """A run directory whose files the report cannot use; the message names the file and why, in one line."""
+
+
+# uavrl's config.yaml and metrics.json hold a few KB: a larger file is not one it wrote, and is not read whole
+MAX_FILE_BYTES = 1 << 20
+NAME = Rule(
+    lambda v: isinstance(v, str) and re.fullmatch(r"[A-Za-z0-9_.+-]+", v) is not None,
+    "it must be a name of letters, digits and _ . + -",
+)
+GRID = Rule(
+    lambda v: isinstance(v, tuple) and len(v) > 0 and all(whole(1).accepts(g) for g in v),
+    "it must be a list of whole numbers >= 1, e.g. [6, 6]",
+)
+# what the report reads of a run's config.yaml: the grouping, the setting's description, the curves' scale
+REQUIRED_SETTINGS: dict[str, Rule] = {
+    "seed": SEED,
+    "env.name": NAME,
+    "env.preset": NAME,
+    "env.grid": GRID,
+    "env.num_uavs": whole(1),
+    "env.max_steps": whole(1),
+    "eval.num_starts": whole(1),
+    "eval.gamma": interval(0.0, 1.0, low_open=True),
+}
+OPTIONAL_SETTINGS: dict[str, Rule] = {
+    "eval.horizon": optional(whole(1), "max(20, 2 (L1 + L2)) steps"),
+    "scenario.name": NAME,
+    "agent.name": NAME,
+}
+
+
+class SavedYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
+    nested aliases expand to billions of values."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
+        return super().compose_node(parent, index)
+
+
+def brief(value) -> str:
+    """A value as typed (:func:`uavrl.settings.shown`), cut to 60 characters for a one-line message."""
+    text = shown(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def kind(value) -> str:
+    return {list: "a list", dict: "an object", str: "a string", bool: "true or false", type(None): "null"}.get(
+        type(value), "a number"
+    )
+
+
+def read_small_text(path: Path) -> str:
+    """The text of a regular file of at most ``MAX_FILE_BYTES`` (a FIFO or device would block or never end)."""
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise DamagedRun(f"{path.name} is not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise DamagedRun(f"{path.name} holds {info.st_size:,} bytes, more than uavrl writes ({MAX_FILE_BYTES:,})")
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DamagedRun(f"{path.name} is not UTF-8 text") from None
+    except OSError as err:
+        raise DamagedRun(f"{path.name} cannot be read ({err.strerror or err})") from None
+
+
+def strings(value):
+    """Every string in a value read from YAML."""
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            yield from strings(item)
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from strings(item)
+
+
+def read_config(path: Path) -> dict:
+    """A saved ``config.yaml``, flat, as written: an interpolation (``${...}``) is refused, never resolved."""
+    text = read_small_text(path)
+    try:
+        data = yaml.load(text, Loader=SavedYamlLoader)
+    except yaml.MarkedYAMLError as err:
+        where = f" at line {err.problem_mark.line + 1}" if err.problem_mark else ""
+        raise DamagedRun(f"config.yaml is not valid YAML ({' '.join(str(err.problem).split())}{where})") from None
+    except RecursionError:
+        raise DamagedRun("config.yaml nests deeper than uavrl ever writes") from None
+    except yaml.YAMLError as err:
+        raise DamagedRun(f"config.yaml is not valid YAML ({' '.join(str(err).split())})") from None
+    if not isinstance(data, dict):
+        raise DamagedRun(f"config.yaml holds {kind(data)}, not a mapping of settings")
+    config = flat(data)
+    for name, value in config.items():
+        if any("${" in text for text in strings(value)):
+            raise DamagedRun(
+                f"config.yaml: {name}={brief(value)} is an interpolation, which uavrl never saves (its configs are "
+                "resolved): not resolved"
+            )
+    return config
+
+
+def read_metrics(path: Path) -> tuple[dict, object]:
+    """The report's metrics of a saved ``metrics.json`` as finite floats (NaN, infinite and null ones left out) and
+    the agent it names."""
+    text = read_small_text(path)
+    if not text.strip():
+        raise DamagedRun("metrics.json is empty")
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise DamagedRun(
+            f"metrics.json is not valid JSON, truncated or damaged ({err.msg} at line {err.lineno})"
+        ) from None
+    except RecursionError:
+        raise DamagedRun("metrics.json nests deeper than uavrl ever writes") from None
+    except ValueError as err:  # an integer of over 4,300 digits
+        raise DamagedRun(f"metrics.json cannot be read ({str(err).split(':')[0]})") from None
+    if not isinstance(data, dict):
+        raise DamagedRun(f"metrics.json holds {kind(data)}, not an object of metrics")
+    if not any(name in data for name in METRICS):
+        raise DamagedRun(f"metrics.json holds none of the report's metrics ({', '.join(METRICS)})")
+    metrics = {}
+    for name in (*METRICS, "eval/sum_utility"):
+        value = data.get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise DamagedRun(f"metrics.json: {name}={brief(value)} is not a number")
+        try:
+            number = float(value)
+        except OverflowError:  # a JSON integer beyond float's range
+            continue
+        if math.isfinite(number):
+            metrics[name] = number
+    return metrics, data.get("agent")
+
+
+def checked(config: dict, rules: dict[str, Rule], required: bool) -> None:
+    for name, rule in rules.items():
+        if name not in config:
+            if required:
+                raise DamagedRun(f"config.yaml has no {name} (not the config.yaml of a uavrl run)")
+            continue
+        if not rule.accepts(config[name]):
+            raise DamagedRun(f"config.yaml: {name}={brief(config[name])} is invalid: {rule.allowed}")
+
+
+def load_run(run_dir: Path) -> Run:
+    """The run in ``run_dir``; :class:`DamagedRun` when its files cannot be used."""
+    metrics, named_agent = read_metrics(run_dir / "metrics.json")
+    config = read_config(run_dir / "config.yaml")
+    checked(config, REQUIRED_SETTINGS, required=True)
+    checked(config, OPTIONAL_SETTINGS, required=False)
+    agent = config.get("agent.name", named_agent)
+    if not NAME.accepts(agent):
+        where = "metrics.json: agent" if "agent.name" not in config else "config.yaml: agent.name"
+        raise DamagedRun(f"{where}={brief(agent)} is invalid: {NAME.allowed}")
+    return Run(run_dir, config, metrics, agent)
+
+
+def find_runs(paths) -> tuple[list[Run], list[tuple[Path, str]]]:
+    """Every run directory (one holding ``metrics.json`` and ``config.yaml``) under ``paths``, in path order, and
+    those skipped with why."""
+    runs, skipped = [], []
     for given in paths:
         given = Path(given)
         if not given.is_dir():
-            raise FileNotFoundError(f"{given}: no such directory (give run directories or sweep directories)")
+            raise FileNotFoundError(
+                f"{shlex.quote(str(given))}: no such directory (give run directories or sweep directories)"
+            )
         for metrics_file in sorted(given.rglob("metrics.json")):
             run_dir = metrics_file.parent
             if not (run_dir / "config.yaml").exists():
                 continue  # not a run directory of uavrl.train
-            config = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml"), resolve=True)
-            runs.append(Run(run_dir, flat(config), json.loads(metrics_file.read_text())))
-    if not runs:
-        raise FileNotFoundError(
-            f"no run directory (with metrics.json and config.yaml) under {', '.join(map(str, paths))}"
-        )
-    return runs
+            try:
+                runs.append(load_run(run_dir))
+            except DamagedRun as err:
+                skipped.append((run_dir, str(err)))
+    return runs, skipped
 
 
 def differing(runs: list[Run], keep) -> list[str]:
@@ -298,7 +475,7 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
         ax.set_xticks(range(len(learners)), [c.agent for c in learners], rotation=20, ha="right")
         ax.set_xlim(-0.6, max(len(learners), 1) - 0.4)
         ax.set_title(METRICS[metric], fontsize=10)
-        if baselines and ax is axes[0][0]:
+        if baselines and ax is axes[0][0] and ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8, loc="best")
     figure.suptitle(f"{label}: mean and 95% bootstrap CI over seeds (grey: seeds; lines: baselines)", fontsize=10)
     return save_figure(figure, out / f"{file_stem(label)}_metrics.png")
@@ -307,7 +484,12 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
 def eval_horizon(run: Run) -> int:
     """The evaluation's steps per rollout (``eval.horizon``, default ``max(20, 2 (L1 + L2))`` as in
     ``uavrl.evaluation.default_horizon``)."""
-    return run.config["eval.horizon"] or max(20, 2 * sum(run.config["env.grid"]))
+    return run.config.get("eval.horizon") or max(20, 2 * sum(run.config["env.grid"]))
+
+
+def evaluated_utility_per_step(run: Run) -> float | None:
+    utility = run.metrics.get("eval/sum_utility")
+    return None if utility is None else utility / eval_horizon(run)
 
 
 def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path | None:
@@ -321,7 +503,7 @@ def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path |
         ax.plot(steps, values.mean(axis=0), color=f"C{x}", label=f"{cell.agent} ({len(values)} seeds)")
         if not np.isnan(low).all():
             ax.fill_between(steps, low, high, color=f"C{x}", alpha=0.25)
-    baseline_lines(ax, cells, lambda run: run.metrics["eval/sum_utility"] / eval_horizon(run))  # evaluated, per step
+    baseline_lines(ax, cells, evaluated_utility_per_step)
     ax.set_xlabel("team steps")
     ax.set_ylabel("utility per step (bit/s/Hz)")
     ax.legend(fontsize=8, loc="best")
@@ -336,7 +518,15 @@ def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path |
 def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     """Write ``report.md`` and the figures to ``out``; returns the path of ``report.md``."""
     out = Path(out)
-    runs = find_runs(paths)
+    runs, skipped = find_runs(paths)
+    for run_dir, why in skipped:
+        print(f"warning: skipped {shlex.quote(str(run_dir))}: {why}", file=sys.stderr)
+    if not runs:
+        damaged = f" ({len(skipped)} with damaged files, skipped)" if skipped else ""
+        raise FileNotFoundError(
+            f"no run directory (with metrics.json and config.yaml) under {' '.join(shlex.quote(str(p)) for p in paths)}"
+            f"{damaged}"
+        )
     cells = group(runs)
     lines = [
         "# Study report",
@@ -356,6 +546,8 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
         if curve_figure is not None:
             lines += ["", f"![{label}: learning curves]({curve_figure.name})"]
     lines += ["", "Runs:", "", *(f"- `{run.path}`" for cell in cells.values() for c in cell for run in c.runs)]
+    if skipped:
+        lines += ["", "Skipped (their files cannot be used):", "", *(f"- `{path}`: {why}" for path, why in skipped)]
     path = out / "report.md"
     save_text("\n".join(lines) + "\n", path)
     return path

@@ -53,7 +53,6 @@ PAPER_LEARNER = dict(
     epsilon=0.1,
     shared_table=False,
     backend="numba",
-    memory_budget=4 * 2**30,
 )
 # how the model's options are typed on this command line
 OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
@@ -61,6 +60,31 @@ OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
 
 def steps_per_episode(size: int, cfg: DictConfig) -> int:
     return int(cfg.steps or PAPER_STEPS[size])
+
+
+def grid_model(size: int, cfg: DictConfig):
+    """The model of the protocol on a ``size x size`` grid."""
+    shape = dict(grid=(size, size), num_uavs=int(cfg.num_uavs), max_steps=steps_per_episode(size, cfg))
+    return make_config("paper", **shape, state_includes_tasks=bool(cfg.state_includes_tasks))
+
+
+def check_memory(cfg: DictConfig) -> None:
+    """The learner's tables (one Q table per run) of every grid to run within ``memory_budget``, before any is
+    built; the refusal says how many runs fit."""
+    from uavrl.agents.tabular import table_bytes
+
+    sizes = [int(cfg.figure_grid)] if cfg.command == "figures" else [int(g) for g in cfg.grids]
+    for size in sizes:
+        model = grid_model(size, cfg)
+        need = table_bytes(model, int(cfg.runs))
+        if need > cfg.memory_budget:
+            per_run = table_bytes(model, 2) - table_bytes(model, 1)
+            fit = max(0, int((cfg.memory_budget - table_bytes(model, 0)) // per_run))
+            raise ValueError(
+                f"runs={cfg.runs} is invalid on the {size}x{size} grid: its Q tables would need {need:,} bytes "
+                f"({need / 2**30:.3g} GiB), over memory_budget={int(cfg.memory_budget)} bytes; give runs={fit} "
+                f"or fewer, or raise memory_budget (e.g. memory_budget={need})"
+            )
 
 
 def variant(cfg: DictConfig) -> dict:
@@ -89,8 +113,7 @@ def check_settings(cfg: DictConfig) -> None:
         if not cfg.steps and size not in PAPER_STEPS:
             reason = f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<per episode>"
             raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
-        shape = dict(grid=(size, size), num_uavs=cfg.num_uavs, max_steps=steps_per_episode(size, cfg))
-        make_config("paper", **shape, state_includes_tasks=cfg.state_includes_tasks)
+        grid_model(size, cfg)
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
@@ -134,15 +157,15 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
-    model = make_config(
-        "paper",
-        grid=(size, size),
-        num_uavs=int(cfg.num_uavs),
-        max_steps=steps,
-        state_includes_tasks=bool(cfg.state_includes_tasks),
-    )
+    model = grid_model(size, cfg)
     built = time.perf_counter()
-    settings = OmegaConf.create({"agent": {**PAPER_LEARNER, "episodes": int(cfg.episodes), "runs": int(cfg.runs)}})
+    learner = {
+        **PAPER_LEARNER,
+        "memory_budget": cfg.memory_budget,
+        "episodes": int(cfg.episodes),
+        "runs": int(cfg.runs),
+    }
+    settings = OmegaConf.create({"agent": learner})
     agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced
@@ -354,6 +377,7 @@ def reproduce(cfg: DictConfig, _overrides=()) -> None:
     torch.set_num_threads(int(cfg.num_threads))
     use_workqueue_threads()  # before numba launches its threads
     numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
+    check_memory(cfg)
     (table2 if cfg.command == "table2" else figures)(cfg)
 
 

@@ -182,6 +182,7 @@ class ReproduceSchema:
     progress: bool = True
     num_threads: int = 1
     numba_threads: int = 0
+    memory_budget: REAL = 4 * 2**30
 
 
 AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}

@@ -161,6 +161,7 @@ REPRODUCE_SETTINGS: dict[str, Rule] = {
     "progress": flag(),
     "num_threads": whole(1),
     "numba_threads": whole(0),
+    "memory_budget": positive(),
 }
 
 

@@ -16,6 +16,7 @@ after its checks.
 from __future__ import annotations
 
 import random
+import shlex
 import sys
 import time
 from datetime import datetime
@@ -24,7 +25,7 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
-from uavrl.cli import run_command
+from uavrl.cli import run_command, typed
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import claim_dir, remove_orphans, save_json, save_text
 from uavrl.settings import RUN_SETTINGS, check, check_scenario
@@ -208,8 +209,8 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"{within:.0%} of starts within 1% of U*)",
             yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
-            f"look at it: tensorboard --logdir {run_dir}   "
-            f"evaluate it again: python -m uavrl.evaluate checkpoint={run_dir}",
+            f"look at it: tensorboard --logdir {shlex.quote(str(run_dir))}   "
+            f"evaluate it again: python -m uavrl.evaluate {typed('checkpoint', run_dir)}",
         ]
     )
 
