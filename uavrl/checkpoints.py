@@ -76,9 +76,10 @@ def read_torch(path: Path):
         if name is not None:
             raise ForeignObjects(f"it holds objects uavrl does not write ({name})") from None
         with open(path, "rb") as f:
-            kind = "truncated or damaged" if f.read(2) == b"PK" else "not a torch file"
+            torch_file = f.read(2) == b"PK" or isinstance(err, EOFError)  # a zip, or a pickle that ends too soon
+        kind = "truncated or damaged" if torch_file else "not a torch file"
         detail = _weights_only_detail(err) or " ".join(str(err).split()).split(". ")[0]
-        raise CheckpointError(f"{kind} ({type(err).__name__}: {detail})") from None
+        raise CheckpointError(f"{kind} ({type(err).__name__}{': ' + detail if detail else ''})") from None
 
 
 def _refused_global(err: Exception) -> str | None:

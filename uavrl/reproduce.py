@@ -287,12 +287,15 @@ def read_history(path: Path, size: int) -> dict:
     """
     import torch
 
-    from uavrl.checkpoints import CheckpointError, read_torch
+    from uavrl.checkpoints import CheckpointError, ForeignObjects, read_torch
 
     again = f"delete it and run this command again (it then runs the {size}x{size} protocol first)"
     shown_path = shlex.quote(str(path))
     try:
         record = read_torch(path)
+    except ForeignObjects as err:
+        refused = "it is not a uavrl file, or it was altered; refused, and nothing in it was run"
+        raise ValueError(f"{shown_path}: {err}: {refused}; {again}") from None
     except CheckpointError as err:
         raise ValueError(f"{shown_path}: {err}: not a history file uavrl wrote, or a damaged one; {again}") from None
     history = record.get("history") if isinstance(record, dict) else None
