@@ -10,6 +10,7 @@ import importlib.util
 import json
 import os
 import pickle
+import random
 import runpy
 import shlex
 import shutil
@@ -127,7 +128,9 @@ def files(runs, tmp_path_factory):
     shutil.copytree(tabular, root / "prev_only")
     (root / "prev_only" / "checkpoint.pt").unlink()
     out["repro_payload"] = reproduction(root, "repro_payload", lambda p: torch.save({"history": Payload(marker)}, p))
-    out["repro_garbage"] = reproduction(root, "repro_garbage", lambda p: p.write_bytes(os.urandom(2000)))
+    out["repro_garbage"] = reproduction(
+        root, "repro_garbage", lambda p: p.write_bytes(random.Random(0).randbytes(2000))
+    )
     out["repro_pickle"] = reproduction(root, "repro_pickle", lambda p: p.write_bytes(pickle.dumps({"history": 1})))
     out["repro_eof"] = reproduction(
         root, "repro_eof", lambda p: p.write_bytes(_legacy_torch_file({"history": {"a": torch.zeros(9)}})[:40])
