@@ -27,7 +27,8 @@ CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"
 _ENTRIES = ("agent", "iteration", "config")  # what every uavrl checkpoint holds
 # A DQN checkpoint of an earlier version holds its replay buffer as a TensorDict, pickled as a call of the first
-# name on the second; both names stand for _stored_tensordict, which rebuilds a plain TensorDict of what was read.
+# name on the second and the stored entries; read, they stand for _stored_tensordict and _tensordict_class, which
+# rebuild a plain TensorDict of those entries and run nothing else.
 _TENSORDICT_NAMES = ("tensordict._reductions._make_td", "tensordict._td.TensorDict")
 
 
@@ -68,7 +69,7 @@ def read_torch(path: Path):
             except pickle.UnpicklingError as err:
                 if _refused_global(err) not in _TENSORDICT_NAMES:
                     raise
-                names = [(_stored_tensordict, _TENSORDICT_NAMES[0]), (_not_called, _TENSORDICT_NAMES[1])]
+                names = [(_stored_tensordict, _TENSORDICT_NAMES[0]), (_tensordict_class, _TENSORDICT_NAMES[1])]
                 with torch.serialization.safe_globals(names):
                     return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # any failure to unpickle means an unreadable file, whatever the library raises
@@ -94,7 +95,8 @@ def _weights_only_detail(err: Exception) -> str | None:
     return " ".join(found.group(1).split()) if found else None
 
 
-def _not_called(*args, **kwargs):
+def _tensordict_class(*args, **kwargs):
+    """The TensorDict class in a stored pickle: only :func:`_stored_tensordict` takes it; calling it fails."""
     raise ValueError("a TensorDict is rebuilt from its stored entries only")
 
 
@@ -102,7 +104,7 @@ def _stored_tensordict(kind, state):
     """The TensorDict that an earlier version's checkpoint pickled: its entries and batch size, nothing else."""
     from tensordict import TensorDict
 
-    if kind is not _not_called or not isinstance(state, dict) or not isinstance(state.get("_tensordict"), dict):
+    if kind is not _tensordict_class or not isinstance(state, dict) or not isinstance(state.get("_tensordict"), dict):
         raise ValueError("not a TensorDict that uavrl writes")
     return TensorDict(state["_tensordict"], batch_size=state.get("_batch_size"), device=state.get("_device"))
 
