@@ -118,6 +118,7 @@ def files(runs, tmp_path_factory):
     out["no_agent"] = changed(root, "no_agent", tabular, lambda s: s["config"].pop("agent"))
     out["agent_list"] = changed(root, "agent_list", tabular, lambda s: s.update(agent=[1, 2]))
     out["agent_text"] = changed(root, "agent_text", tabular, lambda s: s.update(agent={"q": "abc", "episode": 1}))
+    out["dqn_no_hidden"] = changed(root, "dqn_no_hidden", runs["dqn"], lambda s: s["config"]["agent"].pop("hidden"))
     out["no_rng"] = changed(root, "no_rng", tabular, lambda s: s.pop("torch_rng"))
     out["seed_abc"] = changed(root, "seed_abc", tabular, lambda s: s["config"].update(seed="abc"))
     out["interpolation"] = changed(
@@ -173,6 +174,8 @@ CLI_CASES = [
     ("evaluate checkpoint={agent_list}", "its agent is a list, not a dict"),
     ("evaluate checkpoint={agent_text}", "checkpoint.pt: its agent state does not fit a tabular agent"),
     ("train resume={agent_text}", "checkpoint.pt: its agent state does not fit a tabular agent"),
+    ("evaluate checkpoint={dqn_no_hidden}", "checkpoint.pt: its saved config does not fit a dqn agent"),
+    ("train resume={dqn_no_hidden}", "checkpoint.pt: its saved config does not fit a dqn agent"),
     ("train resume={no_rng}", "checkpoint.pt cannot be resumed: it holds no torch random state (torch_rng: none)"),
     ("evaluate checkpoint={seed_abc}", "checkpoint.pt: in its saved config, seed='abc' is invalid"),
     ("train resume={seed_abc}", "checkpoint.pt: in its saved config, seed='abc' is invalid"),

@@ -15,7 +15,14 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from uavrl.checkpoints import CheckpointError, checkpoint_files, load_checkpoint, no_checkpoint, restore_agent
+from uavrl.checkpoints import (
+    CheckpointError,
+    checkpoint_files,
+    load_checkpoint,
+    no_checkpoint,
+    restore_agent,
+    saved_agent,
+)
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import save_json
@@ -41,9 +48,6 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     agent from is a one-line CheckpointError naming its file.
     """
     import torch
-    from omegaconf.errors import OmegaConfBaseException
-
-    from uavrl.agents import agent_class
 
     state, file, notes = load_checkpoint(path, setting)
     source = shlex.quote(str(file))
@@ -51,13 +55,7 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
         cfg = saved_config(state["config"], source)
     except ValueError as err:
         raise CheckpointError(str(err)) from None
-    try:
-        agent = agent_class(cfg.agent.name)(model_config(cfg), cfg, torch.device(device), int(cfg.seed))
-    except (OmegaConfBaseException, KeyError, TypeError) as err:
-        reason = " ".join(f"{type(err).__name__}: {err}".split())
-        raise CheckpointError(f"{source}: its saved config does not fit a {cfg.agent.name} agent ({reason})") from None
-    except ValueError as err:
-        raise CheckpointError(f"{source}: in its saved config, {err}") from None
+    agent = saved_agent(cfg, model_config(cfg), torch.device(device), file)
     restore_agent(agent, state, file, cfg.agent.name)
     fallback = f"{'; '.join(notes)}: using {source} (iteration {state['iteration']})" if notes else None
     return agent, cfg, fallback

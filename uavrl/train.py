@@ -34,6 +34,7 @@ from uavrl.checkpoints import (
     no_checkpoint,
     restore_agent,
     run_directory,
+    saved_agent,
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
@@ -134,7 +135,10 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     device = resolve_device(cfg.device)
     env_cfg = model_config(cfg)
     seed_everything(int(cfg.seed))
-    agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
+    if checkpoint is None:
+        agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
+    else:
+        agent = saved_agent(cfg, env_cfg, device, checkpoint_file)
     run_dir = new_run_dir(cfg)
     start = 0
     if checkpoint is not None:
