@@ -33,6 +33,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from uavrl.agents.base import Agent
+from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
 from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
 from uavrl.envs.exact import fixed_layout_tables
@@ -43,7 +44,11 @@ UP, DOWN, LEFT, RIGHT, SENSE = range(5)
 
 
 class RandomPolicy(TensorDictModuleBase):
-    """Uniform random per-UAV actions among those the ``action_mask`` allows, from its own seeded generator."""
+    """Uniform random per-UAV actions among those the ``action_mask`` allows, from its own seeded generator.
+
+    It acts in any environment; ``RandomAgent.policies`` wraps it in a
+    :class:`~uavrl.agents.env_check.CheckedPolicy`, as every policy of a run.
+    """
 
     in_keys = [("agents", "action_mask")]
     out_keys = [("agents", "action")]
@@ -63,8 +68,9 @@ class OraclePolicy(TensorDictModuleBase):
     """Drives each world's team to an optimal configuration along a valid, collision-free plan (module doc).
 
     Fixed layouts need only ``cfg``.  With ``layout="random"`` the oracle reads
-    each world's layout from the environment it acts in: give ``env=`` (or set
-    ``policy.env``) before the rollout.
+    each world's layout from the environment it acts in: give ``env=`` (or call
+    ``bind_env``) before the rollout.  It acts only in environments of ``cfg``'s
+    grid, number of UAVs and layout (:mod:`uavrl.agents.env_check`).
     """
 
     in_keys = ["positions", "tasks"]
@@ -72,14 +78,19 @@ class OraclePolicy(TensorDictModuleBase):
 
     def __init__(self, cfg: ModelConfig, env=None):
         super().__init__()
-        self.cfg, self.env = cfg, env
+        self.cfg, self.env, self.run_env = cfg, None, RunEnvironment(cfg)
+        if env is not None:
+            self.bind_env(env)
         self.neighbours = grid_neighbours(cfg.grid).tolist()
         self._targets: dict[int, tuple] = {}  # world -> (its contributions, optimal cells, optimal tasks)
         self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
 
-    def bind_env(self, env) -> None:
-        """Act in ``env`` (the evaluation calls this; with ``layout="random"`` the layouts come from it)."""
+    def bind_env(self, env) -> OraclePolicy:
+        """Act in ``env`` (the evaluation calls this; with ``layout="random"`` the layouts come from it); a one-line
+        ValueError unless it has ``cfg``'s grid, number of UAVs and layout."""
+        self.run_env.check_env(env)
         self.env = env
+        return self
 
     def _layout(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
         if self._fixed is not None:
@@ -101,6 +112,7 @@ class OraclePolicy(TensorDictModuleBase):
         return cached[1], cached[2]
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
+        self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
         cells = cells_of(positions, self.cfg.grid[0]).cpu()
         actions = torch.stack([self._plan(w, cells[w], tasks[w].cpu()) for w in range(len(cells))])
@@ -173,8 +185,8 @@ class BaselineAgent(Agent):
 class RandomAgent(BaselineAgent):
     """``agent=random``: the uniform random policy over allowed per-UAV actions, seeded by ``seed``."""
 
-    def policies(self) -> list[RandomPolicy]:
-        return [RandomPolicy(self.seed)]
+    def policies(self) -> list[CheckedPolicy]:
+        return [CheckedPolicy(RandomPolicy(self.seed), self.env_cfg)]
 
 
 class OracleAgent(BaselineAgent):

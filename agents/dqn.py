@@ -57,6 +57,7 @@ from torchrl.modules import EGreedyModule, MultiAgentMLP, QMixer, QValueModule, 
 from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
+from uavrl.agents.env_check import CheckedPolicy
 from uavrl.compat import load_buffer_state, make_collector, written_into
 from uavrl.envs import (
     NODE_FEATURES,
@@ -575,9 +576,10 @@ class DQNAgent(Agent):
         self.target_update.step()
         return loss.detach()
 
-    def policies(self) -> list[TensorDictSequential]:
-        """The greedy policy: reads the env's keys, writes ``("agents", "action")``."""
-        return [self.greedy]
+    def policies(self) -> list[CheckedPolicy]:
+        """The greedy policy: reads the env's keys, writes ``("agents", "action")``, in environments of the run's grid,
+        number of UAVs and layout only."""
+        return [CheckedPolicy(self.greedy, self.env_cfg)]
 
     def state_dict(self) -> dict:
         """Networks with their targets, optimizer, exploration, replay buffer, RNG and progress."""

@@ -2,6 +2,7 @@
 
 import os
 import random
+import shlex
 
 import pytest
 import torch
@@ -41,7 +42,7 @@ def run(compose_cfg, interrupt_at):
 
 
 def load(path):
-    return torch.load(path, weights_only=False)
+    return torch.load(path, weights_only=True)
 
 
 @pytest.mark.parametrize("corruption", CORRUPTIONS)
@@ -70,7 +71,7 @@ def test_no_readable_checkpoint_is_one_line_naming_each_file(run, tmp_path):
         with pytest.raises(CheckpointError) as err:
             run(tmp_path)
         message = str(err.value)
-        assert "\n" not in message and f"resume={str(tmp_path)!r}" in message, message
+        assert "\n" not in message and f"resume={shlex.quote(str(tmp_path))}" in message, message
         assert "checkpoint.pt: empty file" in message and "checkpoint.prev.pt: not a torch file" in message, message
 
 

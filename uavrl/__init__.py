@@ -14,13 +14,23 @@ def load_policy(run_dir, device="cpu", run: int = 0):
         env = UAVSpectrumEnv(batch_size=64, config=env_config)
         td = env.rollout(40, policy)
 
-    The oracle with ``layout="random"`` reads the layouts from the environment
-    it acts in: call ``policy.bind_env(env)`` first.
+    The policy acts only in environments of its run's grid, number of UAVs
+    and layout: ``policy.bind_env(env)`` checks an environment (the oracle
+    with ``layout="random"`` reads the layouts from it, so call it first), and
+    every tensordict the policy gets is checked too (a ValueError in one line).
+
+    Reading the run executes nothing its files hold (``weights_only`` loads): a
+    file holding objects uavrl does not write is refused.  When ``checkpoint.pt``
+    is missing or unreadable, a warning names the file and iteration used instead.
     """
+    import warnings
+
     from uavrl.config import model_config
     from uavrl.evaluate import load_agent
 
-    agent, cfg = load_agent(run_dir, device)
+    agent, cfg, fallback = load_agent(run_dir, device, setting="run_dir")
+    if fallback:
+        warnings.warn(fallback, stacklevel=2)
     policies = agent.policies()
     if not 0 <= run < len(policies):
         raise ValueError(

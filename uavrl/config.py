@@ -51,9 +51,33 @@ MOVED = {
 }
 
 
-def saved_config(saved: dict) -> DictConfig:
-    """The config a run directory saved, with the settings of earlier versions moved to where they live now."""
-    cfg = OmegaConf.create(saved)
+def saved_config(saved: dict, source: str = "the saved run") -> DictConfig:
+    """The config a run directory saved, with the settings of earlier versions moved to where they live now.
+
+    ``source`` (the file it came from) begins the one-line ValueError for a
+    config no version of uavrl wrote: one without an ``agent`` or ``env``
+    section, one with an interpolation (uavrl saves configs resolved, so
+    nothing a saved file names, ``${oc.env:...}`` among them, is looked up), a
+    setting outside its rule (:mod:`uavrl.settings`) or the model's.
+    """
+    from omegaconf.errors import OmegaConfBaseException
+
+    from uavrl.envs.config import InvalidOption
+    from uavrl.settings import RUN_SETTINGS, check
+
+    for name, value in _settings_of(saved):
+        if isinstance(value, str) and "${" in value:
+            raise ValueError(
+                f"{source}: its saved setting {name}={value!r} is an interpolation, and uavrl saves resolved configs: "
+                "not a uavrl run"
+            )
+    for section in ("agent", "env"):
+        if not isinstance(saved.get(section), dict):
+            raise ValueError(f"{source}: its config has no {section} section: not a run config of this uavrl")
+    try:
+        cfg = OmegaConf.create(saved)
+    except OmegaConfBaseException as err:
+        raise ValueError(f"{source}: its config is not a uavrl run config ({' '.join(str(err).split())})") from None
     for old, new in MOVED.items():
         value = OmegaConf.select(cfg, old)
         if value is not None and OmegaConf.select(cfg, new) is None:
@@ -61,7 +85,25 @@ def saved_config(saved: dict) -> DictConfig:
         if value is not None:
             group, key = old.split(".")
             del cfg[group][key]
+    try:
+        check(cfg, RUN_SETTINGS)
+        model_config(cfg)
+    except InvalidOption as err:
+        raise ValueError(f"{source}: in its saved config, {err.renamed(RUN_OPTION_SETTINGS)}") from None
+    except ValueError as err:
+        raise ValueError(f"{source}: in its saved config, {err}") from None
     return cfg
+
+
+def _settings_of(saved: dict, prefix: str = ""):
+    """``(dotted name, value)`` of every leaf of a saved config."""
+    for key, value in saved.items():
+        if isinstance(value, dict):
+            yield from _settings_of(value, f"{prefix}{key}.")
+        elif isinstance(value, list):
+            yield from ((f"{prefix}{key}[{i}]", item) for i, item in enumerate(value))
+        else:
+            yield f"{prefix}{key}", value
 
 
 def flat_hparams(cfg: DictConfig) -> dict:

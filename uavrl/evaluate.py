@@ -9,12 +9,20 @@ the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from pathlib import Path
 
 from omegaconf import DictConfig
 
-from uavrl.checkpoints import CheckpointError, load_checkpoint
+from uavrl.checkpoints import (
+    CheckpointError,
+    checkpoint_files,
+    load_checkpoint,
+    no_checkpoint,
+    restore_agent,
+    saved_agent,
+)
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import save_json
@@ -27,27 +35,30 @@ def check_settings(cfg: DictConfig) -> None:
     check(cfg, RUN_SETTINGS)
     if not cfg.checkpoint:
         raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
-    if not Path(cfg.checkpoint).exists():
-        raise FileNotFoundError(f"checkpoint={cfg.checkpoint!r} does not exist (give checkpoint.pt or a run directory)")
+    if not checkpoint_files(cfg.checkpoint):
+        raise FileNotFoundError(no_checkpoint(cfg.checkpoint, "checkpoint"))
 
 
-def load_agent(path, device="cpu"):
-    """``(agent, saved config)`` from a ``checkpoint.pt`` or the run directory holding one."""
+def load_agent(path, device="cpu", setting: str = "checkpoint"):
+    """``(agent, saved config, fallback)`` from a ``checkpoint.pt`` or the run directory holding one (``setting=path``).
+
+    ``fallback`` is None when the newest checkpoint was read, else one line
+    saying which newer files were missing or unreadable and which file and
+    iteration were used instead.  A checkpoint this uavrl cannot rebuild an
+    agent from is a one-line CheckpointError naming its file.
+    """
     import torch
 
-    from uavrl.agents import agent_class
-
-    state, file, skipped = load_checkpoint(path, "checkpoint")
-    if skipped:
-        print(f"warning: {'; '.join(skipped)}: evaluating {file} (iteration {state['iteration']})", file=sys.stderr)
-    cfg = saved_config(state["config"])
-    agent = agent_class(cfg.agent.name)(model_config(cfg), cfg, torch.device(device), int(cfg.seed))
+    state, file, notes = load_checkpoint(path, setting)
+    source = shlex.quote(str(file))
     try:
-        agent.load_state_dict(state["agent"])
-    except (KeyError, RuntimeError, ValueError) as err:
-        agent_kind, reason = f"a {cfg.agent.name} agent of this uavrl", f"{type(err).__name__}: {err}"
-        raise CheckpointError(f"{file}: its agent state does not fit {agent_kind} ({reason})") from None
-    return agent, cfg
+        cfg = saved_config(state["config"], source)
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
+    agent = saved_agent(cfg, model_config(cfg), torch.device(device), file)
+    restore_agent(agent, state, file, cfg.agent.name)
+    fallback = f"{'; '.join(notes)}: using {source} (iteration {state['iteration']})" if notes else None
+    return agent, cfg, fallback
 
 
 def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
@@ -59,7 +70,9 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
 
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
-    agent, saved = load_agent(cfg.checkpoint, device)
+    agent, saved, fallback = load_agent(cfg.checkpoint, device)
+    if fallback:
+        print(f"warning: {fallback}", file=sys.stderr)
     metrics = evaluate_agent(agent, model_config(saved), **eval_settings(cfg, device))
     out_dir = Path(cfg.checkpoint) if Path(cfg.checkpoint).is_dir() else Path(cfg.checkpoint).parent
     save_json(metrics, out_dir / "eval.json")

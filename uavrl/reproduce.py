@@ -21,6 +21,7 @@ directory; one that holds another variant is refused unless ``overwrite=true``
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import sys
 import time
@@ -297,6 +298,44 @@ def table2(cfg: DictConfig) -> list[dict]:
     return rows
 
 
+# what run_grid saves beside the per-episode metrics
+HISTORY_ENTRIES = ("grid", "steps_per_episode", "num_uavs", "runs", "episodes", "seed", "state_includes_tasks")
+
+
+def read_history(path: Path, size: int) -> dict:
+    """The per-episode metrics that :func:`run_grid` saved to ``path``, read without running anything it holds.
+
+    A damaged file, or one that uavrl did not write, is a one-line ValueError
+    naming it and saying what to do.
+    """
+    import torch
+
+    from uavrl.checkpoints import CheckpointError, ForeignObjects, read_torch
+
+    again = f"delete it and run this command again (it then runs the {size}x{size} protocol first)"
+    shown_path = shlex.quote(str(path))
+    try:
+        record = read_torch(path)
+    except ForeignObjects as err:
+        refused = "it is not a uavrl file, or it was altered; refused, and nothing in it was run"
+        raise ValueError(f"{shown_path}: {err}: {refused}; {again}") from None
+    except CheckpointError as err:
+        raise ValueError(f"{shown_path}: {err}: not a history file uavrl wrote, or a damaged one; {again}") from None
+    history = record.get("history") if isinstance(record, dict) else None
+    if not isinstance(history, dict):
+        raise ValueError(f"{shown_path} is not a history file of this uavrl (no 'history'); {again}")
+    missing = [key for key in HISTORY_ENTRIES if key not in record]
+    if missing:
+        raise ValueError(f"{shown_path} is not a history file of this uavrl (no {', '.join(missing)}); {again}")
+    curves = [history.get(key) for key in METRICS]
+    if not all(torch.is_tensor(c) and c.dim() == 2 and c.is_floating_point() for c in curves) or (
+        len({c.shape for c in curves}) != 1
+    ):
+        what = f"its history is not the [episodes, runs] curves of {', '.join(METRICS)}"
+        raise ValueError(f"{shown_path} is not a history file of this uavrl ({what}); {again}")
+    return record
+
+
 def figures(cfg: DictConfig) -> list[Path]:
     import matplotlib
     import torch
@@ -312,7 +351,7 @@ def figures(cfg: DictConfig) -> list[Path]:
         print(f"no {size}x{size} data in {out_dir}: running {protocol} first", file=sys.stderr)
         claim(out_dir, cfg)
         run_grid(size, cfg, out_dir)
-    record = torch.load(path, weights_only=False)
+    record = read_history(path, size)
     history = record["history"]
     episodes = torch.arange(1, history["sum_utility"].shape[0] + 1)
     state = "location and tasks" if record["state_includes_tasks"] else "joint location (the paper's)"

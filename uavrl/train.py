@@ -24,7 +24,18 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
+from uavrl.checkpoints import (
+    CHECKPOINT,
+    CheckpointError,
+    CheckpointWriter,
+    check_resumable,
+    checkpoint_files,
+    load_checkpoint,
+    no_checkpoint,
+    restore_agent,
+    run_directory,
+    saved_agent,
+)
 from uavrl.cli import run_command, typed
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import claim_dir, remove_orphans, save_json, save_text
@@ -39,8 +50,8 @@ def check_settings(cfg: DictConfig) -> None:
     check(cfg, RUN_SETTINGS)
     check_scenario(cfg)
     model_config(cfg)
-    if cfg.resume and not checkpoint_files(cfg.resume):
-        raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory)")
+    if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
+        raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
         advice = f"continue it with resume={cfg.run_dir}, or pick another run_dir"
         raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a run: {advice}")
@@ -73,18 +84,23 @@ def new_run_dir(cfg: DictConfig) -> Path:
     return claim_dir(Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S"))
 
 
-def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
-    """The saved config and newest readable checkpoint of ``cfg.resume``, and whether it is the newest file.
+def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, bool]:
+    """The saved config and newest readable checkpoint of ``cfg.resume`` (a run directory or its ``checkpoint.pt``),
+    that checkpoint's file, and whether it is the newest file.
 
     Explicit overrides must agree with the saved run.
     """
-    run_dir = Path(cfg.resume)
+    run_dir = run_directory(cfg.resume, "resume")
     remove_orphans(run_dir / CHECKPOINT)
     checkpoint, file, skipped = load_checkpoint(run_dir, "resume")
     if skipped:
         iteration = checkpoint["iteration"]
         print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
-    saved = saved_config(checkpoint["config"])
+    check_resumable(checkpoint, file)
+    try:
+        saved = saved_config(checkpoint["config"], shlex.quote(str(file)))
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
     for override in overrides:
         key = override.split("=", 1)[0].lstrip("+~")
         if key.split(".")[0] in RESUMABLE_OVERRIDES:
@@ -96,9 +112,9 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, bool]:
             )
     for key in RESUMABLE_OVERRIDES:
         saved[key] = cfg[key]
-    saved.run_dir = str(run_dir)
+    saved.resume = saved.run_dir = str(run_dir)
     check(saved, RUN_SETTINGS)
-    return saved, checkpoint, not skipped
+    return saved, checkpoint, file, not skipped
 
 
 def train(cfg: DictConfig, overrides=()) -> Path:
@@ -114,16 +130,19 @@ def train(cfg: DictConfig, overrides=()) -> Path:
 
     checkpoint, newest_is_readable = None, True
     if cfg.resume:
-        cfg, checkpoint, newest_is_readable = resumed_config(cfg, overrides)
+        cfg, checkpoint, checkpoint_file, newest_is_readable = resumed_config(cfg, overrides)
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
     env_cfg = model_config(cfg)
     seed_everything(int(cfg.seed))
-    agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
+    if checkpoint is None:
+        agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
+    else:
+        agent = saved_agent(cfg, env_cfg, device, checkpoint_file)
     run_dir = new_run_dir(cfg)
     start = 0
     if checkpoint is not None:
-        agent.load_state_dict(checkpoint["agent"])
+        restore_agent(agent, checkpoint, checkpoint_file, cfg.agent.name)
         torch.set_rng_state(checkpoint["torch_rng"])
         start = int(checkpoint["iteration"])
     resolved = OmegaConf.to_container(cfg, resolve=True)

@@ -6,6 +6,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from uavrl.agents.env_check import RunEnvironment
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
@@ -16,6 +17,8 @@ class TabularPolicy(TensorDictModuleBase):
     """Greedy valid joint action from a Q table ``[S, 6^N]``, as a TorchRL policy (:mod:`.greedy` in plain torch).
 
     Reads ``state_index`` and ``positions``; writes ``("agents", "action")``.
+    It acts only in environments of ``cfg``'s grid, number of UAVs and layout
+    (:mod:`uavrl.agents.env_check`).
     Ties are broken uniformly at random (SPEC section 6) from the policy's own
     generator seeded ``seed``, so a rollout is reproducible.
 
@@ -37,8 +40,15 @@ class TabularPolicy(TensorDictModuleBase):
         self.register_buffer("neighbours", grid_neighbours(cfg.grid, q.device))
         self.register_buffer("actions", decode_joint_actions(cfg.num_uavs, q.device))
         self.generator = torch.Generator(device=q.device).manual_seed(seed)
+        self.run_env = RunEnvironment(cfg)
+
+    def bind_env(self, env) -> TabularPolicy:
+        """Act in ``env``: a one-line ValueError unless it has the table's grid, number of UAVs and layout."""
+        self.run_env.check_env(env)
+        return self
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
+        self.run_env.check(td)
         positions = td.get("positions").to(self.q.device)
         cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
         values = self.q[td.get("state_index").to(self.q.device)]

@@ -1,0 +1,149 @@
+"""The environments a trained policy may act in: those of its run's grid, number of UAVs and layout.
+
+A table or network learned on a 6x6 grid reads the positions and observations
+of a 5x5 grid without any error (same shapes), and acts on a model it never
+saw.  So the policies of a run (``uavrl.load_policy``, ``Agent.policies``)
+check what they act in, at no per-step cost beyond a shape comparison:
+
+- ``bind_env(env)`` compares the environment's grid, number of UAVs and layout
+  with the run's (the evaluation binds every policy it measures);
+- every tensordict: its number of UAVs;
+- the first tensordicts of each batch shape, until one has a UAV off the
+  first column and one off the first row (at most :data:`FULL_CHECKS`): its
+  positions lie on the run's grid, the observed (x, y) are those positions
+  scaled to the run's grid, the moves that leave the grid are the run's, and
+  for a fixed layout the nodes in ``state`` are the run's.
+
+A mismatch is a ValueError in one line.  :class:`RunEnvironment` holds plain
+numbers and small CPU tensors, so a policy that carries one stays picklable.
+
+Example:
+    >>> from uavrl.envs import UAVSpectrumEnv, make_config
+    >>> run = RunEnvironment(make_config("paper", grid=(6, 6)))
+    >>> run.check(UAVSpectrumEnv(batch_size=2, grid=(6, 6)).reset())
+    >>> try:
+    ...     run.check(UAVSpectrumEnv(batch_size=3, grid=(5, 5)).reset())
+    ... except ValueError as err:
+    ...     print(str(err).split("; ")[1].split(": ")[0])
+    the tensordict's observed positions are scaled for another grid
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from uavrl.envs.channel import fixed_layout
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.grid import cells_of, grid_neighbours
+from uavrl.envs.world import NODE_FEATURES
+
+ADVICE = (
+    "act in an environment of the run's env_config (UAVSpectrumEnv(config=env_config), env_config from "
+    "uavrl.load_policy)"
+)
+FULL_CHECKS = (
+    8  # tensordicts of one batch shape checked in full at most, while all UAVs stay in the first row or column
+)
+_OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours (envs/world.py)
+
+
+class RunEnvironment:
+    """The grid, number of UAVs and layout of a run, and the checks that an environment or tensordict has them."""
+
+    def __init__(self, cfg: ModelConfig):
+        self.grid, self.num_uavs, self.layout = tuple(cfg.grid), int(cfg.num_uavs), cfg.layout
+        L1, L2 = self.grid
+        self.neighbours = grid_neighbours(self.grid)
+        self.xy_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=torch.float64)
+        self.layout_nodes = fixed_layout(cfg)  # [4, 3], None for layout="random"
+        scale = torch.tensor([L1, L2, cfg.height], dtype=torch.float64)
+        # as the env's state holds them
+        self.nodes = None if self.layout_nodes is None else (self.layout_nodes / scale).flatten().float()
+        self.observation_size = _OWN_FEATURES + 3 * (self.num_uavs - 1)
+        self._checked_shape = None  # the batch shape whose tensordicts were checked in full
+        self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
+
+    def __str__(self) -> str:
+        return f"a {self.grid[0]}x{self.grid[1]} grid, {self.num_uavs} UAVs, layout {self.layout!r}"
+
+    def _refuse(self, what: str) -> ValueError:
+        return ValueError(f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
+
+    def check_env(self, env) -> None:
+        """A one-line ValueError unless ``env`` has the run's grid, number of UAVs and layout."""
+        cfg = env.cfg
+        differ = []
+        if tuple(cfg.grid) != self.grid:
+            differ.append(f"a {cfg.grid[0]}x{cfg.grid[1]} grid")
+        if cfg.num_uavs != self.num_uavs:
+            differ.append(f"{cfg.num_uavs} UAVs")
+        nodes = fixed_layout(cfg)
+        if cfg.layout != self.layout:
+            differ.append(f"layout {cfg.layout!r}")
+        elif nodes is not None and tuple(cfg.grid) == self.grid and not torch.equal(nodes, self.layout_nodes):
+            differ.append(f"layout {cfg.layout!r} with its nodes elsewhere (another altitude)")
+        if differ:
+            raise self._refuse(f"the environment has {', '.join(differ)}")
+        self._checked_shape = tuple(env.batch_size)
+
+    def check(self, td: TensorDictBase) -> None:
+        """A one-line ValueError unless ``td`` comes from an environment of the run (module doc: what is checked)."""
+        positions = td.get("positions")
+        if positions.shape[-2:] != (self.num_uavs, 2):
+            shape = f"[..., {self.num_uavs}, 2]"
+            raise self._refuse(f"the tensordict holds positions of shape {list(positions.shape)}, not {shape}")
+        shape = positions.shape[:-2]
+        if shape == self._checked_shape:
+            return
+        told_apart = self._check_content(td, positions.cpu())
+        calls = self._pending[1] + 1 if self._pending[0] == shape else 1
+        if told_apart or calls >= FULL_CHECKS:
+            self._checked_shape = shape
+        self._pending = (shape, calls)
+
+    def _check_content(self, td: TensorDictBase, positions: torch.Tensor) -> bool:
+        """Checks ``td`` (module doc); whether its positions tell the run's grid from others of the same cells in the
+        first row and column (a UAV off each, where the grid has more than one)."""
+        L1, L2 = self.grid
+        x, y = positions[..., 0], positions[..., 1]
+        if bool((x < 0).any() | (x >= L1).any() | (y < 0).any() | (y >= L2).any()):
+            raise self._refuse("the tensordict's positions leave that grid")
+        observation = td.get(("agents", "observation"), None)
+        if observation is not None:
+            observation = observation.cpu()
+            if observation.shape[-1] != self.observation_size:
+                raise self._refuse(
+                    f"its observations have {observation.shape[-1]} features, not {self.observation_size}"
+                )
+            expected = (positions.double() / self.xy_scale).to(observation.dtype)
+            if not torch.allclose(observation[..., :2], expected, atol=1e-5):
+                raise self._refuse("the tensordict's observed positions are scaled for another grid")
+            leaves = observation[..., 5:_OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
+            if not torch.equal(leaves, self.neighbours[cells_of(positions, L1)] < 0):
+                raise self._refuse("the tensordict's observations mark the grid's edges elsewhere")
+        state = td.get("state", None)
+        if state is not None and self.nodes is not None:
+            nodes = state[..., -NODE_FEATURES:].cpu()
+            if not torch.allclose(nodes, self.nodes.expand_as(nodes), atol=1e-5):
+                raise self._refuse("the nodes in the tensordict's state are those of another layout")
+        return bool((L1 == 1 or (x > 0).any()) and (L2 == 1 or (y > 0).any()))
+
+
+class CheckedPolicy(TensorDictModuleBase):
+    """A TorchRL policy that acts only in environments of its run (:class:`RunEnvironment`)."""
+
+    def __init__(self, policy: TensorDictModuleBase, cfg: ModelConfig):
+        super().__init__()
+        self.policy, self.run_env = policy, RunEnvironment(cfg)
+        self.in_keys, self.out_keys = list(policy.in_keys), list(policy.out_keys)
+
+    def bind_env(self, env) -> CheckedPolicy:
+        """Act in ``env``: a one-line ValueError unless it has the run's grid, number of UAVs and layout."""
+        self.run_env.check_env(env)
+        return self
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        self.run_env.check(td)
+        return self.policy(td)
