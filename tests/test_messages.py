@@ -28,12 +28,12 @@ CASES = [
     (["train", "agent.episodes=ünï"], "error: agent.episodes='ünï' is invalid: it must be a whole number"),
     (["train", "ünï=3"], "error: ünï=3 cannot be read: token recognition error at: 'ü' (type setting=value, e.g."),
     (["train", "agent.episodes=[1"], "error: agent.episodes=[1 cannot be read: no viable alternative at input '[1'"),
-    (["train", "resume={odd}"], "error: resume={odd!r}: no checkpoint.pt in that directory"),
-    (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï': no checkpoint.pt in that directory"),
+    (["train", "resume={odd}"], "error: resume={odd_quoted} does not exist"),
+    (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï' does not exist"),
     (["train", "run_dir={run}"], "error: run_dir={run!r} already holds a run"),
     (["train", "-m", "seed=0,1", "sweep_dir={odd}", "env.grid=[0,3]"], "error: env.grid=(0, 3) is invalid"),
     (["train", "-m", "sweep_dir=a,b", "seed=0,1"], "error: sweep_dir=a,b is invalid: give one sweep_dir"),
-    (["evaluate", "checkpoint={odd}"], "error: checkpoint={odd!r} does not exist"),
+    (["evaluate", "checkpoint={odd}"], "error: checkpoint={odd_quoted} does not exist"),
     (["evaluate", "checkpoint={tmp}/my runs/x"], "error: checkpoint='{tmp}/my runs/x' does not exist"),
     (["evaluate", "checkpoint=/tmp/ünï"], "error: checkpoint='/tmp/ünï' does not exist"),
     (
@@ -66,7 +66,7 @@ def paths(tmp_path_factory):
 
 @pytest.mark.parametrize("argv, expected", CASES, ids=[" ".join(argv) for argv, _ in CASES])
 def test_each_command_reads_paths_as_given_and_says_what_to_type(argv, expected, paths, tmp_path, monkeypatch):
-    values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), **paths}
+    values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), "odd_quoted": shlex.quote(str(tmp_path / ODD)), **paths}
     command, *args = argv
     module = f"uavrl.{command}"
     args = [arg.format(**values) for arg in args]
