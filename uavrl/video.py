@@ -21,15 +21,22 @@ Example:
 from __future__ import annotations
 
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from uavrl.envs import ModelConfig
 from uavrl.evaluation import EVAL_SEED, default_horizon
+from uavrl.io import save_bytes
 
 DEFAULT_STARTS = 3
 DEFAULT_FPS = 4
+
+
+def video_settings(cfg, device) -> dict:
+    """Keyword arguments of :func:`comparison_frames` from a run's ``cfg.eval``."""
+    return dict(starts=cfg.eval.video_starts, horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device)
 
 
 def check_settings(starts, fps) -> None:
@@ -102,3 +109,12 @@ def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
 def can_write_mp4() -> bool:
     """Whether PyAV, imageio's MP4 writer, is installed (``pip install -e ".[video]"``)."""
     return importlib.util.find_spec("av") is not None
+
+
+def save_videos(frames: np.ndarray, out_dir, fps: int) -> list[Path]:
+    """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written."""
+    kinds = (".gif", ".mp4") if can_write_mp4() else (".gif",)
+    paths = [Path(out_dir) / f"video{kind}" for kind in kinds]
+    for path, kind in zip(paths, kinds, strict=True):
+        save_bytes(encode(frames, fps, kind), path)
+    return paths
