@@ -11,6 +11,7 @@ checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -44,11 +45,17 @@ def print_videos(cfg: DictConfig, _overrides) -> None:
 
 
 def as_overrides(args: list[str]) -> list[str]:
-    """The command line with a bare run directory (no ``=``, not a flag) written as ``checkpoint=<it>``."""
-    quoted = [arg.replace("\\", "\\\\").replace("'", "\\'") for arg in args]
-    return [
-        arg if "=" in arg or arg.startswith("-") else f"checkpoint='{q}'" for arg, q in zip(args, quoted, strict=True)
-    ]
+    """The command line with a bare run directory written as ``checkpoint=<it>``: an argument that is no flag and
+    either has no ``=`` or names a path that exists (a sweep's run directories end in ``seed=<seed>``)."""
+
+    def is_path(arg: str) -> bool:
+        return not arg.startswith("-") and ("=" not in arg or Path(arg).exists())
+
+    def quoted(arg: str) -> str:
+        # Hydra's quoted values: backslashes are escaped only before a quote (or the closing one)
+        return "'" + re.sub(r"(\\*)('|$)", lambda m: 2 * m[1] + ("\\'" if m[2] else ""), arg) + "'"
+
+    return [f"checkpoint={quoted(arg)}" if is_path(arg) else arg for arg in args]
 
 
 if __name__ == "__main__":
