@@ -14,7 +14,7 @@ from torchrl.record.loggers import CSVLogger
 
 from uavrl.cli import compose_config
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.envs.render import RELAY_COLOUR, SENSE_COLOUR, WorldRenderer, render, tile
+from uavrl.envs.render import IDLE_LINK, RELAY_COLOUR, SENSE_COLOUR, WorldRenderer, render, tile
 from uavrl.envs.world import World
 from uavrl.logger import RunLogger
 from uavrl.render import as_overrides, render_checkpoint
@@ -63,6 +63,23 @@ def test_uavs_show_in_their_task_colour_where_they_are():
                 frame, row, col, SENSE_COLOUR, 2
             )
         world.step(torch.randint(0, 6, (2, 3)))
+
+
+@pytest.mark.parametrize("preset", ["paper", "reference_code"])
+def test_links_that_earn_nothing_are_grey(preset):
+    """All UAVs sensing: no lease, so no emergency rate (the authors' code: no rate at all); one relay pays; all
+    relaying pays in the paper's model only."""
+    world = World(make_config(preset, grid=(6, 6), num_uavs=2), batch_size=1)
+    world.reset()
+    renderer = WorldRenderer(world)
+    idle = np.array([int(IDLE_LINK[i : i + 2], 16) for i in (1, 3, 5)], dtype=np.uint8)
+
+    def grey_pixels(tasks):  # UAVs in cells 7 and 22; a few grey pixels come from anti-aliased text anyway
+        world.start_at(torch.tensor([[2 * 7 + tasks[0], 2 * 22 + tasks[1]]]))
+        return int((renderer.frame(0) == idle).all(-1).sum())
+
+    assert grey_pixels((0, 0)) > 200 and grey_pixels((0, 1)) < 50
+    assert (grey_pixels((1, 1)) > 200) == (preset == "reference_code")
 
 
 def test_frames_change_with_the_step_and_not_otherwise():
