@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-from torchrl.envs import TransformedEnv
+from torchrl.envs import SerialEnv, TransformedEnv
 from torchrl.record import PixelRenderTransform, VideoRecorder
 from torchrl.record.loggers import CSVLogger
 
@@ -146,6 +146,26 @@ def test_pixel_render_transform_and_video_recorder_write_a_video(tmp_path, tiny_
     assert not torch.equal(video[0, 0], video[0, -1])
 
 
+def add_world_dim(frame):
+    return frame[None]
+
+
+def one_world_with_pixels():
+    env = UAVSpectrumEnv(batch_size=1, grid=(3, 3), num_uavs=2, max_steps=5)
+    return TransformedEnv(env, PixelRenderTransform(preproc=add_world_dim))
+
+
+def test_a_batched_env_records_its_workers_side_by_side(tmp_path):
+    """Over SerialEnv (ParallelEnv alike): each worker's frame as a [1, H, W, 3] tensor, tiled by the outer
+    VideoRecorder."""
+    logger = CSVLogger("workers", log_dir=str(tmp_path), video_format="pt")
+    env = TransformedEnv(SerialEnv(2, one_world_with_pixels), VideoRecorder(logger, "uavs"))
+    assert env.rollout(3)["next", "pixels"].shape == (2, 1, 3, 360, 480, 3)
+    env.transform.dump()
+    env.close()
+    assert torch.load(tmp_path / "workers" / "videos" / "uavs_0.pt").shape == (1, 4, 3, 360, 2 * 480)
+
+
 def test_comparison_frames_are_the_policy_beside_the_oracle_from_the_evaluation_starts():
     from uavrl.agents.baselines import OraclePolicy
     from uavrl.evaluation import EVAL_SEED
@@ -225,6 +245,19 @@ def test_evaluate_with_video_writes_the_gif_and_tensorboard(tmp_path, compose_cf
     assert iio.imread(run_dir / "video.gif", index=None).shape == (3, 360, 2 * 480 + 4, 3)
     events = EventAccumulator(str(run_dir), size_guidance={"images": 0}).Reload()
     assert [image.step for image in events.Images("eval/video")] == [40]  # the run's 2 episodes of 20 steps
+
+
+def test_training_logs_the_video_at_its_evaluations(tmp_path, compose_cfg):
+    run_dir = train(
+        compose_cfg(
+            *TINY_RUN, "eval.every=1", "eval.video=true", "eval.video_starts=1", "eval.horizon=2", "progress=false",
+            f"run_dir={tmp_path / 'run'}",
+        )
+    )  # fmt: skip
+    events = EventAccumulator(str(run_dir), size_guidance={"images": 0}).Reload()
+    videos = events.Images("eval/video")
+    assert [image.step for image in videos] == [20, 40]  # after each of the 2 episodes
+    assert iio.imread(videos[-1].encoded_image_string, index=None, extension=".gif").shape == (3, 360, 964, 3)
 
 
 def test_a_bad_video_setting_is_one_line(tmp_path):

@@ -31,7 +31,6 @@ from uavrl.evaluation import EVAL_SEED, default_horizon
 from uavrl.io import save_bytes
 
 DEFAULT_STARTS = 3
-DEFAULT_FPS = 4
 
 
 def video_settings(cfg, device) -> dict:
@@ -39,11 +38,10 @@ def video_settings(cfg, device) -> dict:
     return dict(starts=cfg.eval.video_starts, horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device)
 
 
-def check_settings(starts, fps) -> None:
-    """One-line errors for the video's settings, named as on the command line."""
-    for name, value in (("eval.video_starts", starts), ("eval.video_fps", fps)):
-        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-            raise ValueError(f"{name}={value!r} is invalid: it must be a whole number >= 1")
+def _check_whole(name: str, value) -> None:
+    """A one-line error unless ``value`` is a whole number >= 1 (the commands check ``eval.video_*`` before)."""
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        raise ValueError(f"{name}={value!r} is invalid: it must be a whole number >= 1")
 
 
 def rollout_frames(policy, cfg: ModelConfig, starts: int, horizon: int, seed: int, device, label: str) -> list:
@@ -83,7 +81,7 @@ def comparison_frames(
     from uavrl.agents.baselines import OraclePolicy
     from uavrl.envs.render import tile
 
-    check_settings(starts, DEFAULT_FPS)
+    _check_whole("starts", starts)
     horizon = horizon or default_horizon(cfg)
     played = rollout_frames(policy, cfg, starts, horizon, seed, device, label)
     oracle = rollout_frames(OraclePolicy(cfg), cfg, starts, horizon, seed, device, "oracle")
@@ -99,6 +97,7 @@ def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
     """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4."""
     import imageio.v3 as iio
 
+    _check_whole("fps", fps)
     if extension == ".gif":
         return iio.imwrite("<bytes>", frames, extension=".gif", duration=1000 / fps, loop=0)
     # H.264 in yuv420p needs even sides
