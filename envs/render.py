@@ -114,14 +114,13 @@ class WorldRenderer:
         # the per-UAV rows: a disc in the UAV's colour, then its number, task and share
         panel = self.figure.add_axes((MAP_RIGHT, MARGIN, 1 - MAP_RIGHT - MARGIN, 1 - HEADER - 2 * MARGIN))
         panel.set_axis_off()
-        rows = max(N, 6)
+        rows = max(N, 6)  # the panel's rows; a large team gets smaller ones
+        row_font = min(font * 0.85, 0.7 * panel.get_position().height * height / (rows + 1) * 72 / DPI)
         panel.set_xlim(0, 1)
         panel.set_ylim(rows + 0.5, -0.5)
-        panel.text(0.12, 0, "UAV task  share", fontsize=font * 0.85, va="center", family="monospace", color="#404040")
-        self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 0.9) ** 2, lw=0)
-        self._rows = [
-            panel.text(0.12, i + 1, "", fontsize=font * 0.85, va="center", family="monospace") for i in range(N)
-        ]
+        panel.text(0.12, 0, "UAV task  share", fontsize=row_font, va="center", family="monospace", color="#404040")
+        self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(row_font * 1.05) ** 2, lw=0)
+        self._rows = [panel.text(0.12, i + 1, "", fontsize=row_font, va="center", family="monospace") for i in range(N)]
         self._dynamic = [
             self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
             self._row_dots, *self._rows,
