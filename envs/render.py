@@ -74,21 +74,36 @@ class WorldRenderer:
 
     def __init__(self, world, width: int = 480, height: int = 360, label: str | None = None):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.collections import LineCollection
         from matplotlib.figure import Figure
-        from matplotlib.patches import Rectangle
 
         for name, value in (("width", width), ("height", height)):
             if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 160:
                 raise ValueError(f"{name}={value!r} is invalid: give a whole number of pixels >= 160")
         self.world, self.label, self.size = world, label, (int(height), int(width))
-        cfg = world.cfg
-        N, (L1, L2) = cfg.num_uavs, cfg.grid
-        self._u_star: dict[bytes, float] = {}  # each layout's exact U*, keyed by its node positions
         self.figure = Figure(figsize=(width / DPI, height / DPI), dpi=DPI, facecolor="white")
         self.canvas = FigureCanvasAgg(self.figure)
-        self._font = font = max(7.0, min(11.0, height / 36))
-        # the map: limits and marker sizes are set per layout (_fit), as random layouts move the nodes
+        self._font = max(7.0, min(11.0, height / 36))
+        self._make_map()
+        self._make_header()
+        self._make_panel()
+        self._dynamic = [
+            self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
+            self._row_dots, *self._rows,
+        ]  # fmt: skip
+        for artist in self._dynamic:  # animated: the figure's own draw (the background) leaves them out
+            artist.set_animated(True)
+        self._u_star: dict[bytes, float] = {}  # each layout's exact U*, keyed by its node positions
+        # the background of each recent layout: a tiled batch of random layouts draws each once
+        self._backgrounds: dict[bytes, object] = {}
+        self._background, self._fitted = None, None
+
+    def _make_map(self) -> None:
+        """The grid and the nodes, then what a step moves: the links, the UAVs, their numbers, the focus ring.  Limits
+        and sizes are set per layout (:meth:`_fit`), as random layouts move the nodes."""
+        from matplotlib.collections import LineCollection
+        from matplotlib.patches import Rectangle
+
+        N, (L1, L2), font = self.world.num_uavs, self.world.cfg.grid, self._font
         ax = self.ax = self.figure.add_axes((MARGIN, MARGIN, MAP_RIGHT - 2 * MARGIN, 1 - HEADER - 2 * MARGIN))
         ax.set_axis_off()
         ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="#f3f3f3", edgecolor="#b0b0b0", lw=1.0, zorder=0))
@@ -101,35 +116,32 @@ class WorldRenderer:
             ax.text(0, 0, NODE_NAMES[n], fontsize=font, ha="center", va="top", color=NODE_COLOURS[n], zorder=4)
             for n in range(4)
         ]
-        # what a step changes, drawn over the background (animated: the figure's own draw leaves them out)
         self._links = ax.add_collection(LineCollection([], linewidths=1.6, zorder=1, capstyle="round"))
         self._uavs = ax.scatter(np.zeros(N), np.zeros(N), zorder=3, lw=0)
         self._focus = ax.scatter([0], [0], facecolors="none", edgecolors="black", lw=1.5, zorder=3)
         self._uav_labels = [
             ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
         ]
-        top = 1 - MARGIN
+
+    def _make_header(self) -> None:
+        """Two lines: the label, the step and U against U*; the world and both rates."""
+        top, font = 1 - MARGIN, self._font
         self._title = self.figure.text(MARGIN, top, "", fontsize=font * 1.1, va="top", weight="bold")
         self._rates = self.figure.text(MARGIN, top - HEADER / 2, "", fontsize=font, va="top", color="#404040")
-        # the per-UAV rows: a disc in the UAV's colour, then its number, task and share
+
+    def _make_panel(self) -> None:
+        """One row per UAV: a disc in its colour, its number, task and share; a large team gets smaller rows."""
+        N = self.world.num_uavs
         panel = self.figure.add_axes((MAP_RIGHT, MARGIN, 1 - MAP_RIGHT - MARGIN, 1 - HEADER - 2 * MARGIN))
         panel.set_axis_off()
-        rows = max(N, 6)  # the panel's rows; a large team gets smaller ones
-        row_font = min(font * 0.85, 0.7 * panel.get_position().height * height / (rows + 1) * 72 / DPI)
+        rows = max(N, 6)
+        row_points = panel.get_position().height * self.size[0] / (rows + 1) * 72 / DPI
+        font = min(self._font * 0.85, 0.7 * row_points)
         panel.set_xlim(0, 1)
         panel.set_ylim(rows + 0.5, -0.5)
-        panel.text(0.12, 0, "UAV task  share", fontsize=row_font, va="center", family="monospace", color="#404040")
-        self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(row_font * 1.05) ** 2, lw=0)
-        self._rows = [panel.text(0.12, i + 1, "", fontsize=row_font, va="center", family="monospace") for i in range(N)]
-        self._dynamic = [
-            self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
-            self._row_dots, *self._rows,
-        ]  # fmt: skip
-        for artist in self._dynamic:
-            artist.set_animated(True)
-        # the background of each recent layout: a tiled batch of random layouts draws each once
-        self._backgrounds: dict[bytes, object] = {}
-        self._background, self._fitted = None, None
+        panel.text(0.12, 0, "UAV task  share", fontsize=font, va="center", family="monospace", color="#404040")
+        self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
+        self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
 
     # ----------------------------------------------------------- geometry
     def _fit(self, nodes: np.ndarray) -> None:
