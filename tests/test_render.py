@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-from torchrl.envs import SerialEnv, TransformedEnv
+from torchrl.envs import SerialEnv, TransformedEnv, check_env_specs
 from torchrl.record import PixelRenderTransform, VideoRecorder
 from torchrl.record.loggers import CSVLogger
 
@@ -137,6 +137,7 @@ def test_pixel_render_transform_and_video_recorder_write_a_video(tmp_path, tiny_
     """TorchRL's own recording path: the frames of a rollout through PixelRenderTransform, dumped by VideoRecorder."""
     logger = CSVLogger("rollout", log_dir=str(tmp_path), video_format="pt")
     env = TransformedEnv(tiny_env(batch_size=3, max_steps=5), PixelRenderTransform())
+    check_env_specs(env)  # the frame's spec: non-tensor data, one picture for the batch (VMAS's way)
     env.append_transform(VideoRecorder(logger, "uavs"))
     td = env.rollout(5)
     assert td.get(("next", "pixels")).batch_size == (3, 5)  # world 0's frame at every step, shared by the batch
