@@ -271,6 +271,18 @@ class UAVSpectrumEnv(EnvBase):
         out["truncated"] = truncated.clone()
         return self._outputs(out)
 
+    render_mode = "rgb_array"  # frames come back as arrays (VMAS's and Gymnasium's name); no window opens
+
+    def render(self, mode: str = "rgb_array", env_index=0, agent_index_focus: int | None = None):
+        """VMAS's ``render``: an ``[H, W, 3]`` uint8 picture of world ``env_index`` now, or of a list of worlds tiled.
+
+        It shows the grid, the nodes, each UAV coloured by task with the links it serves, and the step's utility
+        against U* (:mod:`uavrl.envs.render`); ``agent_index_focus`` rings one UAV.
+        """
+        from .render import render
+
+        return render(self.world, mode, env_index, agent_index_focus)
+
     # ------------------------------------------------------ the world's helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:
         """Cell indices ``y * L1 + x`` of ``[..., 2]`` (x, y) positions."""

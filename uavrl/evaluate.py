@@ -61,6 +61,11 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     return agent, cfg, fallback
 
 
+def output_dir(checkpoint) -> Path:
+    """Where an evaluation of ``checkpoint`` (a run directory or a file in one) writes: the run directory."""
+    return Path(checkpoint) if Path(checkpoint).is_dir() else Path(checkpoint).parent
+
+
 def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
@@ -74,9 +79,26 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     if fallback:
         print(f"warning: {fallback}", file=sys.stderr)
     metrics = evaluate_agent(agent, model_config(saved), **eval_settings(cfg, device))
-    out_dir = Path(cfg.checkpoint) if Path(cfg.checkpoint).is_dir() else Path(cfg.checkpoint).parent
+    out_dir = output_dir(cfg.checkpoint)
     save_json(metrics, out_dir / "eval.json")
+    if cfg.eval.video:
+        save_video(agent, saved, cfg, device, out_dir)
     return metrics
+
+
+def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path) -> None:
+    """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.video`), as ``cfg.eval`` asks: files in
+    ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
+    from uavrl.logger import RunLogger
+    from uavrl.video import comparison_frames, save_videos, video_settings
+
+    policy, label = agent.policies()[0], saved.agent.name
+    frames = comparison_frames(policy, model_config(saved), label=label, **video_settings(cfg, device))
+    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps)):
+        print(f"wrote {path}", file=sys.stderr)
+    logger = RunLogger(out_dir)
+    logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
+    logger.close()
 
 
 def print_evaluation(cfg: DictConfig, _overrides) -> None:

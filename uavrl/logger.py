@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tensorboard.compat.proto.summary_pb2 import Summary
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams as hparams_summaries
 
@@ -22,6 +23,18 @@ class RunLogger:
     def log(self, metrics: dict[str, float], step: int) -> None:
         for tag, value in metrics.items():
             self.writer.add_scalar(tag, value, step)
+
+    def video(self, tag: str, frames, step: int, fps: int) -> None:
+        """``[T, H, W, 3]`` uint8 frames as an animated GIF under ``tag`` (TensorBoard's Images tab plays it).
+
+        The summary ``SummaryWriter.add_video`` writes, encoded by imageio: ``add_video`` needs moviepy (and
+        ``moviepy.editor``, gone from moviepy 2), and without it logs nothing.
+        """
+        from uavrl.video import encode
+
+        _, H, W, C = frames.shape
+        image = Summary.Image(height=H, width=W, colorspace=C, encoded_image_string=encode(frames, fps))
+        self.writer.file_writer.add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), step)
 
     def hparams(self, hparams: dict, metric_tags) -> None:
         """The run's settings for TensorBoard's HParams tab, beside the scalar tags ``metric_tags`` already logged.

@@ -39,6 +39,16 @@ class EvalSchema:
 
 
 @dataclass
+class RunEvalSchema(EvalSchema):
+    """The evaluation of ``uavrl.train`` and ``uavrl.evaluate``, with a video of the greedy policy beside the oracle
+    (``uavrl/video.py``)."""
+
+    video: bool = False
+    video_starts: int = 3
+    video_fps: int = 4
+
+
+@dataclass
 class EnvSchema:
     """The model's options (:class:`uavrl.envs.ModelConfig`); null keeps the preset's value."""
 
@@ -135,7 +145,7 @@ class RunSchema:
     checkpoint: Optional[str] = None
     progress: bool = True
     train: TrainSchema = field(default_factory=TrainSchema)
-    eval: EvalSchema = field(default_factory=EvalSchema)
+    eval: RunEvalSchema = field(default_factory=RunEvalSchema)
     env: EnvSchema = field(default_factory=EnvSchema)
     agent: Any = None
     scenario: Optional[ScenarioSchema] = None  # null: env and agent as given; scenario=<name>: configs/scenario/

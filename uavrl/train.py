@@ -127,6 +127,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     from uavrl.envs.world import resolve_device
     from uavrl.evaluation import TrainingClock, evaluate_agent
     from uavrl.logger import RunLogger
+    from uavrl.video import comparison_frames, video_settings
 
     checkpoint, newest_is_readable = None, True
     if cfg.resume:
@@ -162,6 +163,15 @@ def train(cfg: DictConfig, overrides=()) -> Path:
 
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
+
+    def log_evaluation(metrics: dict) -> None:
+        logger.log(metrics, agent.env_steps)
+        if cfg.eval.get("video", False):  # the greedy policy beside the oracle; a run saved before has no setting
+            frames = comparison_frames(
+                agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device)
+            )
+            logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
+
     started = time.perf_counter()
     clock = TrainingClock()
     bar = tqdm(
@@ -185,7 +195,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
             if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
                 trained = clock.read()  # before the evaluation, which the clock leaves out
                 with clock.paused():
-                    logger.log({**evaluate_agent(agent, env_cfg, **eval_kwargs), **trained}, agent.env_steps)
+                    log_evaluation({**evaluate_agent(agent, env_cfg, **eval_kwargs), **trained})
             if done % every == 0 and done < agent.num_iterations:
                 save_checkpoint(done)
         trained = clock.read()
@@ -193,7 +203,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
             final = checkpoint["final"]
         else:
             final = evaluate_agent(agent, env_cfg, **eval_kwargs)
-            logger.log({**final, **trained}, agent.env_steps)
+            log_evaluation({**final, **trained})
             save_checkpoint(agent.num_iterations, final)
     except KeyboardInterrupt as err:
         err.add_note(f"continue the run with: python -m uavrl.train resume={run_dir}")

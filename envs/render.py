@@ -1,0 +1,309 @@
+"""Pictures of the model: one world's grid, nodes, UAVs and links as an ``[H, W, 3]`` uint8 frame (docs/model.md).
+
+:class:`WorldRenderer` draws the worlds of a :class:`~uavrl.envs.world.World`
+from its tensors with matplotlib's Agg canvas (no display, no TorchRL);
+:meth:`UAVSpectrumEnv.render <uavrl.envs.env.UAVSpectrumEnv.render>` returns
+its frames (VMAS's ``render(mode="rgb_array")``), and ``python -m
+uavrl.render`` turns them into videos.
+
+A frame shows, for one world:
+
+- the ``L1 x L2`` grid (``y`` grows downwards, so action 0, *up*, moves a UAV
+  up the picture) and the four nodes: PT and PR (the primary link, squares),
+  S and E (the emergency link, triangles), each labelled;
+- every UAV as a disc numbered by its index, blue when relaying (task 1), orange
+  when sensing (task 0), with the links it serves: PT -> UAV -> PR for a relay,
+  S -> UAV -> E for a sensing UAV, dashed grey where they earn nothing (the
+  emergency link while no UAV relays, by the lease rule; in the authors' code,
+  every link while all UAVs do the same job);
+- a header with the step, the utility ``U = R_PU + R_SE`` of the step against the
+  layout's exact optimum ``U*``, and both rates;
+- a side panel with one row per UAV: its task and its share of its network's
+  sum (the term it adds inside that network's log), room for more per-UAV
+  quantities.
+
+Every artist is made once per renderer; the parts that stay while a layout
+stays are drawn once per layout and kept, so a frame draws only what a step
+changes: about 15 ms of CPU for 2 UAVs on 6x6 and 25 ms for 6 UAVs on 10x10
+(480 x 360 pixels; text is most of it).
+
+Example:
+    >>> from uavrl.envs import make_config
+    >>> from uavrl.envs.world import World
+    >>> world = World(make_config("paper", grid=(6, 6), num_uavs=2), batch_size=2)
+    >>> _ = world.reset()
+    >>> frame = WorldRenderer(world).frame(1)
+    >>> frame.shape, frame.dtype
+    ((360, 480, 3), dtype('uint8'))
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import weakref
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from .channel import PR, PT, E, S
+from .config import NODE_NAMES, RELAYING
+from .optimum import optimum as exact_optimum
+
+RENDER_MODES = ("rgb_array",)
+RELAY_COLOUR = (0x1F, 0x77, 0xB4)  # matplotlib's tab:blue
+SENSE_COLOUR = (0xFF, 0x7F, 0x0E)  # tab:orange
+NODE_COLOURS = {PT: "#0b3c5d", PR: "#0b3c5d", S: "#a34700", E: "#a34700"}
+IDLE_LINK = "#9a9a9a"  # links that earn nothing: sensing ones while no UAV relays (the lease rule: R_SE = 0)
+TASK_NAMES = {0: "sense", 1: "relay"}
+# the panel's layout in figure fractions: header on top, the map on the left, the per-UAV rows on the right
+HEADER, MAP_RIGHT, MARGIN = 0.16, 0.7, 0.02
+DPI = 100
+BACKGROUNDS_KEPT = 16  # layouts whose drawn background a renderer keeps (about 0.7 MB each at 480 x 360)
+
+
+class WorldRenderer:
+    """Frames of the worlds of ``world``, ``width x height`` pixels each, drawn on one reused Agg figure.
+
+    ``label`` heads every frame (e.g. which policy acts).  The artists are made
+    here; what stays while a layout stays (the grid, the nodes, their labels) is
+    drawn once per layout and kept as a background, so :meth:`frame` draws only
+    what a step changes.
+    """
+
+    def __init__(self, world, width: int = 480, height: int = 360, label: str | None = None):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        for name, value in (("width", width), ("height", height)):
+            if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 160:
+                raise ValueError(f"{name}={value!r} is invalid: give a whole number of pixels >= 160")
+        self.world, self.label, self.size = world, label, (int(height), int(width))
+        self.figure = Figure(figsize=(width / DPI, height / DPI), dpi=DPI, facecolor="white")
+        self.canvas = FigureCanvasAgg(self.figure)
+        self._font = max(7.0, min(11.0, height / 36))
+        self._make_map()
+        self._make_header()
+        self._make_panel()
+        self._dynamic = [
+            self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
+            self._row_dots, *self._rows,
+        ]  # fmt: skip
+        for artist in self._dynamic:  # animated: the figure's own draw (the background) leaves them out
+            artist.set_animated(True)
+        self._u_star: dict[bytes, float] = {}  # each layout's exact U*, keyed by its node positions
+        # the background of each recent layout: a tiled batch of random layouts draws each once
+        self._backgrounds: dict[bytes, object] = {}
+        self._background, self._fitted = None, None
+
+    def _make_map(self) -> None:
+        """The grid and the nodes, then what a step moves: the links, the UAVs, their numbers, the focus ring.  Limits
+        and sizes are set per layout (:meth:`_fit`), as random layouts move the nodes."""
+        from matplotlib.collections import LineCollection
+        from matplotlib.patches import Rectangle
+
+        N, (L1, L2), font = self.world.num_uavs, self.world.cfg.grid, self._font
+        ax = self.ax = self.figure.add_axes((MARGIN, MARGIN, MAP_RIGHT - 2 * MARGIN, 1 - HEADER - 2 * MARGIN))
+        ax.set_axis_off()
+        ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="#f3f3f3", edgecolor="#b0b0b0", lw=1.0, zorder=0))
+        lines = [((x - 0.5, -0.5), (x - 0.5, L2 - 0.5)) for x in range(1, L1)]
+        lines += [((-0.5, y - 0.5), (L1 - 0.5, y - 0.5)) for y in range(1, L2)]
+        ax.add_collection(LineCollection(lines, colors="#d6d6d6", linewidths=0.6, zorder=0))
+        marker = {PT: "s", PR: "s", S: "^", E: "^"}
+        self._nodes = [ax.scatter([0], [0], marker=marker[n], c=NODE_COLOURS[n], zorder=2, lw=0) for n in range(4)]
+        self._node_labels = [
+            ax.text(0, 0, NODE_NAMES[n], fontsize=font, ha="center", va="top", color=NODE_COLOURS[n], zorder=4)
+            for n in range(4)
+        ]
+        self._links = ax.add_collection(LineCollection([], linewidths=1.6, zorder=1, capstyle="round"))
+        self._uavs = ax.scatter(np.zeros(N), np.zeros(N), zorder=3, lw=0)
+        self._focus = ax.scatter([0], [0], facecolors="none", edgecolors="black", lw=1.5, zorder=3)
+        self._uav_labels = [
+            ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
+        ]
+
+    def _make_header(self) -> None:
+        """Two lines: the label, the step and U against U*; the world and both rates."""
+        top, font = 1 - MARGIN, self._font
+        self._title = self.figure.text(MARGIN, top, "", fontsize=font * 1.1, va="top", weight="bold")
+        self._rates = self.figure.text(MARGIN, top - HEADER / 2, "", fontsize=font, va="top", color="#404040")
+
+    def _make_panel(self) -> None:
+        """One row per UAV: a disc in its colour, its number, task and share; a large team gets smaller rows."""
+        N = self.world.num_uavs
+        panel = self.figure.add_axes((MAP_RIGHT, MARGIN, 1 - MAP_RIGHT - MARGIN, 1 - HEADER - 2 * MARGIN))
+        panel.set_axis_off()
+        rows = max(N, 6)
+        row_points = panel.get_position().height * self.size[0] / (rows + 1) * 72 / DPI
+        font = min(self._font * 0.85, 0.7 * row_points)
+        panel.set_xlim(0, 1)
+        panel.set_ylim(rows + 0.5, -0.5)
+        panel.text(0.12, 0, "UAV task  share", fontsize=font, va="center", family="monospace", color="#404040")
+        self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
+        self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
+
+    # ----------------------------------------------------------- geometry
+    def _fit(self, nodes: np.ndarray) -> None:
+        """Limits that hold the grid and the nodes at equal scales, marker sizes from the cell size, and the layout's
+        background (drawn unless kept)."""
+        L1, L2 = self.world.cfg.grid
+        pad = 0.7  # cells around the outermost node
+        x_lo, x_hi = min(-0.5, nodes[:, 0].min() - pad), max(L1 - 0.5, nodes[:, 0].max() + pad)
+        y_lo, y_hi = min(-0.5, nodes[:, 1].min() - pad), max(L2 - 0.5, nodes[:, 1].max() + pad)
+        box, (H, W) = self.ax.get_position(), self.size
+        label_px = 1.6 * self._font * DPI / 72  # room below the lowest node for its label
+        box_w, box_h = box.width * W, box.height * H
+        scale = min(box_w / (x_hi - x_lo), (box_h - label_px) / (y_hi - y_lo))  # pixels per cell
+        cx, cy = (x_lo + x_hi) / 2, (y_lo + y_hi + label_px / scale) / 2
+        half_x, half_y = box_w / scale / 2, box_h / scale / 2
+        self.ax.set_xlim(cx - half_x, cx + half_x)
+        self.ax.set_ylim(cy + half_y, cy - half_y)  # y down: "up" (action 0) moves a UAV up the picture
+        cell = scale * 72 / DPI  # one cell in points
+        self._uavs.set_sizes([(0.72 * cell) ** 2])
+        self._focus.set_sizes([(0.98 * cell) ** 2])
+        label_offset = (min(0.6 * cell, 14.0) / 2 + 1) * DPI / 72 / scale  # just below the marker, in cells
+        for n in range(4):
+            self._nodes[n].set_offsets(nodes[n : n + 1])
+            self._nodes[n].set_sizes([min(0.6 * cell, 14.0) ** 2])
+            self._node_labels[n].set_position((nodes[n, 0], nodes[n, 1] + label_offset))
+        for text in self._uav_labels:
+            text.set_visible(scale >= 14)  # a smaller disc has no room for a digit
+            text.set_fontsize(min(self._font * 0.9, 0.45 * cell))
+        key = nodes.tobytes()
+        if key not in self._backgrounds:
+            if len(self._backgrounds) >= BACKGROUNDS_KEPT:
+                del self._backgrounds[next(iter(self._backgrounds))]
+            self.canvas.draw()
+            self._backgrounds[key] = self.canvas.copy_from_bbox(self.figure.bbox)
+        self._background = self._backgrounds[key]
+
+    def pixel_of(self, x: float, y: float) -> tuple[int, int]:
+        """``(row, column)`` of the frame's pixel at the point ``(x, y)`` of the grid (cell units), as last drawn."""
+        px, py = self.ax.transData.transform((x, y))
+        return int(self.size[0] - py), int(px)
+
+    # ------------------------------------------------------------- frames
+    def _layout_optimum(self, index: int, nodes: torch.Tensor) -> float:
+        key = nodes.cpu().numpy().tobytes()
+        if key not in self._u_star:
+            world = self.world
+            contributions, direct = world.cell_contributions[index : index + 1], world.direct[index : index + 1]
+            self._u_star[key] = float(exact_optimum(contributions, direct, world.cfg)[0][0])
+        return self._u_star[key]
+
+    def frame(self, index: int = 0, focus: int | None = None) -> np.ndarray:
+        """The ``[H, W, 3]`` uint8 picture of world ``index`` now; ``focus``: the UAV to ring."""
+        world, cfg = self.world, self.world.cfg
+        state = world._s
+        nodes_t = world._nodes[index if len(world._nodes) > 1 else 0]
+        nodes = nodes_t[:, :2].cpu().numpy()
+        if nodes.tobytes() != self._fitted:
+            self._fit(nodes)
+            self._fitted = nodes.tobytes()
+        code = state.code[index].cpu()
+        cells, tasks = (code >> 1).numpy(), (code & 1).numpy()
+        xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
+        relaying = tasks == RELAYING
+        colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255
+        self._uavs.set_offsets(xy)
+        self._uavs.set_facecolors(colours)
+        for i, text in enumerate(self._uav_labels):
+            text.set_position(xy[i])
+        self._focus.set_visible(focus is not None)
+        if focus is not None:
+            self._focus.set_offsets(xy[focus : focus + 1])
+        # links that earn nothing (docs/model.md): the emergency link's while no UAV relays (the lease rule); in the
+        # authors' code, every link while all UAVs do the same job
+        if cfg.rate_model == "reference_code":
+            paid, unpaid_note = 0 < relaying.sum() < cfg.num_uavs, "   one job for all: no rates"
+        else:
+            paid, unpaid_note = bool(relaying.any()) or not cfg.lease_rule, "   no relay: no lease"
+        segments, link_colours, styles = [], [], []
+        for i in range(cfg.num_uavs):
+            src, dst = (nodes[PT], nodes[PR]) if relaying[i] else (nodes[S], nodes[E])
+            segments += [(src, xy[i]), (xy[i], dst)]
+            colour, style = ((*colours[i], 0.45), "solid") if paid else (IDLE_LINK, "dashed")
+            link_colours += [colour, colour]
+            styles += [style, style]
+        self._links.set_segments(segments)
+        self._links.set_colors(link_colours)
+        self._links.set_linestyles(styles)
+        # the step's rates (faded draws where fading is on) against the layout's U* (mean channels)
+        r_pu, r_se = (float(v) for v in state.r[index])
+        u, u_star = r_pu + r_se, self._layout_optimum(index, nodes_t)
+        head = f"{self.label}  " if self.label else ""
+        self._title.set_text(f"{head}step {int(state.steps[index])}   U {u:.3f} / U* {u_star:.3f} ({u / u_star:.1%})")
+        note = "" if paid else unpaid_note
+        self._rates.set_text(f"world {index}   R_PU {r_pu:.3f}   R_SE {r_se:.3f}{note}")
+        # per UAV: its share of its network's sum inside the log
+        contributions = world.cell_contributions[index].cpu().numpy()  # [C, 2]
+        own = np.where(relaying, contributions[cells, 0], contributions[cells, 1])
+        totals = np.where(relaying, own[relaying].sum(), own[~relaying].sum())
+        shares = np.divide(own, totals, out=np.zeros_like(own), where=totals > 0)
+        for i, row in enumerate(self._rows):
+            row.set_text(f"{i:>3} {TASK_NAMES[int(tasks[i])]} {shares[i]:4.0%}")
+        self._row_dots.set_facecolors(colours)
+        self.canvas.restore_region(self._background)
+        for artist in self._dynamic:
+            self.figure.draw_artist(artist)
+        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
+
+    def frames(self, indices: Sequence[int], focus: int | None = None, columns: int | None = None) -> np.ndarray:
+        """The frames of worlds ``indices`` tiled, ``columns`` per row (default: about a square)."""
+        return tile([self.frame(i, focus) for i in indices], columns)
+
+
+def tile(frames: Sequence[np.ndarray], columns: int | None = None, gap: int = 4) -> np.ndarray:
+    """``[H, W, 3]`` frames of one size side by side, ``columns`` per row (default ``ceil(sqrt(n))``), ``gap``
+    white pixels apart."""
+    n = len(frames)
+    columns = columns or math.ceil(math.sqrt(n))
+    rows = math.ceil(n / columns)
+    h, w, _ = frames[0].shape
+    out = np.full((rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 3), 255, dtype=np.uint8)
+    for k, frame in enumerate(frames):
+        r, c = divmod(k, columns)
+        out[r * (h + gap) : r * (h + gap) + h, c * (w + gap) : c * (w + gap) + w] = frame
+    return out
+
+
+_RENDERERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # one reused figure per World
+
+
+def render(world, mode: str = "rgb_array", env_index=0, agent_index_focus: int | None = None) -> np.ndarray:
+    """VMAS's ``render`` for a :class:`World`: world ``env_index``'s frame, or the frames of a list of worlds tiled.
+
+    Refuses, in one line, a mode other than ``"rgb_array"``, a world or UAV index out of range, and a world never
+    reset.
+    """
+    if mode not in RENDER_MODES:
+        raise ValueError(
+            f"render(mode={mode!r}) is invalid: UAVSpectrumEnv renders mode='rgb_array' only (an [H, W, 3] uint8 "
+            "frame; show it with matplotlib's imshow)"
+        )
+    B, N = world.num_worlds, world.num_uavs
+    indices = [env_index] if isinstance(env_index, numbers.Integral) else env_index
+    if (
+        isinstance(env_index, bool)
+        or not isinstance(indices, Sequence)
+        or not indices
+        or not all(isinstance(i, numbers.Integral) and not isinstance(i, bool) and 0 <= i < B for i in indices)
+    ):
+        raise ValueError(f"render(env_index={env_index!r}) is invalid: give a world 0..{B - 1} or a list of them")
+    if agent_index_focus is not None and not (
+        isinstance(agent_index_focus, numbers.Integral)
+        and not isinstance(agent_index_focus, bool)
+        and 0 <= agent_index_focus < N
+    ):
+        raise ValueError(
+            f"render(agent_index_focus={agent_index_focus!r}) is invalid: give a UAV 0..{N - 1}, or None for none"
+        )
+    if not world._s.was_reset:
+        raise RuntimeError("render() before any reset: call env.reset() first (the worlds have no UAVs yet)")
+    renderer = _RENDERERS.get(world)
+    if renderer is None:
+        renderer = _RENDERERS[world] = WorldRenderer(world)
+    if isinstance(env_index, numbers.Integral):
+        return renderer.frame(int(env_index), agent_index_focus)
+    return renderer.frames([int(i) for i in indices], agent_index_focus)

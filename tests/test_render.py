@@ -1,0 +1,269 @@
+"""Rendering and videos: env.render() frames, TorchRL's PixelRenderTransform and VideoRecorder, the video command."""
+
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from torchrl.envs import SerialEnv, TransformedEnv, check_env_specs
+from torchrl.record import PixelRenderTransform, VideoRecorder
+from torchrl.record.loggers import CSVLogger
+
+from uavrl.cli import compose_config
+from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs.render import IDLE_LINK, RELAY_COLOUR, SENSE_COLOUR, WorldRenderer, render, tile
+from uavrl.envs.world import World
+from uavrl.logger import RunLogger
+from uavrl.render import as_overrides, render_checkpoint
+from uavrl.train import train
+from uavrl.video import can_write_mp4, comparison_frames, encode
+
+TINY_RUN = ["env.grid=[3,3]", "agent.episodes=2", "env.max_steps=20", "agent.runs=1", "eval.num_starts=4"]
+
+
+def colour_near(frame, row, col, colour, radius=3) -> bool:
+    """Whether a pixel of exactly ``colour`` lies within ``radius`` of ``(row, col)`` (a disc's fill, not its digit)."""
+    patch = frame[max(row - radius, 0) : row + radius + 1, max(col - radius, 0) : col + radius + 1]
+    return bool((patch == np.array(colour, dtype=np.uint8)).all(-1).any())
+
+
+def test_render_is_a_uint8_frame_of_the_chosen_world(tiny_env):
+    env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2, layout="random", seed=5)
+    env.reset()
+    frames = [env.render(env_index=i) for i in range(3)]
+    assert env.render_mode == "rgb_array"
+    assert all(f.shape == (360, 480, 3) and f.dtype == np.uint8 for f in frames)
+    assert not np.array_equal(frames[0], frames[1])  # another layout and other UAVs
+    assert np.array_equal(env.render(mode="rgb_array", agent_index_focus=None), frames[0])  # TorchRL's examples' call
+    assert np.array_equal(env.render(), frames[0])  # the same world drawn again is the same picture
+
+
+def test_uavs_show_in_their_task_colour_where_they_are():
+    world = World(make_config("paper", grid=(6, 6), num_uavs=3), batch_size=2, seed=1)
+    world.reset()
+    renderer = WorldRenderer(world)
+    for step in range(4):
+        for index in range(2):
+            frame = renderer.frame(index)
+            code = world.code[index]
+            for cell, task in zip((code >> 1).tolist(), (code & 1).tolist(), strict=True):
+                x, y = cell % 6, cell // 6
+                row, col = renderer.pixel_of(x, y)
+                mine, other = (RELAY_COLOUR, SENSE_COLOUR) if task == 1 else (SENSE_COLOUR, RELAY_COLOUR)
+                # off the centre, clear of the UAV's number
+                assert colour_near(frame, row - 6, col, mine), (step, index, x, y, task)
+                assert not colour_near(frame, row - 6, col, other, radius=1)
+            # an empty cell holds neither colour
+            empty = sorted(set(range(36)) - set((code >> 1).tolist()))[0]
+            row, col = renderer.pixel_of(empty % 6, empty // 6)
+            assert not colour_near(frame, row, col, RELAY_COLOUR, 2) and not colour_near(
+                frame, row, col, SENSE_COLOUR, 2
+            )
+        world.step(torch.randint(0, 6, (2, 3)))
+
+
+@pytest.mark.parametrize("preset", ["paper", "reference_code"])
+def test_links_that_earn_nothing_are_grey(preset):
+    """All UAVs sensing: no lease, so no emergency rate (the authors' code: no rate at all); one relay pays; all
+    relaying pays in the paper's model only."""
+    world = World(make_config(preset, grid=(6, 6), num_uavs=2), batch_size=1)
+    world.reset()
+    renderer = WorldRenderer(world)
+    idle = np.array([int(IDLE_LINK[i : i + 2], 16) for i in (1, 3, 5)], dtype=np.uint8)
+
+    def grey_pixels(tasks):  # UAVs in cells 7 and 22; a few grey pixels come from anti-aliased text anyway
+        world.start_at(torch.tensor([[2 * 7 + tasks[0], 2 * 22 + tasks[1]]]))
+        return int((renderer.frame(0) == idle).all(-1).sum())
+
+    assert grey_pixels((0, 0)) > 200 and grey_pixels((0, 1)) < 50
+    assert (grey_pixels((1, 1)) > 200) == (preset == "reference_code")
+
+
+def test_frames_change_with_the_step_and_not_otherwise():
+    env = UAVSpectrumEnv(batch_size=1, grid=(5, 5), num_uavs=2, seed=0)
+    env.reset()
+    before = env.render()
+    env.step(env.reset().set(("agents", "action"), torch.tensor([[3, 1]])))
+    after = env.render()
+    assert not np.array_equal(before, after)
+    env.world.start_at(env.world.code.clone())
+    assert not np.array_equal(env.render(), after)  # the step counter went back to 0
+    assert np.array_equal(env.render(), env.render())
+
+
+def test_a_list_of_worlds_is_tiled_and_a_focus_rings_a_uav(tiny_env):
+    env = tiny_env(batch_size=4)
+    env.reset()
+    tiled = env.render(env_index=[0, 1, 2, 3])
+    assert tiled.shape == (2 * 360 + 4, 2 * 480 + 4, 3)
+    assert np.array_equal(tiled[:360, :480], env.render(env_index=0))
+    assert np.array_equal(tiled[364:, 484:], env.render(env_index=3))
+    assert np.array_equal(
+        tile([env.render(env_index=i) for i in range(3)], columns=3)[:, 968:], env.render(env_index=2)
+    )
+    assert not np.array_equal(env.render(agent_index_focus=1), env.render())
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"mode": "human"}, "render(mode='human') is invalid: UAVSpectrumEnv renders mode='rgb_array' only"),
+        ({"env_index": 2}, "render(env_index=2) is invalid: give a world 0..1 or a list of them"),
+        ({"env_index": [0, -1]}, "render(env_index=[0, -1]) is invalid"),
+        ({"env_index": True}, "render(env_index=True) is invalid"),
+        ({"agent_index_focus": 2}, "render(agent_index_focus=2) is invalid: give a UAV 0..1, or None for none"),
+    ],
+)
+def test_bad_render_arguments_are_one_line(tiny_env, kwargs, message):
+    env = tiny_env()
+    env.reset()
+    with pytest.raises(ValueError) as refused:
+        env.render(**kwargs)
+    assert str(refused.value).startswith(message) and "\n" not in str(refused.value)
+
+
+def test_render_before_reset_says_so(tiny_env):
+    with pytest.raises(RuntimeError, match=r"render\(\) before any reset"):
+        tiny_env().render()
+    world = World(make_config("paper", grid=(3, 3)), 1)
+    with pytest.raises(RuntimeError, match="call env.reset"):
+        render(world)
+
+
+def test_pixel_render_transform_and_video_recorder_write_a_video(tmp_path, tiny_env):
+    """TorchRL's own recording path: the frames of a rollout through PixelRenderTransform, dumped by VideoRecorder."""
+    logger = CSVLogger("rollout", log_dir=str(tmp_path), video_format="pt")
+    env = TransformedEnv(tiny_env(batch_size=3, max_steps=5), PixelRenderTransform())
+    check_env_specs(env)  # the frame's spec: non-tensor data, one picture for the batch (VMAS's way)
+    env.append_transform(VideoRecorder(logger, "uavs"))
+    td = env.rollout(5)
+    assert td.get(("next", "pixels")).batch_size == (3, 5)  # world 0's frame at every step, shared by the batch
+    env.transform.dump()
+    video = torch.load(tmp_path / "rollout" / "videos" / "uavs_0.pt")
+    assert video.shape == (1, 6, 3, 360, 480) and video.dtype == torch.uint8  # the reset and 5 steps
+    assert not torch.equal(video[0, 0], video[0, -1])
+
+
+def add_world_dim(frame):
+    return frame[None]
+
+
+def one_world_with_pixels():
+    env = UAVSpectrumEnv(batch_size=1, grid=(3, 3), num_uavs=2, max_steps=5)
+    return TransformedEnv(env, PixelRenderTransform(preproc=add_world_dim))
+
+
+def test_a_batched_env_records_its_workers_side_by_side(tmp_path):
+    """Over SerialEnv (ParallelEnv alike): each worker's frame as a [1, H, W, 3] tensor, tiled by the outer
+    VideoRecorder."""
+    logger = CSVLogger("workers", log_dir=str(tmp_path), video_format="pt")
+    env = TransformedEnv(SerialEnv(2, one_world_with_pixels), VideoRecorder(logger, "uavs"))
+    assert env.rollout(3)["next", "pixels"].shape == (2, 1, 3, 360, 480, 3)
+    env.transform.dump()
+    env.close()
+    assert torch.load(tmp_path / "workers" / "videos" / "uavs_0.pt").shape == (1, 4, 3, 360, 2 * 480)
+
+
+def test_comparison_frames_are_the_policy_beside_the_oracle_from_the_evaluation_starts():
+    from uavrl.agents.baselines import OraclePolicy
+    from uavrl.evaluation import EVAL_SEED
+
+    cfg = make_config("paper", grid=(3, 3))
+    frames = comparison_frames(OraclePolicy(cfg), cfg, starts=2, horizon=3, label="oracle")
+    assert frames.shape == (4, 2 * 360 + 4, 2 * 480 + 4, 3)
+    # the oracle on both sides: the same pictures
+    assert np.array_equal(frames[:, :, :480], frames[:, :, 484:])
+    # row 1 is the evaluation's second start (world 1 of a batch seeded EVAL_SEED)
+    env = UAVSpectrumEnv(batch_size=2, config=cfg.replace(max_steps=3), seed=EVAL_SEED)
+    env.reset()
+    start = WorldRenderer(env.world, label="oracle").frame(1)
+    assert np.array_equal(frames[0, 364:, :480], start)
+
+
+def test_encoded_videos_read_back_with_every_frame():
+    frames = np.stack([np.full((40, 60, 3), 20 * t, dtype=np.uint8) for t in range(5)])
+    assert iio.imread(encode(frames, fps=4), index=None, extension=".gif").shape == (5, 40, 60, 3)
+    if can_write_mp4():
+        odd = frames[:, :39, :59]
+        assert iio.imread(encode(odd, 4, ".mp4"), index=None, extension=".mp4").shape == (5, 40, 60, 3)
+
+
+def test_tensorboard_gets_the_video_as_an_animated_gif(tmp_path):
+    frames = np.stack([np.full((40, 60, 3), 30 * t, dtype=np.uint8) for t in range(3)])
+    logger = RunLogger(tmp_path)
+    logger.video("eval/video", frames, step=7, fps=2)
+    logger.close()
+    events = EventAccumulator(str(tmp_path), size_guidance={"images": 0}).Reload()
+    (image,) = events.Images("eval/video")
+    assert image.step == 7 and (image.height, image.width) == (40, 60)
+    assert iio.imread(image.encoded_image_string, index=None, extension=".gif").shape == (3, 40, 60, 3)
+
+
+def test_the_command_writes_a_readable_gif_of_a_run(tmp_path, compose_cfg):
+    run_dir = train(compose_cfg(*TINY_RUN, "progress=false", f"run_dir={tmp_path / 'run'}"))
+    overrides = as_overrides([str(run_dir), "eval.video_starts=2", "eval.horizon=3"])
+    assert overrides[0] == f"checkpoint='{run_dir}'"
+    written = render_checkpoint(compose_config("config", overrides))
+    assert written == [run_dir / "video.gif", *([run_dir / "video.mp4"] if can_write_mp4() else [])]
+    for path in written:  # the start and 3 steps; 2 starts, each the policy beside the oracle
+        assert iio.imread(path, index=None).shape == (4, 2 * 360 + 4, 2 * 480 + 4, 3)
+
+
+def test_a_bare_run_directory_is_the_checkpoint(tmp_path):
+    sweep_job = tmp_path / "agent=dqn" / "seed=0"  # a sweep's run directory: "=" in its name
+    sweep_job.mkdir(parents=True)
+    args = [str(sweep_job), "eval.seed=3", "--help"]
+    assert as_overrides(args) == [f"checkpoint='{sweep_job}'", "eval.seed=3", "--help"]
+    for name in ("it's \\ here", "end\\", "quote\\'s"):
+        path = str(tmp_path / name)
+        assert compose_config("config", as_overrides([path])).checkpoint == path
+
+
+@pytest.mark.slow
+def test_the_command_line_prints_the_files_it_wrote(tmp_path, compose_cfg):
+    run_dir = train(compose_cfg(*TINY_RUN, "progress=false", f"run_dir={tmp_path / 'run'}"))
+    done = subprocess.run(
+        [sys.executable, "-m", "uavrl.render", str(run_dir), "eval.video_starts=1", "eval.horizon=2"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    written = [run_dir / "video.gif", *([run_dir / "video.mp4"] if can_write_mp4() else [])]
+    assert done.stdout.splitlines() == [str(path) for path in written]
+    assert iio.imread(run_dir / "video.gif", index=None).shape == (3, 360, 2 * 480 + 4, 3)
+
+
+def test_evaluate_with_video_writes_the_gif_and_tensorboard(tmp_path, compose_cfg):
+    from uavrl.evaluate import evaluate_checkpoint
+
+    run_dir = train(compose_cfg(*TINY_RUN, "progress=false", f"run_dir={tmp_path / 'run'}"))
+    evaluate_checkpoint(
+        compose_cfg(f"checkpoint={run_dir}", "eval.video=true", "eval.video_starts=1", "eval.horizon=2")
+    )
+    assert iio.imread(run_dir / "video.gif", index=None).shape == (3, 360, 2 * 480 + 4, 3)
+    events = EventAccumulator(str(run_dir), size_guidance={"images": 0}).Reload()
+    assert [image.step for image in events.Images("eval/video")] == [40]  # the run's 2 episodes of 20 steps
+
+
+def test_training_logs_the_video_at_its_evaluations(tmp_path, compose_cfg):
+    run_dir = train(
+        compose_cfg(
+            *TINY_RUN, "eval.every=1", "eval.video=true", "eval.video_starts=1", "eval.horizon=2", "progress=false",
+            f"run_dir={tmp_path / 'run'}",
+        )
+    )  # fmt: skip
+    events = EventAccumulator(str(run_dir), size_guidance={"images": 0}).Reload()
+    videos = events.Images("eval/video")
+    assert [image.step for image in videos] == [20, 40]  # after each of the 2 episodes
+    assert iio.imread(videos[-1].encoded_image_string, index=None, extension=".gif").shape == (3, 360, 964, 3)
+
+
+def test_a_bad_video_setting_is_one_line(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "uavrl.render", str(tmp_path), "eval.video_starts=0"], capture_output=True, text=True
+    )
+    assert done.returncode == 1
+    assert done.stderr.strip() == "error: eval.video_starts=0 is invalid: it must be a whole number >= 1"

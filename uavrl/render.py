@@ -1,0 +1,63 @@
+"""Watch a saved run: ``python -m uavrl.render runs/dqn/paper/<stamp>`` (or ``checkpoint=<run dir>``).
+
+Plays the run's greedy policy (:func:`uavrl.load_policy`) from the evaluation's
+first ``eval.video_starts`` starts, the same starts the yardstick measures, for
+``eval.horizon`` steps, beside the oracle from the same starts (one row per
+start: the policy left, the oracle right), and writes ``video.gif`` (and
+``video.mp4`` where PyAV is installed: ``pip install -e ".[video]"``) beside the
+checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
+checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from uavrl.cli import run_command
+from uavrl.config import RUN_OPTION_SETTINGS
+from uavrl.evaluate import check_settings, output_dir
+
+
+def render_checkpoint(cfg: DictConfig) -> list[Path]:
+    """The run's video files, written."""
+    check_settings(cfg)
+    import torch
+
+    from uavrl import load_policy
+    from uavrl.envs.world import resolve_device
+    from uavrl.video import comparison_frames, save_videos, video_settings
+
+    torch.set_num_threads(int(cfg.num_threads))
+    device = resolve_device(cfg.device)
+    policy, env_cfg = load_policy(cfg.checkpoint, device)
+    frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
+    return save_videos(frames, output_dir(cfg.checkpoint), int(cfg.eval.video_fps))
+
+
+def print_videos(cfg: DictConfig, _overrides) -> None:
+    """``python -m uavrl.render``: the paths written, one a line."""
+    for path in render_checkpoint(cfg):
+        print(path)
+
+
+def as_overrides(args: list[str]) -> list[str]:
+    """The command line with a bare run directory written as ``checkpoint=<it>``: an argument that is no flag and
+    either has no ``=`` or names a path that exists (a sweep's run directories end in ``seed=<seed>``)."""
+
+    def is_path(arg: str) -> bool:
+        return not arg.startswith("-") and ("=" not in arg or Path(arg).exists())
+
+    def quoted(arg: str) -> str:
+        # Hydra's quoted values: backslashes are escaped only before a quote (or the closing one)
+        return "'" + re.sub(r"(\\*)('|$)", lambda m: 2 * m[1] + ("\\'" if m[2] else ""), arg) + "'"
+
+    return [f"checkpoint={quoted(arg)}" if is_path(arg) else arg for arg in args]
+
+
+if __name__ == "__main__":
+    sys.argv[1:] = as_overrides(sys.argv[1:])
+    run_command("config", print_videos, RUN_OPTION_SETTINGS)
