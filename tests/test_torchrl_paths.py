@@ -350,3 +350,20 @@ def test_policy_in_a_collector(name, policies):
     batch = one_batch(make_env(env_cfg), policy, frames=24)
     assert batch.numel() == 24 and unravel_key(("agents", "action")) in batch.keys(True)
     assert_valid_actions(batch, env_cfg)
+
+
+@pytest.mark.slow
+def test_oracle_reads_random_layouts_from_a_parallel_envs_workers(policies):
+    from uavrl.agents.baselines import OraclePolicy
+
+    cfg = policies["oracle"][1].replace(layout="random", max_steps=8)
+    worker = functools.partial(UAVSpectrumEnv, batch_size=2, config=cfg)
+    makers = [functools.partial(worker, seed=4), functools.partial(worker, seed=6)]  # worlds seeded 4, 5, 6, 7
+    alone = UAVSpectrumEnv(batch_size=4, config=cfg, seed=4)
+    single = alone.rollout(8, OraclePolicy(cfg, env=alone), break_when_any_done=False)
+    env = ParallelEnv(2, makers)
+    oracle = OraclePolicy(cfg)
+    oracle.bind_env(env)
+    over = env.rollout(8, oracle, break_when_any_done=False)
+    env.close()
+    assert torch.equal(over["next", "positions"].flatten(0, 1), single["next", "positions"])
