@@ -22,7 +22,7 @@ Example:
     >>> env = UAVSpectrumEnv(batch_size=4, grid=(6, 6), num_uavs=3, max_steps=12)
     >>> td = env.rollout(12, OraclePolicy(env.cfg))
     >>> u_star = env.optimum()[0]
-    >>> bool(((td["next", "utility"][:, -1].double() - u_star).abs() <= 1e-6 * u_star).all())
+    >>> bool(((td["next", "utility"][:, -1, 0].double() - u_star).abs() <= 1e-6 * u_star).all())
     True
 """
 
@@ -34,6 +34,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
+from uavrl.agents.generators import PolicyGenerator
 from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
 from uavrl.envs.exact import fixed_layout_tables
@@ -55,7 +56,7 @@ class RandomPolicy(TensorDictModuleBase):
 
     def __init__(self, seed: int = 0):
         super().__init__()
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = PolicyGenerator(seed)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         mask = td.get(("agents", "action_mask"))
@@ -68,9 +69,13 @@ class OraclePolicy(TensorDictModuleBase):
     """Drives each world's team to an optimal configuration along a valid, collision-free plan (module doc).
 
     Fixed layouts need only ``cfg``.  With ``layout="random"`` the oracle reads
-    each world's layout from the environment it acts in: give ``env=`` (or call
-    ``bind_env``) before the rollout.  It acts only in environments of ``cfg``'s
-    grid, number of UAVs and layout (:mod:`uavrl.agents.env_check`).
+    each world's layout from the environment it acts in: give ``env=`` (or
+    call ``bind_env``) before the rollout; a ``SerialEnv`` or ``ParallelEnv``
+    of :class:`~uavrl.envs.UAVSpectrumEnv` works too (its workers' worlds in
+    order).  Leading batch dimensions are planned world by world, as one batch.
+    The bound env stays in its process: a pickled copy carries none.  It acts
+    only in environments of ``cfg``'s grid, number of UAVs and layout
+    (:mod:`uavrl.agents.env_check`).
     """
 
     in_keys = ["positions", "tasks"]
@@ -78,9 +83,8 @@ class OraclePolicy(TensorDictModuleBase):
 
     def __init__(self, cfg: ModelConfig, env=None):
         super().__init__()
-        self.cfg, self.env, self.run_env = cfg, None, RunEnvironment(cfg)
-        if env is not None:
-            self.bind_env(env)
+        self.cfg, self.run_env = cfg, RunEnvironment(cfg)
+        self.bind_env(env)
         self.neighbours = grid_neighbours(cfg.grid).tolist()
         self._targets: dict[int, tuple] = {}  # world -> (its contributions, optimal cells, optimal tasks)
         self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
@@ -88,21 +92,35 @@ class OraclePolicy(TensorDictModuleBase):
     def bind_env(self, env) -> OraclePolicy:
         """Act in ``env`` (the evaluation calls this; with ``layout="random"`` the layouts come from it); a one-line
         ValueError unless it has ``cfg``'s grid, number of UAVs and layout."""
-        self.run_env.check_env(env)
-        self.env = env
+        if env is not None:
+            self.run_env.check_env(env)
+        # kept out of the nn.Module's registry: an env is no part of the policy's parameters or state
+        self.__dict__["env"] = env
         return self
 
-    def _layout(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
+    def __getstate__(self):
+        state = super().__getstate__()
+        state["env"] = None  # an env (a ParallelEnv's workers) belongs to its process
+        return state
+
+    def _layouts(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """Every world's ``(contributions [W, C, 2], direct [W, 2])`` for a random layout, None for a fixed one."""
         if self._fixed is not None:
-            return self._fixed[0][0], self._fixed[1][0]
+            return None
         if self.env is None:
             raise ValueError(
                 "OraclePolicy with layout='random' needs the environment it acts in: OraclePolicy(cfg, env=env)"
             )
-        return self.env.cell_contributions[world], self.env.direct[world]
+        tables = self.env.layout_tables()
+        if isinstance(tables, list):  # a SerialEnv or ParallelEnv: one pair per worker, in the order of its batch
+            return torch.cat([c for c, _ in tables]), torch.cat([d for _, d in tables])
+        return tables
 
-    def _optimal_sets(self, world: int) -> tuple[torch.Tensor, torch.Tensor]:
-        contributions, direct = self._layout(world)
+    def _optimal_sets(self, world: int, layouts) -> tuple[torch.Tensor, torch.Tensor]:
+        if layouts is None:
+            contributions, direct = self._fixed[0][0], self._fixed[1][0]
+        else:
+            contributions, direct = layouts[0][world], layouts[1][world]
         key = 0 if self._fixed is not None else world
         cached = self._targets.get(key)
         if cached is None or not torch.equal(cached[0], contributions):
@@ -114,14 +132,17 @@ class OraclePolicy(TensorDictModuleBase):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
-        cells = cells_of(positions, self.cfg.grid[0]).cpu()
-        actions = torch.stack([self._plan(w, cells[w], tasks[w].cpu()) for w in range(len(cells))])
-        td.set(("agents", "action"), actions.to(positions.device))
+        N = self.cfg.num_uavs
+        cells = cells_of(positions, self.cfg.grid[0]).cpu().reshape(-1, N)
+        tasks_of = tasks.cpu().reshape(-1, N)
+        layouts = self._layouts()
+        actions = torch.stack([self._plan(w, cells[w], tasks_of[w], layouts) for w in range(len(cells))])
+        td.set(("agents", "action"), actions.view(tasks.shape).to(positions.device))
         return td
 
-    def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
+    def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor, layouts) -> torch.Tensor:
         """One valid joint action of one world, ``[N]``."""
-        target_cells, target_tasks = self._optimal_sets(world)
+        target_cells, target_tasks = self._optimal_sets(world, layouts)
         costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
         _, s, pair = best_assignment(costs)
         width = self.cfg.grid[0]

@@ -544,7 +544,7 @@ class DQNAgent(Agent):
         # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
         reach_utility = mean_utility(nxt) if self.env_cfg.fading != "none" else None
         per_world = episode_metrics(
-            nxt.get("r_pu"), nxt.get("r_se"), nxt.get("task_switches"), nxt.get("moves"), u_star, reach_utility
+            *(nxt.get(key).squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")), u_star, reach_utility
         )
         out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
         out["train/epsilon"] = self.exploration.eps.item()

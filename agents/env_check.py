@@ -72,8 +72,16 @@ class RunEnvironment:
         return ValueError(f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
 
     def check_env(self, env) -> None:
-        """A one-line ValueError unless ``env`` has the run's grid, number of UAVs and layout."""
-        cfg = env.cfg
+        """A one-line ValueError unless ``env`` (or every worker of a ``SerialEnv``/``ParallelEnv``) has the run's
+        grid, number of UAVs and layout."""
+        if getattr(env, "is_closed", False) and hasattr(env, "start"):  # a batched env not started has no workers
+            env.start()
+        configs = env.model_config()
+        for cfg in configs if isinstance(configs, list) else [configs]:
+            self._check_config(cfg)
+        self._checked_shape = tuple(env.batch_size)
+
+    def _check_config(self, cfg: ModelConfig) -> None:
         differ = []
         if tuple(cfg.grid) != self.grid:
             differ.append(f"a {cfg.grid[0]}x{cfg.grid[1]} grid")
@@ -86,7 +94,6 @@ class RunEnvironment:
             differ.append(f"layout {cfg.layout!r} with its nodes elsewhere (another altitude)")
         if differ:
             raise self._refuse(f"the environment has {', '.join(differ)}")
-        self._checked_shape = tuple(env.batch_size)
 
     def check(self, td: TensorDictBase) -> None:
         """A one-line ValueError unless ``td`` comes from an environment of the run (module doc: what is checked)."""

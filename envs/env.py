@@ -17,7 +17,7 @@ from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
 from .config import NUM_ACTIONS, ModelConfig, make_config
-from .world import SEED_LIMIT, World, _check_batch_size, check_seed, resolve_device
+from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_seed, resolve_device
 
 __all__ = ["SEED_LIMIT", "MaskedCategorical", "UAVSpectrumEnv", "check_seed", "resolve_device"]
 
@@ -64,6 +64,8 @@ def _mask_patterns(n: int, device: torch.device) -> tuple[torch.Tensor, torch.Te
     return allows.sum(-1).to(device), torch.where(allows.gather(-1, order) == 1, order, 0).flatten().to(device)
 
 
+_DONE_KEYS = ("done", "terminated", "truncated")
+
 # TorchRL looks action spaces up by exact type (QValueModule, DQN losses, BenchMARL's Q-learners)
 ACTION_SPACE_MAP.setdefault(MaskedCategorical, "categorical")
 
@@ -80,8 +82,11 @@ class UAVSpectrumEnv(EnvBase):
     ``[B, N]`` with ``observation``, ``action`` and ``action_mask``; at the root
     ``reward``, ``done``/``terminated``/``truncated``, a global ``state``, the
     integer views ``positions`` ``[B, N, 2]`` (x, y), ``tasks`` ``[B, N]`` and
-    ``state_index`` ``[B]`` (when the tabular state fits in int64), and the
-    step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches``.
+    ``state_index`` ``[B, 1]`` (when the tabular state fits in int64), and the
+    step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches``, each
+    ``[B, 1]`` like ``reward`` (so ``CatTensors`` joins them with ``state``).
+    As VMAS's TorchRL wrapper, the env has ``n_agents``, ``agent_names``
+    (``agent_0`` ...) and ``group_map`` (``{"agents": agent_names}``).
 
     World ``i`` draws its randomness from its own stream seeded ``seed + i``, so
     it behaves exactly like world 0 of a batch of one seeded ``seed + i``.
@@ -102,6 +107,16 @@ class UAVSpectrumEnv(EnvBase):
             an agent acts and learns from (observation, mask, state,
             positions, tasks, reward, done): a lighter rollout, for
             training loops that read nothing else (BenchMARL's task does this).
+        agent_rewards: publish the reward as VMAS's wrapper does, under the
+            group: ``("agents", "reward")`` ``[B, N, 1]``, every UAV receiving
+            the team reward (so the mean over the UAVs is the team reward), is
+            then the only reward key.  The done keys stay at the root
+            ``[B, 1]``, as VMAS's: per-agent losses read them expanded to the
+            reward's shape (``done.unsqueeze(-1).expand_as(reward)``, what
+            TorchRL's multi-agent examples do in their ``DoneTransform``),
+            which a group copy in the env's output would break (the
+            collector's reused buffer then holds the expanded view).
+            ``False`` (default): the team reward at the root, ``[B, 1]``.
         **overrides: any :class:`~uavrl.envs.config.ModelConfig` option
             (``layout``, ``fading``, ``reward``, powers, ...).
 
@@ -109,7 +124,7 @@ class UAVSpectrumEnv(EnvBase):
         >>> env = UAVSpectrumEnv(batch_size=4, grid=(6, 6), num_uavs=2, max_steps=10)
         >>> td = env.rollout(10)
         >>> td["next", "utility"].shape
-        torch.Size([4, 10])
+        torch.Size([4, 10, 1])
         >>> u_star, positions, tasks = env.optimum()
     """
 
@@ -127,18 +142,45 @@ class UAVSpectrumEnv(EnvBase):
         *,
         config: ModelConfig | None = None,
         diagnostics: bool = True,
+        agent_rewards: bool = False,
         **overrides,
     ):
         if config is not None and overrides:
             raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
         B = _check_batch_size(batch_size)
+        if not isinstance(agent_rewards, bool):
+            raise ValueError(f"agent_rewards={agent_rewards!r} is invalid: give True or False")
         super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.num_uavs
+        self.agent_rewards = agent_rewards
         self.world = World(cfg, B, self.device, seed, diagnostics=diagnostics)
         self._make_specs()
         self.set_seed(seed)
+
+    # --------------------------------------------------- TorchRL's multi-agent names
+    @property
+    def n_agents(self) -> int:
+        """The number of UAVs ``N`` (VMAS's name)."""
+        return self.num_uavs
+
+    @property
+    def agent_names(self) -> list[str]:
+        """``agent_0`` ... ``agent_{N-1}``: UAV ``i`` is row ``i`` of the group ``"agents"``."""
+        return [f"agent_{i}" for i in range(self.num_uavs)]
+
+    @property
+    def group_map(self) -> dict[str, list[str]]:
+        """Every UAV in one group ``"agents"`` (TorchRL's ``MarlGroupMapType.ALL_IN_ONE_GROUP``)."""
+        return {"agents": self.agent_names}
+
+    def to(self, device) -> UAVSpectrumEnv:
+        """Move the env, its specs and its worlds (:meth:`World.to`) to ``device``."""
+        device = resolve_device(device)
+        super().to(device)
+        self.world.to(self.device)
+        return self
 
     # ------------------------------------------------------------------ specs
     @property
@@ -170,11 +212,12 @@ class UAVSpectrumEnv(EnvBase):
         )
         if self.world.diagnostics:
             for key in ("r_pu", "r_se", "utility"):
-                obs[key] = Unbounded((), dtype=torch.float32, device=self.device)
+                obs[key] = Unbounded((1,), dtype=torch.float32, device=self.device)
             for key in ("moves", "task_switches"):
-                obs[key] = Unbounded((), dtype=torch.long, device=self.device)
+                obs[key] = Unbounded((1,), dtype=torch.long, device=self.device)
             if self.world._state_base is not None:
-                obs["state_index"] = Unbounded((), dtype=torch.long, device=self.device)
+                obs["state_index"] = Unbounded((1,), dtype=torch.long, device=self.device)
+
         self.full_observation_spec_unbatched = obs
         self.full_action_spec_unbatched = Composite(
             agents=Composite(
@@ -184,14 +227,18 @@ class UAVSpectrumEnv(EnvBase):
             ),
             device=self.device,
         )
-        self.full_reward_spec_unbatched = Composite(
-            reward=Unbounded((1,), dtype=torch.float32, device=self.device), device=self.device
-        )
+        if self.agent_rewards:  # one reward key, as on VMAS (env.reward_key is ("agents", "reward"))
+            reward = Composite(
+                agents=Composite(
+                    reward=Unbounded((N, 1), dtype=torch.float32, device=self.device), shape=(N,), device=self.device
+                ),
+                device=self.device,
+            )
+        else:
+            reward = Composite(reward=Unbounded((1,), dtype=torch.float32, device=self.device), device=self.device)
+        self.full_reward_spec_unbatched = reward
         self.full_done_spec_unbatched = Composite(
-            {
-                k: Categorical(2, (1,), dtype=torch.bool, device=self.device)
-                for k in ("done", "terminated", "truncated")
-            },
+            {k: Categorical(2, (1,), dtype=torch.bool, device=self.device) for k in _DONE_KEYS},
             device=self.device,
         )
 
@@ -201,13 +248,16 @@ class UAVSpectrumEnv(EnvBase):
 
     # ---------------------------------------------------------- reset, step
     def _outputs(self, out: dict) -> TensorDictBase:
-        """The world's outputs as this env's TensorDict: the per-UAV keys in the group ``"agents"``."""
-        B, dev = self.num_worlds, self.device
-        out["agents"] = TensorDict._new_unsafe(
-            {"observation": out.pop("observation"), "action_mask": out.pop("action_mask")},
-            batch_size=torch.Size((B, self.num_uavs)),
-            device=dev,
-        )
+        """The world's outputs as this env's TensorDict: the per-UAV keys in the group ``"agents"``, the per-world
+        scalars ``[B, 1]``; with ``agent_rewards`` the team reward copied to every UAV."""
+        B, N, dev = self.num_worlds, self.num_uavs, self.device
+        group = {"observation": out.pop("observation"), "action_mask": out.pop("action_mask")}
+        for key in DIAGNOSTICS:  # the world's per-world outputs [B], [B, 1] as TorchRL has a per-world reward or done
+            if key in out:
+                out[key] = out[key].unsqueeze(-1)
+        if self.agent_rewards and "reward" in out:
+            group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
+        out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)
         return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=dev)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
@@ -299,6 +349,14 @@ class UAVSpectrumEnv(EnvBase):
     def joint_action_mask(self, positions: torch.Tensor | None = None) -> torch.Tensor:
         """``[B, 6^N]`` valid joint actions (all cells on the grid and distinct) at ``positions`` (default: now)."""
         return self.world.joint_action_mask(positions)
+
+    def model_config(self) -> ModelConfig:
+        """The model's options: a method, so a ``SerialEnv`` or ``ParallelEnv`` returns every worker's."""
+        return self.cfg
+
+    def layout_tables(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(cell_contributions, direct)``: a method, so a ``SerialEnv`` or ``ParallelEnv`` returns every worker's."""
+        return self.cell_contributions, self.direct
 
     @property
     def cell_contributions(self) -> torch.Tensor:

@@ -201,6 +201,23 @@ class World:
             self._set_layout(torch.zeros(1, dtype=torch.long, device=dev))
         self.set_seed(seed)
 
+    def to(self, device) -> World:
+        """Move every tensor the worlds own (tables, state, random streams) to ``device``; returns ``self``.
+
+        Each stream is a pure function of its key and counter (:mod:`.streams`), so the worlds go on from where they
+        were and a step gives the same outputs on any device.
+        """
+        device = resolve_device(device)
+        for name, value in vars(self).items():
+            if isinstance(value, torch.Tensor):
+                setattr(self, name, value.to(device))
+        for name in _WorldsState.__slots__:
+            value = getattr(self._s, name)
+            if isinstance(value, torch.Tensor):
+                setattr(self._s, name, value.to(device))
+        self.device = device
+        return self
+
     # ---------------------------------------------------------- sizes
     @property
     def observation_size(self) -> int:

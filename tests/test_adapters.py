@@ -139,7 +139,7 @@ def test_vector_env_is_uavspectrumenv():
         obs, reward, _, _, infos = ours.step(actions.numpy())
         td = torchrl_env.step(td.set(("agents", "action"), actions))["next"]
         assert np.array_equal(reward, td["reward"].squeeze(-1).double().numpy())
-        assert np.array_equal(infos["utility"], td["utility"].double().numpy())
+        assert np.array_equal(infos["utility"], td["utility"].squeeze(-1).double().numpy())
 
 
 def test_gymnasiums_vector_wrappers_run_on_the_vector_env():

@@ -356,7 +356,7 @@ def test_log_gap_reward_uses_the_layouts_the_batch_was_played_in(make_agent):
     original = agent._log_gap_reward
 
     def spy(batch, u_star, mean_utility):
-        seen.append((mean_utility(batch), batch.get("utility").double(), u_star))
+        seen.append((mean_utility(batch), batch.get("utility")[..., 0].double(), u_star))
         return original(batch, u_star, mean_utility)
 
     agent._log_gap_reward = spy

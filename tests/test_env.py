@@ -370,7 +370,10 @@ def test_dynamics_follow_spec(scenario):
         rewards += out["reward"][:, 0].double()
         td = out
     if options["reward"] == "delta":
-        weighted = [options["beta1"] * s["r_pu"].double() + options["beta2"] * s["r_se"].double() for s in (start, td)]
+        weighted = [
+            options["beta1"] * s["r_pu"][:, 0].double() + options["beta2"] * s["r_se"][:, 0].double()
+            for s in (start, td)
+        ]
         torch.testing.assert_close(rewards, weighted[1] - weighted[0], rtol=0, atol=1e-4)
 
 
@@ -602,7 +605,7 @@ def test_rayleigh_power_gain_is_exp1(measured):
             xy = out["positions"][:, uav].double()
             d2 = ((xy[:, 0] - node[0]) ** 2 + (xy[:, 1] - node[1]) ** 2 + (h - node[2]) ** 2) * cell**2
             k = small / d2 / noise
-            xs[w_key].append((torch.exp2(2 * out[r_key].double()) - 1) / k)
+            xs[w_key].append((torch.exp2(2 * out[r_key][:, 0].double()) - 1) / k)
         td = step_mdp(td)
     for key in xs:
         x = torch.cat(xs[key])
@@ -647,7 +650,7 @@ def test_rayleigh_fades_direct_links():
     for _ in range(40):
         td = step_with(env, td, [[5, 4]] * 1024)
         for key, k in (("r_pu", k_pu), ("r_se", k_se)):
-            xs[key].append((torch.exp2(2 * td["next", key].double()) - 1) / k)
+            xs[key].append((torch.exp2(2 * td["next", key][:, 0].double()) - 1) / k)
         td = step_mdp(td)
     pu, se = torch.cat(xs["r_pu"]), torch.cat(xs["r_se"])
     for x in (pu, se):  # n = 40,960: sd(mean) = 0.005
@@ -664,7 +667,7 @@ def test_fading_none_is_deterministic_and_utility_ignores_fading():
     det_td = det.reset()
     assert td["positions"].equal(det_td["positions"]) and td["tasks"].equal(det_td["tasks"])
     u_env = env.utility(td["positions"], td["tasks"])[2]
-    torch.testing.assert_close(u_env.float(), det_td["utility"], rtol=1e-6, atol=1e-6)
+    torch.testing.assert_close(u_env.float(), det_td["utility"][:, 0], rtol=1e-6, atol=1e-6)
     assert not torch.allclose(td["utility"], det_td["utility"])
 
 

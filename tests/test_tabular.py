@@ -102,8 +102,8 @@ def test_model_tables_agree_with_the_environment():
         k_after = model.configuration_ids(nxt["positions"], nxt["tasks"])
         assert torch.equal(model.next_cells[k_before // 4, joint].long(), k_after // 4)
         assert torch.equal(model.next_tasks[k_before % 4, joint].long(), k_after % 4)
-        assert torch.allclose(model.r_pu[k_after].float(), nxt["r_pu"])
-        assert torch.equal(model.row[k_after].long(), nxt["state_index"])
+        assert torch.allclose(model.r_pu[k_after].float(), nxt["r_pu"][:, 0])
+        assert torch.equal(model.row[k_after].long(), nxt["state_index"][:, 0])
         td = env.step_mdp(td)
 
 

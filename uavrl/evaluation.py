@@ -189,7 +189,9 @@ def evaluate(
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
     rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
-    return greedy_metrics(env.world, start, rollout["next"], u_star, references, gamma)
+    steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
+    steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
+    return greedy_metrics(env.world, start, steps, u_star, references, gamma)
 
 
 def evaluation_starts(cfg: ModelConfig, num_starts: int, horizon: int | None, seed: int, device, gamma: float):
@@ -213,7 +215,7 @@ def greedy_metrics(
 
     ``start`` holds the start's ``positions`` and ``tasks``, ``steps`` each
     step's ``positions``, ``tasks``, ``r_pu``, ``r_se``, ``task_switches`` and
-    ``moves``, ``[B, H, ...]`` (a TorchRL rollout's ``"next"`` or a dict).
+    ``moves``, ``[B, H, ...]`` (the per-world scalars ``[B, H]``).
     """
     positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)

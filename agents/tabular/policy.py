@@ -10,6 +10,7 @@ from uavrl.agents.env_check import RunEnvironment
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
+from ..generators import PolicyGenerator
 from .greedy import greedy_joint_actions
 
 
@@ -39,7 +40,7 @@ class TabularPolicy(TensorDictModuleBase):
         self.register_buffer("q", q)
         self.register_buffer("neighbours", grid_neighbours(cfg.grid, q.device))
         self.register_buffer("actions", decode_joint_actions(cfg.num_uavs, q.device))
-        self.generator = torch.Generator(device=q.device).manual_seed(seed)
+        self.generator = PolicyGenerator(seed, q.device)
         self.run_env = RunEnvironment(cfg)
 
     def bind_env(self, env) -> TabularPolicy:
@@ -51,7 +52,7 @@ class TabularPolicy(TensorDictModuleBase):
         self.run_env.check(td)
         positions = td.get("positions").to(self.q.device)
         cells = positions[..., 1] * self.cfg.grid[0] + positions[..., 0]
-        values = self.q[td.get("state_index").to(self.q.device)]
+        values = self.q[td.get("state_index").squeeze(-1).to(self.q.device)]
         uniforms = torch.rand(values.shape, generator=self.generator, device=self.q.device)
         valid = joint_action_valid(cells, self.neighbours, self.cfg.num_uavs)
         pick = greedy_joint_actions(values, valid, uniforms)
