@@ -19,6 +19,8 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
+from .limits import PHYSICAL, allowed_range, physics_problem
+
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)
 SENSING, RELAYING = 0, 1
@@ -113,6 +115,27 @@ class ModelConfig:
             _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
         ):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
+        if self.rate_model == "reference_code" and self.num_uavs < 2:
+            reason = "rate_model='reference_code' pays neither network unless both tasks are staffed: give 2 or more"
+            raise InvalidOption("num_uavs", self.num_uavs, reason)
+        self._check_physics()
+
+    def _check_physics(self):
+        """A one-line refusal when the numbers would give NaN, infinite or everywhere-zero rates
+        (:mod:`uavrl.envs.limits`), blaming the option whose preset value would pass, with the range that passes."""
+        values = {name: getattr(self, name) for name in _PHYSICS_OPTIONS} | {"altitude": self.height}
+        problem = physics_problem(values)
+        if problem is None:
+            return
+        preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {})}
+        preset["altitude"] = float(self.grid[0]) if preset["altitude"] is None else preset["altitude"]
+        changed = [name for name in (*PHYSICAL, "beta1", "beta2") if values[name] != preset[name]]
+        for name in changed:
+            if physics_problem({**values, name: preset[name]}) is None:
+                reason = problem if name in ("beta1", "beta2") else f"{problem}; {allowed_range(values, name, preset[name])}"
+                raise InvalidOption(name, getattr(self, name), reason)
+        name = changed[0] if changed else "grid"
+        raise InvalidOption(name, getattr(self, name), problem)
 
     @property
     def num_cells(self) -> int:
@@ -154,6 +177,13 @@ _PRESETS = {
         init_tasks="sensing",
     ),
 }
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
+# what uavrl.envs.limits reads
+_PHYSICS_OPTIONS = (
+    *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward"),
+    *(name for name in PHYSICAL if name != "altitude"),
+    *("beta1", "beta2"),
+)
 OPTION_NAMES = tuple(f.name for f in dataclasses.fields(ModelConfig) if f.name != "preset")
 
 

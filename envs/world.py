@@ -142,12 +142,7 @@ class World:
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
         self._node_scale = torch.tensor([L1, L2, cfg.height], dtype=f64, device=dev)
-        layout = fixed_layout(cfg, f64, dev)
-        if layout is not None:
-            d = torch.cdist(self._cell_xyz, layout).min()
-            if d == 0:
-                reason = f"with layout={cfg.layout!r} a node sits on a UAV cell at UAV altitude (zero distance)"
-                raise InvalidOption("grid", cfg.grid, f"{reason}; use a smaller grid or layout='line'")
+        layout = fixed_layout(cfg, f64, dev)  # ModelConfig refused one with a node on a UAV cell (envs/limits.py)
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
         self._cell_mask = torch.cat(
             [self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1
