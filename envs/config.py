@@ -115,9 +115,6 @@ class ModelConfig:
             _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
         ):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
-        if self.rate_model == "reference_code" and self.num_uavs < 2:
-            reason = "rate_model='reference_code' pays neither network unless both tasks are staffed: give 2 or more"
-            raise InvalidOption("num_uavs", self.num_uavs, reason)
         self._check_physics()
 
     def _check_physics(self):
@@ -132,7 +129,9 @@ class ModelConfig:
         changed = [name for name in (*PHYSICAL, "beta1", "beta2") if values[name] != preset[name]]
         for name in changed:
             if physics_problem({**values, name: preset[name]}) is None:
-                reason = problem if name in ("beta1", "beta2") else f"{problem}; {allowed_range(values, name, preset[name])}"
+                reason = (
+                    problem if name in ("beta1", "beta2") else f"{problem}; {allowed_range(values, name, preset[name])}"
+                )
                 raise InvalidOption(name, getattr(self, name), reason)
         name = changed[0] if changed else "grid"
         raise InvalidOption(name, getattr(self, name), problem)

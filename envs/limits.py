@@ -243,3 +243,64 @@ def _rounded(value: float, direction) -> str:
     """``value`` to 3 significant digits, rounded by ``direction`` (``math.floor`` or ``math.ceil``)."""
     scale = 10 ** (math.floor(math.log10(value)) - 2)
     return f"{direction(value / scale) * scale:.3g}"
+
+
+# ---------------------------------------------------------------------------------------------------------- sizes
+DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest allocations) may take unless raised
+EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
+MAX_EXACT_UAVS = 20  # uavrl.envs.optimum.MAX_EXCHANGE_UAVS: U* enumerates 2^N subsets of the best cells
+
+
+def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
+    """Sets of N (cell, task) pairs on distinct cells: ``C(C, N) 2^N``."""
+    return math.comb(grid[0] * grid[1], num_uavs) * 2**num_uavs
+
+
+def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
+    """Memory of the exact solver (:class:`uavrl.envs.exact.ConfigurationSpace`): the int32 successor table, the
+    configurations and one chunked sweep of ``2^23`` gathered values."""
+    K, A = num_configurations(grid, num_uavs), 6**num_uavs
+    return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + (1 << 23) * 16
+
+
+def world_bytes(cfg, batch_size: int) -> int:
+    """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
+    world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).
+
+    The geometry and the per-code tables cost ~500 bytes a cell, each layout's tables ~520 (while they are built);
+    each world ~440 bytes a UAV, and a reset draws 16 bytes of random keys per cell and world (a step of 3 or more
+    UAVs counts targets per cell and world: 8 more).
+    """
+    C, N, B = cfg.num_cells, cfg.num_uavs, batch_size
+    layouts = B if cfg.layout == "random" else 1
+    per_world = (16 + (8 if N >= 3 else 0)) * C + 440 * N + 64
+    pair_tables = (2 * C) ** 2 * 200 if N == 2 and layouts == 1 and (2 * C) ** 2 <= 1 << 16 else 0
+    return 500 * C + 520 * C * layouts + B * per_world + pair_tables
+
+
+def frame_bytes(cfg) -> int:
+    """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key."""
+    N = cfg.num_uavs
+    observation = 4 * N * (13 + 3 * (N - 1))
+    per_step = observation + 4 * (5 * N + 12) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, positions, ...
+    return 2 * per_step
+
+
+def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
+    """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.bounds`) where the exact solver does not fit:
+    each world's best reachable terms ``[K + 1, N]``, then the relaxation of chunks of (world, step) rows over
+    every split of the UAVs, and the optimal sets (at most ``MAX_CANDIDATES`` candidates)."""
+    N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
+    chunk = 1 << 22  # uavrl.envs.bounds._CHUNK_ELEMENTS
+    reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
+    relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
+    candidates = 2_000_000 * N * 8 * 4
+    return reachable + max(relaxation, candidates)
+
+
+def gib(size: int) -> str:
+    """``size`` bytes as ``12,345,678 bytes (11.8 MiB)``."""
+    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if size >= scale:
+            return f"{size:,} bytes ({size / scale:.3g} {unit})"
+    return f"{size:,} bytes"

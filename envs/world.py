@@ -42,6 +42,7 @@ from .channel import (
 )
 from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
 from .grid import cells_of, grid_neighbours, joint_action_valid
+from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .optimum import optimum as exact_optimum
 
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
@@ -62,11 +63,14 @@ def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> to
 
 
 def resolve_device(device) -> torch.device:
-    """``device`` as a ``torch.device``; a one-line ValueError when it is malformed or not on this machine."""
+    """``device`` as a ``torch.device``; a one-line ValueError when it is malformed, not a CPU or CUDA device, or not
+    on this machine."""
     try:
         resolved = torch.device(device)
     except (RuntimeError, TypeError):
-        raise ValueError(f"device={device!r} is invalid: use 'cpu', 'cuda' or 'cuda:<index>'") from None
+        resolved = None
+    if resolved is None or resolved.type not in ("cpu", "cuda"):  # the worlds' kernels run on CPU and CUDA only
+        raise InvalidOption("device", device, "use 'cpu', 'cuda' or 'cuda:<index>'")
     count = torch.cuda.device_count() if torch.cuda.is_available() else 0
     if resolved.type == "cuda" and (resolved.index or 0) >= count:
         raise ValueError(f"device={device!r} is not available: this torch sees {count} CUDA devices (README: GPU)")
@@ -81,15 +85,28 @@ def check_seed(seed) -> int:
 
 
 def _check_batch_size(batch_size) -> int:
-    size = batch_size if isinstance(batch_size, int) else (list(batch_size) or [None])[0]
-    if (
-        isinstance(batch_size, (list, tuple, torch.Size))
-        and len(batch_size) != 1
-        or not isinstance(size, int)
-        or size < 1
-    ):
-        raise ValueError(f"batch_size={batch_size!r} is invalid: give the number of worlds B >= 1 (an int or [B])")
-    return size
+    """``B`` of ``batch_size`` (``B`` or ``[B]``); a one-line refusal for anything else (a bool, a float, a tensor)."""
+    size = batch_size
+    if isinstance(batch_size, (list, tuple, torch.Size)):
+        size = batch_size[0] if len(batch_size) == 1 else None
+    if not isinstance(size, numbers.Integral) or isinstance(size, bool) or size < 1:
+        raise InvalidOption("batch_size", batch_size, "give the number of worlds B >= 1, a whole number or [B]")
+    return int(size)
+
+
+def check_memory(cfg: ModelConfig, batch_size: int, memory_budget) -> None:
+    """A one-line refusal, before anything is allocated, when ``batch_size`` worlds of ``cfg`` would take more than
+    ``memory_budget`` bytes (:func:`uavrl.envs.limits.world_bytes`)."""
+    if not isinstance(memory_budget, numbers.Real) or isinstance(memory_budget, bool) or not memory_budget > 0:
+        raise InvalidOption("memory_budget", memory_budget, "give the bytes the worlds may take, a positive number")
+    need = world_bytes(cfg, batch_size)
+    if need > memory_budget:
+        L1, L2 = cfg.grid
+        reason = (
+            f"{batch_size:,} worlds of {cfg.num_uavs} UAVs on {L1}x{L2} need about {gib(need)}, over "
+            f"memory_budget={int(memory_budget):,} bytes: use fewer worlds, or raise memory_budget"
+        )
+        raise InvalidOption("batch_size", batch_size, reason)
 
 
 class _WorldsState:
@@ -100,7 +117,7 @@ class _WorldsState:
     (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (``best_so_far``);
     ``steps`` the episode clock; ``started`` whether a world has been reset;
     ``keys`` and ``counters`` the per-world random streams; ``was_reset``
-    whether ``_reset`` ever ran.
+    whether every world has been reset at least once (then every UAV has a cell).
     """
 
     __slots__ = ("code", "r", "best", "steps", "started", "counters", "keys", "was_reset")
@@ -123,8 +140,17 @@ class World:
     acts or learns from the observation needs.
     """
 
-    def __init__(self, cfg: ModelConfig, batch_size: int = 1, device="cpu", seed: int = 0, diagnostics: bool = True):
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        batch_size: int = 1,
+        device="cpu",
+        seed: int = 0,
+        diagnostics: bool = True,
+        memory_budget: int = DEFAULT_MEMORY_BUDGET,
+    ):
         B = _check_batch_size(batch_size)
+        check_memory(cfg, B, memory_budget)
         if not isinstance(diagnostics, bool):
             raise ValueError(f"diagnostics={diagnostics!r} is invalid: give True or False")
         self.diagnostics = diagnostics  # the outputs of DIAGNOSTICS too
@@ -190,7 +216,7 @@ class World:
             started=torch.zeros(B, dtype=torch.bool, device=dev),
             counters=torch.zeros(B, dtype=torch.long, device=dev),
             keys=streams.world_keys(0, B, dev),
-            was_reset=False,  # a Python flag: stepping before the first reset is an error, at no per-step cost
+            was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
         if layout is not None:
             self._set_layout(torch.zeros(1, dtype=torch.long, device=dev))
@@ -445,7 +471,8 @@ class World:
         s.steps[worlds] = 0
         s.best[worlds] = 0.0
         s.r[worlds] = self._current_rates(s.code[worlds], worlds)
-        s.was_reset = True
+        # a partial first reset leaves worlds without cells: read the flags until every world has been reset
+        s.was_reset = s.was_reset or len(worlds) == B or bool(s.started.all())
         return self._observe(self._s.code, self._s.code >> 1, self._no_counts, self._no_counts)
 
     def start_at(self, code: torch.Tensor) -> dict:
