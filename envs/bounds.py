@@ -164,19 +164,39 @@ def best_assignment(costs: torch.Tensor) -> tuple[int, int, np.ndarray]:
 
     Minimising ``sum (N + 1)^cost`` minimises the largest cost first (one pair
     at cost ``m`` outweighs N pairs below ``m``), then how many UAVs need it, and
-    so on: the bottleneck assignment, with the fewest UAVs on long paths.
+    so on: the bottleneck assignment, with the fewest UAVs on long paths.  Where
+    ``(N + 1)^cost`` would leave float64 (costs of hundreds of steps, large grids),
+    each set's bottleneck ``m`` is found first and the weights are ``(N + 1)^(cost - m)``.
     """
     from scipy.optimize import linear_sum_assignment  # scipy (~0.7 s to import) only where an assignment is solved
 
     costs = costs.cpu().numpy()
-    weights = float(costs.shape[1] + 1) ** costs
+    base = float(costs.shape[1] + 1)
+    overflows = costs.max() * math.log10(base) > _LOG10_WEIGHT_LIMIT
     best = None
     for s in range(len(costs)):
-        rows, cols = linear_sum_assignment(weights[s])
-        key = (int(costs[s, rows, cols].max()), float(weights[s, rows, cols].sum()))
+        bottleneck = _bottleneck(costs[s], linear_sum_assignment) if overflows else 0
+        weights = np.where(costs[s] <= bottleneck, base ** (costs[s] - bottleneck), np.inf) if overflows else None
+        weights = base ** costs[s] if weights is None else weights
+        rows, cols = linear_sum_assignment(weights)
+        key = (int(costs[s, rows, cols].max()), float(weights[rows, cols].sum()))
         if best is None or key < best[0]:
             best = (key, s, cols)
     return best[0][0], best[1], best[2]
+
+
+_LOG10_WEIGHT_LIMIT = 300  # (N + 1)^cost beyond 1e300: the sums of N weights would leave float64
+
+
+def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
+    """The least ``m`` such that every UAV gets its own pair at a cost ``<= m`` (bisection over the costs)."""
+    values = np.unique(cost)
+    low, high = 0, len(values) - 1
+    while low < high:
+        middle = (low + high) // 2
+        rows, cols = linear_sum_assignment(cost > values[middle])  # 0 where allowed: a total of 0 fits under m
+        low, high = (middle + 1, high) if (cost[rows, cols] > values[middle]).any() else (low, middle)
+    return int(values[low])
 
 
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:

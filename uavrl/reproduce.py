@@ -32,7 +32,7 @@ from uavrl.cli import run_command
 from uavrl.config import config_dir
 from uavrl.envs.config import make_config
 from uavrl.io import save_json, save_text, save_torch
-from uavrl.settings import REPRODUCE_SETTINGS, check, shown
+from uavrl.settings import REPRODUCE_SETTINGS, check, check_reproduce_costs, shown
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
@@ -53,7 +53,6 @@ PAPER_LEARNER = dict(
     epsilon=0.1,
     shared_table=False,
     backend="numba",
-    memory_budget=4 * 2**30,
 )
 # how the model's options are typed on this command line
 OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
@@ -85,12 +84,14 @@ def output_dir(cfg: DictConfig) -> Path:
 def check_settings(cfg: DictConfig) -> None:
     """Every setting, and that the output directory holds no other variant, before anything heavy is imported."""
     check(cfg, REPRODUCE_SETTINGS)
+    models = []
     for size in cfg.grids:
         if not cfg.steps and size not in PAPER_STEPS:
             reason = f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<per episode>"
             raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
         shape = dict(grid=(size, size), num_uavs=cfg.num_uavs, max_steps=steps_per_episode(size, cfg))
-        make_config("paper", **shape, state_includes_tasks=cfg.state_includes_tasks)
+        models.append(make_config("paper", **shape, state_includes_tasks=cfg.state_includes_tasks))
+    check_reproduce_costs(cfg, models)
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
@@ -142,7 +143,13 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
         state_includes_tasks=bool(cfg.state_includes_tasks),
     )
     built = time.perf_counter()
-    settings = OmegaConf.create({"agent": {**PAPER_LEARNER, "episodes": int(cfg.episodes), "runs": int(cfg.runs)}})
+    learner = {
+        **PAPER_LEARNER,
+        "episodes": int(cfg.episodes),
+        "runs": int(cfg.runs),
+        "memory_budget": cfg.memory_budget,
+    }
+    settings = OmegaConf.create({"agent": learner})
     agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced

@@ -27,7 +27,7 @@ from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, lo
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import claim_dir, remove_orphans, save_json, save_text
-from uavrl.settings import RUN_SETTINGS, check, check_scenario
+from uavrl.settings import RUN_SETTINGS, check, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -37,7 +37,7 @@ def check_settings(cfg: DictConfig) -> None:
     """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
     check(cfg, RUN_SETTINGS)
     check_scenario(cfg)
-    model_config(cfg)
+    check_run_costs(cfg, model_config(cfg))
     if cfg.resume and not checkpoint_files(cfg.resume):
         raise FileNotFoundError(f"resume={cfg.resume!r}: no {CHECKPOINT} in that directory (give a run directory)")
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
