@@ -298,6 +298,24 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     return reachable + max(relaxation, candidates)
 
 
+def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:
+    """Peak bytes of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
+    > 0: the tabular agent's ``tables x num_starts`` worlds stepped together, keeping each step's outputs; else a
+    TorchRL rollout of every transition) and the references: the exact solver where it fits, else the bounds."""
+    if tables:
+        rows = tables * num_starts
+        play = world_bytes(cfg, rows) + rows * horizon * (6 * 8 + 24 * cfg.num_uavs)
+    else:
+        play = num_starts * horizon * frame_bytes(cfg)
+    exact = required_bytes(cfg.grid, cfg.num_uavs)
+    layouts = num_starts if cfg.layout == "random" else 1
+    if exact <= EXACT_SOLVER_BUDGET:  # the solver's tables and each layout's values over its configurations
+        references = exact + layouts * num_configurations(cfg.grid, cfg.num_uavs) * 8 * 4
+    else:
+        references = bounds_bytes(cfg, num_starts, horizon)
+    return world_bytes(cfg, num_starts) + play + references
+
+
 def gib(size: int) -> str:
     """``size`` bytes as ``12,345,678 bytes (11.8 MiB)``."""
     for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):

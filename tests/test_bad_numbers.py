@@ -17,8 +17,10 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from uavrl.agents.baselines import RandomPolicy
 from uavrl.envs import InvalidOption, UAVSpectrumEnv, World, make_config
 from uavrl.envs.limits import world_bytes
+from uavrl.evaluation import evaluate
 
 FAST = 2.0  # seconds: a refusal costs no more than a start-up
 
@@ -160,6 +162,8 @@ API_CASES = [
     (lambda: reset_with(torch.ones(2, 1, dtype=torch.long)), ValueError, "'_reset' has dtype torch.int64"),
     (lambda: reset_with(torch.ones(2, 1, dtype=torch.bool, device="meta")), ValueError, "'_reset' has device meta"),
     (partly_reset_then_step, RuntimeError, "before every world was reset"),
+    (lambda: evaluate(RandomPolicy(), make_config(), num_starts=10**9), ValueError, "eval.num_starts=1000000000"),
+    (lambda: evaluate(RandomPolicy(), make_config(), horizon=10**12), ValueError, "eval.horizon=1000000000000"),
 ]
 
 

@@ -23,12 +23,10 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from uavrl.agents import AGENTS
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
-    EXACT_SOLVER_BUDGET,
     MAX_EXACT_UAVS,
-    bounds_bytes,
+    evaluation_bytes,
     frame_bytes,
     gib,
-    required_bytes,
     world_bytes,
 )
 
@@ -214,8 +212,6 @@ def check(cfg: DictConfig, table: dict[str, Rule], section: str = "") -> None:
 # ------------------------------------------------------------------------------------------ what a run costs
 DEFAULT_STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
 START_BLOCK = 256  # agents/tabular/learner.py: episodes whose starts one World draws for all runs
-# bytes a tabular evaluation keeps per world and step: the outputs it stacks (agents/tabular/greedy.py)
-_TABULAR_STEP_BYTES = 6 * 8
 
 
 @dataclass(frozen=True)
@@ -255,21 +251,9 @@ def evaluation_costs(model, num_starts: int, horizon: int, tables: int, names: t
     > 0: the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
     references: the exact solver where it fits, else the lower bounds.  ``names``: how the number of starts, the
     horizon and the number of tables are typed."""
-    rows = max(tables, 1) * num_starts
-    if tables:
-        play = world_bytes(model, rows) + rows * horizon * (_TABULAR_STEP_BYTES + 24 * model.num_uavs)
-    else:
-        play = num_starts * horizon * frame_bytes(model)
-    exact = required_bytes(model.grid, model.num_uavs)
-    layouts = num_starts if model.layout == "random" else 1
-    references = (
-        exact + layouts * (exact // (4 * 6**model.num_uavs)) * 8 * 4
-        if exact <= EXACT_SOLVER_BUDGET
-        else bounds_bytes(model, num_starts, horizon)
-    )
     factors = {names[0]: num_starts, names[1]: horizon} | ({names[2]: tables} if tables > 1 else {})
     fixed = () if "." in names[1] else (names[1],)  # reproduce has no horizon setting
-    return Cost(world_bytes(model, num_starts) + play + references, factors, "the evaluation", fixed)
+    return Cost(evaluation_bytes(model, num_starts, horizon, tables), factors, "the evaluation", fixed)
 
 
 def starts_worlds(model, runs: int, runs_name: str) -> Cost:

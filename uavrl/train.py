@@ -26,6 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, load_checkpoint
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.io import claim_dir, remove_orphans, save_json, save_text
 from uavrl.settings import RUN_SETTINGS, check, check_run_costs, check_scenario
 
@@ -53,6 +54,7 @@ def eval_settings(cfg: DictConfig, device) -> dict:
         seed=int(cfg.eval.seed),
         device=device,
         gamma=cfg.eval.gamma,
+        memory_budget=cfg.agent.get("memory_budget", DEFAULT_MEMORY_BUDGET),
     )
 
 

@@ -75,6 +75,7 @@ class TeamQLearner:
         self.cfg, self.runs, self.seed = cfg, int(runs), int(seed)
         self.alpha, self.gamma, self.epsilon = float(alpha), float(gamma), float(epsilon)
         self.shared_table, self.backend, self.device = bool(shared_table), backend, torch.device(device)
+        self.memory_budget = memory_budget
         self.model = TabularModel(cfg, self.device)
         self.q = torch.zeros(num_tables, cfg.num_states, cfg.num_joint_actions, dtype=torch.float64, device=self.device)
         self.episode = 0
@@ -91,7 +92,7 @@ class TeamQLearner:
         if block != self._start_block:
             worlds = _START_BLOCK * self.runs
             first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
-            start = World(self.cfg, worlds, self.device, first_world).reset()
+            start = World(self.cfg, worlds, self.device, first_world, memory_budget=self.memory_budget).reset()
             self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
                 _START_BLOCK, self.runs
             )
