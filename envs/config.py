@@ -1,4 +1,4 @@
-"""The model's options (SPEC sections 1-8), their presets and their validation.
+"""The model's options (docs/model.md), their presets and their validation.
 
 A :class:`ModelConfig` is an immutable description of one UAV spectrum-sharing
 model: the grid, the UAVs, the channel, the rate formulas, the reward and the
@@ -49,11 +49,11 @@ class InvalidOption(ValueError):
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """One model of SPEC.md.  Lengths are in cells unless the name says metres.
+    """One model of docs/model.md.  Lengths are in cells unless the name says metres.
 
     ``altitude`` of ``None`` means the paper's ``h = L1`` cells.  ``rate_model``
-    ``"af"`` is the normalised amplify-and-forward form of SPEC section 4;
-    ``"reference_code"`` is the authors' published formula (SPEC section 8),
+    ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
+    ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.
     """
 
@@ -151,7 +151,7 @@ class ModelConfig:
 
     @property
     def num_states(self) -> int:
-        """Size of the tabular state space (SPEC section 6), a Python int of any size."""
+        """Size of the tabular state space (docs/model.md, the tabular learner), a Python int of any size."""
         base = 2 * self.num_cells if self.state_includes_tasks else self.num_cells
         return base**self.num_uavs
 

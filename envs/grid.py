@@ -1,4 +1,4 @@
-"""Grid geometry and joint actions: the moves of SPEC section 2, with no TorchRL import.
+"""Grid geometry and joint actions: the moves of docs/model.md, with no TorchRL import.
 
 Cells are numbered ``c = y * L1 + x``; a UAV's move goes to a neighbouring cell
 (``-1`` when it would leave the grid); a joint action ``j = sum_i a_i 6^i``

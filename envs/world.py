@@ -1,4 +1,4 @@
-"""The physics of the UAV spectrum-sharing model for ``B`` worlds at once, with no TorchRL (SPEC.md).
+"""The physics of the UAV spectrum-sharing model for ``B`` worlds at once, with no TorchRL.
 
 :class:`World` holds the layouts, the per-cell and per-code tables, the UAVs'
 state and the per-world random streams; :meth:`World.reset` and
@@ -164,7 +164,7 @@ class World:
         x, y = c % L1, c // L1
         self._neighbours = grid_neighbours(cfg.grid, dev)  # [C, 4]
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
-        # digit base of the tabular state index s = sum_i d_i base^i (SPEC section 6), None when it overflows int64
+        # digit base of the tabular state index s = sum_i d_i base^i, None when it overflows int64
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
         self._node_scale = torch.tensor([L1, L2, cfg.height], dtype=f64, device=dev)
@@ -296,7 +296,7 @@ class World:
         return table[worlds.view(-1, *([1] * (cells.dim() - 1))), cells]
 
     def _sample_layout(self, worlds: torch.Tensor):
-        """``layout=random``: nodes uniform in the grid widened by half a grid per side (SPEC section 1).
+        """``layout=random``: nodes uniform in the grid widened by half a grid per side (docs/model.md, the nodes).
 
         PT-PR and S-E must be at least 0.6 grid diagonals apart.  Decision: S and E
         (at UAV altitude) must also be at least half a cell from every cell centre,
@@ -495,7 +495,7 @@ class World:
         return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
     def _resolve_moves(self, cells: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Target cells made valid as SPEC section 2 decides (off-grid moves already stay).
+        """Target cells made valid as docs/model.md decides (off-grid moves already stay).
 
         Until all targets differ, every UAV whose target another UAV also targets
         (a mover or a stayer) goes back to its cell; for a stayer that changes
