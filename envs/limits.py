@@ -298,6 +298,11 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     return reachable + max(relaxation, candidates)
 
 
+def default_horizon(cfg) -> int:
+    """Greedy evaluation length (``eval.horizon`` null): enough steps to cross the grid twice."""
+    return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
+
+
 def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:
     """Peak bytes of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
     > 0: the tabular agent's ``tables x num_starts`` worlds stepped together, keeping each step's outputs; else a

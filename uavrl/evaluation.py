@@ -42,7 +42,7 @@ import torch
 from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, gib
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
 from uavrl.envs.world import World
 
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
@@ -51,11 +51,6 @@ NINETY_PERCENT = 0.9
 # the per-episode metrics of every agent's training (SPEC section 7; train/<name>), in the order of episode_metrics
 EPISODE_METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
-
-
-def default_horizon(cfg: ModelConfig) -> int:
-    """Greedy evaluation length: enough steps to cross the grid twice."""
-    return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
 
 
 def check_settings(gamma, horizon, num_starts) -> None:

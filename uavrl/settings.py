@@ -24,6 +24,7 @@ from uavrl.agents import AGENTS
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
     MAX_EXACT_UAVS,
+    default_horizon,
     evaluation_bytes,
     frame_bytes,
     gib,
@@ -261,11 +262,6 @@ def starts_worlds(model, runs: int, runs_name: str) -> Cost:
     factors = {runs_name: runs, "episodes per block": START_BLOCK}
     fixed = ("episodes per block",)
     return Cost(world_bytes(model, START_BLOCK * runs), factors, "the worlds of the episode starts", fixed)
-
-
-def default_horizon(model) -> int:
-    """:func:`uavrl.evaluation.default_horizon` (that module imports torch)."""
-    return max(20, 2 * (model.grid[0] + model.grid[1]))
 
 
 def check_run_costs(cfg: DictConfig, model) -> None:
