@@ -145,9 +145,9 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     built = time.perf_counter()
     learner = {
         **PAPER_LEARNER,
+        "memory_budget": cfg.memory_budget,
         "episodes": int(cfg.episodes),
         "runs": int(cfg.runs),
-        "memory_budget": cfg.memory_budget,
     }
     settings = OmegaConf.create({"agent": learner})
     agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
