@@ -70,6 +70,7 @@ from uavrl.envs import (
 )
 from uavrl.envs.channel import log_gap_potential, rates
 from uavrl.envs.config import RELAYING, SENSING
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.evaluation import episode_metrics
 from uavrl.settings import RUN_SETTINGS, check
 
@@ -488,7 +489,11 @@ class DQNAgent(Agent):
         self.iteration = 0
         torch.manual_seed(self.seed)  # the networks' initial weights; build order matters
         self.env = UAVSpectrumEnv(
-            batch_size=int(a.worlds), config=env_cfg, seed=self._world_seed(0), device=self.device
+            batch_size=int(a.worlds),
+            config=env_cfg,
+            seed=self._world_seed(0),
+            device=self.device,
+            memory_budget=a.get("memory_budget", DEFAULT_MEMORY_BUDGET),  # run directories saved without it
         )
         q = build_q_network(self.env, a)
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations

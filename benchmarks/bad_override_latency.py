@@ -28,6 +28,22 @@ COMMANDS = [
     ("python -m uavrl.train train.episdoes=5 (unknown key)", ["-m", "uavrl.train", "train.episdoes=5"]),
     ("python -m uavrl.evaluate checkpoint=missing.pt", ["-m", "uavrl.evaluate", "checkpoint=missing.pt"]),
     ("python -m uavrl.reproduce table2 episodes=-5", ["-m", "uavrl.reproduce", "table2", "episodes=-5"]),
+    ("python -m uavrl.train ++env.p_u=1e308 (NaN rates)", ["-m", "uavrl.train", "++env.p_u=1e308"]),
+    ("python -m uavrl.train ++env.cell_size=1e-300", ["-m", "uavrl.train", "++env.cell_size=1e-300"]),
+    ("python -m uavrl.train env.max_steps=10**12 (steps)", ["-m", "uavrl.train", "env.max_steps=1000000000000"]),
+    ("python -m uavrl.train eval.num_starts=10**9 (memory)", ["-m", "uavrl.train", "eval.num_starts=1000000000"]),
+    (
+        "python -m uavrl.train agent=dqn env.max_steps=10**12",
+        ["-m", "uavrl.train", "agent=dqn", "env.max_steps=1000000000000"],
+    ),
+    (
+        "python -m uavrl.train agent=dqn env.grid=[10,10] env.num_uavs=60",
+        ["-m", "uavrl.train", "agent=dqn", "env.grid=[10,10]", "env.num_uavs=60"],
+    ),
+    (
+        "python -m uavrl.reproduce table2 steps=10**12",
+        ["-m", "uavrl.reproduce", "table2", "steps=1000000000000"],
+    ),
 ]
 
 

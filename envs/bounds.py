@@ -44,36 +44,55 @@ OPTIMUM_RTOL = 1e-9  # a configuration "is optimal" when U >= (1 - OPTIMUM_RTOL)
 MAX_CANDIDATES = 2_000_000  # configurations examined per world by optimal_configurations
 
 
+_CHUNK_ELEMENTS = 1 << 22  # elements of the largest temporary per torch call: the tables grow with C and 2^N
+
+
 def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[torch.Tensor, torch.Tensor]:
     """``[W, K + 1, N]`` largest relay and sensing contribution UAV ``i`` can hold after ``k = 0..K`` steps.
 
-    ``-inf`` where no cell of that task is within reach (a task change alone takes a step).
+    ``-inf`` where no cell of that task is within reach (a task change alone takes a step).  Per UAV, the best
+    value at each cost (moves + task change) is bucketed, then the running maximum over the costs gives every ``k``:
+    a few ``[w, N, C]`` tensors for a chunk of worlds at a time, whatever ``K``.
     """
-    distance = manhattan(grid, cells.device)[cells]  # [W, N, C]
-    steps = torch.arange(max_steps + 1, device=cells.device)[:, None, None]  # [K + 1, 1, 1]
-    best = []
-    for task, column in ((RELAYING, 0), (SENSING, 1)):
-        cost = distance + (tasks != task).long().unsqueeze(-1)  # [W, N, C]
-        value = contributions[..., column].unsqueeze(1).unsqueeze(1)  # [W, 1, 1, C]
-        best.append(torch.where(cost.unsqueeze(1) <= steps, value, -math.inf).amax(-1))  # [W, K + 1, N]
-    return best[0], best[1]
+    W, N = cells.shape
+    C, K = contributions.shape[-2], max_steps
+    every_cell = torch.arange(C, device=cells.device)
+    contributions = contributions.expand(W, -1, -1)  # one shared layout, or one per world
+    chunk = max(1, _CHUNK_ELEMENTS // (N * C))
+    best = {RELAYING: [], SENSING: []}
+    for start in range(0, W, chunk):
+        here, worlds = cells[start : start + chunk], slice(start, start + chunk)
+        distance = manhattan(here.unsqueeze(-1), every_cell, grid[0])  # [w, N, C]
+        for task, column in ((RELAYING, 0), (SENSING, 1)):
+            cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp_(max=K + 1)  # beyond K: one bucket
+            value = contributions[worlds, :, column].unsqueeze(1).expand_as(cost)
+            at_cost = cost.new_full((*cost.shape[:-1], K + 2), -math.inf, dtype=value.dtype)
+            at_cost.scatter_reduce_(-1, cost, value, "amax")
+            best[task].append(at_cost[..., : K + 1].cummax(-1).values.transpose(1, 2))  # [w, K + 1, N]
+    return torch.cat(best[RELAYING]), torch.cat(best[SENSING])
 
 
 def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
     """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps."""
     N = cfg.num_uavs
     best_a, best_b = reachable_best(cells, tasks, contributions, cfg.grid, max_steps)
+    W, K1 = best_a.shape[:2]
     relays = (
         (torch.arange(2**N, device=cells.device)[:, None] >> torch.arange(N, device=cells.device)) & 1
     ).double()  # [M, N]
-    # which UAVs relay: every split; a split is out of reach while one of its UAVs has no cell of its task in reach
-    blocked = (best_a == -math.inf).double() @ relays.T + (best_b == -math.inf).double() @ (
-        1 - relays
-    ).T  # [W, K + 1, M]
-    sum_a = best_a.clamp(min=0) @ relays.T + direct[:, None, None, 0]
-    sum_b = best_b.clamp(min=0) @ (1 - relays).T + direct[:, None, None, 1]
-    r = rates_from_sums(torch.stack([sum_a, sum_b], -1), relays.sum(-1).expand_as(sum_a), N, cfg)
-    return r.sum(-1).masked_fill(blocked > 0, -math.inf).amax(-1)
+    # one row per (world, k), a chunk of rows at a time: every split of the UAVs into relays and sensors is [rows, M]
+    best_a, best_b, direct = best_a.reshape(-1, N), best_b.reshape(-1, N), direct.expand(W, 2).repeat_interleave(K1, 0)
+    out = []
+    step = max(1, _CHUNK_ELEMENTS // len(relays))
+    for start in range(0, len(best_a), step):
+        a, b, d = best_a[start : start + step], best_b[start : start + step], direct[start : start + step]
+        # a split is out of reach while one of its UAVs has no cell of its task in reach
+        blocked = (a == -math.inf).double() @ relays.T + (b == -math.inf).double() @ (1 - relays).T  # [rows, M]
+        sum_a = a.clamp(min=0) @ relays.T + d[:, None, 0]
+        sum_b = b.clamp(min=0) @ (1 - relays).T + d[:, None, 1]
+        r = rates_from_sums(torch.stack([sum_a, sum_b], -1), relays.sum(-1).expand_as(sum_a), N, cfg)
+        out.append(r.sum(-1).masked_fill(blocked > 0, -math.inf).amax(-1))
+    return torch.cat(out).view(W, K1)
 
 
 def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int) -> torch.Tensor:
@@ -136,7 +155,7 @@ def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: floa
 
 def assignment_costs(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
     """``[S, N, N]`` steps UAV ``i`` (cells/tasks ``[N]``) needs to hold pair ``j`` of target set ``s`` (``[S, N]``)."""
-    distance = manhattan(grid, cells.device)[cells][:, target_cells]  # [N, S, N]
+    distance = manhattan(cells[:, None, None], target_cells[None], grid[0])  # [N, S, N]
     return (distance + (tasks[:, None, None] != target_tasks[None])).permute(1, 0, 2)
 
 
@@ -145,19 +164,39 @@ def best_assignment(costs: torch.Tensor) -> tuple[int, int, np.ndarray]:
 
     Minimising ``sum (N + 1)^cost`` minimises the largest cost first (one pair
     at cost ``m`` outweighs N pairs below ``m``), then how many UAVs need it, and
-    so on: the bottleneck assignment, with the fewest UAVs on long paths.
+    so on: the bottleneck assignment, with the fewest UAVs on long paths.  Where
+    ``(N + 1)^cost`` would leave float64 (costs of hundreds of steps, large grids),
+    each set's bottleneck ``m`` is found first and the weights are ``(N + 1)^(cost - m)``.
     """
     from scipy.optimize import linear_sum_assignment  # scipy (~0.7 s to import) only where an assignment is solved
 
     costs = costs.cpu().numpy()
-    weights = float(costs.shape[1] + 1) ** costs
+    base = float(costs.shape[1] + 1)
+    overflows = costs.max() * math.log10(base) > _LOG10_WEIGHT_LIMIT
     best = None
     for s in range(len(costs)):
-        rows, cols = linear_sum_assignment(weights[s])
-        key = (int(costs[s, rows, cols].max()), float(weights[s, rows, cols].sum()))
+        bottleneck = _bottleneck(costs[s], linear_sum_assignment) if overflows else 0
+        weights = np.where(costs[s] <= bottleneck, base ** (costs[s] - bottleneck), np.inf) if overflows else None
+        weights = base ** costs[s] if weights is None else weights
+        rows, cols = linear_sum_assignment(weights)
+        key = (int(costs[s, rows, cols].max()), float(weights[rows, cols].sum()))
         if best is None or key < best[0]:
             best = (key, s, cols)
     return best[0][0], best[1], best[2]
+
+
+_LOG10_WEIGHT_LIMIT = 300  # (N + 1)^cost beyond 1e300: the sums of N weights would leave float64
+
+
+def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
+    """The least ``m`` such that every UAV gets its own pair at a cost ``<= m`` (bisection over the costs)."""
+    values = np.unique(cost)
+    low, high = 0, len(values) - 1
+    while low < high:
+        middle = (low + high) // 2
+        rows, cols = linear_sum_assignment(cost > values[middle])  # 0 where allowed: a total of 0 fits under m
+        low, high = (middle + 1, high) if (cost[rows, cols] > values[middle]).any() else (low, middle)
+    return int(values[low])
 
 
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:

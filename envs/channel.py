@@ -22,21 +22,15 @@ from __future__ import annotations
 import torch
 
 from .config import RELAYING, ModelConfig
+from .limits import fixed_node_positions
 
 PT, PR, S, E = range(4)
 
 
 def fixed_layout(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor | None:
     """The ``[4, 3]`` node positions of a fixed layout, or ``None`` for ``layout=random``."""
-    L1, L2 = cfg.grid
-    h = cfg.height
-    if cfg.layout == "line":
-        rows = [(0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)]
-    elif cfg.layout == "reference_code":
-        rows = [(0.0, 5.0, 0.0), (10.0, 5.0, 0.0), (-5.0, 5.0, 10.0), (15.0, 5.0, 10.0)]
-    else:
-        return None
-    return torch.tensor(rows, dtype=dtype, device=device)
+    rows = fixed_node_positions(cfg.layout, cfg.grid, cfg.height)
+    return None if rows is None else torch.tensor(rows, dtype=dtype, device=device)
 
 
 def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor:

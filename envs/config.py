@@ -1,4 +1,4 @@
-"""The model's options (SPEC sections 1-8), their presets and their validation.
+"""The model's options (docs/model.md), their presets and their validation.
 
 A :class:`ModelConfig` is an immutable description of one UAV spectrum-sharing
 model: the grid, the UAVs, the channel, the rate formulas, the reward and the
@@ -18,6 +18,8 @@ import math
 import numbers
 import re
 from dataclasses import dataclass, field
+
+from .limits import PHYSICAL, allowed_range, physics_problem
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)
@@ -47,11 +49,11 @@ class InvalidOption(ValueError):
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """One model of SPEC.md.  Lengths are in cells unless the name says metres.
+    """One model of docs/model.md.  Lengths are in cells unless the name says metres.
 
     ``altitude`` of ``None`` means the paper's ``h = L1`` cells.  ``rate_model``
-    ``"af"`` is the normalised amplify-and-forward form of SPEC section 4;
-    ``"reference_code"`` is the authors' published formula (SPEC section 8),
+    ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
+    ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.
     """
 
@@ -113,6 +115,26 @@ class ModelConfig:
             _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
         ):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
+        self._check_physics()
+
+    def _check_physics(self):
+        """A one-line refusal when the numbers would give NaN, infinite or everywhere-zero rates
+        (:mod:`uavrl.envs.limits`), blaming the option whose preset value would pass, with the range that passes."""
+        values = {name: getattr(self, name) for name in _PHYSICS_OPTIONS} | {"altitude": self.height}
+        problem = physics_problem(values)
+        if problem is None:
+            return
+        preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {})}
+        preset["altitude"] = float(self.grid[0]) if preset["altitude"] is None else preset["altitude"]
+        changed = [name for name in (*PHYSICAL, "beta1", "beta2") if values[name] != preset[name]]
+        for name in changed:
+            if physics_problem({**values, name: preset[name]}) is None:
+                reason = (
+                    problem if name in ("beta1", "beta2") else f"{problem}; {allowed_range(values, name, preset[name])}"
+                )
+                raise InvalidOption(name, getattr(self, name), reason)
+        name = changed[0] if changed else "grid"
+        raise InvalidOption(name, getattr(self, name), problem)
 
     @property
     def num_cells(self) -> int:
@@ -129,7 +151,7 @@ class ModelConfig:
 
     @property
     def num_states(self) -> int:
-        """Size of the tabular state space (SPEC section 6), a Python int of any size."""
+        """Size of the tabular state space (docs/model.md, the tabular learner), a Python int of any size."""
         base = 2 * self.num_cells if self.state_includes_tasks else self.num_cells
         return base**self.num_uavs
 
@@ -154,6 +176,13 @@ _PRESETS = {
         init_tasks="sensing",
     ),
 }
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
+# what uavrl.envs.limits reads
+_PHYSICS_OPTIONS = (
+    *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward"),
+    *(name for name in PHYSICAL if name != "altitude"),
+    *("beta1", "beta2"),
+)
 OPTION_NAMES = tuple(f.name for f in dataclasses.fields(ModelConfig) if f.name != "preset")
 
 

@@ -17,7 +17,8 @@ from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
 from .config import NUM_ACTIONS, ModelConfig, make_config
-from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_seed, resolve_device
+from .limits import DEFAULT_MEMORY_BUDGET
+from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
 
 __all__ = ["SEED_LIMIT", "MaskedCategorical", "UAVSpectrumEnv", "check_seed", "resolve_device"]
 
@@ -117,6 +118,8 @@ class UAVSpectrumEnv(EnvBase):
             which a group copy in the env's output would break (the
             collector's reused buffer then holds the expanded view).
             ``False`` (default): the team reward at the root, ``[B, 1]``.
+        memory_budget: bytes the worlds may take (:func:`~uavrl.envs.limits.world_bytes`); a larger
+            ``batch_size`` is refused before anything is allocated.
         **overrides: any :class:`~uavrl.envs.config.ModelConfig` option
             (``layout``, ``fading``, ``reward``, powers, ...).
 
@@ -143,6 +146,7 @@ class UAVSpectrumEnv(EnvBase):
         config: ModelConfig | None = None,
         diagnostics: bool = True,
         agent_rewards: bool = False,
+        memory_budget: int = DEFAULT_MEMORY_BUDGET,
         **overrides,
     ):
         if config is not None and overrides:
@@ -151,11 +155,12 @@ class UAVSpectrumEnv(EnvBase):
         B = _check_batch_size(batch_size)
         if not isinstance(agent_rewards, bool):
             raise ValueError(f"agent_rewards={agent_rewards!r} is invalid: give True or False")
+        check_memory(cfg, B, memory_budget)
         super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.num_uavs
         self.agent_rewards = agent_rewards
-        self.world = World(cfg, B, self.device, seed, diagnostics=diagnostics)
+        self.world = World(cfg, B, self.device, seed, diagnostics=diagnostics, memory_budget=memory_budget)
         self._make_specs()
         self.set_seed(seed)
 
@@ -290,7 +295,30 @@ class UAVSpectrumEnv(EnvBase):
                 f"step() got a TensorDict of batch size {list(tensordict.batch_size)}: this env has "
                 f"[B={self.num_worlds}] worlds, so ('agents', 'action') is [{self.num_worlds}, {self.num_uavs}]"
             )
+        if tensordict.get(("agents", "action"), None) is None:
+            raise ValueError(
+                f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
+                f"{self.num_uavs}] integers 0..5 (up, down, left, right, sense, relay)"
+            )
         return super().step(tensordict)
+
+    def reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        """TorchRL's ``reset``; a one-line error for a ``"_reset"`` mask that is not ``[B]`` or ``[B, 1]`` booleans
+        (on the CPU or a CUDA device: it is moved to the env's)."""
+        mask = None if tensordict is None else tensordict.get("_reset", None)
+        if mask is not None:
+            B, shapes = self.num_worlds, ((self.num_worlds,), (self.num_worlds, 1))
+            wrong = [
+                f"shape {tuple(mask.shape)}" if tuple(mask.shape) not in shapes else "",
+                f"dtype {mask.dtype}" if mask.dtype != torch.bool else "",
+                f"device {mask.device}" if mask.device.type not in ("cpu", "cuda") else "",  # moved to the env's
+            ]
+            if any(wrong):
+                raise ValueError(
+                    f"'_reset' has {', '.join(w for w in wrong if w)}: expected [{B}] or [{B}, 1] booleans (one per "
+                    "world, True to reset it) on the CPU or a CUDA device"
+                )
+        return super().reset(tensordict, **kwargs)
 
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
         """TorchRL's ``rollout``; one-line errors for ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
@@ -309,7 +337,8 @@ class UAVSpectrumEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if not self.world._s.was_reset:
             raise RuntimeError(
-                "UAVSpectrumEnv.step() before any reset: call env.reset() first (the worlds have no UAV positions yet)"
+                "UAVSpectrumEnv.step() before every world was reset: call env.reset() first (a world never reset has "
+                "no UAV positions yet)"
             )
         action = tensordict.get(("agents", "action"))
         self._check_action(action)

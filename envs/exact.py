@@ -42,23 +42,14 @@ import torch
 from .channel import cell_xyz, direct_terms, fixed_layout, link_gains, rates, relay_contributions
 from .config import NUM_ACTIONS, ModelConfig
 from .grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
+from .limits import EXACT_SOLVER_BUDGET, num_configurations, required_bytes
 
-MEMORY_BUDGET = 2**30  # bytes of the successor table and one solver sweep
-_CHUNK_ELEMENTS = 1 << 23  # gathered values per torch call
+MEMORY_BUDGET = EXACT_SOLVER_BUDGET  # bytes of the successor table and one solver sweep
+
+_CHUNK_ELEMENTS = 1 << 23  # gathered values per torch call (uavrl.envs.limits.required_bytes counts it)
 _MAX_SWEEPS = 100_000
 CONVERGENCE_TOLERANCE = 1e-12  # infinite horizon: stop when a sweep changes no value by more than this x max |P|
 UNREACHABLE = torch.iinfo(torch.int32).max
-
-
-def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
-    """Sets of N (cell, task) pairs on distinct cells: ``C(C, N) 2^N``."""
-    return math.comb(grid[0] * grid[1], num_uavs) * 2**num_uavs
-
-
-def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
-    """Memory of the exact solver: the int32 successor table, the configurations and one chunked sweep."""
-    K, A = num_configurations(grid, num_uavs), NUM_ACTIONS**num_uavs
-    return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + _CHUNK_ELEMENTS * 16
 
 
 def fits(cfg: ModelConfig, memory_budget: int = MEMORY_BUDGET) -> bool:

@@ -1,4 +1,4 @@
-"""Grid geometry and joint actions: the moves of SPEC section 2, with no TorchRL import.
+"""Grid geometry and joint actions: the moves of docs/model.md, with no TorchRL import.
 
 Cells are numbered ``c = y * L1 + x``; a UAV's move goes to a neighbouring cell
 (``-1`` when it would leave the grid); a joint action ``j = sum_i a_i 6^i``
@@ -48,10 +48,12 @@ def positions_of(cells: torch.Tensor, width: int) -> torch.Tensor:
     return torch.stack([cells % width, cells // width], -1)
 
 
-def manhattan(grid: tuple[int, int], device=None) -> torch.Tensor:
-    """``[C, C]`` Manhattan distances between cells: the fewest moves between them on an empty grid."""
-    xy = positions_of(torch.arange(grid[0] * grid[1], device=device), grid[0])
-    return (xy[:, None] - xy[None]).abs().sum(-1)
+def manhattan(cells: torch.Tensor, others: torch.Tensor, width: int) -> torch.Tensor:
+    """Manhattan distances between cell indices, broadcast: the fewest moves between them on an empty grid.
+
+    Computed from the cells given, never as a ``[C, C]`` table (8 TB on a 1000x1000 grid)."""
+    delta = (positions_of(cells, width) - positions_of(others, width)).abs()
+    return delta[..., 0] + delta[..., 1]
 
 
 def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:

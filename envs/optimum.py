@@ -1,4 +1,4 @@
-"""The exact optimum U* of deterministic channels (SPEC section 9).
+"""The exact optimum U* of deterministic channels.
 
 UAVs are interchangeable, so a configuration is a set R of relaying cells and a
 disjoint set E of sensing cells with ``|R| + |E| = N``.  ``U`` grows with

@@ -1,4 +1,4 @@
-"""The physics of the UAV spectrum-sharing model for ``B`` worlds at once, with no TorchRL (SPEC.md).
+"""The physics of the UAV spectrum-sharing model for ``B`` worlds at once, with no TorchRL.
 
 :class:`World` holds the layouts, the per-cell and per-code tables, the UAVs'
 state and the per-world random streams; :meth:`World.reset` and
@@ -42,6 +42,7 @@ from .channel import (
 )
 from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
 from .grid import cells_of, grid_neighbours, joint_action_valid
+from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .optimum import optimum as exact_optimum
 
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
@@ -62,11 +63,14 @@ def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> to
 
 
 def resolve_device(device) -> torch.device:
-    """``device`` as a ``torch.device``; a one-line ValueError when it is malformed or not on this machine."""
+    """``device`` as a ``torch.device``; a one-line ValueError when it is malformed, not a CPU or CUDA device, or not
+    on this machine."""
     try:
         resolved = torch.device(device)
     except (RuntimeError, TypeError):
-        raise ValueError(f"device={device!r} is invalid: use 'cpu', 'cuda' or 'cuda:<index>'") from None
+        resolved = None
+    if resolved is None or resolved.type not in ("cpu", "cuda"):  # the worlds' kernels run on CPU and CUDA only
+        raise InvalidOption("device", device, "use 'cpu', 'cuda' or 'cuda:<index>'")
     count = torch.cuda.device_count() if torch.cuda.is_available() else 0
     if resolved.type == "cuda" and (resolved.index or 0) >= count:
         raise ValueError(f"device={device!r} is not available: this torch sees {count} CUDA devices (README: GPU)")
@@ -81,15 +85,28 @@ def check_seed(seed) -> int:
 
 
 def _check_batch_size(batch_size) -> int:
-    size = batch_size if isinstance(batch_size, int) else (list(batch_size) or [None])[0]
-    if (
-        isinstance(batch_size, (list, tuple, torch.Size))
-        and len(batch_size) != 1
-        or not isinstance(size, int)
-        or size < 1
-    ):
-        raise ValueError(f"batch_size={batch_size!r} is invalid: give the number of worlds B >= 1 (an int or [B])")
-    return size
+    """``B`` of ``batch_size`` (``B`` or ``[B]``); a one-line refusal for anything else (a bool, a float, a tensor)."""
+    size = batch_size
+    if isinstance(batch_size, (list, tuple, torch.Size)):
+        size = batch_size[0] if len(batch_size) == 1 else None
+    if not isinstance(size, numbers.Integral) or isinstance(size, bool) or size < 1:
+        raise InvalidOption("batch_size", batch_size, "give the number of worlds B >= 1, a whole number or [B]")
+    return int(size)
+
+
+def check_memory(cfg: ModelConfig, batch_size: int, memory_budget) -> None:
+    """A one-line refusal, before anything is allocated, when ``batch_size`` worlds of ``cfg`` would take more than
+    ``memory_budget`` bytes (:func:`uavrl.envs.limits.world_bytes`)."""
+    if not isinstance(memory_budget, numbers.Real) or isinstance(memory_budget, bool) or not memory_budget > 0:
+        raise InvalidOption("memory_budget", memory_budget, "give the bytes the worlds may take, a positive number")
+    need = world_bytes(cfg, batch_size)
+    if need > memory_budget:
+        L1, L2 = cfg.grid
+        reason = (
+            f"{batch_size:,} worlds of {cfg.num_uavs} UAVs on {L1}x{L2} need about {gib(need)}, over "
+            f"memory_budget={int(memory_budget):,} bytes: use fewer worlds, or raise memory_budget"
+        )
+        raise InvalidOption("batch_size", batch_size, reason)
 
 
 class _WorldsState:
@@ -100,7 +117,7 @@ class _WorldsState:
     (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (``best_so_far``);
     ``steps`` the episode clock; ``started`` whether a world has been reset;
     ``keys`` and ``counters`` the per-world random streams; ``was_reset``
-    whether ``_reset`` ever ran.
+    whether every world has been reset at least once (then every UAV has a cell).
     """
 
     __slots__ = ("code", "r", "best", "steps", "started", "counters", "keys", "was_reset")
@@ -123,8 +140,17 @@ class World:
     acts or learns from the observation needs.
     """
 
-    def __init__(self, cfg: ModelConfig, batch_size: int = 1, device="cpu", seed: int = 0, diagnostics: bool = True):
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        batch_size: int = 1,
+        device="cpu",
+        seed: int = 0,
+        diagnostics: bool = True,
+        memory_budget: int = DEFAULT_MEMORY_BUDGET,
+    ):
         B = _check_batch_size(batch_size)
+        check_memory(cfg, B, memory_budget)
         if not isinstance(diagnostics, bool):
             raise ValueError(f"diagnostics={diagnostics!r} is invalid: give True or False")
         self.diagnostics = diagnostics  # the outputs of DIAGNOSTICS too
@@ -138,16 +164,11 @@ class World:
         x, y = c % L1, c // L1
         self._neighbours = grid_neighbours(cfg.grid, dev)  # [C, 4]
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
-        # digit base of the tabular state index s = sum_i d_i base^i (SPEC section 6), None when it overflows int64
+        # digit base of the tabular state index s = sum_i d_i base^i, None when it overflows int64
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
         self._node_scale = torch.tensor([L1, L2, cfg.height], dtype=f64, device=dev)
-        layout = fixed_layout(cfg, f64, dev)
-        if layout is not None:
-            d = torch.cdist(self._cell_xyz, layout).min()
-            if d == 0:
-                reason = f"with layout={cfg.layout!r} a node sits on a UAV cell at UAV altitude (zero distance)"
-                raise InvalidOption("grid", cfg.grid, f"{reason}; use a smaller grid or layout='line'")
+        layout = fixed_layout(cfg, f64, dev)  # ModelConfig refused one with a node on a UAV cell (envs/limits.py)
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
         self._cell_mask = torch.cat(
             [self._neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=dev)], -1
@@ -195,7 +216,7 @@ class World:
             started=torch.zeros(B, dtype=torch.bool, device=dev),
             counters=torch.zeros(B, dtype=torch.long, device=dev),
             keys=streams.world_keys(0, B, dev),
-            was_reset=False,  # a Python flag: stepping before the first reset is an error, at no per-step cost
+            was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
         if layout is not None:
             self._set_layout(torch.zeros(1, dtype=torch.long, device=dev))
@@ -292,7 +313,7 @@ class World:
         return table[worlds.view(-1, *([1] * (cells.dim() - 1))), cells]
 
     def _sample_layout(self, worlds: torch.Tensor):
-        """``layout=random``: nodes uniform in the grid widened by half a grid per side (SPEC section 1).
+        """``layout=random``: nodes uniform in the grid widened by half a grid per side (docs/model.md, the nodes).
 
         PT-PR and S-E must be at least 0.6 grid diagonals apart.  Decision: S and E
         (at UAV altitude) must also be at least half a cell from every cell centre,
@@ -467,7 +488,8 @@ class World:
         s.steps[worlds] = 0
         s.best[worlds] = 0.0
         s.r[worlds] = self._current_rates(s.code[worlds], worlds)
-        s.was_reset = True
+        # a partial first reset leaves worlds without cells: read the flags until every world has been reset
+        s.was_reset = s.was_reset or len(worlds) == B or bool(s.started.all())
         return self._observe(self._s.code, self._s.code >> 1, self._no_counts, self._no_counts)
 
     def start_at(self, code: torch.Tensor) -> dict:
@@ -490,7 +512,7 @@ class World:
         return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
     def _resolve_moves(self, cells: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Target cells made valid as SPEC section 2 decides (off-grid moves already stay).
+        """Target cells made valid as docs/model.md decides (off-grid moves already stay).
 
         Until all targets differ, every UAV whose target another UAV also targets
         (a mover or a stayer) goes back to its cell; for a stayer that changes

@@ -38,13 +38,11 @@ CASES = [
     (["evaluate", "checkpoint=/tmp/ünï"], "error: checkpoint='/tmp/ünï' does not exist"),
     (
         ["reproduce", "table2", "grids=[2]", "runs=100000000"],
-        "error: runs=100000000 is invalid on the 2x2 grid: its Q tables would need 460,800,005,312 bytes (429 GiB), "
-        "over memory_budget=4294967296 bytes; give runs=932066 or fewer, or raise memory_budget "
-        "(e.g. memory_budget=460800005312)",
+        "error: runs=100000000 is invalid: the team Q tables on 2x2 (16 states x 36 joint actions each",
     ),
     (
         ["reproduce", "figures", "grids=[2]", "figure_grid=2", "runs=100000000", "memory_budget=2e9"],
-        "error: runs=100000000 is invalid on the 2x2 grid",
+        "error: runs=100000000 is invalid: the team Q tables on 2x2",
     ),
     (["reproduce", "table2", "memory_budget=0"], "error: memory_budget=0 is invalid: it must be positive"),
     (["reproduce", "table2", "grids=[2]", "out_dir={variant}"], "error: out_dir={variant!r} holds another variant"),
@@ -121,10 +119,12 @@ def test_the_end_of_run_lines_paste(compose_cfg, tmp_path):
 def test_reproduce_checks_its_memory_budget_before_any_work(monkeypatch, tmp_path, compose_cfg):
     """A budget too small for one 2x2 table is refused before any file is written, naming reproduce's setting."""
     monkeypatch.chdir(tmp_path)
-    from uavrl.reproduce import check_memory
+    from uavrl.reproduce import check_settings
 
     cfg = compose_cfg("grids=[2]", "runs=1", "memory_budget=1000", config_name="reproduce")
-    with pytest.raises(ValueError, match=r"^runs=1 is invalid on the 2x2 grid: .* give runs=0 or fewer, or raise"):
-        check_memory(cfg)
-    check_memory(compose_cfg("grids=[2]", "runs=1", config_name="reproduce"))
+    with pytest.raises(
+        ValueError, match=r"^num_uavs=2 is invalid: the team Q tables on 2x2 .* over memory_budget=1000: lower num_uavs"
+    ):
+        check_settings(cfg)
+    check_settings(compose_cfg("grids=[2]", "runs=1", config_name="reproduce"))
     assert list(tmp_path.iterdir()) == []

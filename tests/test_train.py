@@ -96,7 +96,7 @@ def test_evaluate_a_checkpoint(tmp_path, compose_cfg):
     [
         ("env.grid=[0,3]", "grid=(0, 3) is invalid"),
         ("env.layout=spiral", "layout='spiral' is invalid"),
-        ("env.num_uavs=5 env.grid=[10,10]", "would need"),
+        ("env.num_uavs=5 env.grid=[10,10]", "env.num_uavs=5 is invalid: the team Q tables on 10x10"),
         ("device=cuda:7", "device='cuda:7' is not available"),
         ("agent.epsilon=2", "epsilon=2 is invalid"),
         ("train.steps_per_episode=50", "train.steps_per_episode is now env.max_steps: write env.max_steps=50"),

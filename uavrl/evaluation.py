@@ -42,6 +42,7 @@ import torch
 from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
 from uavrl.envs.world import World
 
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
@@ -50,11 +51,6 @@ NINETY_PERCENT = 0.9
 # the per-episode metrics of every agent's training (SPEC section 7; train/<name>), in the order of episode_metrics
 EPISODE_METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
-
-
-def default_horizon(cfg: ModelConfig) -> int:
-    """Greedy evaluation length: enough steps to cross the grid twice."""
-    return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
 
 
 def check_settings(gamma, horizon, num_starts) -> None:
@@ -67,6 +63,19 @@ def check_settings(gamma, horizon, num_starts) -> None:
         )
     if not (isinstance(num_starts, int) and not isinstance(num_starts, bool) and num_starts >= 1):
         raise ValueError(f"eval.num_starts={num_starts!r} is invalid: give a whole number of starts >= 1")
+
+
+def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
+    """A one-line refusal, before anything is allocated, when the evaluation would need more than ``memory_budget``
+    bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line."""
+    need = evaluation_bytes(cfg, num_starts, horizon, tables)
+    if need > memory_budget:
+        name, value = ("eval.horizon", horizon) if horizon > num_starts else ("eval.num_starts", num_starts)
+        raise ValueError(
+            f"{name}={value} is invalid: the evaluation of {num_starts:,} starts x {horizon:,} steps needs about "
+            f"{gib(need)}, over agent.memory_budget={int(memory_budget)}: lower {name}, or raise "
+            "agent.memory_budget=<bytes>"
+        )
 
 
 def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> dict[str, torch.Tensor]:
@@ -171,18 +180,27 @@ def evaluate(
     seed: int = EVAL_SEED,
     device="cpu",
     gamma: float = DEFAULT_GAMMA,
+    memory_budget: int = DEFAULT_MEMORY_BUDGET,
 ) -> dict[str, float]:
     """Greedy rollouts of ``policy`` from ``num_starts`` fixed, seeded starts, measured by the yardstick.
 
     ``policy`` is any TorchRL policy for :class:`~uavrl.envs.env.UAVSpectrumEnv` (reads the
     observation keys, writes ``("agents", "action")``); one with a ``bind_env``
-    method (the oracle) is first given the evaluation's environment.
+    method (the oracle) is first given the evaluation's environment.  ``memory_budget``: the bytes its worlds may
+    take (``agent.memory_budget`` on the command line).
     """
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
     check_settings(gamma, horizon, num_starts)
     horizon = horizon or default_horizon(cfg)
-    env = UAVSpectrumEnv(batch_size=num_starts, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
+    check_memory(cfg, num_starts, horizon, 0, memory_budget)
+    env = UAVSpectrumEnv(
+        batch_size=num_starts,
+        config=cfg.replace(max_steps=horizon),
+        seed=seed,
+        device=device,
+        memory_budget=memory_budget,
+    )
     start = env.reset()
     u_star = env.optimum()[0]
     references = _references(env.world, start, u_star, horizon, gamma)
@@ -194,7 +212,15 @@ def evaluate(
     return greedy_metrics(env.world, start, steps, u_star, references, gamma)
 
 
-def evaluation_starts(cfg: ModelConfig, num_starts: int, horizon: int | None, seed: int, device, gamma: float):
+def evaluation_starts(
+    cfg: ModelConfig,
+    num_starts: int,
+    horizon: int | None,
+    seed: int,
+    device,
+    gamma: float,
+    memory_budget: int = DEFAULT_MEMORY_BUDGET,
+):
     """What :func:`evaluate` measures every policy from, for evaluations that step a world themselves.
 
     Returns the world of the ``num_starts`` starts (reset), its outputs at the
@@ -202,7 +228,7 @@ def evaluation_starts(cfg: ModelConfig, num_starts: int, horizon: int | None, se
     """
     check_settings(gamma, horizon, num_starts)
     horizon = horizon or default_horizon(cfg)
-    world = World(cfg.replace(max_steps=horizon), num_starts, device, seed)
+    world = World(cfg.replace(max_steps=horizon), num_starts, device, seed, memory_budget=memory_budget)
     start = world.reset()
     u_star = world.optimum()[0]
     return world, start, u_star, _references(world, start, u_star, horizon, gamma), horizon

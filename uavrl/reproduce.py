@@ -33,7 +33,7 @@ from uavrl.cli import run_command
 from uavrl.config import config_dir
 from uavrl.envs.config import make_config
 from uavrl.io import save_json, save_text, save_torch
-from uavrl.settings import REPRODUCE_SETTINGS, check, shown
+from uavrl.settings import REPRODUCE_SETTINGS, check, check_reproduce_costs, shown
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
@@ -69,25 +69,6 @@ def grid_model(size: int, cfg: DictConfig):
     return make_config("paper", **shape, state_includes_tasks=bool(cfg.state_includes_tasks))
 
 
-def check_memory(cfg: DictConfig) -> None:
-    """The learner's tables (one Q table per run) of every grid to run within ``memory_budget``, before any is
-    built; the refusal says how many runs fit."""
-    from uavrl.agents.tabular import table_bytes
-
-    sizes = [int(cfg.figure_grid)] if cfg.command == "figures" else [int(g) for g in cfg.grids]
-    for size in sizes:
-        model = grid_model(size, cfg)
-        need = table_bytes(model, int(cfg.runs))
-        if need > cfg.memory_budget:
-            per_run = table_bytes(model, 2) - table_bytes(model, 1)
-            fit = max(0, int((cfg.memory_budget - table_bytes(model, 0)) // per_run))
-            raise ValueError(
-                f"runs={cfg.runs} is invalid on the {size}x{size} grid: its Q tables would need {need:,} bytes "
-                f"({need / 2**30:.3g} GiB), over memory_budget={int(cfg.memory_budget)} bytes; give runs={fit} "
-                f"or fewer, or raise memory_budget (e.g. memory_budget={need})"
-            )
-
-
 def variant(cfg: DictConfig) -> dict:
     return {key: OmegaConf.to_container(cfg[key]) if key == "grids" else cfg[key] for key in PROTOCOL}
 
@@ -110,11 +91,13 @@ def output_dir(cfg: DictConfig) -> Path:
 def check_settings(cfg: DictConfig) -> None:
     """Every setting, and that the output directory holds no other variant, before anything heavy is imported."""
     check(cfg, REPRODUCE_SETTINGS)
+    models = []
     for size in cfg.grids:
         if not cfg.steps and size not in PAPER_STEPS:
             reason = f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<per episode>"
             raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
-        grid_model(size, cfg)
+        models.append(grid_model(size, cfg))
+    check_reproduce_costs(cfg, models)
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
@@ -416,7 +399,6 @@ def reproduce(cfg: DictConfig, _overrides=()) -> None:
     torch.set_num_threads(int(cfg.num_threads))
     use_workqueue_threads()  # before numba launches its threads
     numba.set_num_threads(min(int(cfg.numba_threads) or numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS))
-    check_memory(cfg)
     (table2 if cfg.command == "table2" else figures)(cfg)
 
 

@@ -27,6 +27,7 @@ REAL = Any  # a real number as typed (int or float), checked by uavrl.settings o
 class TrainSchema:
     checkpoint_every: int = 50
     log_every: int = 1
+    step_budget: int = 10**10
 
 
 @dataclass
@@ -117,11 +118,13 @@ class DQNSchema:
     eps_fraction: REAL = 0.5
     max_grad_norm: REAL = 10.0
     iterations: int = 500
+    memory_budget: REAL = 4 * 2**30
 
 
 @dataclass
 class BaselineSchema:
     name: str = "random"
+    memory_budget: REAL = 4 * 2**30
 
 
 @dataclass
@@ -193,6 +196,7 @@ class ReproduceSchema:
     num_threads: int = 1
     numba_threads: int = 0
     memory_budget: REAL = 4 * 2**30
+    step_budget: int = 10**10
 
 
 AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}

@@ -21,6 +21,16 @@ from typing import Any, Callable
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from uavrl.agents import AGENTS
+from uavrl.envs.limits import (
+    DEFAULT_MEMORY_BUDGET,
+    MAX_EXACT_UAVS,
+    default_horizon,
+    evaluation_bytes,
+    frame_bytes,
+    gib,
+    table_bytes,
+    world_bytes,
+)
 
 _ABSENT = object()
 
@@ -102,6 +112,7 @@ RUN_SETTINGS: dict[str, Rule] = {
     "progress": flag(),
     "train.checkpoint_every": whole(1),
     "train.log_every": whole(1),
+    "train.step_budget": whole(1),
     "eval.num_starts": whole(1),
     "eval.horizon": optional(whole(1), "max(20, 2 (L1 + L2)) steps"),
     "eval.seed": SEED,
@@ -165,6 +176,7 @@ REPRODUCE_SETTINGS: dict[str, Rule] = {
     "num_threads": whole(1),
     "numba_threads": whole(0),
     "memory_budget": positive(),
+    "step_budget": whole(1),
 }
 
 
@@ -200,3 +212,145 @@ def check(cfg: DictConfig, table: dict[str, Rule], section: str = "") -> None:
             value = OmegaConf.to_container(value, resolve=True)
         if not rule.accepts(value):
             raise ValueError(f"{name}={shown(value)} is invalid: {rule.allowed}")
+
+
+# ------------------------------------------------------------------------------------------ what a run costs
+DEFAULT_STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
+START_BLOCK = 256  # agents/tabular/learner.py: episodes whose starts one World draws for all runs
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What one part of a command needs: ``amount`` (bytes or steps), the settings it grows with and their values
+    (``agent.episodes x agent.runs x env.max_steps``), and what the part is, in words."""
+
+    amount: int
+    factors: dict[str, int]
+    what: str
+    fixed: tuple[str, ...] = ()  # factors that are no setting
+
+    def blamed(self) -> str:
+        """The setting among the factors with the largest value: the one most likely typed too large."""
+        settings = [name for name in self.factors if name not in self.fixed] or list(self.factors)
+        return max(settings, key=lambda name: self.factors[name])
+
+    def formula(self) -> str:
+        names, values = " x ".join(self.factors), " x ".join(f"{v:,}" for v in self.factors.values())
+        return f"{self.what} ({names} = {values})"
+
+
+def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str) -> None:
+    """A one-line ValueError naming the setting that grows the part over ``budget``, the estimate and what to type."""
+    for cost in costs:
+        if cost.amount > budget:
+            name = cost.blamed()
+            estimate = gib(cost.amount) if unit == "bytes" else f"{cost.amount:,} team steps"
+            raise ValueError(
+                f"{name}={cost.factors[name]} is invalid: {cost.formula()} needs about {estimate}, over "
+                f"{budget_name}={int(budget)}: lower {name}, or raise {budget_name}=<{unit}>"
+            )
+
+
+def evaluation_costs(model, num_starts: int, horizon: int, tables: int, names: tuple[str, str, str]) -> Cost:
+    """The memory of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
+    > 0: the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
+    references: the exact solver where it fits, else the lower bounds.  ``names``: how the number of starts, the
+    horizon and the number of tables are typed."""
+    factors = {names[0]: num_starts, names[1]: horizon} | ({names[2]: tables} if tables > 1 else {})
+    fixed = () if "." in names[1] else (names[1],)  # reproduce has no horizon setting
+    return Cost(evaluation_bytes(model, num_starts, horizon, tables), factors, "the evaluation", fixed)
+
+
+def starts_worlds(model, runs: int, runs_name: str) -> Cost:
+    """The tabular learner's World that draws the episode starts of ``START_BLOCK`` episodes of every run."""
+    factors = {runs_name: runs, "episodes per block": START_BLOCK}
+    fixed = ("episodes per block",)
+    return Cost(world_bytes(model, START_BLOCK * runs), factors, "the worlds of the episode starts", fixed)
+
+
+def q_tables(model, tables: int, names: tuple[str, str], budget) -> Cost:
+    """The tabular learner's Q tables, one per run, and the model tables beside them; named by the number of UAVs
+    (``names[1]``) when one table alone is over ``budget``, else by the number of runs (``names[0]``)."""
+    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]} ({model.num_states:,} states x "
+    what += f"{model.num_joint_actions:,} joint actions each, with the model's lookup tables)"
+    blamed = {names[1]: model.num_uavs} if table_bytes(model, 1) > budget else {names[0]: tables}
+    return Cost(table_bytes(model, tables), blamed, what)
+
+
+def check_run_costs(cfg: DictConfig, model) -> None:
+    """A one-line refusal, before anything is built, when a run of ``python -m uavrl.train`` would need more memory
+    than ``agent.memory_budget`` or more team steps than ``train.step_budget``, or no exact optimum exists for it."""
+    check_optimum_exists(model, "env.num_uavs")
+    a = cfg.agent
+    memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)
+    step_budget = OmegaConf.select(cfg, "train.step_budget", default=DEFAULT_STEP_BUDGET)
+    horizon = cfg.eval.horizon or default_horizon(model)
+    starts = int(cfg.eval.num_starts)
+    T, steps, memory, tables = model.max_steps, [], [], 0
+    if a.name == "tabular" and a.get("method", "q_learning") == "q_learning":
+        tables = 1 if a.shared_table else int(a.runs)
+        training = {"agent.episodes": int(a.episodes), "agent.runs": int(a.runs), "env.max_steps": T}
+        steps.append(Cost(_product(training), training, "training"))
+        memory.append(starts_worlds(model, int(a.runs), "agent.runs"))
+        memory.append(q_tables(model, tables, ("agent.runs", "env.num_uavs"), memory_budget))
+    elif a.name == "tabular":
+        tables = 1
+    elif a.name == "dqn":
+        worlds = int(a.worlds)
+        training = {"agent.iterations": int(a.iterations), "agent.worlds": worlds, "env.max_steps": T}
+        steps.append(Cost(_product(training), training, "training"))
+        batch = {"agent.worlds": worlds, "env.max_steps": T}
+        memory.append(Cost(world_bytes(model, worlds), {"agent.worlds": worlds}, "the training worlds"))
+        memory.append(Cost(worlds * T * frame_bytes(model), batch, "each iteration's batch of transitions"))
+        buffer = {"agent.buffer_size": int(a.buffer_size)}
+        memory.append(Cost(int(a.buffer_size) * frame_bytes(model), buffer, "the replay buffer"))
+    evaluations = max(tables, 1) * starts * horizon
+    eval_factors = {"eval.num_starts": starts, "eval.horizon": horizon} | ({"agent.runs": tables} if tables > 1 else {})
+    steps.append(Cost(evaluations, eval_factors, "the evaluation"))
+    memory.append(evaluation_costs(model, starts, horizon, tables, ("eval.num_starts", "eval.horizon", "agent.runs")))
+    refuse_over(memory, memory_budget, "agent.memory_budget", "bytes")
+    refuse_over([total_steps(steps)], step_budget, "train.step_budget", "steps")
+
+
+def total_steps(parts: list[Cost]) -> Cost:
+    """The steps of every part together, named by the largest part."""
+    largest = max(parts, key=lambda part: part.amount)
+    return Cost(sum(part.amount for part in parts), largest.factors, largest.what, largest.fixed)
+
+
+def check_optimum_exists(model, num_uavs_name: str) -> None:
+    """The evaluation measures against the exact optimum U*: refused in one line where it is 0 or cannot be found."""
+    if model.num_uavs > MAX_EXACT_UAVS:
+        raise ValueError(
+            f"{num_uavs_name}={model.num_uavs} is invalid: the evaluation's exact optimum U* enumerates 2^N subsets "
+            f"of the best cells, for 1 to {MAX_EXACT_UAVS} UAVs"
+        )
+    if model.rate_model == "reference_code" and model.num_uavs < 2:
+        raise ValueError(
+            f"{num_uavs_name}={model.num_uavs} is invalid with the authors' rate_model='reference_code': it pays "
+            "neither network unless both tasks are staffed, so U* = 0 and U / U* is undefined; give 2 or more"
+        )
+
+
+def _product(factors: dict[str, int]) -> int:
+    return math.prod(factors.values())
+
+
+def check_reproduce_costs(cfg: DictConfig, models: list) -> None:
+    """A one-line refusal, before anything is built, when the protocol of ``python -m uavrl.reproduce`` would need
+    more memory on one grid than ``memory_budget`` or more team steps in all than ``step_budget``."""
+    runs, episodes, starts, steps = int(cfg.runs), int(cfg.episodes), int(cfg.eval_starts), []
+    for model in models:
+        check_optimum_exists(model, "num_uavs")
+        horizon = default_horizon(model)
+        training = {"runs": runs, "episodes": episodes, "steps": model.max_steps}
+        steps.append(Cost(_product(training), training, f"training on {model.grid[0]}x{model.grid[1]}"))
+        evaluation = {"eval_starts": starts, "runs": runs, "its horizon": horizon}
+        steps.append(Cost(_product(evaluation), evaluation, "the evaluation", ("its horizon",)))
+        memory = [
+            q_tables(model, runs, ("runs", "num_uavs"), cfg.memory_budget),
+            starts_worlds(model, runs, "runs"),
+            evaluation_costs(model, starts, horizon, runs, ("eval_starts", "its horizon", "runs")),
+        ]
+        refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes")
+    refuse_over([total_steps(steps)], cfg.step_budget, "step_budget", "steps")

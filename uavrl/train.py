@@ -38,8 +38,9 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command, typed
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.io import claim_dir, remove_orphans, save_json, save_text
-from uavrl.settings import RUN_SETTINGS, check, check_scenario
+from uavrl.settings import RUN_SETTINGS, check, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -49,7 +50,7 @@ def check_settings(cfg: DictConfig) -> None:
     """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
     check(cfg, RUN_SETTINGS)
     check_scenario(cfg)
-    model_config(cfg)
+    check_run_costs(cfg, model_config(cfg))
     if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
         raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
@@ -65,6 +66,7 @@ def eval_settings(cfg: DictConfig, device) -> dict:
         seed=int(cfg.eval.seed),
         device=device,
         gamma=cfg.eval.gamma,
+        memory_budget=cfg.agent.get("memory_budget", DEFAULT_MEMORY_BUDGET),
     )
 
 

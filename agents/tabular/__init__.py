@@ -41,9 +41,11 @@ Example:
     (torch.Size([2, 81, 36]), torch.Size([2]), torch.Size([2, 50]))
 """
 
+from uavrl.envs.limits import table_bytes
+
 from .agent import METHODS, TabularAgent
 from .learner import TeamQLearner
-from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, exact_q_table, table_bytes
+from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, exact_q_table
 
 __all__ = [
     "DEFAULT_MEMORY_BUDGET",

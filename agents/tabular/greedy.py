@@ -15,8 +15,17 @@ import torch
 
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.world import World
-from uavrl.evaluation import DEFAULT_GAMMA, EVAL_SEED, evaluation_starts, greedy_metrics
+from uavrl.evaluation import (
+    DEFAULT_GAMMA,
+    EVAL_SEED,
+    check_memory,
+    check_settings,
+    default_horizon,
+    evaluation_starts,
+    greedy_metrics,
+)
 
 OUTPUTS = ("positions", "tasks", "r_pu", "r_se", "task_switches", "moves")  # what the yardstick reads per step
 
@@ -42,6 +51,7 @@ def evaluate_tables(
     device="cpu",
     gamma: float = DEFAULT_GAMMA,
     policy_seed: int = 0,
+    memory_budget: int = DEFAULT_MEMORY_BUDGET,
 ) -> list[dict[str, float]]:
     """:func:`uavrl.evaluation.evaluate` of the greedy policy of each table ``[R, S, 6^N]``: one dict per table.
 
@@ -49,11 +59,15 @@ def evaluate_tables(
     for every ``r`` (same starts, same tie-breaking numbers), with the ``R``
     tables' rollouts stepped together in one world of ``R x num_starts``.
     """
-    world, start, u_star, references, horizon = evaluation_starts(cfg, num_starts, horizon, seed, device, gamma)
+    check_settings(gamma, horizon, num_starts)
+    check_memory(cfg, num_starts, horizon or default_horizon(cfg), len(tables), memory_budget)
+    world, start, u_star, references, horizon = evaluation_starts(
+        cfg, num_starts, horizon, seed, device, gamma, memory_budget
+    )
     q = tables.to(world.device)
     R, B, N, A, C = len(q), num_starts, cfg.num_uavs, cfg.num_joint_actions, cfg.num_cells
     neighbours = grid_neighbours(cfg.grid, world.device)
-    play = World(world.cfg, R * B, world.device, seed)
+    play = World(world.cfg, R * B, world.device, seed, memory_budget=memory_budget)
     out = play.start_at(world.code.repeat(R, 1))
     table_of = torch.arange(R, device=world.device).repeat_interleave(B)
     joint_actions, place = decode_joint_actions(N, world.device), C ** torch.arange(N, device=world.device)

@@ -8,11 +8,12 @@ import torch
 
 from uavrl.envs import ModelConfig, streams
 from uavrl.envs.channel import best_so_far_reward, delta_reward
+from uavrl.envs.limits import table_bytes
 from uavrl.envs.world import World
 from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
-from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, table_bytes
+from .tables import DEFAULT_MEMORY_BUDGET, TabularModel
 
 _START_BLOCK = 256  # episodes whose starts are drawn together
 _LEARNER_STREAM = 1 << 20  # the purpose of the learner's draws in the random streams (the world's are small numbers)
@@ -75,6 +76,7 @@ class TeamQLearner:
         self.cfg, self.runs, self.seed = cfg, int(runs), int(seed)
         self.alpha, self.gamma, self.epsilon = float(alpha), float(gamma), float(epsilon)
         self.shared_table, self.backend, self.device = bool(shared_table), backend, torch.device(device)
+        self.memory_budget = memory_budget
         self.model = TabularModel(cfg, self.device)
         self.q = torch.zeros(num_tables, cfg.num_states, cfg.num_joint_actions, dtype=torch.float64, device=self.device)
         self.episode = 0
@@ -91,7 +93,7 @@ class TeamQLearner:
         if block != self._start_block:
             worlds = _START_BLOCK * self.runs
             first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
-            start = World(self.cfg, worlds, self.device, first_world).reset()
+            start = World(self.cfg, worlds, self.device, first_world, memory_budget=self.memory_budget).reset()
             self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
                 _START_BLOCK, self.runs
             )

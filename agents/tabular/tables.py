@@ -17,31 +17,24 @@ from uavrl.envs.channel import rates
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
+from uavrl.envs.limits import row_itemsize, valid_list_itemsize
 from uavrl.envs.optimum import optimum
 
 DEFAULT_MEMORY_BUDGET = 4 * 2**30
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
 
 
-def table_bytes(cfg: ModelConfig, num_tables: int) -> int:
-    """Bytes of the Q tables plus the model tables the learner keeps beside them."""
-    A = cfg.num_joint_actions
-    positions = cfg.num_cells**cfg.num_uavs
-    configs = positions * 2**cfg.num_uavs
-    # per placement and joint action: next cells (int32), valid flag, moves, the valid list; per configuration:
-    # both rates (float64) and the Q row (int32 or int64)
-    per_action, per_configuration = 4 + 1 + 1 + _valid_list_dtype(A).itemsize, 8 + 8 + _row_dtype(cfg).itemsize
-    return num_tables * cfg.num_states * A * 8 + positions * A * per_action + configs * per_configuration
+_TORCH_INTEGERS = {1: torch.uint8, 2: torch.int16, 4: torch.int32, 8: torch.int64}
 
 
 def _valid_list_dtype(num_joint_actions: int) -> torch.dtype:
     """The smallest integer type of a joint action index: the learner's valid-action lists are read every step, and
     the smaller they are, the fewer cache lines a step touches."""
-    return torch.uint8 if num_joint_actions <= 256 else torch.int16 if num_joint_actions <= 2**15 else torch.int32
+    return _TORCH_INTEGERS[valid_list_itemsize(num_joint_actions)]
 
 
 def _row_dtype(cfg: ModelConfig) -> torch.dtype:
-    return torch.int32 if cfg.num_states < 2**31 else torch.int64
+    return _TORCH_INTEGERS[row_itemsize(cfg)]
 
 
 class TabularModel:

@@ -1,0 +1,351 @@
+"""Which values of the model's numbers keep its rates finite and positive (standard library only).
+
+The rates of docs/model.md (How good a configuration is) are computed in float64:
+channel gains ``g0 d^-alpha`` (``d`` in metres), SNRs ``g = P |h|^2 / noise``, the
+amplify-and-forward term ``c = g1 g2 / (1 + g1 + g2)`` (or the authors'
+``A / (1 + A)``, ``A = reference_gain |h|^2 |h|^2``) and ``R = 1/2 log2(1 + sum)``.
+A gain or an SNR product beyond float64 turns a rate into NaN; a best cell whose
+term ``c`` lies below float64's resolution next to 1 makes that network's rate 0
+everywhere, and then ``U*`` (and every ``U / U*``) is undefined.  The checks work
+on the logarithms of these quantities, over the distances every cell and every
+layout the options allow can produce, so they cost microseconds whatever the
+grid: :class:`~uavrl.envs.config.ModelConfig` runs them before anything is built.
+
+Example:
+    >>> values = dict(grid=(6, 6), num_uavs=2, layout="line", fading="none", cell_size=10.0, altitude=6.0,
+    ...               alpha=2.0, g0=1.0, p_pt=0.01, p_s=0.02, p_u=0.02, noise=1e-9, direct_links=False,
+    ...               rate_model="af", reference_gain=200.0, reward="delta", beta1=1.0, beta2=1.0)
+    >>> physics_problem(values) is None
+    True
+    >>> physics_problem({**values, "p_u": 1e308})[:42]
+    'the SNR product g1 g2 of the AF term c = g'
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+NODE_NAMES = ("PT", "PR", "S", "E")
+_LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
+_LOG_MIN = math.log10(sys.float_info.min)  # its smallest normal number, 2.2e-308
+_LOG_RESOLUTION = math.log10(sys.float_info.epsilon)  # below this s, 1 + s is 1 in float64 and log2(1 + s) is 0
+_LOG_FLOAT32_MAX = math.log10(3.4028234663852886e38)  # rewards are float32
+FADING_PEAK = 32 * math.log(2)  # the largest Exp(1) power gain drawn from a 32-bit uniform (fading=rayleigh)
+# the options whose value the checks can blame, in the order they are tried
+PHYSICAL = ("p_pt", "p_s", "p_u", "noise", "cell_size", "altitude", "alpha", "g0", "reference_gain")
+# (network, its source node, its destination node, the source's power option)
+NETWORKS = (("the primary network (R_PU)", 0, 1, "p_pt"), ("the emergency network (R_SE)", 2, 3, "p_s"))
+
+
+def fixed_node_positions(layout: str, grid: tuple[int, int], height: float) -> list[tuple[float, float, float]] | None:
+    """``(x, y, z)`` of PT, PR, S, E in cells for a fixed layout (docs/model.md, Where the four nodes are), else
+    ``None`` (``layout="random"`` draws them at every reset)."""
+    L1, L2 = grid
+    if layout == "line":
+        return [(0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, height), (1.5 * L1, L2 / 2, height)]
+    if layout == "reference_code":
+        return [(0.0, 5.0, 0.0), (10.0, 5.0, 0.0), (-5.0, 5.0, 10.0), (15.0, 5.0, 10.0)]
+    return None
+
+
+def _shown(log10_value: float) -> str:
+    """``10 ** log10_value`` as ``1.2e+600``, also beyond float64."""
+    if math.isinf(log10_value):
+        return "inf" if log10_value > 0 else "0"
+    exponent = math.floor(log10_value)
+    mantissa = 10 ** (log10_value - exponent)
+    if mantissa >= 9.95:
+        mantissa, exponent = 1.0, exponent + 1
+    return f"{mantissa:.2g}e{exponent:+03d}"
+
+
+def _log_sum(*logs: float) -> float:
+    """``log10(sum of 10 ** l)`` without leaving float64."""
+    top = max(logs)
+    if top == -math.inf:
+        return top
+    return top + math.log10(sum(10 ** (log - top) for log in logs))
+
+
+def _log10(value: float) -> float:
+    return math.log10(value) if value > 0 else -math.inf
+
+
+class _Channels:
+    """The logarithms of the gains of ``values`` (the options, ``altitude`` resolved to the UAVs' height)."""
+
+    def __init__(self, values: dict):
+        self.v = values
+        self.log_cell = _log10(values["cell_size"])
+
+    def log_power(self, cells: float) -> float:
+        """``log10 d^-alpha`` at ``cells`` cells (``d`` in metres), the power torch computes before ``g0``."""
+        return math.inf if cells == 0 else -self.v["alpha"] * (math.log10(cells) + self.log_cell)
+
+    def log_gain(self, cells: float) -> float:
+        return self.log_power(cells) + _log10(self.v["g0"])
+
+    def log_term(self, log_gain_src: float, log_gain_dst: float, src_power: str) -> float:
+        """``log10 c`` of a UAV with those link gains: the AF term, or the authors' ``A / (1 + A)``."""
+        v = self.v
+        if v["rate_model"] == "reference_code":
+            a = _log10(v["reference_gain"]) + log_gain_src + log_gain_dst
+            return a - _log_sum(0.0, a)
+        g1 = log_gain_src + _log10(v[src_power]) - _log10(v["noise"])
+        g2 = log_gain_dst + _log10(v["p_u"]) - _log10(v["noise"])
+        return g1 + g2 - _log_sum(0.0, g1, g2)
+
+
+def _distances(values: dict) -> tuple[list[tuple[float, float, float]], list[tuple[float, float]]]:
+    """Per node, in cells: the least distance to a cell centre over every layout the options allow, the largest
+    distance to its nearest cell, and the largest to any cell; per network, the least and largest direct distance."""
+    (L1, L2), h = values["grid"], values["altitude"]
+    nodes = fixed_node_positions(values["layout"], values["grid"], h)
+    if nodes is None:  # layout=random: PT, PR on the ground, S, E aloft at least half a cell from every cell centre
+        near, far, diagonal = math.hypot(L1 / 2 + 1, L2 / 2 + 1), 1.5 * math.hypot(L1, L2), math.hypot(L1, L2)
+        ground, aloft = (h, math.hypot(near, h), math.hypot(far, h)), (0.5, near, far)
+        return [ground, ground, aloft, aloft], [(0.6 * diagonal, 2 * diagonal)] * 2
+    per_node = []
+    for x, y, z in nodes:
+        nearest = math.hypot(min(max(round(x), 0), L1 - 1) - x, min(max(round(y), 0), L2 - 1) - y, h - z)
+        farthest = math.hypot(max(abs(x), abs(x - L1 + 1)), max(abs(y), abs(y - L2 + 1)), h - z)
+        per_node.append((nearest, nearest, farthest))
+    direct = [math.dist(nodes[src], nodes[dst]) for _, src, dst, _ in NETWORKS]
+    return per_node, [(d, d) for d in direct]
+
+
+def _best_term_at_least(values: dict, channels: _Channels, src: int, dst: int, power: str) -> float:
+    """``log10`` of a lower bound on the largest term ``c`` of the network over the cells (mean channels).
+
+    A fixed layout: the exact term at three cells (nearest the source, the destination, and their midpoint).
+    A random one: the cell nearest the source, or nearest the destination, in the layout that puts it farthest.
+    """
+    (L1, L2), h = values["grid"], values["altitude"]
+    nodes = fixed_node_positions(values["layout"], values["grid"], h)
+    if nodes is None:
+        (_, reach_src, far_src), (_, reach_dst, far_dst) = (_distances(values)[0][i] for i in (src, dst))
+        return max(
+            channels.log_term(channels.log_gain(reach_src), channels.log_gain(far_dst), power),
+            channels.log_term(channels.log_gain(far_src), channels.log_gain(reach_dst), power),
+        )
+    a, b = nodes[src], nodes[dst]
+    best = -math.inf
+    for x, y in ((a[0], a[1]), (b[0], b[1]), ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)):
+        cell = (min(max(round(x), 0), L1 - 1), min(max(round(y), 0), L2 - 1), h)
+        gains = channels.log_gain(math.dist(cell, a)), channels.log_gain(math.dist(cell, b))
+        best = max(best, channels.log_term(*gains, power))
+    return best
+
+
+def physics_problem(values: dict) -> str | None:
+    """Why the options ``values`` would give NaN, infinite or everywhere-zero rates, or ``None`` when they do not.
+
+    ``values`` holds :class:`~uavrl.envs.config.ModelConfig`'s options by name, ``altitude`` as the UAVs' height in
+    cells.
+    """
+    v, channels = values, _Channels(values)
+    per_node, direct = _distances(v)
+    fade = math.log10(FADING_PEAK) if v["fading"] != "none" else 0.0
+    for name, (closest, _, _) in zip(NODE_NAMES, per_node, strict=True):
+        if closest == 0:
+            return f"{name} sits on a UAV cell at UAV altitude (distance 0, an infinite channel gain)"
+        power, gain = channels.log_power(closest), channels.log_gain(closest)
+        if max(power, gain) + fade > _LOG_MAX:
+            metres = f"{closest * v['cell_size']:.3g} m"
+            return (
+                f"the channel gain g0 d^-alpha from {name} to its nearest cell ({metres}) reaches "
+                f"{_shown(max(power, gain) + fade)}, beyond float64's {_shown(_LOG_MAX)}, so the rates would be NaN"
+            )
+    largest_sum, af = -math.inf, v["rate_model"] == "af"
+    for network, src, dst, power in NETWORKS:
+        gain_src, gain_dst = (channels.log_gain(per_node[i][0]) + fade for i in (src, dst))
+        if af:
+            snr_src = _log10(v[power]) - _log10(v["noise"])
+            snr_u = _log10(v["p_u"]) - _log10(v["noise"])
+            g1, g2 = gain_src + snr_src, gain_dst + snr_u
+            if max(snr_src, snr_u, g1 + g2, max(g1, g2) + math.log10(3)) > _LOG_MAX:
+                return (
+                    f"the SNR product g1 g2 of the AF term c = g1 g2 / (1 + g1 + g2) reaches {_shown(g1 + g2)} in "
+                    f"{network}, beyond float64's {_shown(_LOG_MAX)}, so the rates would be NaN"
+                )
+            largest_term = min(g1, g2)  # c < min(g1, g2)
+        else:
+            a = _log10(v["reference_gain"]) + gain_src + gain_dst
+            if max(a, a - gain_dst) > _LOG_MAX:
+                return (
+                    f"the authors' A = reference_gain |h|^2 |h|^2 reaches {_shown(a)} in {network}, beyond float64's "
+                    f"{_shown(_LOG_MAX)}, so the rates would be NaN"
+                )
+            largest_term = 0.0  # A / (1 + A) < 1
+        log_direct = -math.inf
+        if v["direct_links"]:
+            log_direct = channels.log_gain(direct[src // 2][0]) + _log10(v[power]) - _log10(v["noise"]) + fade
+        total = _log_sum(math.log10(v["num_uavs"]) + largest_term, log_direct)
+        if total + math.log10(2) > _LOG_MAX:
+            return (
+                f"the sum inside the logarithm of {network} reaches {_shown(total)}, beyond float64's "
+                f"{_shown(_LOG_MAX)}, so the rates would be infinite"
+            )
+        largest_sum = max(largest_sum, total)
+        best = _best_term_at_least(v, channels, src, dst, power)
+        if v["direct_links"]:
+            best = _log_sum(best, channels.log_gain(direct[src // 2][1]) + _log10(v[power]) - _log10(v["noise"]))
+        if best < _LOG_RESOLUTION:
+            return (
+                f"a UAV in the best cell adds only about {_shown(best)} inside the logarithm of {network}, below "
+                f"float64's resolution {_shown(_LOG_RESOLUTION)} next to 1, so that rate would be 0 everywhere and "
+                "U* (and every U / U*) undefined"
+            )
+    largest_rate = math.log2(1 + 10 ** min(largest_sum, _LOG_MAX - 1)) * (0.5 if af else 1.0)
+    weight = abs(v["beta1"]) + abs(v["beta2"])  # reward="delta": |beta1 dR_PU + beta2 dR_SE| <= weight * the rate
+    if v["reward"] == "delta" and weight and math.log10(weight) + _log10(largest_rate) > _LOG_FLOAT32_MAX:
+        return (
+            f"delta rewards weighted by |beta1| + |beta2| = {weight:.3g} reach "
+            f"{_shown(math.log10(weight) + _log10(largest_rate))} for rates up to {largest_rate:.3g} bit/s/Hz, "
+            "beyond float32's 3.4e+38 (the reward's dtype)"
+        )
+    return None
+
+
+def allowed_range(values: dict, name: str, good: float) -> str:
+    """The values of the positive option ``name`` with which ``values`` passes :func:`physics_problem`, as words.
+
+    ``good`` is a value that passes (the preset's).  Along one option every condition is monotone, so what passes
+    is one interval around ``good``: its ends are found by bisection on ``log10`` of the value.
+    """
+
+    def passes(log_value: float) -> bool:
+        return physics_problem({**values, name: 10**log_value}) is None
+
+    def edge(inside: float, outside: float) -> float:
+        for _ in range(60):
+            middle = (inside + outside) / 2
+            inside, outside = (middle, outside) if passes(middle) else (inside, middle)
+        return inside
+
+    centre = math.log10(good)
+    low = None if passes(_LOG_MIN) else edge(centre, _LOG_MIN)
+    high = None if passes(_LOG_MAX - 1e-9) else edge(centre, _LOG_MAX - 1e-9)
+    # printed with 3 digits, rounded towards the inside so that the printed ends pass too
+    low_text = None if low is None else _rounded(10**low, math.ceil)
+    high_text = None if high is None else _rounded(10**high, math.floor)
+    if low_text and high_text:
+        return f"with the other settings as they are it must lie in [{low_text}, {high_text}]"
+    if high_text:
+        return f"with the other settings as they are it must be at most {high_text}"
+    if low_text:
+        return f"with the other settings as they are it must be at least {low_text}"
+    return "no value of it passes with the other settings as they are"
+
+
+def _rounded(value: float, direction) -> str:
+    """``value`` to 3 significant digits, rounded by ``direction`` (``math.floor`` or ``math.ceil``)."""
+    scale = 10 ** (math.floor(math.log10(value)) - 2)
+    return f"{direction(value / scale) * scale:.3g}"
+
+
+# ---------------------------------------------------------------------------------------------------------- sizes
+DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest allocations) may take unless raised
+EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
+MAX_EXACT_UAVS = 20  # uavrl.envs.optimum.MAX_EXCHANGE_UAVS: U* enumerates 2^N subsets of the best cells
+
+
+def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
+    """Sets of N (cell, task) pairs on distinct cells: ``C(C, N) 2^N``."""
+    return math.comb(grid[0] * grid[1], num_uavs) * 2**num_uavs
+
+
+def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
+    """Memory of the exact solver (:class:`uavrl.envs.exact.ConfigurationSpace`): the int32 successor table, the
+    configurations and one chunked sweep of ``2^23`` gathered values."""
+    K, A = num_configurations(grid, num_uavs), 6**num_uavs
+    return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + (1 << 23) * 16
+
+
+def table_bytes(cfg, num_tables: int) -> int:
+    """Bytes of the tabular learner's Q tables plus the model tables it keeps beside them
+    (:mod:`uavrl.agents.tabular.tables`), in plain integers so the commands check it before torch is imported."""
+    A = cfg.num_joint_actions
+    positions = cfg.num_cells**cfg.num_uavs
+    configs = positions * 2**cfg.num_uavs
+    # per placement and joint action: next cells (int32), valid flag, moves, the valid list; per configuration:
+    # both rates (float64) and the Q row
+    per_action, per_configuration = 4 + 1 + 1 + valid_list_itemsize(A), 8 + 8 + row_itemsize(cfg)
+    return num_tables * cfg.num_states * A * 8 + positions * A * per_action + configs * per_configuration
+
+
+def valid_list_itemsize(num_joint_actions: int) -> int:
+    """Bytes of the smallest integer type that holds a joint action index."""
+    return 1 if num_joint_actions <= 256 else 2 if num_joint_actions <= 2**15 else 4
+
+
+def row_itemsize(cfg) -> int:
+    """Bytes of the integer type of a Q table's row index."""
+    return 4 if cfg.num_states < 2**31 else 8
+
+
+def world_bytes(cfg, batch_size: int) -> int:
+    """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
+    world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).
+
+    The geometry and the per-code tables cost ~500 bytes a cell, each layout's tables ~520 (while they are built);
+    each world ~440 bytes a UAV, and a reset draws 16 bytes of random keys per cell and world (a step of 3 or more
+    UAVs counts targets per cell and world: 8 more).
+    """
+    C, N, B = cfg.num_cells, cfg.num_uavs, batch_size
+    layouts = B if cfg.layout == "random" else 1
+    per_world = (16 + (8 if N >= 3 else 0)) * C + 440 * N + 64
+    pair_tables = (2 * C) ** 2 * 200 if N == 2 and layouts == 1 and (2 * C) ** 2 <= 1 << 16 else 0
+    return 500 * C + 520 * C * layouts + B * per_world + pair_tables
+
+
+def frame_bytes(cfg) -> int:
+    """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key."""
+    N = cfg.num_uavs
+    observation = 4 * N * (13 + 3 * (N - 1))
+    per_step = observation + 4 * (5 * N + 12) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, positions, ...
+    return 2 * per_step
+
+
+def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
+    """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.bounds`) where the exact solver does not fit:
+    each world's best reachable terms ``[K + 1, N]``, then the relaxation of chunks of (world, step) rows over
+    every split of the UAVs, and the optimal sets (at most ``MAX_CANDIDATES`` candidates)."""
+    N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
+    chunk = 1 << 22  # uavrl.envs.bounds._CHUNK_ELEMENTS
+    reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
+    relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
+    candidates = 2_000_000 * N * 8 * 4
+    return reachable + max(relaxation, candidates)
+
+
+def default_horizon(cfg) -> int:
+    """Greedy evaluation length (``eval.horizon`` null): enough steps to cross the grid twice."""
+    return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
+
+
+def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:
+    """Peak bytes of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
+    > 0: the tabular agent's ``tables x num_starts`` worlds stepped together, keeping each step's outputs; else a
+    TorchRL rollout of every transition) and the references: the exact solver where it fits, else the bounds."""
+    if tables:
+        rows = tables * num_starts
+        play = world_bytes(cfg, rows) + rows * horizon * (6 * 8 + 24 * cfg.num_uavs)
+    else:
+        play = num_starts * horizon * frame_bytes(cfg)
+    exact = required_bytes(cfg.grid, cfg.num_uavs)
+    layouts = num_starts if cfg.layout == "random" else 1
+    if exact <= EXACT_SOLVER_BUDGET:  # the solver's tables and each layout's values over its configurations
+        references = exact + layouts * num_configurations(cfg.grid, cfg.num_uavs) * 8 * 4
+    else:
+        references = bounds_bytes(cfg, num_starts, horizon)
+    return world_bytes(cfg, num_starts) + play + references
+
+
+def gib(size: int) -> str:
+    """``size`` bytes as ``12,345,678 bytes (11.8 MiB)``."""
+    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if size >= scale:
+            return f"{size:,} bytes ({size / scale:.3g} {unit})"
+    return f"{size:,} bytes"
