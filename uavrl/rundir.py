@@ -1,0 +1,193 @@
+"""A run directory held by one training process, and the interrupts that end a run with a checkpoint.
+
+:func:`hold` creates or opens the run directory and takes its lock
+(``filelock``'s ``fcntl`` lock on ``.uavrl.lock``, which the operating system
+releases when the process dies, even by ``kill -9``): a second ``train`` or
+``resume`` into a directory that a live process holds is refused at once,
+naming the holder that ``.uavrl.lock.holder`` records.  Only the holder
+removes the temporary files of killed writes, so no process deletes another's
+write in flight.  A run that fails before it saved anything removes the
+directory if it made it.
+
+:class:`Interrupts` turns SIGINT (Ctrl-C) and SIGTERM (a scheduler's stop)
+into a request that the training loop answers at the end of the iteration: it
+saves a checkpoint there, so the resumed run ends exactly as an uninterrupted
+one.  A second signal stops at once; the write it cuts short is discarded and
+the checkpoints already on disk stay as they were.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shlex
+import shutil
+import signal
+import socket
+import sys
+import threading
+from pathlib import Path
+
+from uavrl.io import WriteError, make_dirs, orphans, save_text
+
+EVENTS = "events.out.tfevents.*"  # TensorBoard's files (uavrl.logger)
+
+LOCK = ".uavrl.lock"
+HOLDER = ".uavrl.lock.holder"
+# what a training run writes atomically (uavrl.io), whose orphaned temporary files the holder removes
+RUN_FILES = ("checkpoint.pt", "checkpoint.prev.pt", "config.yaml", "metrics.json", HOLDER)
+VALUABLE = ("checkpoint.pt", "checkpoint.prev.pt", "metrics.json")
+
+
+def quoted(path) -> str:
+    """A path as a shell takes it back (spaces, quotes, non-ASCII letters)."""
+    return shlex.quote(str(path))
+
+
+def path_argument(setting: str, path) -> str:
+    """``setting=path`` as one command-line argument that the shell and Hydra's override parser both read back:
+    a path of other characters than ASCII letters, digits and ``/._:-`` is quoted for Hydra, then for the shell."""
+    value = str(path)
+    if not re.fullmatch(r"[\w/.:-]+", value, re.ASCII):
+        value = "'" + value.replace("'", "\\'") + "'"
+    argument = f"{setting}={value}"
+    if shlex.quote(argument) == argument or re.search(r'["$`\\!]', argument):
+        return shlex.quote(argument)
+    return f'"{argument}"'  # the shell's quotes around Hydra's: easier to read than shlex's
+
+
+def resume_command(run_dir) -> str:
+    return f"python -m uavrl.train {path_argument('resume', run_dir)}"
+
+
+class RunDirectoryInUse(OSError):
+    """Another live process holds the run directory."""
+
+
+class RunDirectory:
+    """A run directory this process holds; :meth:`release` at the end, :meth:`discard` after a failure."""
+
+    def __init__(self, path: Path, created: bool, lock):
+        self.path, self.created, self._lock = path, created, lock
+
+    def holds_value(self) -> bool:
+        return any((self.path / name).exists() for name in VALUABLE)
+
+    def release(self) -> None:
+        (self.path / HOLDER).unlink(missing_ok=True)
+        self._lock.release()
+
+    def discard(self) -> None:
+        """Release; remove the directory too if this process made it and it holds no checkpoint or metrics."""
+        if self.created and self.path.is_dir() and not self.holds_value():
+            shutil.rmtree(self.path, ignore_errors=True)
+            self._lock.release()
+            return
+        self.release()
+
+
+def hold(path, setting: str, created: bool = False) -> RunDirectory:
+    """Create ``path`` if missing, lock it, record the holder and remove orphaned temporary files.
+
+    ``setting`` is how the user gave the directory (``run_dir``, ``resume``), for
+    the messages; ``created``: the caller made the directory (a new timestamped one).
+    """
+    from filelock import FileLock, Timeout
+
+    path = Path(path)
+    given = f"{setting}={quoted(path)}"
+    if path.exists() and not path.is_dir():
+        advice = f"resume={quoted(path.parent)}" if setting == "resume" else "a directory (new, or without a run)"
+        raise NotADirectoryError(f"{given} is a file, not a directory: give {advice}")
+    created = created or not path.exists()
+    make_dirs(path)
+    lock = FileLock(path / LOCK, timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise RunDirectoryInUse(
+            f"{given} is in use by another uavrl process ({holder(path)}): wait for it to end, or give another "
+            "directory"
+        ) from None
+    except OSError as err:
+        if created:
+            shutil.rmtree(path, ignore_errors=True)
+        raise WriteError(path / LOCK, err) from None
+    held = RunDirectory(path, created, lock)
+    try:
+        for orphan in [*(o for name in RUN_FILES for o in orphans(path / name)), *path.glob(f".{EVENTS}.tmp")]:
+            orphan.unlink(missing_ok=True)
+        save_text(f"pid {os.getpid()} on {socket.gethostname()}\n", path / HOLDER)
+    except BaseException:
+        held.discard()
+        raise
+    return held
+
+
+def holder(path: Path) -> str:
+    """Who holds ``path``'s lock, as its holder file says."""
+    try:
+        return (path / HOLDER).read_text().strip() or "pid unknown"
+    except OSError:
+        return "pid unknown"
+
+
+class Interrupted(KeyboardInterrupt):
+    """The run was stopped by a signal; ``signum`` says which (the exit status is 128 + signum)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class Interrupts:
+    """SIGINT and SIGTERM while the run holds its directory.
+
+    Inside :meth:`deferred` (one training iteration) the first signal is
+    recorded in ``received`` and the iteration runs to its end; anywhere else,
+    and for a second signal, :class:`Interrupted` is raised at once.  Handlers
+    are installed only in the main thread (Python's rule); elsewhere (a
+    launcher's worker thread) signals keep their default effect.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.received: int | None = None
+        self._deferring = False
+        self._previous = {}
+        self.iteration_message = "the current iteration"
+
+    def __enter__(self) -> Interrupts:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = {signum: signal.signal(signum, self._handle) for signum in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous = {}
+
+    @contextlib.contextmanager
+    def deferred(self, what: str):
+        """Signals received inside wait for its end; ``what``: the work, for the notice (``iteration 7 of 50``)."""
+        self._deferring, self.iteration_message = True, what
+        try:
+            yield
+        finally:
+            self._deferring = False
+
+    def _handle(self, signum, frame) -> None:
+        if self.received is None and self._deferring:
+            self.received = signum
+            name = signal.Signals(signum).name
+            print(
+                f"{name}: finishing {self.iteration_message}, then saving a checkpoint (a second Ctrl-C or SIGTERM "
+                "stops at once, keeping the checkpoints already saved)",
+                file=sys.stderr,
+                flush=True,
+            )
+            return
+        self.received = self.received or signum
+        raise Interrupted(signum)
