@@ -128,6 +128,15 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     try:
         with Interrupts() as interrupts:
             cfg, env_cfg, result = run(cfg, overrides, held.path, interrupts)
+    except Interrupted as err:
+        if not getattr(err, "__notes__", None):  # before the first iteration
+            err.add_note(
+                f"the run is as it was; continue it with: {resume_command(held.path)}"
+                if cfg.resume
+                else "stopped before the first checkpoint, nothing saved"
+            )
+        held.discard()
+        raise
     except BaseException:
         held.discard()
         raise
