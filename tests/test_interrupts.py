@@ -33,8 +33,8 @@ TABULAR = ["agent=tabular", "env.grid=[3,3]", "agent.episodes=6", "env.max_steps
 DQN = ["agent=dqn", "env.grid=[3,3]", "agent.iterations=6", "env.max_steps=8", "agent.worlds=8", "agent.hidden=16"]
 DQN += ["agent.depth=1", "agent.batch_size=32", "agent.buffer_size=100", "agent.updates=2", "agent.learning_starts=16"]
 COMMON = ["train.checkpoint_every=2", "eval.num_starts=4", "progress=false"]
-# a tabular run of ~10 s that checkpoints every episode: long enough to be signalled or killed mid-way
-LONG = ["agent=tabular", "env.grid=[3,3]", "agent.episodes=400", "env.max_steps=2000", "agent.runs=1"]
+# a tabular run of a few seconds that checkpoints every episode: long enough to be signalled or killed mid-way
+LONG = ["agent=tabular", "env.grid=[3,3]", "agent.episodes=150", "env.max_steps=2000", "agent.runs=1"]
 LONG += ["train.checkpoint_every=1", "eval.num_starts=4", "progress=false", "num_threads=1"]
 
 
@@ -180,7 +180,7 @@ def test_a_refused_late_setting_leaves_no_run_directory(tmp_path):
 
 def start(run_dir, *overrides, cwd=None) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "uavrl.train", *LONG, *overrides, f"run_dir={run_dir}"],
+        [sys.executable, "-m", "uavrl.train", *LONG, *overrides, f"run_dir='{run_dir}'"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -215,10 +215,10 @@ def test_a_signalled_process_prints_a_resume_command_that_pastes_and_ends_exactl
     assert process.returncode == 128 + signum, stderr
     notice, last = stderr.strip().splitlines()
     assert notice.startswith(f"{signal.Signals(signum).name}: finishing iteration "), stderr
-    assert last.startswith("interrupted: checkpoint.pt holds iteration ") and " of 400; " in last, stderr
+    assert last.startswith("interrupted: checkpoint.pt holds iteration ") and " of 150; " in last, stderr
     command = last.split("continue the run with: ")[1]
     assert command == f"python -m uavrl.train \"resume='{run_dir}'\""
-    assert 2 <= iteration(run_dir) < 400 and temporary_files(run_dir) == []
+    assert 2 <= iteration(run_dir) < 150 and temporary_files(run_dir) == []
     argv = shlex.split(command)
     subprocess.run([sys.executable, *argv[1:]], check=True, capture_output=True)
     assert final_metrics(run_dir) == final_metrics(long_run)

@@ -144,20 +144,22 @@ class Interrupted(KeyboardInterrupt):
 class Interrupts:
     """SIGINT and SIGTERM while the run holds its directory.
 
-    Inside :meth:`deferred` (one training iteration) the first signal is
-    recorded in ``received`` and the iteration runs to its end; anywhere else,
-    and for a second signal, :class:`Interrupted` is raised at once.  Handlers
-    are installed only in the main thread (Python's rule); elsewhere (a
-    launcher's worker thread) signals keep their default effect.
+    Inside :meth:`deferred` (the training loop) the first signal is recorded
+    in ``received`` and the loop saves at the end of the iteration; anywhere
+    else, and for a second signal, :class:`Interrupted` is raised at once,
+    except inside :meth:`shielded` (logging, the progress bar: code holding
+    locks that an exception would leave held), which acts on it when it ends.
+    Handlers are installed only in the main thread (Python's rule); elsewhere
+    (a launcher's worker thread) signals keep their default effect.
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self):
         self.received: int | None = None
-        self._deferring = False
+        self.working_on = "the current iteration"  # for the notice: ``iteration 7 of 50``
+        self._deferring, self._shielded, self._pending = False, 0, None
         self._previous = {}
-        self.iteration_message = "the current iteration"
 
     def __enter__(self) -> Interrupts:
         if threading.current_thread() is threading.main_thread():
@@ -170,21 +172,38 @@ class Interrupts:
         self._previous = {}
 
     @contextlib.contextmanager
-    def deferred(self, what: str):
-        """Signals received inside wait for its end; ``what``: the work, for the notice (``iteration 7 of 50``)."""
-        self._deferring, self.iteration_message = True, what
+    def deferred(self):
+        """A first signal received inside is recorded, not raised: the caller checks ``received``."""
+        self._deferring = True
         try:
             yield
         finally:
             self._deferring = False
 
+    @contextlib.contextmanager
+    def shielded(self, act_after: bool = True):
+        """Signals received inside wait for its end; ``act_after=False`` (cleanup while stopping) drops them."""
+        self._shielded += 1
+        try:
+            yield
+        finally:
+            self._shielded -= 1
+        pending, self._pending = self._pending, None
+        if pending is not None and act_after and not self._shielded:
+            self._act(pending)
+
     def _handle(self, signum, frame) -> None:
+        if self._shielded:
+            self._pending = signum
+            return
+        self._act(signum)
+
+    def _act(self, signum: int) -> None:
         if self.received is None and self._deferring:
             self.received = signum
-            name = signal.Signals(signum).name
             print(
-                f"{name}: finishing {self.iteration_message}, then saving a checkpoint (a second Ctrl-C or SIGTERM "
-                "stops at once, keeping the checkpoints already saved)",
+                f"{signal.Signals(signum).name}: finishing {self.working_on}, then saving a checkpoint (a second "
+                "Ctrl-C or SIGTERM stops at once, keeping the checkpoints already saved)",
                 file=sys.stderr,
                 flush=True,
             )

@@ -171,7 +171,8 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
     resolved = OmegaConf.to_container(cfg, resolve=True)
     save_text(OmegaConf.to_yaml(resolved), run_dir / "config.yaml")
     # points after the checkpoint's step (any, for a new run) are replaced; those up to it stay
-    logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
+    with interrupts.shielded():
+        logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
     checkpoints = CheckpointWriter(run_dir, newest_is_readable)
 
     def save_checkpoint(iteration: int, final: dict | None = None, torch_rng=None) -> None:
@@ -189,36 +190,41 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
     eval_kwargs = eval_settings(cfg, device)
     started = time.perf_counter()
     clock = TrainingClock()
-    bar = tqdm(
-        range(start, agent.num_iterations),
-        initial=start,
-        total=agent.num_iterations,
-        disable=not cfg.progress,
-        desc=f"{cfg.agent.name} {cfg.env.name}",
-        unit="it",
-        dynamic_ncols=True,
-    )
+    with interrupts.shielded():
+        bar = tqdm(
+            initial=start,
+            total=agent.num_iterations,
+            disable=not cfg.progress,
+            desc=f"{cfg.agent.name} {cfg.env.name}",
+            unit="it",
+            dynamic_ncols=True,
+        )
     try:
-        for iteration in bar:
-            done = iteration + 1
-            # a signal now waits for the iteration's end, where the run is in a state a checkpoint resumes exactly
-            with interrupts.deferred(f"iteration {done} of {agent.num_iterations}"):
+        # a first signal waits for the iteration's end, where a checkpoint resumes exactly
+        with interrupts.deferred():
+            for done in range(start + 1, agent.num_iterations + 1):
+                interrupts.working_on = f"iteration {done} of {agent.num_iterations}"
                 metrics = agent.train_iteration()
                 if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
-                    logger.log(metrics, agent.env_steps)
-                    if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
-                        per_step = metrics["train/sum_utility"] / env_cfg.max_steps
-                        bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
+                    with interrupts.shielded():
+                        logger.log(metrics, agent.env_steps)
+                        if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
+                            per_step = metrics["train/sum_utility"] / env_cfg.max_steps
+                            bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
                 if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
                     trained = clock.read()  # before the evaluation, which the clock leaves out
                     with clock.paused():
-                        logger.log({**evaluate_agent(agent, env_cfg, **eval_kwargs), **trained}, agent.env_steps)
+                        evaluation = evaluate_agent(agent, env_cfg, **eval_kwargs)
+                    with interrupts.shielded():
+                        logger.log({**evaluation, **trained}, agent.env_steps)
                 if done % every == 0 and done < agent.num_iterations:
                     save_checkpoint(done)
-            if interrupts.received:
-                if saved != done:
-                    save_checkpoint(done)
-                raise Interrupted(interrupts.received)
+                with interrupts.shielded():
+                    bar.update()
+                if interrupts.received:
+                    if saved != done:
+                        save_checkpoint(done)
+                    raise Interrupted(interrupts.received)
         trained = clock.read()
         if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
             final = checkpoint["final"]
@@ -230,9 +236,11 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
                 if saved != agent.num_iterations:
                     save_checkpoint(agent.num_iterations, torch_rng=trained_rng)
                 raise
-            logger.log({**final, **trained}, agent.env_steps)
+            with interrupts.shielded():
+                logger.log({**final, **trained}, agent.env_steps)
             save_checkpoint(agent.num_iterations, final)
-        logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
+        with interrupts.shielded():
+            logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
     except Interrupted as err:
         err.add_note(interrupted_note(run_dir, saved, agent.num_iterations, checkpoint is not None))
         raise
@@ -244,8 +252,9 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
             f"{resume_command(run_dir)}"
         ) from None
     finally:
-        bar.close()
-        logger.close()
+        with interrupts.shielded(act_after=False):
+            bar.close()
+            logger.close()
     result = {
         "agent": cfg.agent.name,
         "env": cfg.env.name,
