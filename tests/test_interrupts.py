@@ -306,12 +306,13 @@ def _events(path):
 def test_tensorboard_curves_after_a_kill_and_resume_equal_the_uninterrupted_ones(compose_cfg, long_run, tmp_path):
     run_dir = tmp_path / "run"
     for _ in range(2):  # killed twice, the second time in the resumed run
-        process = start(run_dir) if not (run_dir / "checkpoint.pt").exists() else resume_process(run_dir)
+        fresh = not (run_dir / "checkpoint.pt").exists()
+        process = start(run_dir, "train.checkpoint_every=10") if fresh else resume_process(run_dir)
         before = iteration(run_dir) if (run_dir / "checkpoint.pt").exists() else 0
         while not (run_dir / "checkpoint.pt").exists() or iteration(run_dir) < before + 20:
             assert process.poll() is None, process.communicate()
             time.sleep(0.05)
-        time.sleep(0.3)  # episodes logged after the checkpoint, which the resumed run logs again
+        time.sleep(0.3)  # episodes logged after the checkpoint (up to 9), which the resumed run logs again
         process.kill()
         process.wait()
     resume(compose_cfg, run_dir, *LONG)

@@ -17,6 +17,7 @@ import secrets
 import tempfile
 from pathlib import Path
 
+EVENTS = "events.out.tfevents.*"  # TensorBoard's event files (uavrl.logger)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 

@@ -7,8 +7,7 @@ from pathlib import Path
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams as hparams_summaries
 
-from uavrl.io import save_bytes
-from uavrl.rundir import EVENTS
+from uavrl.io import EVENTS, save_bytes
 
 
 class RunLogger:

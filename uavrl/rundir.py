@@ -29,9 +29,7 @@ import sys
 import threading
 from pathlib import Path
 
-from uavrl.io import WriteError, make_dirs, orphans, save_text
-
-EVENTS = "events.out.tfevents.*"  # TensorBoard's files (uavrl.logger)
+from uavrl.io import EVENTS, WriteError, make_dirs, orphans, save_text
 
 LOCK = ".uavrl.lock"
 HOLDER = ".uavrl.lock.holder"

@@ -6,7 +6,9 @@ resolved ``config.yaml``, ``checkpoint.pt`` (atomic, every
 kept as ``checkpoint.prev.pt``) and ``metrics.json`` with the final
 evaluation.  ``resume=<run dir>`` continues a killed run from its newest
 readable checkpoint with the run's saved config; with the same seed it ends
-exactly as an uninterrupted run would.
+exactly as an uninterrupted run would.  One process at a time holds a run
+directory; Ctrl-C or SIGTERM saves a checkpoint at the end of the iteration
+and prints the command that resumes it (:mod:`uavrl.rundir`).
 
 Every setting is checked before torch is imported (:mod:`uavrl.settings`), so a
 mistyped override is refused at once; :func:`train` imports the heavy modules
