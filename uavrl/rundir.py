@@ -153,7 +153,9 @@ class Interrupts:
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __init__(self):
+    def __init__(self, notify=None):
+        """``notify(line)`` shows the notice of a first signal (default: print to stderr)."""
+        self.notify = notify or (lambda line: print(line, file=sys.stderr, flush=True))
         self.received: int | None = None
         self.working_on = "the current iteration"  # for the notice: ``iteration 7 of 50``
         self._deferring, self._shielded, self._pending = False, 0, None
@@ -199,11 +201,9 @@ class Interrupts:
     def _act(self, signum: int) -> None:
         if self.received is None and self._deferring:
             self.received = signum
-            print(
+            self.notify(
                 f"{signal.Signals(signum).name}: finishing {self.working_on}, then saving a checkpoint (a second "
-                "Ctrl-C or SIGTERM stops at once, keeping the checkpoints already saved)",
-                file=sys.stderr,
-                flush=True,
+                "Ctrl-C or SIGTERM stops at once, keeping the checkpoints already saved)"
             )
             return
         self.received = self.received or signum

@@ -126,9 +126,11 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     run that fails before it saved anything removes the directory it made.
     """
     check_settings(cfg)
+    from tqdm import tqdm
+
     held = hold_run_dir(cfg)
     try:
-        with Interrupts() as interrupts:
+        with Interrupts(notify=lambda line: tqdm.write(line, file=sys.stderr)) as interrupts:
             cfg, env_cfg, result = run(cfg, overrides, held.path, interrupts)
     except Interrupted as err:
         if not getattr(err, "__notes__", None):  # before the first iteration
