@@ -401,6 +401,15 @@ def test_a_real_full_disk_names_the_file_and_an_already_full_one_leaves_no_run_d
     assert not (small_disk / "new").exists()
 
 
+def test_a_resume_refused_for_want_of_a_checkpoint_still_removes_a_killed_write(compose_cfg, tmp_path):
+    (tmp_path / "config.yaml").write_text("agent: {name: tabular}\n")
+    orphan = tmp_path / ".checkpoint.pt.k1ll3d.tmp"  # a SIGKILL during the first checkpoint's write
+    orphan.write_bytes(b"half a checkpoint")
+    with pytest.raises(FileNotFoundError, match="no checkpoint.pt"):
+        resume(compose_cfg, tmp_path, *TABULAR)
+    assert not orphan.exists()
+
+
 def test_run_dir_that_is_a_file_is_refused_as_a_file(tmp_path, compose_cfg):
     file = tmp_path / "notes.txt"
     file.write_text("mine")

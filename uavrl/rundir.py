@@ -114,13 +114,35 @@ def hold(path, setting: str, created: bool = False) -> RunDirectory:
         raise WriteError(path / LOCK, err) from None
     held = RunDirectory(path, created, lock)
     try:
-        for orphan in [*(o for name in RUN_FILES for o in orphans(path / name)), *path.glob(f".{EVENTS}.tmp")]:
-            orphan.unlink(missing_ok=True)
+        _remove_orphans(path)
         save_text(f"pid {os.getpid()} on {socket.gethostname()}\n", path / HOLDER)
     except BaseException:
         held.discard()
         raise
     return held
+
+
+def tidy(path) -> None:
+    """Remove the orphaned temporary files of the run directory ``path`` if no live process holds it."""
+    from filelock import FileLock, Timeout
+
+    path = Path(path)
+    if not path.is_dir():
+        return
+    lock = FileLock(path / LOCK, timeout=0)
+    try:
+        lock.acquire()
+    except (Timeout, OSError):  # held by a live process (its files are in use), or not ours to write
+        return
+    try:
+        _remove_orphans(path)
+    finally:
+        lock.release()
+
+
+def _remove_orphans(path: Path) -> None:
+    for orphan in [*(o for name in RUN_FILES for o in orphans(path / name)), *path.glob(f".{EVENTS}.tmp")]:
+        orphan.unlink(missing_ok=True)
 
 
 def holder(path: Path) -> str:

@@ -29,7 +29,7 @@ from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, lo
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import WriteError, claim_dir, save_json, save_text
-from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, quoted, resume_command
+from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, quoted, resume_command, tidy
 from uavrl.settings import RUN_SETTINGS, check, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
@@ -125,7 +125,12 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     run with a checkpoint at the end of the iteration (:mod:`uavrl.rundir`); a
     run that fails before it saved anything removes the directory it made.
     """
-    check_settings(cfg)
+    try:
+        check_settings(cfg)
+    except FileNotFoundError:
+        if cfg.resume:  # a run killed in its first checkpoint's write: its temporary file goes, though refused
+            tidy(cfg.resume)
+        raise
     from tqdm import tqdm
 
     held = hold_run_dir(cfg)
