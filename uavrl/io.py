@@ -85,11 +85,11 @@ def _keep_as_previous(path: Path, previous: Path) -> None:
     complete checkpoint, so a kill between this and the rename of the new file loses nothing."""
     link = previous.with_name(f".{previous.name}.{secrets.token_hex(4)}.tmp")
     try:
-        os.link(path, link)
-    except OSError:  # a file system without hard links: a moment without ``path``, the previous file still complete
-        os.replace(path, previous)
-        return
-    try:
+        try:
+            os.link(path, link)
+        except OSError:  # a file system without hard links: a moment without ``path``, the previous file complete
+            os.replace(path, previous)
+            return
         os.replace(link, previous)
     except BaseException:
         link.unlink(missing_ok=True)
@@ -99,12 +99,9 @@ def _keep_as_previous(path: Path, previous: Path) -> None:
 def _atomic(path: Path, write, previous: Path | None = None):
     path = Path(path)
     make_dirs(path.parent)
+    tmp = file = None
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as err:
-        raise WriteError(path, err) from None
-    file = None
-    try:
         with os.fdopen(fd, "wb") as raw:
             file = _Recording(raw)
             write(file)
@@ -115,7 +112,8 @@ def _atomic(path: Path, write, previous: Path | None = None):
             _keep_as_previous(path, previous)
         os.replace(tmp, path)
     except BaseException as err:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         cause = file.error if file is not None and file.error is not None else err
         if isinstance(err, Exception) and isinstance(cause, OSError) and not isinstance(cause, WriteError):
             raise WriteError(path, cause) from None
