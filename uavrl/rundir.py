@@ -66,8 +66,9 @@ class RunDirectoryInUse(OSError):
 class RunDirectory:
     """A run directory this process holds; :meth:`release` at the end, :meth:`discard` after a failure."""
 
-    def __init__(self, path: Path, created: bool, lock):
+    def __init__(self, path: Path, created: bool, lock, created_parents=()):
         self.path, self.created, self._lock = path, created, lock
+        self.created_parents = list(created_parents)  # innermost first
 
     def holds_value(self) -> bool:
         return any((self.path / name).exists() for name in VALUABLE)
@@ -81,15 +82,19 @@ class RunDirectory:
         if self.created and self.path.is_dir() and not self.holds_value():
             shutil.rmtree(self.path, ignore_errors=True)
             self._lock.release()
+            for parent in self.created_parents:
+                with contextlib.suppress(OSError):  # another run's directory in it since: it stays
+                    parent.rmdir()
             return
         self.release()
 
 
-def hold(path, setting: str, created: bool = False) -> RunDirectory:
+def hold(path, setting: str, created: bool = False, created_parents=()) -> RunDirectory:
     """Create ``path`` if missing, lock it, record the holder and remove orphaned temporary files.
 
     ``setting`` is how the user gave the directory (``run_dir``, ``resume``), for
-    the messages; ``created``: the caller made the directory (a new timestamped one).
+    the messages; ``created``: the caller made the directory (a new timestamped
+    one), and ``created_parents`` the folders above it (innermost first).
     """
     from filelock import FileLock, Timeout
 
@@ -98,7 +103,8 @@ def hold(path, setting: str, created: bool = False) -> RunDirectory:
     if path.exists() and not path.is_dir():
         advice = f"resume={quoted(path.parent)}" if setting == "resume" else "a directory (new, or without a run)"
         raise NotADirectoryError(f"{given} is a file, not a directory: give {advice}")
-    created = created or not path.exists()
+    if not path.exists():
+        created, created_parents = True, missing_parents(path)
     make_dirs(path)
     lock = FileLock(path / LOCK, timeout=0)
     try:
@@ -112,7 +118,7 @@ def hold(path, setting: str, created: bool = False) -> RunDirectory:
         if created:
             shutil.rmtree(path, ignore_errors=True)
         raise WriteError(path / LOCK, err) from None
-    held = RunDirectory(path, created, lock)
+    held = RunDirectory(path, created, lock, created_parents)
     try:
         _remove_orphans(path)
         save_text(f"pid {os.getpid()} on {socket.gethostname()}\n", path / HOLDER)
@@ -120,6 +126,11 @@ def hold(path, setting: str, created: bool = False) -> RunDirectory:
         held.discard()
         raise
     return held
+
+
+def missing_parents(path) -> list[Path]:
+    """The folders above ``path`` that do not exist yet, innermost first."""
+    return [parent for parent in Path(path).parents if not parent.exists()]
 
 
 def tidy(path) -> None:

@@ -29,7 +29,17 @@ from uavrl.checkpoints import CHECKPOINT, CheckpointWriter, checkpoint_files, lo
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.io import WriteError, claim_dir, save_json, save_text
-from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, quoted, resume_command, tidy
+from uavrl.rundir import (
+    Interrupted,
+    Interrupts,
+    RunDirectory,
+    hold,
+    missing_parents,
+    path_argument,
+    quoted,
+    resume_command,
+    tidy,
+)
 from uavrl.settings import RUN_SETTINGS, check, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
@@ -80,8 +90,9 @@ def hold_run_dir(cfg: DictConfig) -> RunDirectory:
             held.release()
             raise FileExistsError(already_a_run(cfg.run_dir))
         return held
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    return hold(claim_dir(Path("runs") / cfg.agent.name / cfg.env.name / stamp), "run_dir", created=True)
+    base = Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
+    parents = missing_parents(base)
+    return hold(claim_dir(base), "run_dir", created=True, created_parents=parents)
 
 
 def already_a_run(run_dir) -> str:
