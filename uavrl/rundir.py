@@ -138,7 +138,7 @@ def tidy(path) -> None:
     from filelock import FileLock, Timeout
 
     path = Path(path)
-    if not path.is_dir():
+    if not path.is_dir() or not _orphans(path):  # nothing to do: no lock file made in a directory not a run's
         return
     lock = FileLock(path / LOCK, timeout=0)
     try:
@@ -151,8 +151,12 @@ def tidy(path) -> None:
         lock.release()
 
 
+def _orphans(path: Path) -> list[Path]:
+    return [*(o for name in RUN_FILES for o in orphans(path / name)), *path.glob(f".{EVENTS}.tmp")]
+
+
 def _remove_orphans(path: Path) -> None:
-    for orphan in [*(o for name in RUN_FILES for o in orphans(path / name)), *path.glob(f".{EVENTS}.tmp")]:
+    for orphan in _orphans(path):
         orphan.unlink(missing_ok=True)
 
 
