@@ -106,23 +106,50 @@ def test_a_signal_mid_iteration_saves_that_iteration_and_the_resumed_run_ends_ex
         assert torch.equal(a["agent"]["q"], b["agent"]["q"])
 
 
+class SignalledFile:
+    """A file that receives SIGINT at its third write: a second signal in the middle of torch's zip writer."""
+
+    def __init__(self, file):
+        self.file, self.writes = file, 0
+
+    def write(self, data):
+        self.writes += 1
+        if self.writes == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return self.file.write(data)
+
+    def flush(self):
+        self.file.flush()
+
+
+@pytest.mark.parametrize("during", ["torch.save", "fsync"])
 def test_a_second_signal_during_the_checkpoint_write_keeps_the_checkpoints_on_disk(
-    compose_cfg, signal_at, monkeypatch, tmp_path
+    during, compose_cfg, signal_at, monkeypatch, tmp_path
 ):
     whole = train(compose_cfg(*TABULAR, *COMMON, f"run_dir={tmp_path / 'whole'}"))
     killed = tmp_path / "killed"
-    fsync, writes = os.fsync, []
+    save, fsync, writes = torch.save, os.fsync, []
 
-    def second_signal_while_writing(fd):
+    def second_signal_in_save(obj, file, *args, **kwargs):
+        writes.append(1)
+        if len(writes) == 2:  # checkpoint 2, then the interrupt's checkpoint 3
+            file.file = SignalledFile(file.file)
+        return save(obj, file, *args, **kwargs)
+
+    def second_signal_in_fsync(fd):
         fsync(fd)
         writes.append(1)
         if len(writes) == 4:  # config.yaml, the holder, checkpoint 2, then the interrupt's checkpoint 3
             os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr(uavrl.io.os, "fsync", second_signal_while_writing)
+    if during == "torch.save":
+        monkeypatch.setattr(torch, "save", second_signal_in_save)
+    else:
+        monkeypatch.setattr(uavrl.io.os, "fsync", second_signal_in_fsync)
     with signal_at(tabular.TabularAgent, 3, signal.SIGTERM), pytest.raises(Interrupted) as err:
         train(compose_cfg(*TABULAR, *COMMON, f"run_dir={killed}"))
     monkeypatch.setattr(uavrl.io.os, "fsync", fsync)
+    monkeypatch.setattr(torch, "save", save)
     assert err.value.signum == signal.SIGINT and "checkpoint.pt holds iteration 2 of 6" in err.value.__notes__[0]
     assert iteration(killed) == 2 and temporary_files(killed) == []
     resume(compose_cfg, killed, *TABULAR, *COMMON)

@@ -64,7 +64,8 @@ def make_dirs(path) -> None:
 
 
 class _Recording:
-    """A file whose write errors are kept: torch's zip writer turns them into a message without the cause."""
+    """A file whose write errors are kept: torch's zip writer replaces them (a full disk, an interrupt) with an
+    error of its own that does not say the cause."""
 
     def __init__(self, file):
         self.file, self.error = file, None
@@ -72,7 +73,7 @@ class _Recording:
     def write(self, data) -> int:
         try:
             return self.file.write(data)
-        except OSError as err:
+        except BaseException as err:
             self.error = err
             raise
 
@@ -114,9 +115,11 @@ def _atomic(path: Path, write, previous: Path | None = None):
     except BaseException as err:
         if tmp is not None:
             Path(tmp).unlink(missing_ok=True)
-        cause = file.error if file is not None and file.error is not None else err
-        if isinstance(err, Exception) and isinstance(cause, OSError) and not isinstance(cause, WriteError):
+        cause = err if file is None or file.error is None or isinstance(err, KeyboardInterrupt) else file.error
+        if isinstance(cause, OSError) and not isinstance(cause, WriteError):
             raise WriteError(path, cause) from None
+        if cause is not err:
+            raise cause from None
         raise
 
 
