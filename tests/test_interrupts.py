@@ -453,3 +453,12 @@ def test_the_end_of_a_run_prints_commands_that_paste(compose_cfg, tmp_path, caps
     out = capsys.readouterr().out
     assert f"tensorboard --logdir '{run_dir}'" in out
     assert f"evaluate it again: python -m uavrl.evaluate \"checkpoint='{run_dir}'\"" in out
+
+
+def test_a_write_after_one_cut_short_between_its_renames_keeps_both_checkpoints(tmp_path):
+    newest, previous = tmp_path / "checkpoint.pt", tmp_path / "checkpoint.prev.pt"
+    uavrl.io.save_torch({"iteration": 1}, newest)
+    os.link(newest, previous)  # what a write stopped after keeping the previous checkpoint leaves
+    uavrl.io.save_torch({"iteration": 2}, newest, previous=previous)
+    assert iteration(tmp_path) == 2 and iteration(tmp_path, previous.name) == 1
+    assert temporary_files(tmp_path) == []

@@ -84,6 +84,8 @@ class _Recording:
 def _keep_as_previous(path: Path, previous: Path) -> None:
     """Make ``previous`` the file ``path`` is now, leaving ``path`` in place: at every instant both names hold a
     complete checkpoint, so a kill between this and the rename of the new file loses nothing."""
+    if previous.exists() and os.path.samefile(path, previous):  # a write cut short after the link: kept already
+        return
     link = previous.with_name(f".{previous.name}.{secrets.token_hex(4)}.tmp")
     try:
         try:
