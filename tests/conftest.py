@@ -64,9 +64,11 @@ def tiny_env():
 
 @pytest.fixture
 def interrupt_at(monkeypatch):
-    """``with interrupt_at(AgentClass, n): ...``: the n-th ``train_iteration`` call raises KeyboardInterrupt (Ctrl-C).
+    """``with interrupt_at(AgentClass, n): ...``: the n-th ``train_iteration`` call raises KeyboardInterrupt.
 
-    A run killed this way and resumed must end exactly as the uninterrupted run.
+    As a kill does, it leaves what the last periodic checkpoint saved (a real
+    Ctrl-C saves the iteration it interrupts: ``tests/test_interrupts.py``). A
+    run killed this way and resumed must end exactly as the uninterrupted run.
     """
 
     @contextlib.contextmanager

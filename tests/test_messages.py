@@ -30,7 +30,7 @@ CASES = [
     (["train", "agent.episodes=[1"], "error: agent.episodes=[1 cannot be read: no viable alternative at input '[1'"),
     (["train", "resume={odd}"], "error: resume={odd_quoted} does not exist"),
     (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï' does not exist"),
-    (["train", "run_dir={run}"], "error: run_dir={run!r} already holds a run"),
+    (["train", "run_dir={run}"], "error: run_dir={run_quoted} already holds a run"),
     (["train", "-m", "seed=0,1", "sweep_dir={odd}", "env.grid=[0,3]"], "error: env.grid=(0, 3) is invalid"),
     (["train", "-m", "sweep_dir=a,b", "seed=0,1"], "error: sweep_dir=a,b is invalid: give one sweep_dir"),
     (["evaluate", "checkpoint={odd}"], "error: checkpoint={odd_quoted} does not exist"),
@@ -64,7 +64,8 @@ def paths(tmp_path_factory):
 
 @pytest.mark.parametrize("argv, expected", CASES, ids=[" ".join(argv) for argv, _ in CASES])
 def test_each_command_reads_paths_as_given_and_says_what_to_type(argv, expected, paths, tmp_path, monkeypatch):
-    values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), "odd_quoted": shlex.quote(str(tmp_path / ODD)), **paths}
+    values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), "odd_quoted": shlex.quote(str(tmp_path / ODD))}
+    values |= paths | {"run_quoted": shlex.quote(paths["run"])}
     command, *args = argv
     module = f"uavrl.{command}"
     args = [arg.format(**values) for arg in args]

@@ -11,18 +11,21 @@ import pytest
 
 from uavrl.cli import check_sweep, split_sweep_dir, sweep_jobs
 from uavrl.io import claim_dir
-from uavrl.train import new_run_dir
+from uavrl.train import hold_run_dir
 
 
 def test_runs_started_at_once_get_their_own_directories(tmp_path, compose_cfg, monkeypatch):
-    """16 threads released together claim runs/<agent>/<env>/<timestamp>[-n]: 16 directories, each claimed once."""
+    """16 threads released together claim and lock runs/<agent>/<env>/<timestamp>[-n]: 16 directories, each claimed
+    once."""
     monkeypatch.chdir(tmp_path)
     cfg = compose_cfg("agent=random")
     start, claimed = threading.Barrier(16), []
 
     def start_a_run():
         start.wait()
-        claimed.append(new_run_dir(cfg))
+        held = hold_run_dir(cfg)
+        claimed.append(held.path)
+        held.release()
 
     threads = [threading.Thread(target=start_a_run) for _ in range(16)]
     for thread in threads:

@@ -22,7 +22,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
-from uavrl.io import save_json, save_text
+from uavrl.io import claim_dir, save_json, save_text
+from uavrl.rundir import RunDirectory, hold
 from uavrl.settings import RUN_SETTINGS, check
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
@@ -54,19 +55,25 @@ def check_settings(cfg: DictConfig) -> str:
     return name
 
 
-def new_run_dir(cfg: DictConfig, algorithm: str) -> Path:
+def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
+    """``run_dir`` or a new ``runs/benchmarl_<algorithm>/<env>/<timestamp>``, locked as ``uavrl.train``'s are."""
     if cfg.run_dir:
-        return Path(cfg.run_dir)
+        return hold(cfg.run_dir, "run_dir")
     base = Path("runs") / f"benchmarl_{algorithm}" / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
-    run_dir, n = base, 1
-    while run_dir.exists():
-        run_dir, n = base.with_name(f"{base.name}-{n}"), n + 1
-    return run_dir
+    return hold(claim_dir(base), "run_dir", created=True)
 
 
 def train(cfg: DictConfig, overrides=()) -> Path:
     """Run BenchMARL's experiment as configured, evaluate its policy with ours; returns the run directory."""
     algorithm = check_settings(cfg)
+    held = hold_run_dir(cfg, algorithm)
+    try:  # released, never removed: BenchMARL's own folder may hold its checkpoints
+        return run_experiment(cfg, algorithm, held.path)
+    finally:
+        held.release()
+
+
+def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     import torch
     from benchmarl.experiment import Experiment
     from benchmarl.hydra_config import (
@@ -80,8 +87,6 @@ def train(cfg: DictConfig, overrides=()) -> Path:
 
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)
-    run_dir = new_run_dir(cfg, algorithm)
-    run_dir.mkdir(parents=True, exist_ok=True)
     save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
     experiment_config = load_experiment_config_from_hydra(cfg.experiment)
     experiment_config.save_folder = str(run_dir.resolve())

@@ -274,4 +274,4 @@ def _reported(command: Command, cfg: DictConfig, overrides: list[str], option_se
     except KeyboardInterrupt as err:
         notes = getattr(err, "__notes__", [])
         print(f"interrupted{': ' + notes[0] if notes else ''}", file=sys.stderr)
-        raise SystemExit(130) from None
+        raise SystemExit(128 + getattr(err, "signum", 2)) from None  # the shell's status for death by that signal

@@ -2,33 +2,48 @@
 
 A write goes to a temporary ``.<name>.<random>.tmp`` beside the file, then is
 renamed over it.  A process killed mid-write leaves that temporary file; the
-next write of the same file removes it.  torch is imported by :func:`save_torch`
-only, so the commands' light start-up can use this module.
+next run that holds the directory's lock removes it (:mod:`uavrl.rundir`), so
+no process deletes another's write in flight.  A write that fails (a full
+disk, no permission) raises :class:`WriteError`, which names the file, and
+leaves the file as it was.  torch is imported by :func:`save_torch` only, so
+the commands' light start-up can use this module.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import secrets
 import tempfile
 from pathlib import Path
 
+EVENTS = "events.out.tfevents.*"  # TensorBoard's event files (uavrl.logger)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
-def remove_orphans(path) -> None:
-    """Remove the temporary files that killed writes of ``path`` left."""
+class WriteError(OSError):
+    """A file that could not be written or a directory that could not be made; the message names it."""
+
+    def __init__(self, path, err: OSError, verb: str = "write"):
+        super().__init__(err.errno, err.strerror or str(err), str(path))
+        self.verb = verb
+
+    def __str__(self) -> str:
+        return f"could not {self.verb} {self.filename!r}: {self.strerror}"
+
+
+def orphans(path) -> list[Path]:
+    """The temporary files that killed writes of ``path`` left."""
     path = Path(path)
-    for orphan in path.parent.glob(f".{path.name}.*.tmp"):
-        orphan.unlink(missing_ok=True)
+    return [orphan for orphan in path.parent.glob(f".{path.name}.*.tmp") if orphan.is_file()]
 
 
 def claim_dir(base) -> Path:
     """Create and return ``base``, or ``base-1``, ``base-2``, ... if taken: one directory per caller, even for
     processes that start in the same second (``mkdir`` either creates the directory or fails)."""
     base = Path(base)
-    base.parent.mkdir(parents=True, exist_ok=True)
+    make_dirs(base.parent)
     candidate, n = base, 1
     while True:
         try:
@@ -36,24 +51,77 @@ def claim_dir(base) -> Path:
             return candidate
         except FileExistsError:
             candidate, n = base.with_name(f"{base.name}-{n}"), n + 1
+        except OSError as err:
+            raise WriteError(candidate, err, "create") from None
+
+
+def make_dirs(path) -> None:
+    """``mkdir -p``; a :class:`WriteError` naming the directory when it cannot be made."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise WriteError(path, err, "create") from None
+
+
+class _Recording:
+    """A file whose write errors are kept: torch's zip writer replaces them (a full disk, an interrupt) with an
+    error of its own that does not say the cause."""
+
+    def __init__(self, file):
+        self.file, self.error = file, None
+
+    def write(self, data) -> int:
+        try:
+            return self.file.write(data)
+        except BaseException as err:
+            self.error = err
+            raise
+
+    def flush(self) -> None:
+        self.file.flush()
+
+
+def _keep_as_previous(path: Path, previous: Path) -> None:
+    """Make ``previous`` the file ``path`` is now, leaving ``path`` in place: at every instant both names hold a
+    complete checkpoint, so a kill between this and the rename of the new file loses nothing."""
+    if previous.exists() and os.path.samefile(path, previous):  # a write cut short after the link: kept already
+        return
+    link = previous.with_name(f".{previous.name}.{secrets.token_hex(4)}.tmp")
+    try:
+        try:
+            os.link(path, link)
+        except OSError:  # a file system without hard links: a moment without ``path``, the previous file complete
+            os.replace(path, previous)
+            return
+        os.replace(link, previous)
+    except BaseException:
+        link.unlink(missing_ok=True)
+        raise
 
 
 def _atomic(path: Path, write, previous: Path | None = None):
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_orphans(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    make_dirs(path.parent)
+    tmp = file = None
     try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as raw:
+            file = _Recording(raw)
+            write(file)
+            raw.flush()
+            os.fsync(raw.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)
         if previous is not None and path.exists():
-            os.replace(path, previous)
+            _keep_as_previous(path, previous)
         os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+    except BaseException as err:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        cause = err if file is None or file.error is None or isinstance(err, KeyboardInterrupt) else file.error
+        if isinstance(cause, OSError) and not isinstance(cause, WriteError):
+            raise WriteError(path, cause) from None
+        if cause is not err:
+            raise cause from None
         raise
 
 

@@ -6,7 +6,9 @@ resolved ``config.yaml``, ``checkpoint.pt`` (atomic, every
 kept as ``checkpoint.prev.pt``) and ``metrics.json`` with the final
 evaluation.  ``resume=<run dir>`` continues a killed run from its newest
 readable checkpoint with the run's saved config; with the same seed it ends
-exactly as an uninterrupted run would.
+exactly as an uninterrupted run would.  One process at a time holds a run
+directory; Ctrl-C or SIGTERM saves a checkpoint at the end of the iteration
+and prints the command that resumes it (:mod:`uavrl.rundir`).
 
 Every setting is checked before torch is imported (:mod:`uavrl.settings`), so a
 mistyped override is refused at once; :func:`train` imports the heavy modules
@@ -25,7 +27,6 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.checkpoints import (
-    CHECKPOINT,
     CheckpointError,
     CheckpointWriter,
     check_resumable,
@@ -36,10 +37,21 @@ from uavrl.checkpoints import (
     run_directory,
     saved_agent,
 )
-from uavrl.cli import run_command, typed
+from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.io import claim_dir, remove_orphans, save_json, save_text
+from uavrl.io import WriteError, claim_dir, save_json, save_text
+from uavrl.rundir import (
+    Interrupted,
+    Interrupts,
+    RunDirectory,
+    hold,
+    missing_parents,
+    path_argument,
+    quoted,
+    resume_command,
+    tidy,
+)
 from uavrl.settings import RUN_SETTINGS, check, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
@@ -53,9 +65,10 @@ def check_settings(cfg: DictConfig) -> None:
     check_run_costs(cfg, model_config(cfg))
     if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
         raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
+    if not cfg.resume and cfg.run_dir and Path(cfg.run_dir).is_file():
+        raise NotADirectoryError(f"run_dir={quoted(cfg.run_dir)} is a file, not a directory: give a directory")
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
-        advice = f"continue it with resume={cfg.run_dir}, or pick another run_dir"
-        raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a run: {advice}")
+        raise FileExistsError(already_a_run(cfg.run_dir))
 
 
 def eval_settings(cfg: DictConfig, device) -> dict:
@@ -79,11 +92,27 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def new_run_dir(cfg: DictConfig) -> Path:
-    """``run_dir`` if given (a sweep job gets one from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>``."""
+def hold_run_dir(cfg: DictConfig) -> RunDirectory:
+    """The run directory, locked (:mod:`uavrl.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job gets one
+    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>``."""
+    if cfg.resume:
+        return hold(run_directory(cfg.resume, "resume"), "resume")
     if cfg.run_dir:
-        return Path(cfg.run_dir)
-    return claim_dir(Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S"))
+        held = hold(cfg.run_dir, "run_dir")
+        if checkpoint_files(held.path):  # a run started there since the settings were checked
+            held.release()
+            raise FileExistsError(already_a_run(cfg.run_dir))
+        return held
+    base = Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
+    parents = missing_parents(base)
+    return hold(claim_dir(base), "run_dir", created=True, created_parents=parents)
+
+
+def already_a_run(run_dir) -> str:
+    return (
+        f"run_dir={quoted(run_dir)} already holds a run: continue it with {path_argument('resume', run_dir)}, "
+        "or pick another run_dir"
+    )
 
 
 def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, bool]:
@@ -93,7 +122,6 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
     Explicit overrides must agree with the saved run.
     """
     run_dir = run_directory(cfg.resume, "resume")
-    remove_orphans(run_dir / CHECKPOINT)
     checkpoint, file, skipped = load_checkpoint(run_dir, "resume")
     if skipped:
         iteration = checkpoint["iteration"]
@@ -120,8 +148,43 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
 
 
 def train(cfg: DictConfig, overrides=()) -> Path:
-    """Run training as configured; returns the run directory."""
-    check_settings(cfg)
+    """Run training as configured; returns the run directory.
+
+    The run directory is locked for the whole run; SIGINT and SIGTERM end the
+    run with a checkpoint at the end of the iteration (:mod:`uavrl.rundir`); a
+    run that fails before it saved anything removes the directory it made.
+    """
+    try:
+        check_settings(cfg)
+    except FileNotFoundError:
+        if cfg.resume:  # a run killed in its first checkpoint's write: its temporary file goes, though refused
+            tidy(run_directory(cfg.resume, "resume"))
+        raise
+    from tqdm import tqdm
+
+    held = hold_run_dir(cfg)
+    try:
+        with Interrupts(notify=lambda line: tqdm.write(line, file=sys.stderr)) as interrupts:
+            cfg, env_cfg, result = run(cfg, overrides, held.path, interrupts)
+    except Interrupted as err:
+        if not getattr(err, "__notes__", None):  # before the first iteration
+            err.add_note(
+                f"the run is as it was; continue it with: {resume_command(held.path)}"
+                if cfg.resume
+                else "stopped before the first checkpoint, nothing saved"
+            )
+        held.discard()
+        raise
+    except BaseException:
+        held.discard()
+        raise
+    held.release()
+    print(summary(cfg, env_cfg, result, held.path))
+    return held.path
+
+
+def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tuple[DictConfig, object, dict]:
+    """Train in the held ``run_dir``: the resumed or new run's config, its model config and ``metrics.json``."""
     import torch  # the heavy modules, once the settings are known to be good
     from tqdm import tqdm
 
@@ -142,76 +205,107 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
     else:
         agent = saved_agent(cfg, env_cfg, device, checkpoint_file)
-    run_dir = new_run_dir(cfg)
-    start = 0
+    start = saved = 0
     if checkpoint is not None:
         restore_agent(agent, checkpoint, checkpoint_file, cfg.agent.name)
         torch.set_rng_state(checkpoint["torch_rng"])
-        start = int(checkpoint["iteration"])
+        start = saved = int(checkpoint["iteration"])
     resolved = OmegaConf.to_container(cfg, resolve=True)
     save_text(OmegaConf.to_yaml(resolved), run_dir / "config.yaml")
     # points after the checkpoint's step (any, for a new run) are replaced; those up to it stay
-    logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
+    with interrupts.shielded():
+        logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
     checkpoints = CheckpointWriter(run_dir, newest_is_readable)
 
-    def save_checkpoint(iteration: int, final: dict | None = None) -> None:
+    def save_checkpoint(iteration: int, final: dict | None = None, torch_rng=None) -> None:
+        nonlocal saved
         state = {
             "agent": agent.state_dict(),
             "iteration": iteration,
             "config": resolved,
-            "torch_rng": torch.get_rng_state(),
+            "torch_rng": torch.get_rng_state() if torch_rng is None else torch_rng,
         }
         checkpoints.save(state if final is None else {**state, "final": final})
+        saved = iteration
 
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
 
     def log_evaluation(metrics: dict) -> None:
-        logger.log(metrics, agent.env_steps)
+        with interrupts.shielded():
+            logger.log(metrics, agent.env_steps)
         if cfg.eval.get("video", False):  # the greedy policy beside the oracle; a run saved before has no setting
             frames = comparison_frames(
                 agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device)
             )
-            logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
+            with interrupts.shielded():
+                logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
 
     started = time.perf_counter()
     clock = TrainingClock()
-    bar = tqdm(
-        range(start, agent.num_iterations),
-        initial=start,
-        total=agent.num_iterations,
-        disable=not cfg.progress,
-        desc=f"{cfg.agent.name} {cfg.env.name}",
-        unit="it",
-        dynamic_ncols=True,
-    )
+    with interrupts.shielded():
+        bar = tqdm(
+            initial=start,
+            total=agent.num_iterations,
+            disable=not cfg.progress,
+            desc=f"{cfg.agent.name} {cfg.env.name}",
+            unit="it",
+            dynamic_ncols=True,
+        )
     try:
-        for iteration in bar:
-            metrics = agent.train_iteration()
-            done = iteration + 1
-            if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
-                logger.log(metrics, agent.env_steps)
-                if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
-                    per_step = metrics["train/sum_utility"] / env_cfg.max_steps
-                    bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
-            if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
-                trained = clock.read()  # before the evaluation, which the clock leaves out
-                with clock.paused():
-                    log_evaluation({**evaluate_agent(agent, env_cfg, **eval_kwargs), **trained})
-            if done % every == 0 and done < agent.num_iterations:
-                save_checkpoint(done)
+        # a first signal waits for the iteration's end, where a checkpoint resumes exactly
+        with interrupts.deferred():
+            for done in range(start + 1, agent.num_iterations + 1):
+                interrupts.working_on = f"iteration {done} of {agent.num_iterations}"
+                metrics = agent.train_iteration()
+                if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
+                    with interrupts.shielded():
+                        logger.log(metrics, agent.env_steps)
+                        if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
+                            per_step = metrics["train/sum_utility"] / env_cfg.max_steps
+                            bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
+                if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
+                    trained = clock.read()  # before the evaluation, which the clock leaves out
+                    with clock.paused():
+                        evaluation = evaluate_agent(agent, env_cfg, **eval_kwargs)
+                    log_evaluation({**evaluation, **trained})
+                if done % every == 0 and done < agent.num_iterations:
+                    save_checkpoint(done)
+                with interrupts.shielded():
+                    bar.update()
+                if interrupts.received:
+                    if saved != done:
+                        save_checkpoint(done)
+                    raise Interrupted(interrupts.received)
         trained = clock.read()
         if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
             final = checkpoint["final"]
         else:
-            final = evaluate_agent(agent, env_cfg, **eval_kwargs)
+            trained_rng = torch.get_rng_state()
+            try:
+                final = evaluate_agent(agent, env_cfg, **eval_kwargs)
+            except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
+                if saved != agent.num_iterations:
+                    save_checkpoint(agent.num_iterations, torch_rng=trained_rng)
+                raise
             log_evaluation({**final, **trained})
             save_checkpoint(agent.num_iterations, final)
-    except KeyboardInterrupt as err:
-        err.add_note(f"continue the run with: python -m uavrl.train resume={run_dir}")
+        with interrupts.shielded():
+            logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
+    except Interrupted as err:
+        err.add_note(interrupted_note(run_dir, saved, agent.num_iterations, checkpoint is not None))
         raise
-    logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
-    logger.close()
+    except WriteError as err:
+        if saved == 0:  # nothing to continue from
+            raise
+        raise OSError(
+            f"{err}; the checkpoints already there are unchanged: make room, then continue the run with: "
+            f"{resume_command(run_dir)}"
+        ) from None
+    finally:
+        with interrupts.shielded(act_after=False):
+            bar.close()
+            logger.close()
     result = {
         "agent": cfg.agent.name,
         "env": cfg.env.name,
@@ -223,8 +317,14 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         **final,
     }
     save_json(result, run_dir / "metrics.json")
-    print(summary(cfg, env_cfg, result, run_dir))
-    return run_dir
+    return cfg, env_cfg, result
+
+
+def interrupted_note(run_dir: Path, saved: int, iterations: int, resumed: bool) -> str:
+    """What an interrupted run left, and the command that continues it."""
+    if saved == 0 and not resumed:
+        return "stopped before the first checkpoint, nothing saved"
+    return f"checkpoint.pt holds iteration {saved} of {iterations}; continue the run with: {resume_command(run_dir)}"
 
 
 def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
@@ -240,8 +340,8 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"{within:.0%} of starts within 1% of U*)",
             yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
-            f"look at it: tensorboard --logdir {shlex.quote(str(run_dir))}   "
-            f"evaluate it again: python -m uavrl.evaluate {typed('checkpoint', run_dir)}",
+            f"look at it: tensorboard --logdir {quoted(run_dir)}   "
+            f"evaluate it again: python -m uavrl.evaluate {path_argument('checkpoint', run_dir)}",
         ]
     )
 
