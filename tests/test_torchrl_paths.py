@@ -29,6 +29,7 @@ from torchrl.modules import (
 )
 from torchrl.objectives import ClipPPOLoss, DQNLoss, QMixerLoss, ValueEstimators
 from torchrl.record import PixelRenderTransform
+from torchrl.record.loggers import CSVLogger
 
 from uavrl.agents import agent_class
 from uavrl.compat import make_collector
@@ -213,6 +214,26 @@ def test_clip_ppo_loss_with_gae_on_per_agent_values_and_rewards():  # mappo_ippo
         loss.value_estimator(batch, params=loss.critic_network_params, target_params=loss.target_critic_network_params)
     assert batch["advantage"].shape == (4, 10, 2, 1)  # per UAV and step
     assert_trains(loss, batch.reshape(-1))
+
+
+def test_the_examples_evaluation_logs_a_video(tmp_path):  # iql.py, qmix_vdn.py, mappo_ippo.py with a logger on
+    """Their evaluation: a rollout whose callback keeps ``env.render(mode="rgb_array", agent_index_focus=None)``
+    in ``env.frames``, then the frames as a ``[1, T, 3, H, W]`` uint8 video to the logger."""
+    env = TINY(agent_rewards=True)
+    env.frames = []
+
+    def rendering_callback(env, td):
+        env.frames.append(env.render(mode="rgb_array", agent_index_focus=None))
+
+    torch.manual_seed(0)  # the rollout's random actions
+    with torch.no_grad():
+        rollouts = env.rollout(max_steps=5, callback=rendering_callback, break_when_any_done=False)
+    assert rollouts.batch_size == (4, 5) and len(env.frames) == 4  # TorchRL calls back after every step but the last
+    video = torch.tensor(np.transpose(np.stack(env.frames), (0, 3, 1, 2)), dtype=torch.uint8).unsqueeze(0)
+    logger = CSVLogger("eval", log_dir=str(tmp_path), video_format="pt")  # "mp4" needs torchcodec
+    logger.log_video("eval_video", video, step=0)
+    saved = torch.load(tmp_path / "eval" / "videos" / "eval_video_0.pt")
+    assert saved.shape == (1, 4, 3, 360, 480) and not torch.equal(saved[0, 0], saved[0, -1])
 
 
 # ----------------------------------------------------------------- devices, batched envs, collectors
