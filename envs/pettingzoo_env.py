@@ -11,7 +11,9 @@ step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches`` (the team's
 The physics is a :class:`~uavrl.envs.world.World` of one world: the same observations, masks, rewards and
 seeds as :class:`~uavrl.envs.env.UAVSpectrumEnv` and :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`
 (``reset(seed=s)`` is the Gymnasium env's ``reset(seed=s)``; before the first seeded reset the world is seeded
-0).  ``reset`` accepts PettingZoo's ``options`` and ignores them: the model defines none.
+0).  ``reset`` accepts PettingZoo's ``options`` and ignores them: the model defines none.  With
+``render_mode="rgb_array"``, ``render()`` returns the world's ``[H, W, 3]`` uint8 frame, the picture
+``UAVSpectrumEnv.render()`` draws (:mod:`uavrl.envs.render`).
 
 Example:
     >>> env = UAVSpectrumParallelEnv(grid=(6, 6), num_uavs=2, max_steps=10)
@@ -32,12 +34,14 @@ from pettingzoo import ParallelEnv
 
 from .config import NUM_ACTIONS, ModelConfig
 from .gym_env import (
+    RENDER_FPS,
     RENDER_MODES,
     NumpyWorlds,
     check_actions,
     check_render_mode,
     model_config,
     observation_bounds,
+    render_frames,
     state_bounds,
     world_info,
 )
@@ -52,7 +56,12 @@ class UAVSpectrumParallelEnv(ParallelEnv):
     Arguments as :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`'s.
     """
 
-    metadata = {"name": "uavrl_uav_spectrum_v0", "render_modes": RENDER_MODES, "is_parallelizable": True}
+    metadata = {
+        "name": "uavrl_uav_spectrum_v0",
+        "render_modes": RENDER_MODES,
+        "render_fps": RENDER_FPS,
+        "is_parallelizable": True,
+    }
 
     def __init__(
         self,
@@ -121,6 +130,11 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         if truncated[0]:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> np.ndarray | None:
+        """The world now as an ``[H, W, 3]`` uint8 frame (``render_mode="rgb_array"``); None without a mode."""
+        frames = render_frames(self.world, self.render_mode, range(1))
+        return None if frames is None else frames[0]
 
     def state(self) -> np.ndarray:
         if self._state is None:

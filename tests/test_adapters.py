@@ -19,7 +19,7 @@ from gymnasium.utils.env_checker import check_env, data_equivalence  # noqa: E40
 from gymnasium.utils.passive_env_checker import data_shares_objects  # noqa: E402
 from gymnasium.vector import AutoresetMode, SyncVectorEnv  # noqa: E402
 from gymnasium.vector.utils import batch_space  # noqa: E402
-from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, state_test  # noqa: E402
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, render_test, state_test  # noqa: E402
 from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 
 from uavrl.envs import UAVSpectrumEnv, make_config, observation_with_nodes  # noqa: E402
@@ -43,11 +43,13 @@ def _one_thread(one_thread):
 
 
 # ----------------------------------------------------------------------------- Gymnasium, one world
+@pytest.mark.parametrize("render_mode", [None, "rgb_array"])
 @pytest.mark.parametrize("options", MODELS, ids=MODEL_IDS)
-def test_gym_env_passes_check_env(options):
+def test_gym_env_passes_check_env(options, render_mode):
+    """Made through ``gymnasium.make``, so the checker also renders a new env in every declared mode."""
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # check_env's warnings (bounds, dtypes, determinism) fail the test too
-        check_env(gymnasium.make(ENV_ID, max_steps=8, **options).unwrapped)
+        warnings.simplefilter("error")  # check_env's warnings (bounds, dtypes, determinism, render) fail the test too
+        check_env(gymnasium.make(ENV_ID, max_steps=8, render_mode=render_mode, **options).unwrapped)
 
 
 def test_make_builds_the_adapters():
@@ -205,6 +207,57 @@ def test_parallel_env_is_the_gym_env():
     assert zoo.agents == []
 
 
+# ----------------------------------------------------------------------------- rendering
+def test_the_adapters_render_the_frames_uavspectrumenv_draws():
+    """``render_mode="rgb_array"``: the Gymnasium env, the vector env (a frame per world) and the PettingZoo env draw
+    the picture ``UAVSpectrumEnv.render()`` draws of the same world, step for step."""
+    B, seed, options = 3, 4, {"grid": (4, 4), "num_uavs": 2, "layout": "random", "max_steps": 6}
+    single = UAVSpectrumGymEnv(render_mode="rgb_array", **options)
+    vector = UAVSpectrumVectorEnv(num_envs=B, render_mode="rgb_array", **options)
+    zoo = UAVSpectrumParallelEnv(render_mode="rgb_array", **options)
+    torchrl_one, torchrl_batch = (UAVSpectrumEnv(batch_size=b, seed=seed, **options) for b in (1, B))
+    for env in (single, vector, zoo):
+        env.reset(seed=seed)
+    td_one, td_batch = torchrl_one.reset(), torchrl_batch.reset()
+    generator = torch.Generator().manual_seed(0)
+    for step in range(3):
+        expected = torchrl_one.render()
+        assert expected.shape == (360, 480, 3) and expected.dtype == np.uint8
+        assert np.array_equal(single.render(), expected) and np.array_equal(zoo.render(), expected)
+        frames = vector.render()
+        assert isinstance(frames, tuple) and len(frames) == B
+        for i, frame in enumerate(frames):
+            assert np.array_equal(frame, torchrl_batch.render(env_index=i)), (step, i)
+        actions = torch.randint(0, 6, (B, 2), generator=generator)
+        single.step(actions[0].numpy())
+        vector.step(actions.numpy())
+        zoo.step(dict(zip(zoo.agents, actions[0].tolist(), strict=True)))
+        td_one = torchrl_one.step(td_one.set(("agents", "action"), actions[:1]))["next"]
+        td_batch = torchrl_batch.step(td_batch.set(("agents", "action"), actions))["next"]
+    assert not np.array_equal(single.render(), expected)  # the frame follows the steps
+
+
+@pytest.mark.parametrize(
+    "make", [UAVSpectrumGymEnv, lambda: UAVSpectrumVectorEnv(2), UAVSpectrumParallelEnv], ids=["gym", "vector", "zoo"]
+)
+def test_render_without_a_render_mode_draws_nothing(make):
+    env = make()
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode=None draws nothing: give render_mode='rgb_array'"):
+        assert env.render() is None
+
+
+def test_parallel_env_passes_pettingzoos_render_test():
+    def make(render_mode=None):
+        # render_test builds its first env with render_mode="human" only to read the metadata's modes: this env
+        # opens no window and refuses "human", so that one is made without a mode
+        mode = None if render_mode == "human" else render_mode
+        return parallel_to_aec(UAVSpectrumParallelEnv(grid=(4, 4), num_uavs=3, max_steps=20, render_mode=mode))
+
+    assert make().metadata["render_modes"] == ["rgb_array"]
+    render_test(make, custom_tests={"rgb_array": lambda frame: frame.shape == (360, 480, 3)})
+
+
 # ----------------------------------------------------------------------------- evaluation and SB3
 def test_team_action_policy_is_measured_on_the_vector_envs_worlds():
     """``evaluate(TeamActionPolicy(act))`` plays ``act`` on the vector env's observations: its final utility over
@@ -259,7 +312,13 @@ def test_maskable_ppo_reads_the_action_masks():
         (lambda: _reset(UAVSpectrumGymEnv()).step([0.5, 1.0]), TypeError, "action has dtype float64"),
         (lambda: UAVSpectrumGymEnv().reset(seed=-1), ValueError, r"seed=-1 is invalid"),
         (lambda: UAVSpectrumGymEnv().reset(options={"x": 1}), ValueError, "takes no reset options"),
-        (lambda: UAVSpectrumGymEnv(render_mode="rgb_array"), ValueError, "render_mode='rgb_array' is invalid"),
+        (
+            lambda: UAVSpectrumGymEnv(render_mode="human"),
+            ValueError,
+            r"render_mode='human' is invalid: .*\['rgb_array'\]",
+        ),
+        (lambda: UAVSpectrumParallelEnv(render_mode="ansi"), ValueError, "render_mode='ansi' is invalid"),
+        (lambda: UAVSpectrumGymEnv(render_mode="rgb_array").render(), RuntimeError, r"render\(\) before any reset"),
         (lambda: UAVSpectrumGymEnv(grid=(0, 6)), ValueError, "grid"),
         (lambda: UAVSpectrumVectorEnv(num_envs=0), ValueError, "num_envs=0 is invalid"),
         (lambda: UAVSpectrumVectorEnv(2).reset(options={"reset_mask": [1, 0]}), ValueError, "no reset_mask"),

@@ -11,6 +11,7 @@ collectors.
 import functools
 import pickle
 
+import numpy as np
 import pytest
 import torch
 from tensordict import unravel_key
@@ -27,6 +28,8 @@ from torchrl.modules import (
     VDNMixer,
 )
 from torchrl.objectives import ClipPPOLoss, DQNLoss, QMixerLoss, ValueEstimators
+from torchrl.record import PixelRenderTransform
+from torchrl.record.loggers import CSVLogger
 
 from uavrl.agents import agent_class
 from uavrl.compat import make_collector
@@ -213,6 +216,26 @@ def test_clip_ppo_loss_with_gae_on_per_agent_values_and_rewards():  # mappo_ippo
     assert_trains(loss, batch.reshape(-1))
 
 
+def test_the_examples_evaluation_logs_a_video(tmp_path):  # iql.py, qmix_vdn.py, mappo_ippo.py with a logger on
+    """Their evaluation: a rollout whose callback keeps ``env.render(mode="rgb_array", agent_index_focus=None)``
+    in ``env.frames``, then the frames as a ``[1, T, 3, H, W]`` uint8 video to the logger."""
+    env = TINY(agent_rewards=True)
+    env.frames = []
+
+    def rendering_callback(env, td):
+        env.frames.append(env.render(mode="rgb_array", agent_index_focus=None))
+
+    torch.manual_seed(0)  # the rollout's random actions
+    with torch.no_grad():
+        rollouts = env.rollout(max_steps=5, callback=rendering_callback, break_when_any_done=False)
+    assert rollouts.batch_size == (4, 5) and len(env.frames) == 4  # TorchRL calls back after every step but the last
+    video = torch.tensor(np.transpose(np.stack(env.frames), (0, 3, 1, 2)), dtype=torch.uint8).unsqueeze(0)
+    logger = CSVLogger("eval", log_dir=str(tmp_path), video_format="pt")  # "mp4" needs torchcodec
+    logger.log_video("eval_video", video, step=0)
+    saved = torch.load(tmp_path / "eval" / "videos" / "eval_video_0.pt")
+    assert saved.shape == (1, 4, 3, 360, 480) and not torch.equal(saved[0, 0], saved[0, -1])
+
+
 # ----------------------------------------------------------------- devices, batched envs, collectors
 def world_tensors(world):
     tensors = {name: v for name, v in vars(world).items() if isinstance(v, torch.Tensor)}
@@ -244,6 +267,24 @@ def test_to_moves_every_tensor_of_the_worlds(device, options):
         for key in ("positions", "tasks", "state_index"):
             assert torch.equal(out_moved["next", key].cpu(), out_kept["next", key])
         torch.testing.assert_close(out_moved["next", "utility"].cpu(), out_kept["next", "utility"])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_to_keeps_drawing_the_same_worlds(device):
+    """The frames of worlds moved (after a frame was drawn, so the renderer predates the move) are the frames of the
+    same worlds kept where they were, step after step."""
+    moved, kept = TINY(layout="random"), TINY(layout="random")
+    td_moved, td_kept = moved.reset(), kept.reset()
+    worlds = [0, 3]
+    before = moved.render(env_index=worlds)
+    moved.to(device)
+    assert np.array_equal(moved.render(env_index=worlds), before)
+    actions = torch.tensor([[0, 5], [3, 4], [1, 1], [2, 5]])
+    for _ in range(2):
+        td_moved["agents", "action"], td_kept["agents", "action"] = actions.to(moved.device), actions
+        td_moved, td_kept = moved.step(td_moved)["next"], kept.step(td_kept)["next"]
+        assert np.array_equal(moved.render(env_index=worlds), kept.render(env_index=worlds))
+    assert not np.array_equal(moved.render(env_index=worlds), before)
 
 
 def test_to_a_missing_device_is_one_line():
@@ -296,6 +337,20 @@ def test_policy_is_picklable_and_acts_with_extra_batch_dims(name, policies):
     acted = policy(stacked)
     assert acted["agents", "action"].shape == (1, 2, 3, env_cfg.num_uavs)
     assert_valid_actions(acted, env_cfg)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_policy_in_a_rollout_with_pixels(name, policies):
+    """What the examples' evaluation with a logger does: the policy acts in a ``PixelRenderTransform`` env, and
+    every step's frame is world 0's picture then."""
+    policy, env_cfg = policies[name]
+    env = TransformedEnv(make_env(env_cfg), PixelRenderTransform())
+    td = env.rollout(4, policy)
+    assert td.batch_size == (3, 4)
+    assert_valid_actions(td, env_cfg)
+    frames = [np.asarray(td[0, t]["next", "pixels"]) for t in range(4)]
+    assert all(frame.shape == (360, 480, 3) and frame.dtype == np.uint8 for frame in frames)
+    assert np.array_equal(frames[-1], env.base_env.render())
 
 
 @pytest.mark.parametrize("name", NAMES)
