@@ -79,7 +79,7 @@ def eval_settings(cfg: DictConfig, device) -> dict:
         seed=int(cfg.eval.seed),
         device=device,
         gamma=cfg.eval.gamma,
-        memory_budget=cfg.agent.get("memory_budget", DEFAULT_MEMORY_BUDGET),
+        memory_budget=OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET),  # BenchMARL: none
     )
 
 
