@@ -28,7 +28,8 @@ def free_space_db(distance_m: torch.Tensor, carrier_ghz: float) -> torch.Tensor:
 
 
 def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) -> torch.Tensor:
-    """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani 2014, eq. 5)."""
+    """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani 2014,
+    eq. 5)."""
     a, b, _, _ = AL_HOURANI[environment]
     return 1 / (1 + a * torch.exp(-b * (elevation_deg - a)))
 

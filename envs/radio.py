@@ -55,5 +55,6 @@ def noise_dbm(bandwidth_mhz: float, noise_figure_db: float) -> float:
 
 
 def free_space_db(distance_m: float, carrier_ghz: float) -> float:
-    """``FSPL = 20 log10(4 pi f_c d / c)`` in dB (scalar; the torch form is :func:`uavrl.envs.pathloss.free_space_db`)."""
+    """``FSPL = 20 log10(4 pi f_c d / c)`` in dB of a distance in metres and a carrier in GHz (a float; the tensor
+    form is :func:`uavrl.envs.pathloss.free_space_db`)."""
     return 20 * math.log10(4 * math.pi * carrier_ghz * 1e9 * distance_m / SPEED_OF_LIGHT)

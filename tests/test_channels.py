@@ -1,4 +1,4 @@
-"""The channel models (docs/model.md, Channel models) against implementations written here from the sources' formulas."""
+"""The channel models (docs/model.md, Channel models) against implementations written here from their sources."""
 
 import importlib.util
 import json
