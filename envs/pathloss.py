@@ -28,8 +28,8 @@ def free_space_db(distance_m: torch.Tensor, carrier_ghz: float) -> torch.Tensor:
 
 
 def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) -> torch.Tensor:
-    """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani 2014,
-    eq. 5)."""
+    """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani et al.
+    2014)."""
     a, b, _, _ = AL_HOURANI[environment]
     return 1 / (1 + a * torch.exp(-b * (elevation_deg - a)))
 
@@ -37,7 +37,7 @@ def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) ->
 def al_hourani_db(
     horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
 ) -> torch.Tensor:
-    """``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani 2014, eq. 4-5): the excess losses
+    """``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani et al. 2014): the excess losses
     eta are in dB, added to the free-space loss in dB."""
     _, _, eta_los, eta_nlos = AL_HOURANI[environment]
     p_los = al_hourani_los_probability(torch.rad2deg(torch.atan2(height_m, horizontal_m)), environment)
