@@ -306,14 +306,15 @@ def _allowed_decibels(values: dict, name: str, good: float) -> str:
             inside, outside = (middle, outside) if passes(middle) else (inside, middle)
         return inside
 
+    unit = "dBm" if name.endswith("_dbm") else "dB"
     low = None if passes(-1000.0) else math.ceil(edge(good, -1000.0) * 100) / 100
     high = None if passes(1000.0) else math.floor(edge(good, 1000.0) * 100) / 100
     if low is not None and high is not None:
-        return f"with the other settings as they are it must lie in [{low:g}, {high:g}] dB"
+        return f"with the other settings as they are it must lie in [{low:g}, {high:g}] {unit}"
     if high is not None:
-        return f"with the other settings as they are it must be at most {high:g} dB"
+        return f"with the other settings as they are it must be at most {high:g} {unit}"
     if low is not None:
-        return f"with the other settings as they are it must be at least {low:g} dB"
+        return f"with the other settings as they are it must be at least {low:g} {unit}"
     return "no value of it passes with the other settings as they are"
 
 

@@ -193,7 +193,7 @@ def test_each_channel_runs_end_to_end(options):
         (dict(altitude=3.0, altitude_m=30.0), "altitude_m=30.0 is invalid: give the height once"),
         (dict(altitude_m=-5.0), "altitude_m=-5.0 is invalid: give a finite positive height in metres"),
         (dict(preset="a2g_urban", cell_size=1e-200), "cell_size=1e-200 is invalid: the channel gain 10^(-PL / 10)"),
-        (dict(preset="a2g_urban", p_s_dbm=-100.0, cell_size=1e5), "is invalid"),
+        (dict(preset="a2g_urban", p_s_dbm=-100.0, cell_size=1e5), "cell_size=100000.0 is invalid: a UAV in the best"),
     ],
     ids=str,
 )
@@ -203,6 +203,17 @@ def test_bad_channel_options_are_one_line(options, words):
         make_config(preset, **options)
     message = str(refused.value)
     assert words in message and "\n" not in message, message
+
+
+def test_a_power_in_dbm_is_refused_with_the_range_that_passes():
+    """Too little power to tell a rate from 0 in float64: the refusal's bound, in dBm, passes; below it does not."""
+    weak = dict(p_u_dbm=-100.0, carrier_ghz=5.8, grid=(100, 100))
+    with pytest.raises(InvalidOption, match=r"^p_s_dbm=-100.0 is invalid: .* must be at least (-?[0-9.]+) dBm$") as e:
+        make_config("a2g_urban", p_s_dbm=-100.0, **weak)
+    bound = float(str(e.value).split()[-2])
+    assert make_config("a2g_urban", p_s_dbm=bound, **weak).p_s_dbm == bound
+    with pytest.raises(InvalidOption):
+        make_config("a2g_urban", p_s_dbm=bound - 0.1, **weak)
 
 
 def test_a_bad_channel_override_is_one_line_on_the_command_line(tmp_path, monkeypatch, capsys):
