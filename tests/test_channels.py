@@ -235,3 +235,7 @@ def test_the_oracle_solves_a2g_urban_from_the_command_line(tmp_path):
     assert result.returncode == 0, result.stderr
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["eval/optimality"] == pytest.approx(1.0, abs=1e-6), metrics
+    # U* in bit/s: the mean-channel optimum in bit/s/Hz times 10 MHz
+    u_star = UAVSpectrumEnv(config=make_config("a2g_urban")).optimum()[0].item()
+    assert metrics["eval/u_star_bit_per_s"] == pytest.approx(u_star * 1e7, rel=1e-12)
+    assert metrics["eval/utility_bit_per_s"] == pytest.approx(u_star * 1e7, rel=1e-6)
