@@ -23,7 +23,7 @@ import torch
 
 from .config import RELAYING, ModelConfig
 from .limits import fixed_node_positions
-from .pathloss import gain_from_db, mean_path_loss_db
+from .pathloss import gain_from_db, link_states_db, mean_path_loss_db
 
 PT, PR, S, E = range(4)
 
@@ -59,6 +59,13 @@ def link_gains(
     d = torch.linalg.vector_norm(uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3), dim=-1) * cfg.cell_size
     gain = cfg.g0 * d.pow(-cfg.alpha)
     return gain if fading is None else gain * fading
+
+
+def link_state_gains(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
+    """``[..., N, 4, 3]``: per link ``P_LoS`` and the gains ``10^(-PL / 10)`` in line of sight and out of it, what
+    ``fading="los_nlos"`` draws from (physical channels; docs/model.md, Channel models)."""
+    p_los, los, nlos = link_states_db(uav_xyz, nodes, cfg)
+    return torch.stack([p_los, gain_from_db(los), gain_from_db(nlos)], -1)
 
 
 def relay_contributions(gains: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:

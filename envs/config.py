@@ -28,7 +28,7 @@ SENSING, RELAYING = 0, 1
 NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
-FADINGS = ("none", "rayleigh")
+FADINGS = ("none", "rayleigh", "los_nlos")
 REWARDS = ("delta", "best_so_far", "log_gap")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
@@ -168,6 +168,9 @@ class ModelConfig:
         if self.is_physical and self.rate_model == "reference_code":
             reason = "the authors' formula multiplies the power law's gains; use channel='paper' or 'reference_code'"
             raise InvalidOption("rate_model", self.rate_model, reason)
+        if not self.is_physical and self.fading == "los_nlos":
+            reason = f"channel={self.channel!r} has no line-of-sight state: use 'al_hourani' or 'tr36777_uma'"
+            raise InvalidOption("fading", self.fading, reason)
         if self.is_physical and self.direct_links:
             reason = f"channel={self.channel!r} has no model of the ground-to-ground link PT-PR"
             raise InvalidOption("direct_links", True, reason)

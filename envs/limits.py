@@ -197,7 +197,8 @@ def physics_problem(values: dict) -> str | None:
     """
     v, channels = values, _Channels(values)
     per_node, direct = _distances(v)
-    fade = math.log10(FADING_PEAK) if v["fading"] != "none" else 0.0
+    # a LoS/NLoS draw (fading=los_nlos) gives at most the LoS gain, which the physical channels' bounds already allow
+    fade = math.log10(FADING_PEAK) if v["fading"] == "rayleigh" else 0.0
     law = "10^(-PL / 10)" if channels.physical else "g0 d^-alpha"
     for node, (name, (closest, _, _)) in enumerate(zip(NODE_NAMES, per_node, strict=True)):
         if closest == 0:

@@ -34,14 +34,22 @@ def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) ->
     return 1 / (1 + a * torch.exp(-b * (elevation_deg - a)))
 
 
+def al_hourani_states(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(P_LoS, PL_LoS, PL_NLoS)``: ``PL = FSPL(d) + eta`` in dB in each state (Al-Hourani et al. 2014), the excess
+    loss eta in dB added to the free-space loss in dB."""
+    _, _, eta_los, eta_nlos = AL_HOURANI[environment]
+    p_los = al_hourani_los_probability(torch.rad2deg(torch.atan2(height_m, horizontal_m)), environment)
+    free = free_space_db(distance_m, carrier_ghz)
+    return p_los, free + eta_los, free + eta_nlos
+
+
 def al_hourani_db(
     horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
 ) -> torch.Tensor:
-    """``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani et al. 2014): the excess losses
-    eta are in dB, added to the free-space loss in dB."""
-    _, _, eta_los, eta_nlos = AL_HOURANI[environment]
-    p_los = al_hourani_los_probability(torch.rad2deg(torch.atan2(height_m, horizontal_m)), environment)
-    return free_space_db(distance_m, carrier_ghz) + eta_los * p_los + eta_nlos * (1 - p_los)
+    """The mean ``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani et al. 2014)."""
+    return _mean(*al_hourani_states(horizontal_m, height_m, distance_m, carrier_ghz, environment))
 
 
 def uma_av_los_probability(horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
@@ -55,34 +63,54 @@ def uma_av_los_probability(horizontal_m: torch.Tensor, height_m: torch.Tensor) -
     return torch.where(height_m > UMA_AV_ALL_LOS_ABOVE_M, torch.ones_like(p_los), p_los)
 
 
-def uma_av_db(
+def uma_av_states(
     horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
-) -> torch.Tensor:
-    """TR 36.777 Table B-2, UMa-AV: ``P_LoS PL_LoS + (1 - P_LoS) PL_NLoS`` in dB with ``PL_LoS = 28 + 22 log10(d_3D)
-    + 20 log10(f_c)`` and ``PL_NLoS = -17.5 + (46 - 7 log10(h)) log10(d_3D) + 20 log10(40 pi f_c / 3)``."""
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """TR 36.777 Table B-2, UMa-AV: ``(P_LoS, PL_LoS, PL_NLoS)`` in dB with ``PL_LoS = 28 + 22 log10(d_3D) + 20
+    log10(f_c)`` and ``PL_NLoS = -17.5 + (46 - 7 log10(h)) log10(d_3D) + 20 log10(40 pi f_c / 3)``."""
     log_d = torch.log10(distance_m)
     los = 28.0 + 22 * log_d + 20 * math.log10(carrier_ghz)
     nlos = -17.5 + (46 - 7 * torch.log10(height_m)) * log_d + 20 * math.log10(40 * math.pi * carrier_ghz / 3)
-    p_los = uma_av_los_probability(horizontal_m, height_m)
-    return p_los * los + (1 - p_los) * nlos
+    return uma_av_los_probability(horizontal_m, height_m), los, nlos
 
 
-def mean_path_loss_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> torch.Tensor:
-    """``[..., N, 4]`` mean path loss in dB from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]`` (cells).
+def uma_av_db(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
+) -> torch.Tensor:
+    """The mean ``P_LoS PL_LoS + (1 - P_LoS) PL_NLoS`` in dB of :func:`uma_av_states`."""
+    return _mean(*uma_av_states(horizontal_m, height_m, distance_m, carrier_ghz))
 
-    Air-to-ground links (PT, PR) follow ``cfg.channel``; air-to-air ones (S, E) are free space.  ``h`` is the UAV's
-    height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D distance, all in metres.
+
+def _mean(p_los: torch.Tensor, los_db: torch.Tensor, nlos_db: torch.Tensor) -> torch.Tensor:
+    """The LoS-probability weighted mean path loss in dB."""
+    return p_los * los_db + (1 - p_los) * nlos_db
+
+
+def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(P_LoS, PL_LoS, PL_NLoS)`` ``[..., N, 4]`` in dB from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``
+    (cells).
+
+    Air-to-ground links (PT, PR) follow ``cfg.channel``; air-to-air ones (S, E) are free space in line of sight
+    (``P_LoS = 1``).  ``h`` is the UAV's height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D
+    distance, all in metres.
     """
     delta = (uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3)) * cfg.cell_size
     horizontal = torch.linalg.vector_norm(delta[..., :2], dim=-1)
     height = delta[..., 2].abs()
     distance = torch.linalg.vector_norm(delta, dim=-1)
     if cfg.channel == "al_hourani":
-        ground = al_hourani_db(horizontal, height, distance, cfg.carrier_ghz, cfg.environment)
+        ground = al_hourani_states(horizontal, height, distance, cfg.carrier_ghz, cfg.environment)
     else:
-        ground = uma_av_db(horizontal, height, distance, cfg.carrier_ghz)
+        ground = uma_av_states(horizontal, height, distance, cfg.carrier_ghz)
     air = torch.tensor(AIR_TO_GROUND, device=uav_xyz.device)
-    return torch.where(air, ground, free_space_db(distance, cfg.carrier_ghz))
+    free = free_space_db(distance, cfg.carrier_ghz)
+    p_los, los, nlos = ground
+    return torch.where(air, p_los, torch.ones_like(p_los)), torch.where(air, los, free), torch.where(air, nlos, free)
+
+
+def mean_path_loss_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> torch.Tensor:
+    """``[..., N, 4]`` mean path loss in dB of :func:`link_states_db` (free space on the air-to-air links)."""
+    return _mean(*link_states_db(uav_xyz, nodes, cfg))
 
 
 def gain_from_db(path_loss_db: torch.Tensor) -> torch.Tensor:

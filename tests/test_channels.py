@@ -109,6 +109,37 @@ def test_al_hourani_los_probability_rises_with_elevation():
     assert at_45 == sorted(at_45, reverse=True)  # denser cities block more
 
 
+def test_a_los_nlos_draw_puts_each_air_to_ground_link_in_line_of_sight_with_probability_p_los():
+    """fading=los_nlos: one relaying UAV's R_PU takes the four values of (PT link, PR link) in or out of line of
+    sight, as often as P_LoS says, over 4,000 worlds."""
+    from uavrl.envs.world import World
+
+    cfg = make_config("a2g_urban", grid=(6, 6), num_uavs=1, fading="los_nlos")
+    world = World(cfg, batch_size=4000, seed=5)
+    x, y = 2, 3  # 100 m from PT (45 degrees), 200 m from PR (27 degrees)
+    rates = world.start_at(torch.full((4000, 1), 2 * (y * 6 + x) + 1))["r_pu"].double()
+    noise = 10 ** ((-174 + 70 + 9 - 30) / 10)
+    a, b, eta_los, eta_nlos = PAPER_TABLE["urban"]
+    links = []
+    for node_x, power_dbm in ((0.0, 46.0), (6.0, 23.0)):  # PT -> UAV at the PT's power, UAV -> PR at the UAV's
+        r, h = abs(x - node_x) * 50.0, 100.0
+        p = 1 / (1 + a * math.exp(-b * (math.degrees(math.atan2(h, r)) - a)))
+        snr = [10 ** ((power_dbm - 30 - fspl(math.hypot(r, h), 2.0) - eta) / 10) / noise for eta in (eta_los, eta_nlos)]
+        links.append([(p, snr[0]), (1 - p, snr[1])])
+    for p1, g1 in links[0]:
+        for p2, g2 in links[1]:
+            value = 0.5 * math.log2(1 + g1 * g2 / (1 + g1 + g2))
+            share = (torch.isclose(rates, torch.tensor(value, dtype=torch.float64), rtol=1e-6)).double().mean().item()
+            assert share == pytest.approx(p1 * p2, abs=4 * math.sqrt(p1 * p2 * (1 - p1 * p2) / 4000) + 1e-3)
+    assert 0.3 < links[1][0][0] < 0.9  # the PR link is often blocked: the test sees both states
+    # the deterministic utility stays the mean channel's
+    mean = World(cfg.replace(fading="none"), batch_size=1)
+    position, task = torch.tensor([[[x, y]]]), torch.tensor([[1]])
+    assert torch.equal(
+        world.utility(position.expand(4000, 1, 2), task.expand(4000, 1))[2][0], mean.utility(position, task)[2][0]
+    )
+
+
 def test_the_power_laws_are_g0_d_to_the_minus_alpha_bit_for_bit():
     for preset, (g0, alpha) in (("paper", (1.0, 2.0)), ("reference_code", (2.0, 4.0))):
         cfg = make_config(preset)
@@ -155,6 +186,8 @@ def test_physical_units():
         dict(channel="tr36777_uma", altitude_m=60.0, cell_size=30.0),
         dict(channel="tr36777_uma", altitude_m=150.0, cell_size=30.0, layout="random"),
         dict(channel="al_hourani", reward="log_gap", init_tasks="sensing"),
+        dict(channel="tr36777_uma", altitude_m=60.0, cell_size=30.0, fading="los_nlos", reward="log_gap"),
+        dict(channel="al_hourani", fading="los_nlos", layout="random"),
     ],
     ids=str,
 )
@@ -186,6 +219,7 @@ def test_each_channel_runs_end_to_end(options):
         (dict(channel="al_hourani", alpha=3.0), "alpha=3.0 is invalid: only the power-law channels"),
         (dict(channel="paper", environment="suburban"), "environment='suburban' is invalid: only the physical"),
         (dict(channel="paper", carrier_ghz=3.5), "carrier_ghz=3.5 is invalid: only the physical channels"),
+        (dict(fading="los_nlos"), "fading='los_nlos' is invalid: channel='paper' has no line-of-sight state"),
         (dict(channel="al_hourani", direct_links=True), "direct_links=True is invalid: channel='al_hourani' has no"),
         (dict(channel="al_hourani", rate_model="reference_code"), "rate_model='reference_code' is invalid"),
         (dict(channel="tr36777_uma", altitude_m=10.0), "altitude_m=10.0 is invalid: the UAVs fly at 10 m"),
