@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass, field
 
 from . import radio
-from .limits import PHYSICAL, allowed_range, max_ground_distance_cells, physics_problem
+from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)
@@ -176,36 +176,13 @@ class ModelConfig:
             raise InvalidOption("direct_links", True, reason)
 
     def _check_radio(self):
-        """The physical channels' options within where their models hold (:mod:`uavrl.envs.radio`)."""
+        """The physical channels' options within where their models hold (:func:`uavrl.envs.limits.radio_problem`)."""
         _choice("environment", self.environment, ENVIRONMENTS)
-        low, high = radio.CARRIER_GHZ[self.channel]
-        ranges = {
-            "carrier_ghz": (low, high, f"channel={self.channel!r} holds for carriers (GHz)"),
-            "bandwidth_mhz": (*radio.BANDWIDTH_MHZ, "give a bandwidth in MHz"),
-            "noise_figure_db": (*radio.NOISE_FIGURE_DB, "give a receiver's noise figure in dB"),
-            **{name: (*radio.POWER_DBM, "give a transmit power in dBm") for name in ("p_pt_dbm", "p_s_dbm", "p_u_dbm")},
-        }
-        for name, (low, high, what) in ranges.items():
-            value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value) and low <= value <= high):
-                raise InvalidOption(name, value, f"{what} in [{low:g}, {high:g}]")
-        if self.channel == "tr36777_uma":
-            low, high = radio.UMA_AV_HEIGHT_M
-            metres = self.height * self.cell_size
-            if not low < metres <= high:
-                name = "altitude_m" if self.altitude_m is not None else "altitude"
-                reason = (
-                    f"the UAVs fly at {metres:g} m, and TR 36.777's UMa-AV model holds for heights in ({low:g}, "
-                    f"{high:g}] m (altitude_m sets the height in metres)"
-                )
-                raise InvalidOption(name, getattr(self, name), reason)
-            reach = max_ground_distance_cells(self.layout, self.grid, self.height) * self.cell_size
-            if reach > radio.UMA_AV_MAX_D2D_M:
-                reason = (
-                    f"a UAV can be {reach:.4g} m from PT or PR along the ground, and TR 36.777's UMa-AV model holds "
-                    f"to {radio.UMA_AV_MAX_D2D_M:g} m: use smaller cells or a smaller grid"
-                )
-                raise InvalidOption("cell_size", self.cell_size, reason)
+        values = {name: getattr(self, name) for name in (*_PHYSICS_OPTIONS, "altitude_m")} | {"altitude": self.height}
+        problem = radio_problem(values)
+        if problem is not None:
+            name, reason = problem
+            raise InvalidOption(name, getattr(self, name), reason)
 
     def _check_physics(self):
         """A one-line refusal when the numbers would give NaN, infinite or everywhere-zero rates

@@ -24,6 +24,7 @@ Example:
 from __future__ import annotations
 
 import math
+import numbers
 import sys
 
 from . import radio
@@ -187,6 +188,43 @@ def _best_term_at_least(values: dict, channels: _Channels, src: int, dst: int, p
         gains = channels.log_gain(math.dist(cell, a), src, True), channels.log_gain(math.dist(cell, b), dst, True)
         best = max(best, channels.log_term(*gains, power))
     return best
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def radio_problem(values: dict) -> tuple[str, str] | None:
+    """The option of a physical channel outside where its model holds (:mod:`uavrl.envs.radio`), and why; ``None``
+    when every one lies inside.  ``values`` as :func:`physics_problem` reads them, with ``altitude_m``."""
+    v, channel = values, values["channel"]
+    low, high = radio.CARRIER_GHZ[channel]
+    ranges = {
+        "carrier_ghz": (low, high, f"channel={channel!r} holds for carriers (GHz)"),
+        "bandwidth_mhz": (*radio.BANDWIDTH_MHZ, "give a bandwidth in MHz"),
+        "noise_figure_db": (*radio.NOISE_FIGURE_DB, "give a receiver's noise figure in dB"),
+        **{name: (*radio.POWER_DBM, "give a transmit power in dBm") for name in ("p_pt_dbm", "p_s_dbm", "p_u_dbm")},
+    }
+    for name, (low, high, what) in ranges.items():
+        if not (_is_number(v[name]) and low <= v[name] <= high):
+            return name, f"{what} in [{low:g}, {high:g}]"
+    if channel == "tr36777_uma":
+        low, high = radio.UMA_AV_HEIGHT_M
+        metres = v["altitude"] * v["cell_size"]
+        if not low < metres <= high:
+            reason = (
+                f"the UAVs fly at {metres:g} m, and TR 36.777's UMa-AV model holds for heights in ({low:g}, "
+                f"{high:g}] m (altitude_m sets the height in metres)"
+            )
+            return ("altitude_m" if v["altitude_m"] is not None else "altitude"), reason
+        reach = max_ground_distance_cells(v["layout"], v["grid"], v["altitude"]) * v["cell_size"]
+        if reach > radio.UMA_AV_MAX_D2D_M:
+            reason = (
+                f"a UAV can be {reach:.4g} m from PT or PR along the ground, and TR 36.777's UMa-AV model holds "
+                f"to {radio.UMA_AV_MAX_D2D_M:g} m: use smaller cells or a smaller grid"
+            )
+            return "cell_size", reason
+    return None
 
 
 def physics_problem(values: dict) -> str | None:
