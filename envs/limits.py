@@ -1,7 +1,9 @@
 """Which values of the model's numbers keep its rates finite and positive (standard library only).
 
 The rates of docs/model.md (How good a configuration is) are computed in float64:
-channel gains ``g0 d^-alpha`` (``d`` in metres), SNRs ``g = P |h|^2 / noise``, the
+channel gains ``g0 d^-alpha`` (``d`` in metres) or ``10^(-PL / 10)`` of a physical
+model's path loss (docs/model.md, Channel models; its ranges of validity are
+:func:`radio_problem`'s), SNRs ``g = P |h|^2 / noise``, the
 amplify-and-forward term ``c = g1 g2 / (1 + g1 + g2)`` (or the authors'
 ``A / (1 + A)``, ``A = reference_gain |h|^2 |h|^2``) and ``R = 1/2 log2(1 + sum)``.
 A gain or an SNR product beyond float64 turns a rate into NaN; a best cell whose
