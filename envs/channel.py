@@ -1,8 +1,8 @@
 """The physics of the model: node layouts, channel gains and AF rates.
 
-This is the one implementation of SPEC sections 1, 3 and 4.  The environment,
-the exact optimum, the tabular learners' lookup tables and the tests all call
-these functions, so they cannot disagree about a rate.
+This is the one implementation of docs/model.md (Where the four nodes are, How good a configuration is, Channel
+models).  The environment, the exact optimum, the tabular learners' lookup tables and the tests all call these
+functions, so they cannot disagree about a rate.
 
 Shapes: ``...`` is any batch shape (worlds, configurations); ``N`` UAVs; the
 four fixed nodes are ordered ``(PT, PR, S, E)``.  Positions are in cell units.
@@ -23,6 +23,7 @@ import torch
 
 from .config import RELAYING, ModelConfig
 from .limits import fixed_node_positions
+from .pathloss import gain_from_db, link_states_db, mean_path_loss_db
 
 PT, PR, S, E = range(4)
 
@@ -45,31 +46,45 @@ def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor
 def link_gains(
     uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig, fading: torch.Tensor | None = None
 ) -> torch.Tensor:
-    """``|h|^2 = g0 d^-alpha X`` from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``: ``[..., N, 4]``.
+    """``|h|^2 X`` from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``: ``[..., N, 4]``.
 
-    ``d`` is the 3-D distance in metres (cells times ``cell_size``); ``fading``
-    is the ``[..., N, 4]`` power gain ``X`` (Exp(1) for Rayleigh), 1 when omitted.
+    The mean gain ``|h|^2`` is ``g0 d^-alpha`` for the power laws (``channel`` ``paper`` and ``reference_code``),
+    ``10^(-PL / 10)`` of the mean path loss in dB for the physical models (:mod:`.pathloss`); ``d`` is the 3-D
+    distance in metres (cells times ``cell_size``).  ``fading`` is the ``[..., N, 4]`` power gain ``X`` (Exp(1) for
+    Rayleigh), 1 when omitted.
     """
+    if cfg.is_physical:
+        gain = gain_from_db(mean_path_loss_db(uav_xyz, nodes, cfg))
+        return gain if fading is None else gain * fading
     d = torch.linalg.vector_norm(uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3), dim=-1) * cfg.cell_size
     gain = cfg.g0 * d.pow(-cfg.alpha)
     return gain if fading is None else gain * fading
+
+
+def link_state_gains(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
+    """``[..., N, 4, 3]``: per link ``P_LoS`` and the gains ``10^(-PL / 10)`` in line of sight and out of it, what
+    ``fading="los_nlos"`` draws from (physical channels; docs/model.md, Channel models)."""
+    p_los, los, nlos = link_states_db(uav_xyz, nodes, cfg)
+    return torch.stack([p_los, gain_from_db(los), gain_from_db(nlos)], -1)
 
 
 def relay_contributions(gains: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
     """Per UAV, what it adds inside the log when relaying for PU and when sensing for SE: ``[..., N, 2]``.
 
     ``af``: ``g1 g2 / (1 + g1 + g2)`` with ``g1 = P_src |h_src,j|^2 / sigma^2`` and
-    ``g2 = P_U |h_j,dst|^2 / sigma^2`` (SPEC section 4).  ``reference_code``:
-    ``A / (1 + A)`` with ``A = reference_gain |h_a,j|^2 |h_j,b|^2`` (SPEC section 8).
+    ``g2 = P_U |h_j,dst|^2 / sigma^2`` (docs/model.md, How good a configuration is; powers and noise in W).
+    ``reference_code``: ``A / (1 + A)`` with ``A = reference_gain |h_a,j|^2 |h_j,b|^2`` (docs/model.md, The
+    authors' code as a preset).
     """
     src = gains[..., [PT, S]]
     dst = gains[..., [PR, E]]
     if cfg.rate_model == "reference_code":
         a = cfg.reference_gain * src * dst
         return a / (1 + a)
-    p_src = torch.tensor([cfg.p_pt, cfg.p_s], dtype=gains.dtype, device=gains.device)
-    g1 = src * (p_src / cfg.noise)
-    g2 = dst * (cfg.p_u / cfg.noise)
+    p_pt, p_s, p_u = cfg.powers_w
+    p_src = torch.tensor([p_pt, p_s], dtype=gains.dtype, device=gains.device)
+    g1 = src * (p_src / cfg.noise_w)
+    g2 = dst * (p_u / cfg.noise_w)
     return g1 * g2 / (1 + g1 + g2)
 
 
@@ -89,7 +104,7 @@ def rates(
 
     ``contributions`` ``[..., N, 2]`` come from :func:`relay_contributions` at
     the UAVs' cells, ``tasks`` ``[..., N]`` (0 sensing, 1 relaying), ``direct``
-    ``[..., 2]`` from :func:`direct_terms`.
+    ``[..., 2]`` from :func:`direct_terms`.  Times ``cfg.bandwidth_hz`` they are in bit/s (physical channels).
     """
     relaying = tasks == RELAYING
     zero = contributions.new_zeros(())

@@ -19,7 +19,8 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
-from .limits import PHYSICAL, allowed_range, physics_problem
+from . import radio
+from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)
@@ -27,12 +28,17 @@ SENSING, RELAYING = 0, 1
 NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
-FADINGS = ("none", "rayleigh")
+FADINGS = ("none", "rayleigh", "los_nlos")
 REWARDS = ("delta", "best_so_far", "log_gap")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
 RESET_POSITIONS = ("random", "keep")
-PRESETS = ("paper", "reference_code")
+CHANNELS = radio.CHANNELS
+ENVIRONMENTS = radio.ENVIRONMENTS
+PRESETS = ("paper", "reference_code", "a2g_urban")
+# the options only the power laws read, and those only the physical channels read (docs/model.md, Channel models)
+POWER_LAW_OPTIONS = ("alpha", "g0", "p_pt", "p_s", "p_u", "noise")
+PHYSICAL_OPTIONS = ("environment", "carrier_ghz", "bandwidth_mhz", "noise_figure_db", "p_pt_dbm", "p_s_dbm", "p_u_dbm")
 
 
 class InvalidOption(ValueError):
@@ -51,7 +57,11 @@ class InvalidOption(ValueError):
 class ModelConfig:
     """One model of docs/model.md.  Lengths are in cells unless the name says metres.
 
-    ``altitude`` of ``None`` means the paper's ``h = L1`` cells.  ``rate_model``
+    ``altitude`` of ``None`` means the paper's ``h = L1`` cells (``altitude_m`` gives it in metres instead).
+    ``channel`` picks the mean gain of a link (docs/model.md, Channel models): the power laws ``paper`` and
+    ``reference_code`` read ``g0``, ``alpha`` (``None``: the channel's own, 1 and 2 or 2 and 4), powers and noise
+    in W; the physical models ``al_hourani`` and ``tr36777_uma`` read ``carrier_ghz``, ``bandwidth_mhz``,
+    ``noise_figure_db`` and powers in dBm.  ``rate_model``
     ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
     ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.
@@ -63,13 +73,23 @@ class ModelConfig:
     layout: str = "line"
     cell_size: float = 10.0
     altitude: float | None = None
-    alpha: float = 2.0
-    g0: float = 1.0
+    altitude_m: float | None = None
+    channel: str = "paper"
+    alpha: float | None = None
+    g0: float | None = None
     fading: str = "none"
     p_pt: float = 0.01
     p_s: float = 0.02
     p_u: float = 0.02
     noise: float = 1e-9
+    # the physical channels' defaults: the a2g_urban preset's (docs/model.md, Channel models, for their sources)
+    environment: str = "urban"
+    carrier_ghz: float = 2.0
+    bandwidth_mhz: float = 10.0
+    noise_figure_db: float = 9.0
+    p_pt_dbm: float = 46.0
+    p_s_dbm: float = 23.0
+    p_u_dbm: float = 23.0
     direct_links: bool = False
     lease_rule: bool = True
     rate_model: str = "af"
@@ -96,6 +116,8 @@ class ModelConfig:
         object.__setattr__(self, "num_uavs", int(self.num_uavs))
         object.__setattr__(self, "max_steps", int(self.max_steps))
         _choice("layout", self.layout, LAYOUTS)
+        _choice("channel", self.channel, CHANNELS)
+        self._resolve_channel()
         _choice("fading", self.fading, FADINGS)
         _choice("reward", self.reward, REWARDS)
         _choice("rate_model", self.rate_model, RATE_MODELS)
@@ -103,6 +125,8 @@ class ModelConfig:
         _choice("reset_positions", self.reset_positions, RESET_POSITIONS)
         for name in ("p_pt", "p_s", "p_u", "noise", "cell_size", "g0", "alpha", "reference_gain"):
             value = getattr(self, name)
+            if value is None and name in POWER_LAW_OPTIONS:  # a physical channel has no g0 and alpha
+                continue
             if not (_is_real(value) and math.isfinite(value) and value > 0):
                 raise InvalidOption(name, value, "it must be a finite positive number")
         for name in ("beta1", "beta2"):
@@ -115,7 +139,50 @@ class ModelConfig:
             _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
         ):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
+        if self.altitude_m is not None:
+            if not (_is_real(self.altitude_m) and math.isfinite(self.altitude_m) and self.altitude_m > 0):
+                raise InvalidOption("altitude_m", self.altitude_m, "give a finite positive height in metres, or None")
+            if self.altitude is not None:
+                raise InvalidOption("altitude_m", self.altitude_m, "give the height once: altitude (cells) is set too")
+        if self.is_physical:
+            self._check_radio()
         self._check_physics()
+
+    def _resolve_channel(self):
+        """``g0`` and ``alpha`` of ``None`` become the power law's own; a channel refuses the options it does not read
+        (left at a value other than the default, they would be silently ignored)."""
+        if self.channel in radio.POWER_LAWS:
+            g0, alpha = radio.POWER_LAWS[self.channel]
+            object.__setattr__(self, "g0", g0 if self.g0 is None else self.g0)
+            object.__setattr__(self, "alpha", alpha if self.alpha is None else self.alpha)
+            unread, reads = PHYSICAL_OPTIONS, "the physical channels 'al_hourani' and 'tr36777_uma'"
+        else:
+            unread, reads = POWER_LAW_OPTIONS, "the power-law channels 'paper' and 'reference_code' (powers in W)"
+        for name in unread:
+            value = getattr(self, name)
+            if value is not None and value != _DEFAULTS[name]:
+                reason = f"only {reads} read it, not channel={self.channel!r}"
+                if name in ("p_pt", "p_s", "p_u"):
+                    reason += f": give the power in dBm as {name}_dbm"
+                raise InvalidOption(name, value, reason)
+        if self.is_physical and self.rate_model == "reference_code":
+            reason = "the authors' formula multiplies the power law's gains; use channel='paper' or 'reference_code'"
+            raise InvalidOption("rate_model", self.rate_model, reason)
+        if not self.is_physical and self.fading == "los_nlos":
+            reason = f"channel={self.channel!r} has no line-of-sight state: use 'al_hourani' or 'tr36777_uma'"
+            raise InvalidOption("fading", self.fading, reason)
+        if self.is_physical and self.direct_links:
+            reason = f"channel={self.channel!r} has no model of the ground-to-ground link PT-PR"
+            raise InvalidOption("direct_links", True, reason)
+
+    def _check_radio(self):
+        """The physical channels' options within where their models hold (:func:`uavrl.envs.limits.radio_problem`)."""
+        _choice("environment", self.environment, ENVIRONMENTS)
+        values = {name: getattr(self, name) for name in (*_PHYSICS_OPTIONS, "altitude_m")} | {"altitude": self.height}
+        problem = radio_problem(values)
+        if problem is not None:
+            name, reason = problem
+            raise InvalidOption(name, getattr(self, name), reason)
 
     def _check_physics(self):
         """A one-line refusal when the numbers would give NaN, infinite or everywhere-zero rates
@@ -125,10 +192,17 @@ class ModelConfig:
         if problem is None:
             return
         preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {})}
+        g0, alpha = radio.POWER_LAWS.get(self.channel, (None, None))
+        preset["g0"] = g0 if preset["g0"] is None else preset["g0"]
+        preset["alpha"] = alpha if preset["alpha"] is None else preset["alpha"]
+        if preset["altitude_m"] is not None:
+            preset["altitude"] = preset["altitude_m"] / preset["cell_size"]
         preset["altitude"] = float(self.grid[0]) if preset["altitude"] is None else preset["altitude"]
         changed = [name for name in (*PHYSICAL, "beta1", "beta2") if values[name] != preset[name]]
         for name in changed:
             if physics_problem({**values, name: preset[name]}) is None:
+                if name == "altitude" and self.altitude_m is not None:  # the height was given in metres
+                    raise InvalidOption("altitude_m", self.altitude_m, problem)
                 reason = (
                     problem if name in ("beta1", "beta2") else f"{problem}; {allowed_range(values, name, preset[name])}"
                 )
@@ -142,8 +216,35 @@ class ModelConfig:
 
     @property
     def height(self) -> float:
-        """UAV altitude in cells: the paper's ``h = L1`` unless set."""
+        """UAV altitude in cells: the paper's ``h = L1`` unless ``altitude`` (cells) or ``altitude_m`` is set."""
+        if self.altitude_m is not None:
+            return self.altitude_m / self.cell_size
         return float(self.grid[0] if self.altitude is None else self.altitude)
+
+    @property
+    def is_physical(self) -> bool:
+        """A channel model in physical units (docs/model.md, Channel models), not a power law."""
+        return self.channel in radio.PHYSICAL_CHANNELS
+
+    @property
+    def powers_w(self) -> tuple[float, float, float]:
+        """Transmit powers ``(P_PT, P_S, P_U)`` in W: the options in W of the power laws, in dBm of the others."""
+        if self.is_physical:
+            return tuple(radio.dbm_to_watts(p) for p in (self.p_pt_dbm, self.p_s_dbm, self.p_u_dbm))
+        return self.p_pt, self.p_s, self.p_u
+
+    @property
+    def noise_w(self) -> float:
+        """Noise power in W: ``noise`` for the power laws, ``-174 dBm/Hz + 10 log10(B) + NF`` for the others."""
+        if self.is_physical:
+            return radio.dbm_to_watts(radio.noise_dbm(self.bandwidth_mhz, self.noise_figure_db))
+        return self.noise
+
+    @property
+    def bandwidth_hz(self) -> float | None:
+        """The bandwidth in Hz of the physical channels (a rate in bit/s/Hz times it is in bit/s); ``None`` for the
+        power laws, whose rates are per Hz."""
+        return self.bandwidth_mhz * 1e6 if self.is_physical else None
 
     @property
     def num_joint_actions(self) -> int:
@@ -169,17 +270,20 @@ _PRESETS = {
         layout="reference_code",
         cell_size=1.0,
         altitude=10.0,
-        alpha=4.0,
-        g0=2.0,
+        channel="reference_code",
         rate_model="reference_code",
         reward="best_so_far",
         init_tasks="sensing",
+    ),
+    # docs/model.md, Channel models: the sources of these numbers (and of the physical defaults of ModelConfig)
+    "a2g_urban": dict(
+        grid=(10, 10), num_uavs=6, channel="al_hourani", environment="urban", cell_size=50.0, altitude_m=100.0
     ),
 }
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
 # what uavrl.envs.limits reads
 _PHYSICS_OPTIONS = (
-    *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward"),
+    *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward", "channel", "environment"),
     *(name for name in PHYSICAL if name != "altitude"),
     *("beta1", "beta2"),
 )

@@ -96,7 +96,9 @@ class UAVSpectrumEnv(EnvBase):
         batch_size: number of independent worlds ``B``.
         grid: ``(L1, L2)`` cells.
         num_uavs: ``N``, at most ``L1 * L2``.
-        preset: ``"paper"`` or ``"reference_code"`` (SPEC section 8).
+        preset: ``"paper"``, ``"reference_code"`` (docs/model.md, The authors' code as a preset) or
+            ``"a2g_urban"`` (docs/model.md, Channel models); ``grid`` and ``num_uavs`` given here win over the
+            preset's (``config=make_config("a2g_urban")`` keeps its 10x10 and 6 UAVs).
         seed: seed of world 0.
         device: where the worlds live.
         max_steps: episode length ``T``.

@@ -1,7 +1,9 @@
 """Which values of the model's numbers keep its rates finite and positive (standard library only).
 
 The rates of docs/model.md (How good a configuration is) are computed in float64:
-channel gains ``g0 d^-alpha`` (``d`` in metres), SNRs ``g = P |h|^2 / noise``, the
+channel gains ``g0 d^-alpha`` (``d`` in metres) or ``10^(-PL / 10)`` of a physical
+model's path loss (docs/model.md, Channel models; its ranges of validity are
+:func:`radio_problem`'s), SNRs ``g = P |h|^2 / noise``, the
 amplify-and-forward term ``c = g1 g2 / (1 + g1 + g2)`` (or the authors'
 ``A / (1 + A)``, ``A = reference_gain |h|^2 |h|^2``) and ``R = 1/2 log2(1 + sum)``.
 A gain or an SNR product beyond float64 turns a rate into NaN; a best cell whose
@@ -14,7 +16,7 @@ grid: :class:`~uavrl.envs.config.ModelConfig` runs them before anything is built
 Example:
     >>> values = dict(grid=(6, 6), num_uavs=2, layout="line", fading="none", cell_size=10.0, altitude=6.0,
     ...               alpha=2.0, g0=1.0, p_pt=0.01, p_s=0.02, p_u=0.02, noise=1e-9, direct_links=False,
-    ...               rate_model="af", reference_gain=200.0, reward="delta", beta1=1.0, beta2=1.0)
+    ...               rate_model="af", reference_gain=200.0, reward="delta", beta1=1.0, beta2=1.0, channel="paper")
     >>> physics_problem(values) is None
     True
     >>> physics_problem({**values, "p_u": 1e308})[:42]
@@ -24,7 +26,10 @@ Example:
 from __future__ import annotations
 
 import math
+import numbers
 import sys
+
+from . import radio
 
 NODE_NAMES = ("PT", "PR", "S", "E")
 _LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
@@ -33,7 +38,11 @@ _LOG_RESOLUTION = math.log10(sys.float_info.epsilon)  # below this s, 1 + s is 1
 _LOG_FLOAT32_MAX = math.log10(3.4028234663852886e38)  # rewards are float32
 FADING_PEAK = 32 * math.log(2)  # the largest Exp(1) power gain drawn from a 32-bit uniform (fading=rayleigh)
 # the options whose value the checks can blame, in the order they are tried
-PHYSICAL = ("p_pt", "p_s", "p_u", "noise", "cell_size", "altitude", "alpha", "g0", "reference_gain")
+PHYSICAL = (
+    *("p_pt", "p_s", "p_u", "noise", "cell_size", "altitude", "alpha", "g0", "reference_gain"),
+    *("p_pt_dbm", "p_s_dbm", "p_u_dbm", "bandwidth_mhz", "noise_figure_db", "carrier_ghz"),
+)
+DECIBELS = ("p_pt_dbm", "p_s_dbm", "p_u_dbm", "noise_figure_db")  # options in dB: any real number, not only positive
 # (network, its source node, its destination node, the source's power option)
 NETWORKS = (("the primary network (R_PU)", 0, 1, "p_pt"), ("the emergency network (R_SE)", 2, 3, "p_s"))
 
@@ -47,6 +56,15 @@ def fixed_node_positions(layout: str, grid: tuple[int, int], height: float) -> l
     if layout == "reference_code":
         return [(0.0, 5.0, 0.0), (10.0, 5.0, 0.0), (-5.0, 5.0, 10.0), (15.0, 5.0, 10.0)]
     return None
+
+
+def max_ground_distance_cells(layout: str, grid: tuple[int, int], height: float) -> float:
+    """The largest horizontal distance in cells from PT or PR to a cell centre over the layouts the options allow."""
+    L1, L2 = grid
+    nodes = fixed_node_positions(layout, grid, height)
+    if nodes is None:  # layout=random: the nodes lie in the grid widened by half a grid on each side
+        return 1.5 * math.hypot(L1, L2)
+    return max(math.hypot(max(abs(x), abs(x - L1 + 1)), max(abs(y), abs(y - L2 + 1))) for x, y, _ in nodes[:2])
 
 
 def _shown(log10_value: float) -> str:
@@ -73,27 +91,63 @@ def _log10(value: float) -> float:
 
 
 class _Channels:
-    """The logarithms of the gains of ``values`` (the options, ``altitude`` resolved to the UAVs' height)."""
+    """The logarithms of the gains of ``values`` (the options, ``altitude`` resolved to the UAVs' height).
+
+    The physical channels' mean path loss in dB lies between its LoS and its NLoS loss (free space for the air-to-air
+    links UAV-S and UAV-E), each rising with the distance: gains use the low end for what could overflow and the high
+    end for what must stay above float64's resolution (``pessimistic``).
+    """
 
     def __init__(self, values: dict):
         self.v = values
         self.log_cell = _log10(values["cell_size"])
+        self.physical = values["channel"] in radio.PHYSICAL_CHANNELS
+        if self.physical:
+            dbm = {"p_pt": "p_pt_dbm", "p_s": "p_s_dbm", "p_u": "p_u_dbm"}
+            self.log_watts = {name: (values[option] - 30) / 10 for name, option in dbm.items()}
+            self.log_watts["noise"] = (radio.noise_dbm(values["bandwidth_mhz"], values["noise_figure_db"]) - 30) / 10
+        else:
+            self.log_watts = {name: _log10(values[name]) for name in ("p_pt", "p_s", "p_u", "noise")}
 
-    def log_power(self, cells: float) -> float:
-        """``log10 d^-alpha`` at ``cells`` cells (``d`` in metres), the power torch computes before ``g0``."""
-        return math.inf if cells == 0 else -self.v["alpha"] * (math.log10(cells) + self.log_cell)
+    def _loss_db(self, metres: float, node: int, pessimistic: bool) -> float:
+        """The least (or, ``pessimistic``, the largest) mean path loss in dB of a link ``metres`` long to ``node``."""
+        v = self.v
+        free = radio.free_space_db(metres, v["carrier_ghz"])
+        if node >= 2:  # S and E fly at the UAVs' height: free space
+            return free
+        if v["channel"] == "al_hourani":
+            _, _, eta_los, eta_nlos = radio.AL_HOURANI[v["environment"]]
+            return free + (eta_nlos if pessimistic else eta_los)
+        h = v["altitude"] * v["cell_size"]
+        log_d, log_f = math.log10(metres), math.log10(v["carrier_ghz"])
+        los = 28.0 + 22 * log_d + 20 * log_f
+        if h > radio.UMA_AV_ALL_LOS_ABOVE_M:
+            return los
+        nlos = -17.5 + (46 - 7 * math.log10(h)) * log_d + 20 * math.log10(40 * math.pi * v["carrier_ghz"] / 3)
+        return max(los, nlos) if pessimistic else min(los, nlos)
 
-    def log_gain(self, cells: float) -> float:
+    def log_power(self, cells: float, node: int = 0) -> float:
+        """``log10 d^-alpha`` at ``cells`` cells (``d`` in metres), the power torch computes before ``g0``; for the
+        physical channels the largest mean gain ``10^(-PL / 10)``."""
+        if cells == 0:
+            return math.inf
+        if self.physical:
+            return -self._loss_db(cells * self.v["cell_size"], node, pessimistic=False) / 10
+        return -self.v["alpha"] * (math.log10(cells) + self.log_cell)
+
+    def log_gain(self, cells: float, node: int = 0, pessimistic: bool = False) -> float:
+        if self.physical:
+            return math.inf if cells == 0 else -self._loss_db(cells * self.v["cell_size"], node, pessimistic) / 10
         return self.log_power(cells) + _log10(self.v["g0"])
 
     def log_term(self, log_gain_src: float, log_gain_dst: float, src_power: str) -> float:
         """``log10 c`` of a UAV with those link gains: the AF term, or the authors' ``A / (1 + A)``."""
-        v = self.v
+        v, w = self.v, self.log_watts
         if v["rate_model"] == "reference_code":
             a = _log10(v["reference_gain"]) + log_gain_src + log_gain_dst
             return a - _log_sum(0.0, a)
-        g1 = log_gain_src + _log10(v[src_power]) - _log10(v["noise"])
-        g2 = log_gain_dst + _log10(v["p_u"]) - _log10(v["noise"])
+        g1 = log_gain_src + w[src_power] - w["noise"]
+        g2 = log_gain_dst + w["p_u"] - w["noise"]
         return g1 + g2 - _log_sum(0.0, g1, g2)
 
 
@@ -126,16 +180,53 @@ def _best_term_at_least(values: dict, channels: _Channels, src: int, dst: int, p
     if nodes is None:
         (_, reach_src, far_src), (_, reach_dst, far_dst) = (_distances(values)[0][i] for i in (src, dst))
         return max(
-            channels.log_term(channels.log_gain(reach_src), channels.log_gain(far_dst), power),
-            channels.log_term(channels.log_gain(far_src), channels.log_gain(reach_dst), power),
+            channels.log_term(channels.log_gain(reach_src, src, True), channels.log_gain(far_dst, dst, True), power),
+            channels.log_term(channels.log_gain(far_src, src, True), channels.log_gain(reach_dst, dst, True), power),
         )
     a, b = nodes[src], nodes[dst]
     best = -math.inf
     for x, y in ((a[0], a[1]), (b[0], b[1]), ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)):
         cell = (min(max(round(x), 0), L1 - 1), min(max(round(y), 0), L2 - 1), h)
-        gains = channels.log_gain(math.dist(cell, a)), channels.log_gain(math.dist(cell, b))
+        gains = channels.log_gain(math.dist(cell, a), src, True), channels.log_gain(math.dist(cell, b), dst, True)
         best = max(best, channels.log_term(*gains, power))
     return best
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def radio_problem(values: dict) -> tuple[str, str] | None:
+    """The option of a physical channel outside where its model holds (:mod:`uavrl.envs.radio`), and why; ``None``
+    when every one lies inside.  ``values`` as :func:`physics_problem` reads them, with ``altitude_m``."""
+    v, channel = values, values["channel"]
+    low, high = radio.CARRIER_GHZ[channel]
+    ranges = {
+        "carrier_ghz": (low, high, f"channel={channel!r} holds for carriers (GHz)"),
+        "bandwidth_mhz": (*radio.BANDWIDTH_MHZ, "give a bandwidth in MHz"),
+        "noise_figure_db": (*radio.NOISE_FIGURE_DB, "give a receiver's noise figure in dB"),
+        **{name: (*radio.POWER_DBM, "give a transmit power in dBm") for name in ("p_pt_dbm", "p_s_dbm", "p_u_dbm")},
+    }
+    for name, (low, high, what) in ranges.items():
+        if not (_is_number(v[name]) and low <= v[name] <= high):
+            return name, f"{what} in [{low:g}, {high:g}]"
+    if channel == "tr36777_uma":
+        low, high = radio.UMA_AV_HEIGHT_M
+        metres = v["altitude"] * v["cell_size"]
+        if not low < metres <= high:
+            reason = (
+                f"the UAVs fly at {metres:g} m, and TR 36.777's UMa-AV model holds for heights in ({low:g}, "
+                f"{high:g}] m (altitude_m sets the height in metres)"
+            )
+            return ("altitude_m" if v["altitude_m"] is not None else "altitude"), reason
+        reach = max_ground_distance_cells(v["layout"], v["grid"], v["altitude"]) * v["cell_size"]
+        if reach > radio.UMA_AV_MAX_D2D_M:
+            reason = (
+                f"a UAV can be {reach:.4g} m from PT or PR along the ground, and TR 36.777's UMa-AV model holds "
+                f"to {radio.UMA_AV_MAX_D2D_M:g} m: use smaller cells or a smaller grid"
+            )
+            return "cell_size", reason
+    return None
 
 
 def physics_problem(values: dict) -> str | None:
@@ -146,23 +237,25 @@ def physics_problem(values: dict) -> str | None:
     """
     v, channels = values, _Channels(values)
     per_node, direct = _distances(v)
-    fade = math.log10(FADING_PEAK) if v["fading"] != "none" else 0.0
-    for name, (closest, _, _) in zip(NODE_NAMES, per_node, strict=True):
+    # a LoS/NLoS draw (fading=los_nlos) gives at most the LoS gain, which the physical channels' bounds already allow
+    fade = math.log10(FADING_PEAK) if v["fading"] == "rayleigh" else 0.0
+    law = "10^(-PL / 10)" if channels.physical else "g0 d^-alpha"
+    for node, (name, (closest, _, _)) in enumerate(zip(NODE_NAMES, per_node, strict=True)):
         if closest == 0:
             return f"{name} sits on a UAV cell at UAV altitude (distance 0, an infinite channel gain)"
-        power, gain = channels.log_power(closest), channels.log_gain(closest)
+        power, gain = channels.log_power(closest, node), channels.log_gain(closest, node)
         if max(power, gain) + fade > _LOG_MAX:
             metres = f"{closest * v['cell_size']:.3g} m"
             return (
-                f"the channel gain g0 d^-alpha from {name} to its nearest cell ({metres}) reaches "
+                f"the channel gain {law} from {name} to its nearest cell ({metres}) reaches "
                 f"{_shown(max(power, gain) + fade)}, beyond float64's {_shown(_LOG_MAX)}, so the rates would be NaN"
             )
     largest_sum, af = -math.inf, v["rate_model"] == "af"
     for network, src, dst, power in NETWORKS:
-        gain_src, gain_dst = (channels.log_gain(per_node[i][0]) + fade for i in (src, dst))
+        gain_src, gain_dst = (channels.log_gain(per_node[i][0], i) + fade for i in (src, dst))
         if af:
-            snr_src = _log10(v[power]) - _log10(v["noise"])
-            snr_u = _log10(v["p_u"]) - _log10(v["noise"])
+            snr_src = channels.log_watts[power] - channels.log_watts["noise"]
+            snr_u = channels.log_watts["p_u"] - channels.log_watts["noise"]
             g1, g2 = gain_src + snr_src, gain_dst + snr_u
             if max(snr_src, snr_u, g1 + g2, max(g1, g2) + math.log10(3)) > _LOG_MAX:
                 return (
@@ -215,6 +308,9 @@ def allowed_range(values: dict, name: str, good: float) -> str:
     is one interval around ``good``: its ends are found by bisection on ``log10`` of the value.
     """
 
+    if name in DECIBELS:  # a number in dB: bisection on the value itself, within what the model allows
+        return _allowed_decibels(values, name, good)
+
     def passes(log_value: float) -> bool:
         return physics_problem({**values, name: 10**log_value}) is None
 
@@ -236,6 +332,30 @@ def allowed_range(values: dict, name: str, good: float) -> str:
         return f"with the other settings as they are it must be at most {high_text}"
     if low_text:
         return f"with the other settings as they are it must be at least {low_text}"
+    return "no value of it passes with the other settings as they are"
+
+
+def _allowed_decibels(values: dict, name: str, good: float) -> str:
+    """:func:`allowed_range` of an option in dB: its ends within ``[-1000, 1000]`` dB, to 0.01 dB."""
+
+    def passes(value: float) -> bool:
+        return physics_problem({**values, name: value}) is None
+
+    def edge(inside: float, outside: float) -> float:
+        for _ in range(60):
+            middle = (inside + outside) / 2
+            inside, outside = (middle, outside) if passes(middle) else (inside, middle)
+        return inside
+
+    unit = "dBm" if name.endswith("_dbm") else "dB"
+    low = None if passes(-1000.0) else math.ceil(edge(good, -1000.0) * 100) / 100
+    high = None if passes(1000.0) else math.floor(edge(good, 1000.0) * 100) / 100
+    if low is not None and high is not None:
+        return f"with the other settings as they are it must lie in [{low:g}, {high:g}] {unit}"
+    if high is not None:
+        return f"with the other settings as they are it must be at most {high:g} {unit}"
+    if low is not None:
+        return f"with the other settings as they are it must be at least {low:g} {unit}"
     return "no value of it passes with the other settings as they are"
 
 

@@ -35,6 +35,7 @@ from .channel import (
     direct_terms,
     fixed_layout,
     link_gains,
+    link_state_gains,
     log_gap_potential,
     rates,
     rates_from_sums,
@@ -193,7 +194,9 @@ class World:
         self._nodes = (
             (layout if layout is not None else torch.zeros(4, 3, dtype=f64, device=dev)).expand(Bt, 4, 3).clone()
         )
-        self._cell_gains = torch.zeros(Bt, C, 4, dtype=f64, device=dev) if cfg.fading != "none" else None
+        # the gains fading draws from: the mean gain per link (rayleigh), or P_LoS and the LoS and NLoS gains (los_nlos)
+        fading_shape = {"rayleigh": (Bt, C, 4), "los_nlos": (Bt, C, 4, 3)}.get(cfg.fading)
+        self._cell_gains = None if fading_shape is None else torch.zeros(fading_shape, dtype=f64, device=dev)
         self._cell_contrib = torch.zeros(Bt, C, 2, dtype=f64, device=dev)
         self._code_obs = torch.zeros(
             Bt, 2 * C, 13, dtype=torch.float32, device=dev
@@ -293,8 +296,10 @@ class World:
             "_node_obs": (nodes / self._node_scale).flatten(1).float(),  # [k, NODE_FEATURES]
             "_direct": direct_terms(nodes, cfg),
         }
-        if self._cell_gains is not None:
+        if cfg.fading == "rayleigh":
             tables["_cell_gains"] = gains
+        elif cfg.fading == "los_nlos":
+            tables["_cell_gains"] = link_state_gains(self._cell_xyz, nodes, cfg)
         if cfg.reward == "log_gap":
             tables["_u_star"] = exact_optimum(contrib, tables["_direct"], cfg)[0]
         for name, rows in tables.items():
@@ -459,8 +464,12 @@ class World:
             (self._s.keys, self._s.counters) if worlds is None else (self._s.keys[worlds], self._s.counters[worlds])
         )
         gains = self._per_cell(self._cell_gains, code >> 1, worlds)
-        u = streams.uniform(keys, counters, _FADING, 4 * self.num_uavs).view_as(gains)
-        contrib = relay_contributions(gains * -torch.log1p(-u), cfg)  # Exp(1) power gain per link
+        u = streams.uniform(keys, counters, _FADING, 4 * self.num_uavs).view(gains.shape[:3])
+        if cfg.fading == "los_nlos":  # each link in line of sight with probability P_LoS, drawn anew
+            p_los, los, nlos = gains.unbind(-1)
+            contrib = relay_contributions(torch.where(u < p_los, los, nlos), cfg)
+        else:
+            contrib = relay_contributions(gains * -torch.log1p(-u), cfg)  # Exp(1) power gain per link
         direct = self._direct_of(worlds).expand(len(code), 2)
         if cfg.direct_links:  # the direct links PT->PR and S->E fade too
             direct = direct * -torch.log1p(-streams.uniform(keys, counters, _FADING_DIRECT, 2))

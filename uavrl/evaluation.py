@@ -254,6 +254,9 @@ def greedy_metrics(
     out["eval/optimality"] = optimality.mean().item()
     out["eval/optimality_min"] = optimality.min().item()
     out["eval/optimal_fraction"] = (optimality >= 0.99).double().mean().item()
+    if world.cfg.bandwidth_hz is not None:  # a physical channel: bit/s/Hz times the bandwidth (docs/model.md)
+        out["eval/u_star_bit_per_s"] = u_star.double().mean().item() * world.cfg.bandwidth_hz
+        out["eval/utility_bit_per_s"] = utility[:, -1].mean().item() * world.cfg.bandwidth_hz
     out.update(yardstick_metrics(utility, u_star, references, gamma))
     return out
 

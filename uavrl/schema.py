@@ -61,6 +61,8 @@ class EnvSchema:
     layout: Optional[str] = None
     cell_size: REAL = None
     altitude: REAL = None
+    altitude_m: REAL = None
+    channel: Optional[str] = None
     alpha: REAL = None
     g0: REAL = None
     fading: Optional[str] = None
@@ -68,6 +70,13 @@ class EnvSchema:
     p_s: REAL = None
     p_u: REAL = None
     noise: REAL = None
+    environment: Optional[str] = None
+    carrier_ghz: REAL = None
+    bandwidth_mhz: REAL = None
+    noise_figure_db: REAL = None
+    p_pt_dbm: REAL = None
+    p_s_dbm: REAL = None
+    p_u_dbm: REAL = None
     direct_links: Optional[bool] = None
     lease_rule: Optional[bool] = None
     rate_model: Optional[str] = None

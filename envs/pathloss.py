@@ -1,0 +1,118 @@
+"""The mean path loss of the physical channel models, in dB (docs/model.md, Channel models).
+
+Only the links PT-UAV and UAV-PR are air-to-ground: S and E fly at the UAVs' height, so UAV-S and UAV-E are
+air-to-air, free space and line of sight.  The mean of a model with a LoS and an NLoS state is the LoS-probability
+weighted mean of the two losses in dB (Al-Hourani et al. define their mean path loss so; for TR 36.777 the same rule
+keeps the two models comparable, see docs/model.md).  Shadowing is zero-mean in dB and left out of the mean.
+
+Example:
+    >>> import torch
+    >>> round(uma_av_los_probability(torch.tensor(200.0), torch.tensor(50.0)).item(), 3)  # TR 36.777's check value
+    0.967
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from .radio import AL_HOURANI, SPEED_OF_LIGHT, UMA_AV_ALL_LOS_ABOVE_M
+
+AIR_TO_GROUND = (True, True, False, False)  # per node (PT, PR, S, E): is the UAV's link to it air-to-ground?
+
+
+def free_space_db(distance_m: torch.Tensor, carrier_ghz: float) -> torch.Tensor:
+    """``FSPL = 20 log10(4 pi f_c d / c)``, ``d`` in metres, ``f_c`` in GHz."""
+    return 20 * torch.log10(distance_m * (4 * math.pi * carrier_ghz * 1e9 / SPEED_OF_LIGHT))
+
+
+def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) -> torch.Tensor:
+    """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani et al.
+    2014)."""
+    a, b, _, _ = AL_HOURANI[environment]
+    return 1 / (1 + a * torch.exp(-b * (elevation_deg - a)))
+
+
+def al_hourani_states(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(P_LoS, PL_LoS, PL_NLoS)``: ``PL = FSPL(d) + eta`` in dB in each state (Al-Hourani et al. 2014), the excess
+    loss eta in dB added to the free-space loss in dB."""
+    _, _, eta_los, eta_nlos = AL_HOURANI[environment]
+    p_los = al_hourani_los_probability(torch.rad2deg(torch.atan2(height_m, horizontal_m)), environment)
+    free = free_space_db(distance_m, carrier_ghz)
+    return p_los, free + eta_los, free + eta_nlos
+
+
+def al_hourani_db(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
+) -> torch.Tensor:
+    """The mean ``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani et al. 2014)."""
+    return _mean(*al_hourani_states(horizontal_m, height_m, distance_m, carrier_ghz, environment))
+
+
+def uma_av_los_probability(horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
+    """TR 36.777 Table B-1, UMa-AV: 1 within ``d_1`` (and above 100 m), else ``d_1 / d_2D + exp(-d_2D / p_1)
+    (1 - d_1 / d_2D)`` with ``p_1 = 4300 log10(h) - 3800`` and ``d_1 = max(460 log10(h) - 700, 18)`` metres."""
+    log_h = torch.log10(height_m)
+    d1 = (460 * log_h - 700).clamp(min=18.0)
+    p1 = 4300 * log_h - 3800
+    ratio = d1 / horizontal_m.clamp(min=d1)  # 1 within d_1: the formula then gives 1 too
+    p_los = ratio + torch.exp(-horizontal_m / p1) * (1 - ratio)
+    return torch.where(height_m > UMA_AV_ALL_LOS_ABOVE_M, torch.ones_like(p_los), p_los)
+
+
+def uma_av_states(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """TR 36.777 Table B-2, UMa-AV: ``(P_LoS, PL_LoS, PL_NLoS)`` in dB with ``PL_LoS = 28 + 22 log10(d_3D) + 20
+    log10(f_c)`` and ``PL_NLoS = -17.5 + (46 - 7 log10(h)) log10(d_3D) + 20 log10(40 pi f_c / 3)``."""
+    log_d = torch.log10(distance_m)
+    los = 28.0 + 22 * log_d + 20 * math.log10(carrier_ghz)
+    nlos = -17.5 + (46 - 7 * torch.log10(height_m)) * log_d + 20 * math.log10(40 * math.pi * carrier_ghz / 3)
+    return uma_av_los_probability(horizontal_m, height_m), los, nlos
+
+
+def uma_av_db(
+    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
+) -> torch.Tensor:
+    """The mean ``P_LoS PL_LoS + (1 - P_LoS) PL_NLoS`` in dB of :func:`uma_av_states`."""
+    return _mean(*uma_av_states(horizontal_m, height_m, distance_m, carrier_ghz))
+
+
+def _mean(p_los: torch.Tensor, los_db: torch.Tensor, nlos_db: torch.Tensor) -> torch.Tensor:
+    """The LoS-probability weighted mean path loss in dB."""
+    return p_los * los_db + (1 - p_los) * nlos_db
+
+
+def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(P_LoS, PL_LoS, PL_NLoS)`` ``[..., N, 4]`` in dB from every UAV ``[..., N, 3]`` to every node ``[..., 4, 3]``
+    (cells).
+
+    Air-to-ground links (PT, PR) follow ``cfg.channel``; air-to-air ones (S, E) are free space in line of sight
+    (``P_LoS = 1``).  ``h`` is the UAV's height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D
+    distance, all in metres.
+    """
+    delta = (uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3)) * cfg.cell_size
+    horizontal = torch.linalg.vector_norm(delta[..., :2], dim=-1)
+    height = delta[..., 2].abs()
+    distance = torch.linalg.vector_norm(delta, dim=-1)
+    if cfg.channel == "al_hourani":
+        ground = al_hourani_states(horizontal, height, distance, cfg.carrier_ghz, cfg.environment)
+    else:
+        ground = uma_av_states(horizontal, height, distance, cfg.carrier_ghz)
+    air = torch.tensor(AIR_TO_GROUND, device=uav_xyz.device)
+    free = free_space_db(distance, cfg.carrier_ghz)
+    p_los, los, nlos = ground
+    return torch.where(air, p_los, torch.ones_like(p_los)), torch.where(air, los, free), torch.where(air, nlos, free)
+
+
+def mean_path_loss_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> torch.Tensor:
+    """``[..., N, 4]`` mean path loss in dB of :func:`link_states_db` (free space on the air-to-air links)."""
+    return _mean(*link_states_db(uav_xyz, nodes, cfg))
+
+
+def gain_from_db(path_loss_db: torch.Tensor) -> torch.Tensor:
+    """The power gain ``|h|^2 = 10^(-PL / 10)`` of a path loss in dB."""
+    return torch.pow(10.0, -path_loss_db / 10)
