@@ -164,7 +164,7 @@ class ValidGreedy(nn.Module):
     UAV by UAV in id order, each takes its best allowed action.  Allowed: a
     move whose target cell differs from the cells of the UAVs still to choose
     and from the targets of those that chose (staying always qualifies, so all
-    targets differ: a valid joint action, SPEC section 2), and a switch to a
+    targets differ: a valid joint action, docs/model.md), and a switch to a
     task that no UAV before it switches to in this step.  Then, in a second
     pass, a UAV that kept its cell takes its best move into a cell that no
     other UAV now targets, if it values that move more (a UAV held back by a

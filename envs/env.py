@@ -1,4 +1,4 @@
-"""The batched TorchRL environment of the UAV spectrum-sharing model (SPEC.md).
+"""The batched TorchRL environment of the UAV spectrum-sharing model (docs/model.md).
 
 :class:`UAVSpectrumEnv` is a thin ``EnvBase`` over a :class:`~uavrl.envs.world.World`
 (the physics, no TorchRL): it owns the specs, the keys, seeding and resets,

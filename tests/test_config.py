@@ -1,4 +1,4 @@
-"""Model options: presets hold the SPEC numbers, and every invalid value is a one-line ValueError naming it."""
+"""Model options: presets hold docs/model.md's numbers, and every invalid value is a one-line ValueError naming it."""
 
 from __future__ import annotations
 

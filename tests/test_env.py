@@ -1,6 +1,6 @@
-"""The environment against SPEC.md: hand-worked rates, dynamics properties, batching, TorchRL integration.
+"""The environment against docs/model.md: hand-worked rates, dynamics properties, batching, TorchRL integration.
 
-The reference values here are computed with plain Python ``math`` from the SPEC
+The reference values here are computed with plain Python ``math`` from docs/model.md's
 formulas, never with :mod:`uavrl.envs.channel`, so a wrong formula in the
 package cannot hide behind the same wrong formula in the test.
 """
@@ -37,16 +37,16 @@ OUTPUT_KEYS = [
 PROPERTY_SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-# ----------------------------------------------------------------- plain-Python reference of SPEC 1-5, 8
+# ----------------------------------------------------------------- plain-Python reference of docs/model.md
 def line_nodes(L1, L2, h):
-    """SPEC 1, layout=line, in cell units: PT, PR, S, E."""
+    """Where the four nodes are, layout=line, in cell units: PT, PR, S, E."""
     return (0.0, L2 / 2, 0.0), (float(L1), L2 / 2, 0.0), (-L1 / 2, L2 / 2, h), (1.5 * L1, L2 / 2, h)
 
 
 def paper_rates(
     cells_xy, tasks, nodes, h, *, cell=10.0, p_pt=0.01, p_s=0.02, p_u=0.02, noise=1e-9, direct=False, lease=True
 ):
-    """SPEC 3-4: |h|^2 = d^-2 (d in metres), normalised AF, 1/2 log2, lease rule."""
+    """How good a configuration is: |h|^2 = d^-2 (d in metres), normalised AF, 1/2 log2, lease rule."""
     PT, PR, S, E = nodes
 
     def gain(a, b):
@@ -69,8 +69,8 @@ def paper_rates(
 
 
 def reference_code_rates(cells_xy, tasks):
-    """SPEC 8: absolute layout, |h|^2 = 2 d^-4 in cells, A = 200 |h|^2 |h|^2, A/(1+A), log2, 0 unless both tasks
-    staffed."""
+    """The authors' code: absolute layout, |h|^2 = 2 d^-4 in cells, A = 200 |h|^2 |h|^2, A/(1+A), log2, 0 unless
+    both tasks staffed."""
     PT, PR, S, E = (0, 5, 0), (10, 5, 0), (-5, 5, 10), (15, 5, 10)
 
     def h2(a, b):
@@ -91,7 +91,7 @@ def reference_code_rates(cells_xy, tasks):
 
 
 def resolve(cells_xy, actions, L1, L2):
-    """SPEC 2 in plain Python: off-grid moves stay, then clashing movers are cancelled (all at once) until cells
+    """One step in plain Python: off-grid moves stay, then clashing movers are cancelled (all at once) until cells
     differ."""
     targets = []
     for (x, y), a in zip(cells_xy, actions, strict=True):
@@ -195,7 +195,7 @@ def test_two_by_one_by_hand():
     ],
 )
 def test_env_outputs_match_hand_rates(preset, grid, num_uavs, options):
-    """r_pu, r_se, utility after reset and after every step equal the plain-Python SPEC formulas."""
+    """r_pu, r_se, utility after reset and after every step equal the plain-Python formulas of docs/model.md."""
     L1, L2 = grid
     B = 3
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=num_uavs, preset=preset, seed=11, max_steps=50, **options)
@@ -259,7 +259,8 @@ def test_lease_rule_zeroes_r_se_without_relays():
 
 
 def test_reference_code_preset():
-    """SPEC 8: authors' formula, both rates 0 when all UAVs share a task, sensing start, best_so_far reward."""
+    """The authors' code as a preset: their formula, both rates 0 when all UAVs share a task, sensing start,
+    best_so_far reward."""
     env = UAVSpectrumEnv(batch_size=2, grid=(4, 4), num_uavs=2, preset="reference_code", seed=3, max_steps=30)
     assert env.cfg.reward == "best_so_far" and env.cfg.init_tasks == "sensing"
     td = env.reset()
@@ -337,7 +338,7 @@ def scenarios(draw):
 @PROPERTY_SETTINGS
 @given(scenarios())
 def test_dynamics_follow_spec(scenario):
-    """Any action sequence (invalid joint actions included): SPEC 2 resolution, counts, grid, rewards."""
+    """Any action sequence (invalid joint actions included): docs/model.md's move resolution, counts, grid, rewards."""
     (L1, L2), N, B, seed, actions, options = scenario
     env = UAVSpectrumEnv(batch_size=B, grid=(L1, L2), num_uavs=N, seed=seed, max_steps=100, **options)
     td = env.reset()
@@ -406,7 +407,7 @@ def test_dynamics_follow_spec(scenario):
     ],
 )
 def test_swaps_and_cancelled_moves(grid, start, actions, end, switches):
-    """SPEC 2: swaps and cycles are allowed, clashing moves are cancelled (in chains) and count as no move."""
+    """Moves: swaps and cycles are allowed, clashing moves are cancelled (in chains) and count as no move."""
     env = UAVSpectrumEnv(batch_size=1, grid=grid, num_uavs=len(start), init_tasks="sensing")
     for seed in range(3000):
         env.set_seed(seed)
@@ -624,7 +625,7 @@ def test_rayleigh_power_gain_is_exp1(measured):
 
 
 def test_rayleigh_fades_direct_links():
-    """SPEC 3 "every link": with direct links on, PT->PR and S->E get their own Exp(1) draws.
+    """The channel's "every link": with direct links on, PT->PR and S->E get their own Exp(1) draws.
 
     The UAV hops are silenced (P_U = 1e-30 W makes their contributions < 1e-20), so
     2^(2R) - 1 = k X with k = P |h|^2 / sigma^2 of the direct link (d = L1 and 2 L1 cells).

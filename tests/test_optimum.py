@@ -1,4 +1,4 @@
-"""The exact optimum U* (SPEC 9) and the joint-action tables against plain-Python searches."""
+"""The exact optimum U* (docs/model.md) and the joint-action tables against plain-Python searches."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Training curves (``train/...``) and evaluations (``eval/...``) of all agents are
 computed here, so their TensorBoard tags and meanings are identical.
 
-The yardstick (SPEC section 7b) measures what the paper set out to do: reach
+The yardstick (docs/model.md, "What the numbers mean") measures what the paper set out to do: reach
 the best configuration in as few steps as possible.  From each of
 ``num_starts`` fixed, seeded starts the greedy policy runs ``horizon`` steps;
 with ``U_t`` the mean-channel utility after step ``t`` (faded draws never
@@ -48,7 +48,8 @@ from uavrl.envs.world import World
 EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
 DEFAULT_GAMMA = 0.9
 NINETY_PERCENT = 0.9
-# the per-episode metrics of every agent's training (SPEC section 7; train/<name>), in the order of episode_metrics
+# the per-episode metrics of every agent's training (docs/model.md, "What the numbers mean"; train/<name>), in the
+# order of episode_metrics
 EPISODE_METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
@@ -79,7 +80,8 @@ def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, m
 
 
 def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> dict[str, torch.Tensor]:
-    """SPEC section 7 per episode.  Inputs ``[W, T]`` for ``W`` episodes of ``T`` steps, ``u_star`` ``[W]``.
+    """The per-episode metrics of docs/model.md ("What the numbers mean").  Inputs ``[W, T]`` for ``W`` episodes of
+    ``T`` steps, ``u_star`` ``[W]``.
 
     Returns ``[W]`` tensors: the sums over steps of R_PU, R_SE and U (Fig. 3), of
     task switches and moves (Fig. 4), and the number of steps until U first

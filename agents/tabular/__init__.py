@@ -1,6 +1,6 @@
 """Tabular team Q-learning (the paper's eqs. 9-10), with the Q table as a torch tensor.
 
-One controller learns ``Q[s, j]`` over the joint state ``s`` (SPEC section 6:
+One controller learns ``Q[s, j]`` over the joint state ``s`` (docs/model.md, "What the agents see and learn":
 the joint location, optionally with tasks) and the joint action
 ``j = sum_i a_i 6^i``.  Each step it picks an epsilon-greedy *valid* joint
 action (every UAV on the grid, cells distinct), ties broken uniformly at random,

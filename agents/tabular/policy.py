@@ -20,7 +20,7 @@ class TabularPolicy(TensorDictModuleBase):
     Reads ``state_index`` and ``positions``; writes ``("agents", "action")``.
     It acts only in environments of ``cfg``'s grid, number of UAVs and layout
     (:mod:`uavrl.agents.env_check`).
-    Ties are broken uniformly at random (SPEC section 6) from the policy's own
+    Ties are broken uniformly at random (docs/model.md) from the policy's own
     generator seeded ``seed``, so a rollout is reproducible.
 
     Example:

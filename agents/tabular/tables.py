@@ -128,8 +128,8 @@ class TabularModel:
 
 
 def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET) -> torch.Tensor:
-    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state (SPEC section
-    6).
+    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state
+    (docs/model.md, "What the agents see and learn").
 
     Solved on the configuration graph (:mod:`uavrl.envs.exact`, the environment's
     own dynamics and rates), infinite horizon, discount ``gamma``.  With
