@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import time
 
 
@@ -37,17 +36,6 @@ def parse_args(argv=None):
     p.add_argument("--warmup", type=int, default=1)
     p.add_argument("--threads", type=int, default=1, help="torch.set_num_threads (default 1)")
     return p.parse_args(argv)
-
-
-def timed(fn, repeats: int, warmup: int) -> tuple[float, float]:
-    """(median, best) seconds of ``repeats`` runs of ``fn`` after ``warmup`` runs."""
-    times = []
-    for i in range(warmup + repeats):
-        start = time.perf_counter()
-        fn()
-        if i >= warmup:
-            times.append(time.perf_counter() - start)
-    return statistics.median(times), min(times)
 
 
 def loops(B: int, N: int, L: int, T: int) -> dict:
@@ -95,6 +83,7 @@ def loops(B: int, N: int, L: int, T: int) -> dict:
 def main(argv=None):
     args = parse_args(argv)
     import torch
+    from env_throughput import timed  # this folder is on sys.path when run as a script
 
     torch.set_num_threads(args.threads)
     print(

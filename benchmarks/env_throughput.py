@@ -44,6 +44,17 @@ import time
 HUGETLB = "glibc.malloc.hugetlb=1"
 
 
+def timed(fn, repeats: int, warmup: int) -> tuple[float, float]:
+    """(median, best) seconds of ``repeats`` runs of ``fn`` after ``warmup`` runs."""
+    times = []
+    for i in range(warmup + repeats):
+        start = time.perf_counter()
+        fn()
+        if i >= warmup:
+            times.append(time.perf_counter() - start)
+    return statistics.median(times), min(times)
+
+
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--threads", type=int, default=1, help="torch.set_num_threads (default 1)")
@@ -147,16 +158,6 @@ def main(argv=None):
     def random_action(td):
         td.set("action", torch.randint(0, 6, td.batch_size + (1,), generator=gen))
         return td
-
-    def timed(fn, repeats, warmup):
-        """(median, best) seconds of ``repeats`` runs after ``warmup`` runs."""
-        times = []
-        for i in range(warmup + repeats):
-            start = time.perf_counter()
-            fn()
-            if i >= warmup:
-                times.append(time.perf_counter() - start)
-        return statistics.median(times), min(times)
 
     print(
         f"# uavrl env throughput: {time.strftime('%Y-%m-%d')}, torch {torch.__version__}, threads "
