@@ -9,7 +9,6 @@ the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 from __future__ import annotations
 
 import json
-import shlex
 import sys
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import save_json
+from uavrl.io import quoted, save_json
 from uavrl.settings import RUN_SETTINGS, check
 from uavrl.train import eval_settings
 
@@ -50,7 +49,7 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     import torch
 
     state, file, notes = load_checkpoint(path, setting)
-    source = shlex.quote(str(file))
+    source = quoted(file)
     try:
         cfg = saved_config(state["config"], source)
     except ValueError as err:

@@ -11,13 +11,12 @@ checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
 from omegaconf import DictConfig
 
-from uavrl.cli import run_command
+from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS
 from uavrl.evaluate import check_settings, output_dir
 
@@ -51,11 +50,7 @@ def as_overrides(args: list[str]) -> list[str]:
     def is_path(arg: str) -> bool:
         return not arg.startswith("-") and ("=" not in arg or Path(arg).exists())
 
-    def quoted(arg: str) -> str:
-        # Hydra's quoted values: backslashes are escaped only before a quote (or the closing one)
-        return "'" + re.sub(r"(\\*)('|$)", lambda m: 2 * m[1] + ("\\'" if m[2] else ""), arg) + "'"
-
-    return [f"checkpoint={quoted(arg)}" if is_path(arg) else arg for arg in args]
+    return [f"checkpoint={hydra_quoted(arg)}" if is_path(arg) else arg for arg in args]
 
 
 if __name__ == "__main__":

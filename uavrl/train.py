@@ -18,7 +18,6 @@ after its checks.
 from __future__ import annotations
 
 import random
-import shlex
 import sys
 import time
 from datetime import datetime
@@ -40,7 +39,7 @@ from uavrl.checkpoints import (
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.io import WriteError, claim_dir, save_json, save_text
+from uavrl.io import WriteError, claim_dir, quoted, save_json, save_text
 from uavrl.rundir import (
     Interrupted,
     Interrupts,
@@ -48,7 +47,6 @@ from uavrl.rundir import (
     hold,
     missing_parents,
     path_argument,
-    quoted,
     resume_command,
     tidy,
 )
@@ -128,7 +126,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
         print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
     check_resumable(checkpoint, file)
     try:
-        saved = saved_config(checkpoint["config"], shlex.quote(str(file)))
+        saved = saved_config(checkpoint["config"], quoted(file))
     except ValueError as err:
         raise CheckpointError(str(err)) from None
     for override in overrides:
