@@ -19,11 +19,12 @@ from omegaconf import DictConfig
 from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS
 from uavrl.evaluate import check_settings, output_dir
+from uavrl.settings import check_video_cost
 
 
 def render_checkpoint(cfg: DictConfig) -> list[Path]:
     """The run's video files, written."""
-    check_settings(cfg)
+    check_settings(cfg, video=True)
     import torch
 
     from uavrl import load_policy
@@ -33,6 +34,7 @@ def render_checkpoint(cfg: DictConfig) -> list[Path]:
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
     policy, env_cfg = load_policy(cfg.checkpoint, device)
+    check_video_cost(cfg, env_cfg)
     frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
     return save_videos(frames, output_dir(cfg.checkpoint), int(cfg.eval.video_fps))
 
