@@ -229,14 +229,16 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
 
-    def log_evaluation(metrics: dict) -> None:
+    def video_frames():
+        """The greedy policy beside the oracle, where ``eval.video`` asks (a run saved before has no setting)."""
+        if not cfg.eval.get("video", False):
+            return None
+        return comparison_frames(agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device))
+
+    def log_evaluation(metrics: dict, frames) -> None:
         with interrupts.shielded():
             logger.log(metrics, agent.env_steps)
-        if cfg.eval.get("video", False):  # the greedy policy beside the oracle; a run saved before has no setting
-            frames = comparison_frames(
-                agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device)
-            )
-            with interrupts.shielded():
+            if frames is not None:
                 logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
 
     started = time.perf_counter()
@@ -266,7 +268,7 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
                     trained = clock.read()  # before the evaluation, which the clock leaves out
                     with clock.paused():
                         evaluation = evaluate_agent(agent, env_cfg, **eval_kwargs)
-                    log_evaluation({**evaluation, **trained})
+                    log_evaluation({**evaluation, **trained}, video_frames())
                 if done % every == 0 and done < agent.num_iterations:
                     save_checkpoint(done)
                 with interrupts.shielded():
@@ -282,12 +284,14 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
             trained_rng = torch.get_rng_state()
             try:
                 final = evaluate_agent(agent, env_cfg, **eval_kwargs)
+                frames = video_frames()
             except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
                 if saved != agent.num_iterations:
                     save_checkpoint(agent.num_iterations, torch_rng=trained_rng)
                 raise
-            log_evaluation({**final, **trained})
-            save_checkpoint(agent.num_iterations, final)
+            with interrupts.shielded():  # logged and saved as one: a resumed run neither logs it again nor loses it
+                log_evaluation({**final, **trained}, frames)
+                save_checkpoint(agent.num_iterations, final)
         with interrupts.shielded():
             logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
     except Interrupted as err:
