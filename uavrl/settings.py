@@ -335,14 +335,15 @@ def check_evaluation_floor(cfg: DictConfig, video: bool) -> None:
     costs = [Cost(world_bytes(smallest, starts), {"eval.num_starts": starts}, what)]
     if video:
         costs.append(video_cost(int(cfg.eval.video_starts), horizon))
-    refuse_over(costs, cfg.agent.get("memory_budget", DEFAULT_MEMORY_BUDGET), "agent.memory_budget", "bytes")
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
+    refuse_over(costs, budget, "agent.memory_budget", "bytes")
 
 
 def check_video_cost(cfg: DictConfig, model) -> None:
     """A one-line refusal, before any frame is drawn, when the video of ``cfg.eval`` on ``model`` (a run read from
     its checkpoint) would need more than ``agent.memory_budget``."""
     horizon = cfg.eval.horizon or default_horizon(model)
-    budget = cfg.agent.get("memory_budget", DEFAULT_MEMORY_BUDGET)
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
     refuse_over([video_cost(int(cfg.eval.video_starts), horizon)], budget, "agent.memory_budget", "bytes")
 
 
