@@ -44,6 +44,14 @@ COMMANDS = [
         "python -m uavrl.reproduce table2 steps=10**12",
         ["-m", "uavrl.reproduce", "table2", "steps=1000000000000"],
     ),
+    (  # refused before the checkpoint is looked for
+        "python -m uavrl.evaluate checkpoint=run eval.num_starts=10**9",
+        ["-m", "uavrl.evaluate", "checkpoint=run", "eval.num_starts=1000000000"],
+    ),
+    (
+        "python -m uavrl.render run eval.video_starts=10**9",
+        ["-m", "uavrl.render", "run", "eval.video_starts=1000000000"],
+    ),
 ]
 
 

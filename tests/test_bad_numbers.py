@@ -54,6 +54,11 @@ CLI_CASES = [
     ("train agent=dqn env.grid=[10,10] env.num_uavs=60", "env.num_uavs=60 is invalid: the evaluation's exact"),
     # the evaluation's bound tables on 1000x1000 are estimated up front (they fit the default budget)
     ("train agent=dqn env.grid=[1000,1000] agent.memory_budget=1000000000", "over agent.memory_budget=1000000000"),
+    ("train eval.video=true eval.video_starts=1000", "eval.video_starts=1000 is invalid: the video's frames"),
+    # evaluate and render refuse before reading the checkpoint (none here): no model needs less than these
+    ("evaluate checkpoint=run eval.num_starts=1000000000", "eval.num_starts=1000000000 is invalid: the evaluation"),
+    ("evaluate checkpoint=run eval.video=true eval.video_starts=100000", "eval.video_starts=100000 is invalid"),
+    ("render checkpoint=run eval.video_starts=1000000000", "eval.video_starts=1000000000 is invalid: the video"),
     ("train train.step_budget=0", "train.step_budget=0 is invalid"),
     ("train agent=oracle agent.memory_budget=0", "agent.memory_budget=0 is invalid"),
     ("reproduce table2 steps=1000000000000", "steps=1000000000000 is invalid: training on 2x2"),

@@ -107,6 +107,32 @@ def test_a_signal_mid_iteration_saves_that_iteration_and_the_resumed_run_ends_ex
         assert torch.equal(a["agent"]["q"], b["agent"]["q"])
 
 
+def test_a_signal_during_the_final_video_keeps_the_training_and_logs_the_evaluation_once(
+    compose_cfg, monkeypatch, tmp_path
+):
+    import uavrl.video
+
+    settings = [*TABULAR, *COMMON, "eval.video=true", "eval.video_starts=1", "eval.horizon=3"]
+    run_dir, drawn = tmp_path / "run", uavrl.video.comparison_frames
+
+    def signalled(*args, **kwargs):  # a Ctrl-C while the video of the trained policy is drawn
+        os.kill(os.getpid(), signal.SIGINT)
+        return drawn(*args, **kwargs)
+
+    monkeypatch.setattr(uavrl.video, "comparison_frames", signalled)
+    with pytest.raises(Interrupted) as err:
+        train(compose_cfg(*settings, f"run_dir={run_dir}"))
+    assert err.value.__notes__ == [
+        f"checkpoint.pt holds iteration 6 of 6; continue the run with: python -m uavrl.train resume={run_dir}"
+    ]
+    monkeypatch.setattr(uavrl.video, "comparison_frames", drawn)
+    resume(compose_cfg, run_dir, *settings)
+    events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
+    events.Reload()
+    steps = [event.step for event in events.Scalars("eval/optimality")]
+    assert len(steps) == len(set(steps)) == 1 and len(events.Images("eval/video")) == 1
+
+
 class SignalledFile:
     """A file that receives SIGINT at its third write: a second signal in the middle of torch's zip writer."""
 

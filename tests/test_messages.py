@@ -31,6 +31,11 @@ CASES = [
     (["train", "resume={odd}"], "error: resume={odd_quoted} does not exist"),
     (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï' does not exist"),
     (["train", "run_dir={run}"], "error: run_dir={run_quoted} already holds a run"),
+    (
+        ["train", "resume={run}", "agent.iterations=100"],
+        "error: Could not override 'agent.iterations': Key 'iterations' not in 'TabularSchema' (resume= continues the "
+        "saved run with its own settings: give resume=<run dir> alone)",
+    ),
     (["train", "-m", "seed=0,1", "sweep_dir={odd}", "env.grid=[0,3]"], "error: env.grid=(0, 3) is invalid"),
     (["train", "-m", "sweep_dir=a,b", "seed=0,1"], "error: sweep_dir=a,b is invalid: give one sweep_dir"),
     (["evaluate", "checkpoint={odd}"], "error: checkpoint={odd_quoted} does not exist"),

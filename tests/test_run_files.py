@@ -189,6 +189,10 @@ CLI_CASES = [
     ("reproduce figures {reproduce} out_dir={repro_zip_cut}", "history_2x2.pt: truncated or damaged"),
     ("reproduce figures {reproduce} out_dir={repro_no_history}", "history_2x2.pt is not a history file of this uavrl"),
     ("reproduce figures {reproduce} out_dir={repro_empty}", "history_2x2.pt: empty file"),
+    # render reads the run as evaluate does, and names it as typed: a bare directory is checkpoint=
+    ("render {payload}", "checkpoint={q_payload}: " + "{q_payload}/checkpoint.pt: it holds objects"),
+    ("render checkpoint={agent_list}", "checkpoint={q_agent_list}: no readable checkpoint"),
+    ("render {benchmarl}", "checkpoint={q_benchmarl} is a BenchMARL run"),
 ]
 
 

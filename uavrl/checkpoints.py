@@ -17,11 +17,10 @@ imported when a checkpoint is read or written.
 from __future__ import annotations
 
 import re
-import shlex
 import warnings
 from pathlib import Path
 
-from uavrl.io import save_torch
+from uavrl.io import quoted, save_torch
 
 CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"
@@ -132,7 +131,7 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
     when none is readable or one holds objects uavrl does not write; their
     messages begin with ``setting=path``.
     """
-    given = f"{setting}={shlex.quote(str(path))}"
+    given = f"{setting}={quoted(path)}"
     files = checkpoint_files(path)
     if not files:
         raise FileNotFoundError(no_checkpoint(path, setting))
@@ -143,7 +142,7 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
             return _read(file), file, notes + skipped
         except ForeignObjects as err:
             raise ForeignObjects(
-                f"{given}: {shlex.quote(str(file))}: {err}: it is not a uavrl file, or it was altered; refused, and "
+                f"{given}: {quoted(file)}: {err}: it is not a uavrl file, or it was altered; refused, and "
                 "nothing in it was run"
             ) from None
         except CheckpointError as err:
@@ -154,7 +153,7 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
 def no_checkpoint(path, setting: str) -> str:
     """Why ``setting=path`` has no checkpoint to read, and what to give instead."""
     path = Path(path)
-    given = f"{setting}={shlex.quote(str(path))}"
+    given = f"{setting}={quoted(path)}"
     if not path.exists():
         return f"{given} does not exist (give a run directory or its {CHECKPOINT})"
     benchmarl = benchmarl_run(path)
@@ -170,7 +169,7 @@ def benchmarl_run(run_dir: Path) -> str | None:
         return None
     metrics = run_dir / "metrics.json"
     results = (
-        f"its final evaluation is in {shlex.quote(str(metrics))}"
+        f"its final evaluation is in {quoted(metrics)}"
         if metrics.exists()
         else "it holds no final evaluation (metrics.json)"
     )
@@ -199,9 +198,9 @@ def run_directory(path, setting: str) -> Path:
     """
     path = Path(path)
     if path.is_file() and path.name != CHECKPOINT:
-        directory = shlex.quote(str(path.parent))
+        directory = quoted(path.parent)
         raise ValueError(
-            f"{setting}={shlex.quote(str(path))} is invalid: give the run directory, {setting}={directory} (it "
+            f"{setting}={quoted(path)} is invalid: give the run directory, {setting}={directory} (it "
             "continues from the newest readable checkpoint there)"
         )
     return path.parent if path.is_file() else path
@@ -214,7 +213,7 @@ def saved_agent(cfg, env_cfg, device, file: Path):
 
     from uavrl.agents import agent_class
 
-    source = shlex.quote(str(file))
+    source = quoted(file)
     try:
         return agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
     except (OmegaConfBaseException, KeyError, TypeError) as err:
@@ -231,7 +230,7 @@ def restore_agent(agent, state: dict, file: Path, name: str) -> None:
     except (AttributeError, IndexError, KeyError, RuntimeError, TypeError, ValueError) as err:
         reason = " ".join(f"{type(err).__name__}: {err}".split())
         raise CheckpointError(
-            f"{shlex.quote(str(file))}: its agent state does not fit a {name} agent of this uavrl ({reason})"
+            f"{quoted(file)}: its agent state does not fit a {name} agent of this uavrl ({reason})"
         ) from None
 
 
@@ -243,9 +242,9 @@ def check_resumable(state: dict, file: Path) -> None:
     if not (torch.is_tensor(rng) and rng.dtype == torch.uint8 and rng.shape == torch.get_rng_state().shape):
         found = "none" if rng is None else f"a {type(rng).__name__}"
         raise CheckpointError(
-            f"{shlex.quote(str(file))} cannot be resumed: it holds no torch random state (torch_rng: {found}), which "
+            f"{quoted(file)} cannot be resumed: it holds no torch random state (torch_rng: {found}), which "
             f"every uavrl checkpoint saves; evaluate it instead: python -m uavrl.evaluate "
-            f"checkpoint={shlex.quote(str(file))}"
+            f"checkpoint={quoted(file)}"
         )
 
 

@@ -233,7 +233,11 @@ def compose_config(config_name: str, overrides: list[str], return_hydra_config: 
         with initialize_config_dir(config_dir=config_dir(), version_base=None):
             return compose(config_name=config_name, overrides=overrides, return_hydra_config=return_hydra_config)
     except (HydraException, OmegaConfBaseException) as err:
-        raise SystemExit(f"error: {wrong_type(err) or hydra_message(err)}") from None
+        message = wrong_type(err) or hydra_message(err)
+        if any(override.split("=", 1)[0] == "resume" for override in overrides):
+            # composed before the saved run is read: another agent's setting fails against the default agent's schema
+            message += " (resume= continues the saved run with its own settings: give resume=<run dir> alone)"
+        raise SystemExit(f"error: {message}") from None
 
 
 def wrong_type(err: Exception) -> str | None:

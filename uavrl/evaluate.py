@@ -9,7 +9,6 @@ the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 from __future__ import annotations
 
 import json
-import shlex
 import sys
 from pathlib import Path
 
@@ -25,14 +24,16 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import save_json
-from uavrl.settings import RUN_SETTINGS, check
+from uavrl.io import quoted, save_json
+from uavrl.settings import RUN_SETTINGS, check, check_evaluation_floor, check_video_cost
 from uavrl.train import eval_settings
 
 
-def check_settings(cfg: DictConfig) -> None:
-    """The settings of an evaluation, refused in one line before anything heavy is imported."""
+def check_settings(cfg: DictConfig, video: bool | None = None) -> None:
+    """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
+    anything heavy is imported."""
     check(cfg, RUN_SETTINGS)
+    check_evaluation_floor(cfg, bool(cfg.eval.video) if video is None else video)
     if not cfg.checkpoint:
         raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
     if not checkpoint_files(cfg.checkpoint):
@@ -50,7 +51,7 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     import torch
 
     state, file, notes = load_checkpoint(path, setting)
-    source = shlex.quote(str(file))
+    source = quoted(file)
     try:
         cfg = saved_config(state["config"], source)
     except ValueError as err:
@@ -78,6 +79,8 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     agent, saved, fallback = load_agent(cfg.checkpoint, device)
     if fallback:
         print(f"warning: {fallback}", file=sys.stderr)
+    if cfg.eval.video:  # refused before the evaluation's work, not after it
+        check_video_cost(cfg, model_config(saved))
     metrics = evaluate_agent(agent, model_config(saved), **eval_settings(cfg, device))
     out_dir = output_dir(cfg.checkpoint)
     save_json(metrics, out_dir / "eval.json")

@@ -14,12 +14,18 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import shlex
 import tempfile
 from pathlib import Path
 
 EVENTS = "events.out.tfevents.*"  # TensorBoard's event files (uavrl.logger)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+
+
+def quoted(path) -> str:
+    """A path as a shell takes it back (spaces, quotes, non-ASCII letters): how every message prints one."""
+    return shlex.quote(str(path))
 
 
 class WriteError(OSError):

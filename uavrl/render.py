@@ -1,6 +1,6 @@
 """Watch a saved run: ``python -m uavrl.render runs/dqn/paper/<stamp>`` (or ``checkpoint=<run dir>``).
 
-Plays the run's greedy policy (:func:`uavrl.load_policy`) from the evaluation's
+Plays the run's greedy policy (the policy :func:`uavrl.load_policy` returns) from the evaluation's
 first ``eval.video_starts`` starts, the same starts the yardstick measures, for
 ``eval.horizon`` steps, beside the oracle from the same starts (one row per
 start: the policy left, the oracle right), and writes ``video.gif`` (and
@@ -11,30 +11,33 @@ checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
 from omegaconf import DictConfig
 
-from uavrl.cli import run_command
-from uavrl.config import RUN_OPTION_SETTINGS
-from uavrl.evaluate import check_settings, output_dir
+from uavrl.cli import hydra_quoted, run_command
+from uavrl.config import RUN_OPTION_SETTINGS, model_config
+from uavrl.evaluate import check_settings, load_agent, output_dir
+from uavrl.settings import check_video_cost
 
 
 def render_checkpoint(cfg: DictConfig) -> list[Path]:
     """The run's video files, written."""
-    check_settings(cfg)
+    check_settings(cfg, video=True)
     import torch
 
-    from uavrl import load_policy
     from uavrl.envs.world import resolve_device
     from uavrl.video import comparison_frames, save_videos, video_settings
 
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
-    policy, env_cfg = load_policy(cfg.checkpoint, device)
-    frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
+    agent, saved, fallback = load_agent(cfg.checkpoint, device)  # named checkpoint=, as the command line has it
+    if fallback:
+        print(f"warning: {fallback}", file=sys.stderr)
+    env_cfg = model_config(saved)
+    check_video_cost(cfg, env_cfg)
+    frames = comparison_frames(agent.policies()[0], env_cfg, **video_settings(cfg, device))
     return save_videos(frames, output_dir(cfg.checkpoint), int(cfg.eval.video_fps))
 
 
@@ -51,11 +54,7 @@ def as_overrides(args: list[str]) -> list[str]:
     def is_path(arg: str) -> bool:
         return not arg.startswith("-") and ("=" not in arg or Path(arg).exists())
 
-    def quoted(arg: str) -> str:
-        # Hydra's quoted values: backslashes are escaped only before a quote (or the closing one)
-        return "'" + re.sub(r"(\\*)('|$)", lambda m: 2 * m[1] + ("\\'" if m[2] else ""), arg) + "'"
-
-    return [f"checkpoint={quoted(arg)}" if is_path(arg) else arg for arg in args]
+    return [f"checkpoint={hydra_quoted(arg)}" if is_path(arg) else arg for arg in args]
 
 
 if __name__ == "__main__":

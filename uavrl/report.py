@@ -34,7 +34,6 @@ import argparse
 import json
 import math
 import re
-import shlex
 import stat
 import sys
 from dataclasses import dataclass, field
@@ -43,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from uavrl.io import save_text
+from uavrl.io import quoted, save_text
 from uavrl.settings import SEED, Rule, interval, optional, shown, whole
 
 # the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
@@ -307,9 +306,7 @@ def find_runs(paths) -> tuple[list[Run], list[tuple[Path, str]]]:
     for given in paths:
         given = Path(given)
         if not given.is_dir():
-            raise FileNotFoundError(
-                f"{shlex.quote(str(given))}: no such directory (give run directories or sweep directories)"
-            )
+            raise FileNotFoundError(f"{quoted(given)}: no such directory (give run directories or sweep directories)")
         for metrics_file in sorted(given.rglob("metrics.json")):
             run_dir = metrics_file.parent
             if not (run_dir / "config.yaml").exists():
@@ -520,12 +517,11 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     out = Path(out)
     runs, skipped = find_runs(paths)
     for run_dir, why in skipped:
-        print(f"warning: skipped {shlex.quote(str(run_dir))}: {why}", file=sys.stderr)
+        print(f"warning: skipped {quoted(run_dir)}: {why}", file=sys.stderr)
     if not runs:
         damaged = f" ({len(skipped)} with damaged files, skipped)" if skipped else ""
         raise FileNotFoundError(
-            f"no run directory (with metrics.json and config.yaml) under {' '.join(shlex.quote(str(p)) for p in paths)}"
-            f"{damaged}"
+            f"no run directory (with metrics.json and config.yaml) under {' '.join(quoted(p) for p in paths)}{damaged}"
         )
     cells = group(runs)
     lines = [

@@ -21,7 +21,6 @@ directory; one that holds another variant is refused unless ``overwrite=true``
 from __future__ import annotations
 
 import json
-import shlex
 import shutil
 import sys
 import time
@@ -32,7 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.cli import run_command
 from uavrl.config import config_dir
 from uavrl.envs.config import make_config
-from uavrl.io import save_json, save_text, save_torch
+from uavrl.io import quoted, save_json, save_text, save_torch
 from uavrl.settings import REPRODUCE_SETTINGS, check, check_reproduce_costs, shown
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
@@ -296,7 +295,7 @@ def read_history(path: Path, size: int) -> dict:
     from uavrl.checkpoints import CheckpointError, ForeignObjects, read_torch
 
     again = f"delete it and run this command again (it then runs the {size}x{size} protocol first)"
-    shown_path = shlex.quote(str(path))
+    shown_path = quoted(path)
     try:
         record = read_torch(path)
     except ForeignObjects as err:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shlex
 import shutil
 import signal
 import socket
@@ -28,18 +27,13 @@ import sys
 import threading
 from pathlib import Path
 
-from uavrl.io import EVENTS, WriteError, make_dirs, orphans, save_text
+from uavrl.io import EVENTS, WriteError, make_dirs, orphans, quoted, save_text
 
 LOCK = ".uavrl.lock"
 HOLDER = ".uavrl.lock.holder"
 # what a training run writes atomically (uavrl.io), whose orphaned temporary files the holder removes
 RUN_FILES = ("checkpoint.pt", "checkpoint.prev.pt", "config.yaml", "metrics.json", HOLDER)
 VALUABLE = ("checkpoint.pt", "checkpoint.prev.pt", "metrics.json")
-
-
-def quoted(path) -> str:
-    """A path as a shell takes it back (spaces, quotes, non-ASCII letters)."""
-    return shlex.quote(str(path))
 
 
 def path_argument(setting: str, path) -> str:

@@ -21,6 +21,7 @@ from typing import Any, Callable
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from uavrl.agents import AGENTS
+from uavrl.envs.config import make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
     MAX_EXACT_UAVS,
@@ -33,6 +34,7 @@ from uavrl.envs.limits import (
 )
 
 _ABSENT = object()
+PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
 
 
 @dataclass(frozen=True)
@@ -308,8 +310,41 @@ def check_run_costs(cfg: DictConfig, model) -> None:
     eval_factors = {"eval.num_starts": starts, "eval.horizon": horizon} | ({"agent.runs": tables} if tables > 1 else {})
     steps.append(Cost(evaluations, eval_factors, "the evaluation"))
     memory.append(evaluation_costs(model, starts, horizon, tables, ("eval.num_starts", "eval.horizon", "agent.runs")))
+    if cfg.eval.get("video", False):
+        memory.append(video_cost(int(cfg.eval.video_starts), horizon))
     refuse_over(memory, memory_budget, "agent.memory_budget", "bytes")
     refuse_over([total_steps(steps)], step_budget, "train.step_budget", "steps")
+
+
+def video_cost(starts: int, horizon: int) -> Cost:
+    """The frames of a video (:mod:`uavrl.video`): every step's panels of the policy and the oracle, their tiles and
+    the stacked frames, each panel ``PANEL_BYTES``."""
+    factors = {"eval.video_starts": starts, "eval.horizon": horizon}
+    return Cost(3 * 2 * starts * (horizon + 1) * PANEL_BYTES, factors, "the video's frames (eval.video)")
+
+
+def check_evaluation_floor(cfg: DictConfig, video: bool) -> None:
+    """Before ``python -m uavrl.evaluate`` or ``uavrl.render`` reads a checkpoint (its model still unknown): a
+    one-line refusal when the evaluation's starts, or the ``video``'s, need more than ``agent.memory_budget`` even
+    for the smallest model (one UAV on one cell, the shortest default horizon): every evaluation builds its starts'
+    worlds.  The model's own estimate follows once the checkpoint is read."""
+    smallest = make_config("paper", grid=(1, 1), num_uavs=1)
+    horizon = cfg.eval.horizon or default_horizon(smallest)
+    starts = int(cfg.eval.num_starts)
+    what = "the evaluation's worlds, even of the smallest model (1 UAV on 1 cell)"
+    costs = [Cost(world_bytes(smallest, starts), {"eval.num_starts": starts}, what)]
+    if video:
+        costs.append(video_cost(int(cfg.eval.video_starts), horizon))
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
+    refuse_over(costs, budget, "agent.memory_budget", "bytes")
+
+
+def check_video_cost(cfg: DictConfig, model) -> None:
+    """A one-line refusal, before any frame is drawn, when the video of ``cfg.eval`` on ``model`` (a run read from
+    its checkpoint) would need more than ``agent.memory_budget``."""
+    horizon = cfg.eval.horizon or default_horizon(model)
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
+    refuse_over([video_cost(int(cfg.eval.video_starts), horizon)], budget, "agent.memory_budget", "bytes")
 
 
 def total_steps(parts: list[Cost]) -> Cost:

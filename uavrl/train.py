@@ -18,7 +18,6 @@ after its checks.
 from __future__ import annotations
 
 import random
-import shlex
 import sys
 import time
 from datetime import datetime
@@ -40,7 +39,7 @@ from uavrl.checkpoints import (
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.io import WriteError, claim_dir, save_json, save_text
+from uavrl.io import WriteError, claim_dir, quoted, save_json, save_text
 from uavrl.rundir import (
     Interrupted,
     Interrupts,
@@ -48,7 +47,6 @@ from uavrl.rundir import (
     hold,
     missing_parents,
     path_argument,
-    quoted,
     resume_command,
     tidy,
 )
@@ -128,7 +126,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
         print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
     check_resumable(checkpoint, file)
     try:
-        saved = saved_config(checkpoint["config"], shlex.quote(str(file)))
+        saved = saved_config(checkpoint["config"], quoted(file))
     except ValueError as err:
         raise CheckpointError(str(err)) from None
     for override in overrides:
@@ -231,14 +229,16 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
     every = int(cfg.train.checkpoint_every)
     eval_kwargs = eval_settings(cfg, device)
 
-    def log_evaluation(metrics: dict) -> None:
+    def video_frames():
+        """The greedy policy beside the oracle, where ``eval.video`` asks (a run saved before has no setting)."""
+        if not cfg.eval.get("video", False):
+            return None
+        return comparison_frames(agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device))
+
+    def log_evaluation(metrics: dict, frames) -> None:
         with interrupts.shielded():
             logger.log(metrics, agent.env_steps)
-        if cfg.eval.get("video", False):  # the greedy policy beside the oracle; a run saved before has no setting
-            frames = comparison_frames(
-                agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device)
-            )
-            with interrupts.shielded():
+            if frames is not None:
                 logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
 
     started = time.perf_counter()
@@ -268,7 +268,7 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
                     trained = clock.read()  # before the evaluation, which the clock leaves out
                     with clock.paused():
                         evaluation = evaluate_agent(agent, env_cfg, **eval_kwargs)
-                    log_evaluation({**evaluation, **trained})
+                    log_evaluation({**evaluation, **trained}, video_frames())
                 if done % every == 0 and done < agent.num_iterations:
                     save_checkpoint(done)
                 with interrupts.shielded():
@@ -284,12 +284,14 @@ def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tu
             trained_rng = torch.get_rng_state()
             try:
                 final = evaluate_agent(agent, env_cfg, **eval_kwargs)
+                frames = video_frames()
             except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
                 if saved != agent.num_iterations:
                     save_checkpoint(agent.num_iterations, torch_rng=trained_rng)
                 raise
-            log_evaluation({**final, **trained})
-            save_checkpoint(agent.num_iterations, final)
+            with interrupts.shielded():  # logged and saved as one: a resumed run neither logs it again nor loses it
+                log_evaluation({**final, **trained}, frames)
+                save_checkpoint(agent.num_iterations, final)
         with interrupts.shielded():
             logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
     except Interrupted as err:
