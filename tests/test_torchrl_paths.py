@@ -418,8 +418,6 @@ def test_policy_over_a_parallel_env_and_a_multi_sync_collector(name, policies):
     td = env.rollout(4, policy, break_when_any_done=False)
     assert td["agents", "action"].shape == (2, 3, 4, env_cfg.num_uavs)
     env.close()
-    if hasattr(policy, "bind_env"):
-        policy.bind_env(None)
     collector = MultiSyncCollector([make, make], policy, frames_per_batch=24, total_frames=48)
     batches = list(collector)
     collector.shutdown()
