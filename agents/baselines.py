@@ -37,6 +37,7 @@ from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
 from uavrl.agents.generators import PolicyGenerator
 from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
+from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
 from uavrl.envs.exact import fixed_layout_tables
 from uavrl.envs.grid import cells_of, grid_neighbours
 from uavrl.envs.optimum import optimum
@@ -69,65 +70,68 @@ class OraclePolicy(TensorDictModuleBase):
     """Drives each world's team to an optimal configuration along a valid, collision-free plan (module doc).
 
     Fixed layouts need only ``cfg``.  With ``layout="random"`` the oracle reads
-    each world's layout from the environment it acts in: give ``env=`` (or
-    call ``bind_env``) before the rollout; a ``SerialEnv`` or ``ParallelEnv``
-    of :class:`~uavrl.envs.UAVSpectrumEnv` works too (its workers' worlds in
-    order).  Leading batch dimensions are planned world by world, as one batch.
-    The bound env stays in its process: a pickled copy carries none.  It acts
-    only in environments of ``cfg``'s grid, number of UAVs and layout
-    (:mod:`uavrl.agents.env_check`).
+    each world's layout from the tensordict it gets: the node positions
+    ``nodes`` that :class:`~uavrl.envs.UAVSpectrumEnv` publishes for random
+    layouts, from which it computes the world's tables as the environment does
+    (:mod:`uavrl.envs.channel`).  So it needs no environment and acts alike in
+    a plain env, a ``SerialEnv``, a ``ParallelEnv`` and a collector's workers,
+    and a pickled copy too.  Leading batch dimensions are planned world by
+    world, as one batch.  It acts only in environments of ``cfg``'s grid,
+    number of UAVs and layout (:mod:`uavrl.agents.env_check`): ``env=`` or
+    ``bind_env`` checks one up front.
     """
 
-    in_keys = ["positions", "tasks"]
     out_keys = [("agents", "action")]
 
     def __init__(self, cfg: ModelConfig, env=None):
         super().__init__()
         self.cfg, self.run_env = cfg, RunEnvironment(cfg)
+        self.in_keys = ["positions", "tasks"] + (["nodes"] if cfg.layout == "random" else [])
         self.bind_env(env)
         self.neighbours = grid_neighbours(cfg.grid).tolist()
-        self._targets: dict[int, tuple] = {}  # world -> (its contributions, optimal cells, optimal tasks)
+        self._targets: dict[int, tuple] = {}  # world -> (its nodes, optimal cells, optimal tasks)
         self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
 
     def bind_env(self, env) -> OraclePolicy:
-        """Act in ``env`` (the evaluation calls this; with ``layout="random"`` the layouts come from it); a one-line
-        ValueError unless it has ``cfg``'s grid, number of UAVs and layout."""
+        """Check that ``env`` (None: nothing to check) has ``cfg``'s grid, number of UAVs and layout, else a one-line
+        ValueError; the evaluation calls this.  The oracle keeps no reference to it."""
         if env is not None:
             self.run_env.check_env(env)
-        # kept out of the nn.Module's registry: an env is no part of the policy's parameters or state
-        self.__dict__["env"] = env
         return self
 
-    def __getstate__(self):
-        state = super().__getstate__()
-        state["env"] = None  # an env (a ParallelEnv's workers) belongs to its process
-        return state
-
-    def _layouts(self) -> tuple[torch.Tensor, torch.Tensor] | None:
-        """Every world's ``(contributions [W, C, 2], direct [W, 2])`` for a random layout, None for a fixed one."""
+    def _nodes(self, td: TensorDictBase) -> torch.Tensor | None:
+        """Every world's ``[W, 4, 3]`` node positions for a random layout, None for a fixed one."""
         if self._fixed is not None:
             return None
-        if self.env is None:
+        nodes = td.get("nodes", None)
+        if nodes is None:
             raise ValueError(
-                "OraclePolicy with layout='random' needs the environment it acts in: OraclePolicy(cfg, env=env)"
+                "OraclePolicy with layout='random' reads each world's layout from the key 'nodes' [..., 4, 3] that "
+                "UAVSpectrumEnv(layout='random') writes: this tensordict has none (keep 'nodes' through transforms)"
             )
-        tables = self.env.layout_tables()
-        if isinstance(tables, list):  # a SerialEnv or ParallelEnv: one pair per worker, in the order of its batch
-            return torch.cat([c for c, _ in tables]), torch.cat([d for _, d in tables])
-        return tables
+        return nodes.reshape(-1, 4, 3)
 
-    def _optimal_sets(self, world: int, layouts) -> tuple[torch.Tensor, torch.Tensor]:
-        if layouts is None:
-            contributions, direct = self._fixed[0][0], self._fixed[1][0]
-        else:
-            contributions, direct = layouts[0][world], layouts[1][world]
-        key = 0 if self._fixed is not None else world
-        cached = self._targets.get(key)
-        if cached is None or not torch.equal(cached[0], contributions):
-            u_star = float(optimum(contributions[None], direct[None], self.cfg)[0][0])
-            cached = (contributions, *optimal_configurations(contributions, direct, self.cfg, u_star))
-            self._targets[key] = cached
+    def _optimal_sets(self, world: int, nodes) -> tuple[torch.Tensor, torch.Tensor]:
+        if nodes is None:
+            cached = self._targets.get(0)
+            if cached is None:
+                contributions, direct = self._fixed[0][0], self._fixed[1][0]
+                cached = self._targets[0] = (None, *self._optimal_configurations(contributions, direct))
+            return cached[1], cached[2]
+        at = nodes[world]
+        cached = self._targets.get(world)
+        if cached is None or not torch.equal(cached[0], at):
+            # the World's own functions on the same float64 nodes (World._set_layout): the same tables, bit for bit
+            xyz = cell_xyz(self.cfg, torch.float64, at.device)
+            contributions = relay_contributions(link_gains(xyz, at[None], self.cfg), self.cfg)[0]
+            direct = direct_terms(at[None], self.cfg)[0]
+            cached = self._targets[world] = (at.clone(), *self._optimal_configurations(contributions, direct))
         return cached[1], cached[2]
+
+    def _optimal_configurations(self, contributions: torch.Tensor, direct: torch.Tensor):
+        """Every optimal configuration ``(cells, tasks)`` of one world's tables ``[C, 2]``, ``[2]``."""
+        u_star = float(optimum(contributions[None], direct[None], self.cfg)[0][0])
+        return optimal_configurations(contributions, direct, self.cfg, u_star)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.run_env.check(td)
@@ -135,14 +139,14 @@ class OraclePolicy(TensorDictModuleBase):
         N = self.cfg.num_uavs
         cells = cells_of(positions, self.cfg.grid[0]).cpu().reshape(-1, N)
         tasks_of = tasks.cpu().reshape(-1, N)
-        layouts = self._layouts()
-        actions = torch.stack([self._plan(w, cells[w], tasks_of[w], layouts) for w in range(len(cells))])
+        nodes = self._nodes(td)
+        actions = torch.stack([self._plan(w, cells[w], tasks_of[w], nodes) for w in range(len(cells))])
         td.set(("agents", "action"), actions.view(tasks.shape).to(positions.device))
         return td
 
-    def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor, layouts) -> torch.Tensor:
+    def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor, nodes) -> torch.Tensor:
         """One valid joint action of one world, ``[N]``."""
-        target_cells, target_tasks = self._optimal_sets(world, layouts)
+        target_cells, target_tasks = self._optimal_sets(world, nodes)
         costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
         _, s, pair = best_assignment(costs)
         width = self.cfg.grid[0]

@@ -86,6 +86,9 @@ class UAVSpectrumEnv(EnvBase):
     ``state_index`` ``[B, 1]`` (when the tabular state fits in int64), and the
     step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches``, each
     ``[B, 1]`` like ``reward`` (so ``CatTensors`` joins them with ``state``).
+    With ``layout="random"`` also ``nodes`` ``[B, 4, 3]``: each world's PT, PR,
+    S, E (x, y, z) in cell units, float64, what its layout tables are computed
+    from (the oracle plans on them; ``state`` holds them scaled, in float32).
     As VMAS's TorchRL wrapper, the env has ``n_agents``, ``agent_names``
     (``agent_0`` ...) and ``group_map`` (``{"agents": agent_names}``).
 
@@ -108,7 +111,7 @@ class UAVSpectrumEnv(EnvBase):
             ``moves``, ``task_switches`` and ``state_index``
             (:data:`~uavrl.envs.world.DIAGNOSTICS`).  ``False`` leaves the keys
             an agent acts and learns from (observation, mask, state,
-            positions, tasks, reward, done): a lighter rollout, for
+            positions, tasks, nodes, reward, done): a lighter rollout, for
             training loops that read nothing else (BenchMARL's task does this).
         agent_rewards: publish the reward as VMAS's wrapper does, under the
             group: ``("agents", "reward")`` ``[B, N, 1]``, every UAV receiving
@@ -224,6 +227,8 @@ class UAVSpectrumEnv(EnvBase):
                 obs[key] = Unbounded((1,), dtype=torch.long, device=self.device)
             if self.world._state_base is not None:
                 obs["state_index"] = Unbounded((1,), dtype=torch.long, device=self.device)
+        if self.cfg.layout == "random":  # not a diagnostic: the oracle plans on each world's layout
+            obs["nodes"] = Unbounded((4, 3), dtype=torch.float64, device=self.device)
 
         self.full_observation_spec_unbatched = obs
         self.full_action_spec_unbatched = Composite(
@@ -262,6 +267,8 @@ class UAVSpectrumEnv(EnvBase):
         for key in DIAGNOSTICS:  # the world's per-world outputs [B], [B, 1] as TorchRL has a per-world reward or done
             if key in out:
                 out[key] = out[key].unsqueeze(-1)
+        if self.cfg.layout == "random":
+            out["nodes"] = self.world.nodes
         if self.agent_rewards and "reward" in out:
             group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
         out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)

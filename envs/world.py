@@ -659,6 +659,11 @@ class World:
         return self._direct.clone().expand(self.num_worlds, -1)
 
     @property
+    def nodes(self) -> torch.Tensor:
+        """``[B, 4, 3]`` float64 (x, y, z) of PT, PR, S, E in cell units: what every layout table is computed from."""
+        return self._nodes.clone().expand(self.num_worlds, -1, -1)
+
+    @property
     def neighbours(self) -> torch.Tensor:
         """``[C, 4]`` target cell of each move, -1 off the grid."""
         return self._neighbours

@@ -688,6 +688,23 @@ def test_check_env_specs(B, grid, N, preset, options):
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=N, preset=preset, max_steps=5, **options)
     check_env_specs(env, seed=0)
     assert ("state_index" in env.observation_spec.keys()) == env.cfg.has_state_index
+    assert ("nodes" in env.observation_spec.keys()) == (env.cfg.layout == "random")
+
+
+@pytest.mark.parametrize("preset,options", [("paper", {}), ("a2g_urban", {"fading": "los_nlos"})])
+def test_random_layouts_publish_the_nodes_every_table_is_computed_from(preset, options):
+    """``nodes`` after a reset and a step, and after an auto-reset's new layouts, give the env's own tables through
+    the channel functions, bit for bit (what the oracle plans on)."""
+    from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
+
+    env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2, preset=preset, max_steps=2, layout="random", **options)
+    td = env.rollout(3, break_when_any_done=False)  # the third step starts from new layouts
+    assert td["next", "nodes"].dtype == torch.float64 and td["next", "nodes"].shape == (3, 3, 4, 3)
+    assert not torch.equal(td["nodes"][:, 0], td["nodes"][:, 2])
+    nodes = env.reset()["nodes"]
+    assert torch.equal(nodes, env.world.nodes)
+    contributions = relay_contributions(link_gains(cell_xyz(env.cfg), nodes, env.cfg), env.cfg)
+    assert torch.equal(contributions, env.cell_contributions) and torch.equal(direct_terms(nodes, env.cfg), env.direct)
 
 
 def test_rollout_shapes_and_transforms():

@@ -363,20 +363,48 @@ def test_policy_over_a_serial_env(name, policies):
     env.close()
 
 
-def test_oracle_over_a_serial_env_reaches_what_it_reaches_alone(policies):
+def random_layout_oracle(policies, max_steps):
+    """The oracle and the model options of a random-layout run, and its actions in one plain env of 4 worlds
+    seeded 4 (auto-resets draw new layouts): what it must do wherever the worlds are."""
     from uavrl.agents.baselines import OraclePolicy
 
-    _, env_cfg = policies["oracle"]
-    cfg = env_cfg.replace(layout="random")
-    alone = UAVSpectrumEnv(batch_size=2, config=cfg.replace(max_steps=12), seed=4)
-    single = alone.rollout(12, OraclePolicy(cfg, env=alone), break_when_any_done=False)
-    worker = functools.partial(UAVSpectrumEnv, batch_size=1, config=cfg.replace(max_steps=12))
-    batched = SerialEnv(2, [functools.partial(worker, seed=4), functools.partial(worker, seed=5)])  # world i: 4 + i
-    oracle = OraclePolicy(cfg)
-    oracle.bind_env(batched)
-    over = batched.rollout(12, oracle, break_when_any_done=False)
-    assert torch.equal(over["next", "positions"][:, 0], single["next", "positions"])
-    batched.close()
+    cfg = policies["oracle"][1].replace(layout="random", max_steps=max_steps)
+    alone = UAVSpectrumEnv(batch_size=4, config=cfg, seed=4)
+    single = alone.rollout(2 * max_steps, OraclePolicy(cfg), break_when_any_done=False)
+    return OraclePolicy(cfg), cfg, single
+
+
+def test_random_layout_oracle_over_a_serial_env_acts_as_in_one_env(policies):
+    """No env bound: the workers' worlds (seeded 4 and 5, then 6 and 7) carry their layouts in 'nodes'; a pickled
+    copy, used or not, acts the same."""
+    oracle, cfg, single = random_layout_oracle(policies, max_steps=6)
+    worker = functools.partial(UAVSpectrumEnv, batch_size=2, config=cfg)
+    unused = pickle.loads(pickle.dumps(random_layout_oracle(policies, max_steps=6)[0]))
+    for policy in (oracle, pickle.loads(pickle.dumps(oracle)), unused):  # the second carries the first's cache
+        batched = SerialEnv(2, [functools.partial(worker, seed=4), functools.partial(worker, seed=6)])
+        over = batched.rollout(12, policy, break_when_any_done=False)
+        batched.close()
+        assert torch.equal(over["agents", "action"].flatten(0, 1), single["agents", "action"])
+
+
+def test_random_layout_oracle_refuses_a_tensordict_without_nodes(policies):
+    oracle, cfg, _ = random_layout_oracle(policies, max_steps=2)
+    td = UAVSpectrumEnv(batch_size=2, config=cfg).reset().exclude("nodes")
+    with pytest.raises(ValueError, match=r"^OraclePolicy with layout='random' reads .* 'nodes' .* has none[^\n]*$"):
+        oracle(td)
+
+
+@pytest.mark.slow
+def test_random_layout_oracle_in_a_multi_sync_collector_acts_as_in_one_env(policies):
+    """Each worker process gets a pickled oracle and no env: the layouts come with the tensordicts."""
+    oracle, cfg, single = random_layout_oracle(policies, max_steps=5)
+    worker = functools.partial(UAVSpectrumEnv, batch_size=2, config=cfg)
+    makers = [functools.partial(worker, seed=4), functools.partial(worker, seed=6)]
+    collector = MultiSyncCollector(makers, oracle, frames_per_batch=40, total_frames=40)
+    (batch,) = list(collector)
+    collector.shutdown()
+    assert batch["agents", "action"].shape == (2, 2, 10, cfg.num_uavs)  # [workers, worlds, steps, UAVs]
+    assert torch.equal(batch["agents", "action"].flatten(0, 1), single["agents", "action"])
 
 
 @pytest.mark.slow
@@ -390,8 +418,6 @@ def test_policy_over_a_parallel_env_and_a_multi_sync_collector(name, policies):
     td = env.rollout(4, policy, break_when_any_done=False)
     assert td["agents", "action"].shape == (2, 3, 4, env_cfg.num_uavs)
     env.close()
-    if hasattr(policy, "bind_env"):
-        policy.bind_env(None)
     collector = MultiSyncCollector([make, make], policy, frames_per_batch=24, total_frames=48)
     batches = list(collector)
     collector.shutdown()
@@ -408,17 +434,10 @@ def test_policy_in_a_collector(name, policies):
 
 
 @pytest.mark.slow
-def test_oracle_reads_random_layouts_from_a_parallel_envs_workers(policies):
-    from uavrl.agents.baselines import OraclePolicy
-
-    cfg = policies["oracle"][1].replace(layout="random", max_steps=8)
+def test_random_layout_oracle_over_a_parallel_env_acts_as_in_one_env(policies):
+    oracle, cfg, single = random_layout_oracle(policies, max_steps=4)
     worker = functools.partial(UAVSpectrumEnv, batch_size=2, config=cfg)
-    makers = [functools.partial(worker, seed=4), functools.partial(worker, seed=6)]  # worlds seeded 4, 5, 6, 7
-    alone = UAVSpectrumEnv(batch_size=4, config=cfg, seed=4)
-    single = alone.rollout(8, OraclePolicy(cfg, env=alone), break_when_any_done=False)
-    env = ParallelEnv(2, makers)
-    oracle = OraclePolicy(cfg)
-    oracle.bind_env(env)
+    env = ParallelEnv(2, [functools.partial(worker, seed=4), functools.partial(worker, seed=6)])  # worlds 4, 5, 6, 7
     over = env.rollout(8, oracle, break_when_any_done=False)
     env.close()
-    assert torch.equal(over["next", "positions"].flatten(0, 1), single["next", "positions"])
+    assert torch.equal(over["agents", "action"].flatten(0, 1), single["agents", "action"])

@@ -15,8 +15,7 @@ def load_policy(run_dir, device="cpu", run: int = 0):
         td = env.rollout(40, policy)
 
     The policy acts only in environments of its run's grid, number of UAVs
-    and layout: ``policy.bind_env(env)`` checks an environment (the oracle
-    with ``layout="random"`` reads the layouts from it, so call it first), and
+    and layout: ``policy.bind_env(env)`` checks an environment up front, and
     every tensordict the policy gets is checked too (a ValueError in one line).
 
     Reading the run executes nothing its files hold (``weights_only`` loads): a

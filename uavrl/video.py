@@ -52,7 +52,7 @@ def rollout_frames(policy, cfg: ModelConfig, starts: int, horizon: int, seed: in
     env = UAVSpectrumEnv(batch_size=starts, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     renderer = WorldRenderer(env.world, label=label)
     start = env.reset()
-    if hasattr(policy, "bind_env"):  # the oracle reads random layouts from the env it acts in
+    if hasattr(policy, "bind_env"):  # a one-line error for a policy of another grid, number of UAVs or layout
         policy.bind_env(env)
     frames = [[renderer.frame(i) for i in range(starts)]]
 
