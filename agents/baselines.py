@@ -95,8 +95,7 @@ class OraclePolicy(TensorDictModuleBase):
     def bind_env(self, env) -> OraclePolicy:
         """Check that ``env`` (None: nothing to check) has ``cfg``'s grid, number of UAVs and layout, else a one-line
         ValueError; the evaluation calls this.  The oracle keeps no reference to it."""
-        if env is not None:
-            self.run_env.check_env(env)
+        self.run_env.check_env(env)
         return self
 
     def _nodes(self, td: TensorDictBase) -> torch.Tensor | None:

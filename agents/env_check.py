@@ -73,7 +73,10 @@ class RunEnvironment:
 
     def check_env(self, env) -> None:
         """A one-line ValueError unless ``env`` (or every worker of a ``SerialEnv``/``ParallelEnv``) has the run's
-        grid, number of UAVs and layout."""
+        grid, number of UAVs and layout; ``None`` (no environment) leaves every tensordict to its own check."""
+        if env is None:
+            self._checked_shape = None
+            return
         if getattr(env, "is_closed", False) and hasattr(env, "start"):  # a batched env not started has no workers
             env.start()
         configs = env.model_config()
