@@ -25,6 +25,7 @@ import uavrl.agents.tabular as tabular
 import uavrl.io
 from uavrl.agents.dqn import DQNAgent
 from uavrl.cli import typed
+from uavrl.io import quoted
 from uavrl.rundir import HOLDER, Interrupted, RunDirectoryInUse
 from uavrl.train import train
 
@@ -269,7 +270,7 @@ def test_a_signalled_process_prints_a_resume_command_that_pastes_and_ends_exactl
     assert notice.startswith(f"{signal.Signals(signum).name}: finishing iteration "), stderr
     assert last.startswith("interrupted: checkpoint.pt holds iteration ") and " of 150; " in last, stderr
     command = last.split("continue the run with: ")[1]
-    assert command == f"python -m uavrl.train \"resume='{run_dir}'\""
+    assert command == f"python -m uavrl.train {typed('resume', run_dir)}"
     assert 2 <= iteration(run_dir) < 150 and temporary_files(run_dir) == []
     argv = shlex.split(command)
     subprocess.run([sys.executable, *argv[1:]], check=True, capture_output=True)
@@ -408,7 +409,7 @@ def test_a_full_disk_during_a_checkpoint_names_the_file_and_keeps_the_checkpoint
     with pytest.raises(OSError) as err:
         train(compose_cfg(*TABULAR, *COMMON, f"run_dir={tmp_path}"))
     assert str(err.value) == (
-        f"could not write {str(tmp_path / 'checkpoint.pt')!r}: No space left on device; the checkpoints already "
+        f"could not write {quoted(tmp_path / 'checkpoint.pt')}: No space left on device; the checkpoints already "
         f"there are unchanged: make room, then continue the run with: python -m uavrl.train resume={tmp_path}"
     )
     assert iteration(tmp_path) == 2 and temporary_files(tmp_path) == []
@@ -435,7 +436,7 @@ def test_a_real_full_disk_names_the_file_and_an_already_full_one_leaves_no_run_d
     )
     assert result.returncode == 1 and result.stderr.count("\n") == 1, result.stderr
     file = small_disk / "run" / "checkpoint.pt"
-    assert result.stderr.startswith(f"error: could not write {str(file)!r}: No space left on device"), result.stderr
+    assert result.stderr.startswith(f"error: could not write {quoted(file)}: No space left on device"), result.stderr
     assert temporary_files(small_disk / "run") == []
     fd = os.open(small_disk / "filler", os.O_WRONLY | os.O_CREAT)
     with contextlib.suppress(OSError):
@@ -449,7 +450,7 @@ def test_a_real_full_disk_names_the_file_and_an_already_full_one_leaves_no_run_d
         cwd=small_disk,
     )
     assert result.returncode == 1 and result.stderr.count("\n") == 1, result.stderr
-    assert result.stderr.startswith("error: could not write 'new/") and "No space left on device" in result.stderr
+    assert result.stderr.startswith("error: could not write new/") and "No space left on device" in result.stderr
     assert not (small_disk / "new").exists()
 
 

@@ -50,7 +50,10 @@ CASES = [
         "error: runs=100000000 is invalid: the team Q tables on 2x2",
     ),
     (["reproduce", "table2", "memory_budget=0"], "error: memory_budget=0 is invalid: it must be positive"),
-    (["reproduce", "table2", "grids=[2]", "out_dir={variant}"], "error: out_dir={variant!r} holds another variant"),
+    (
+        ["reproduce", "table2", "grids=[2]", "out_dir={variant}"],
+        "error: out_dir={variant_quoted} holds another variant",
+    ),
     (["reproduce", "table2", "episodes=ünï"], "error: episodes='ünï' is invalid: it must be a whole number"),
 ]
 
@@ -70,7 +73,7 @@ def paths(tmp_path_factory):
 @pytest.mark.parametrize("argv, expected", CASES, ids=[" ".join(argv) for argv, _ in CASES])
 def test_each_command_reads_paths_as_given_and_says_what_to_type(argv, expected, paths, tmp_path, monkeypatch):
     values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), "odd_quoted": shlex.quote(str(tmp_path / ODD))}
-    values |= paths | {"run_quoted": shlex.quote(paths["run"])}
+    values |= paths | {"run_quoted": shlex.quote(paths["run"]), "variant_quoted": shlex.quote(paths["variant"])}
     command, *args = argv
     module = f"uavrl.{command}"
     args = [arg.format(**values) for arg in args]

@@ -36,7 +36,7 @@ class WriteError(OSError):
         self.verb = verb
 
     def __str__(self) -> str:
-        return f"could not {self.verb} {self.filename!r}: {self.strerror}"
+        return f"could not {self.verb} {quoted(self.filename)}: {self.strerror}"
 
 
 def orphans(path) -> list[Path]:

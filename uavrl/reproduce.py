@@ -109,7 +109,7 @@ def check_settings(cfg: DictConfig) -> None:
         if saved != mine:
             changed = [key for key in PROTOCOL if saved.get(key) != mine[key]]
             differences = ", ".join(f"{key}={shown(saved.get(key))} there, {shown(mine[key])} here" for key in changed)
-            raise FileExistsError(f"out_dir={str(out_dir)!r} holds another variant ({differences}): {REFUSAL}")
+            raise FileExistsError(f"out_dir={quoted(out_dir)} holds another variant ({differences}): {REFUSAL}")
     elif any(any(out_dir.glob(pattern)) for pattern in OUTPUTS):
         raise FileExistsError(f"out_dir={str(out_dir)!r} holds results of unknown settings: {REFUSAL}")
 
