@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import importlib.util
+import runpy
 import subprocess
 import sys
 
@@ -91,6 +93,26 @@ def interrupt_at(monkeypatch):
 
 
 RAY_START_TIMEOUT = "The current node timed out during startup"
+
+
+@pytest.fixture
+def command_exit(monkeypatch):
+    """``run(line, cwd)``: the command ``python -m uavrl.<command> [word] progress=false <overrides>`` run in this
+    process (for speed) from ``cwd``; returns its exit code (the one error line of a refusal).  ``line`` is a string
+    or a list of words; a first argument with no ``=`` that is no flag is the command's word (``reproduce table2``,
+    ``render <run dir>``)."""
+
+    def run(line, cwd) -> object:
+        command, *args = line.split() if isinstance(line, str) else line
+        word = [args.pop(0)] if args and "=" not in args[0] and not args[0].startswith("-") else []
+        module = f"uavrl.{command}"
+        monkeypatch.chdir(cwd)
+        monkeypatch.setattr(sys, "argv", [module, *word, "progress=false", *args])
+        with pytest.raises(SystemExit) as exit:
+            runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
+        return exit.value.code
+
+    return run
 
 
 @pytest.fixture(scope="session")

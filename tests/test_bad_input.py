@@ -2,7 +2,6 @@
 
 import importlib.util
 import os
-import runpy
 import subprocess
 import sys
 
@@ -114,15 +113,10 @@ def cli_argv(line: str) -> list[str]:
 
 
 @pytest.mark.parametrize("line, words", CLI_CASES, ids=[line for line, _ in CLI_CASES])
-def test_command_line_mistakes_are_one_line(line, words, files, tmp_path, monkeypatch, capsys):
+def test_command_line_mistakes_are_one_line(line, words, files, tmp_path, command_exit, capsys):
     """Each command as ``python -m`` runs it (here, for speed): a non-zero exit, one line naming the setting."""
     paths = {key.split(".")[0]: value for key, value in files.items()}
-    module, *args = cli_argv(line.format(tmp=tmp_path, **paths))
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "argv", [module, *args])
-    with pytest.raises(SystemExit) as exit:
-        runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
-    error = exit.value.code  # what the interpreter prints to stderr, with exit status 1
+    error = command_exit(line.format(tmp=tmp_path, **paths), tmp_path)  # what python prints, with exit status 1
     assert isinstance(error, str) and error.startswith("error: ") and "\n" not in error, error
     assert words.format(tmp=tmp_path, **paths) in error, error
     assert capsys.readouterr() == ("", "")

@@ -4,12 +4,9 @@ Physics that would give NaN, infinite or everywhere-zero rates (uavrl/envs/limit
 team steps exceed a budget (uavrl/settings.py, World's memory_budget), from the command line and the Python API.
 """
 
-import importlib.util
 import math
 import random
 import re
-import runpy
-import sys
 import time
 
 import numpy as np
@@ -72,17 +69,10 @@ CLI_CASES = [
 
 
 @pytest.mark.parametrize("line, words", CLI_CASES, ids=[line for line, _ in CLI_CASES])
-def test_command_line_numbers_are_refused_at_once(line, words, tmp_path, monkeypatch, capsys):
-    command, *args = line.split()
-    word = [args.pop(0)] if args and "=" not in args[0] else []
-    module = f"uavrl.{command}"
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "argv", [module, *word, "progress=false", *args])
+def test_command_line_numbers_are_refused_at_once(line, words, tmp_path, command_exit, capsys):
     started = time.perf_counter()
-    with pytest.raises(SystemExit) as exit:
-        runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
+    error = command_exit(line, tmp_path)
     seconds = time.perf_counter() - started
-    error = exit.value.code
     assert isinstance(error, str) and error.startswith("error: ") and "\n" not in error, error
     assert words in error, error
     assert seconds < FAST, f"refused after {seconds:.2f} s"

@@ -1,9 +1,7 @@
 """The channel models (docs/model.md, Channel models) against implementations written here from their sources."""
 
-import importlib.util
 import json
 import math
-import runpy
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -250,16 +248,12 @@ def test_a_power_in_dbm_is_refused_with_the_range_that_passes():
         make_config("a2g_urban", p_s_dbm=bound - 0.1, **weak)
 
 
-def test_a_bad_channel_override_is_one_line_on_the_command_line(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    args = ["agent=oracle", "env=a2g_urban", "env.carrier_ghz=60", "progress=false"]
-    monkeypatch.setattr(sys, "argv", ["uavrl.train", *args])
-    with pytest.raises(SystemExit) as exit:
-        runpy.run_path(importlib.util.find_spec("uavrl.train").origin, run_name="__main__")
-    assert exit.value.code.startswith(
+def test_a_bad_channel_override_is_one_line_on_the_command_line(tmp_path, command_exit):
+    error = command_exit("train agent=oracle env=a2g_urban env.carrier_ghz=60", tmp_path)
+    assert error.startswith(
         "error: env.carrier_ghz=60 is invalid: env.channel='al_hourani' holds for carriers (GHz) in [0.7, 5.8]"
     )
-    assert "\n" not in exit.value.code and list(tmp_path.iterdir()) == []
+    assert "\n" not in error and list(tmp_path.iterdir()) == []
 
 
 def test_the_oracle_solves_a2g_urban_from_the_command_line(tmp_path):

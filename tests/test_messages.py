@@ -1,10 +1,7 @@
 """Paths as the shell passes them (spaces, letters beyond ASCII, quotes), values Hydra's grammar cannot read, and the
 advice of a refusal: each command's messages say what to type, and what they print pastes back."""
 
-import importlib.util
-import runpy
 import shlex
-import sys
 from pathlib import Path
 
 import pytest
@@ -71,18 +68,10 @@ def paths(tmp_path_factory):
 
 
 @pytest.mark.parametrize("argv, expected", CASES, ids=[" ".join(argv) for argv, _ in CASES])
-def test_each_command_reads_paths_as_given_and_says_what_to_type(argv, expected, paths, tmp_path, monkeypatch):
+def test_each_command_reads_paths_as_given_and_says_what_to_type(argv, expected, paths, tmp_path, command_exit):
     values = {"tmp": tmp_path, "odd": str(tmp_path / ODD), "odd_quoted": shlex.quote(str(tmp_path / ODD))}
     values |= paths | {"run_quoted": shlex.quote(paths["run"]), "variant_quoted": shlex.quote(paths["variant"])}
-    command, *args = argv
-    module = f"uavrl.{command}"
-    args = [arg.format(**values) for arg in args]
-    word = [args.pop(0)] if command == "reproduce" else []
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "argv", [module, *word, "progress=false", *args])
-    with pytest.raises(SystemExit) as exit:
-        runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
-    error = exit.value.code
+    error = command_exit([arg.format(**values) for arg in argv], tmp_path)
     assert isinstance(error, str) and "\n" not in error, error
     assert error.startswith(expected.format(**values)), error
     assert "agent.memory_budget" not in error

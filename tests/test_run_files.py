@@ -6,12 +6,10 @@ Each table row is one case: a command line (run as ``python -m`` runs it, in thi
 ``os.system("touch <marker>")`` and assert that no marker appears.
 """
 
-import importlib.util
 import json
 import os
 import pickle
 import random
-import runpy
 import shlex
 import shutil
 import subprocess
@@ -210,14 +208,9 @@ def cli_argv(line: str) -> list[str]:
 
 @pytest.mark.parametrize("line, words", CLI_CASES, ids=[line for line, _ in CLI_CASES])
 def test_run_files_that_are_hostile_damaged_or_foreign_are_refused_in_one_line(
-    line, words, files, tmp_path, monkeypatch, capsys
+    line, words, files, tmp_path, command_exit, capsys
 ):
-    module, *args = cli_argv(fill(line, files))
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "argv", [module, *args])
-    with pytest.raises(SystemExit) as exit:
-        runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
-    error = exit.value.code  # what the interpreter prints to stderr, with exit status 1
+    error = command_exit(fill(line, files), tmp_path)  # what the interpreter prints, with exit status 1
     assert isinstance(error, str) and error.startswith("error: ") and "\n" not in error, error
     assert fill(words, files) in error, error
     assert capsys.readouterr().out == ""
