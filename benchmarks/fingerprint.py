@@ -125,7 +125,7 @@ def world_case(preset: str, options: dict) -> dict[str, str]:
     world = World(cfg, batch_size=WORLDS, seed=7)
     g = torch.Generator().manual_seed(1)
     seen = [world.reset()]
-    for t in range(STEPS):
+    for _ in range(STEPS):
         action = torch.randint(0, 6, (WORLDS, cfg.num_uavs), generator=g)
         step, reward, done = world.step(action)
         seen.append((step, reward, done))
