@@ -68,9 +68,10 @@ from uavrl.envs import (
     joint_action_valid,
     observation_with_nodes,
 )
-from uavrl.envs.channel import log_gap_potential, rates
+from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.rewards import log_gap_reward
 from uavrl.evaluation import episode_metrics
 from uavrl.settings import RUN_SETTINGS, check
 
@@ -565,12 +566,10 @@ class DQNAgent(Agent):
         resolves: greedy policies then wander near U*.  On a log scale of the
         gap to U* each halving of the gap is worth the same, down to the floor.
         """
-        floor = float(self.settings.gap_floor)
-
-        def potential(td):
-            return log_gap_potential(mean_utility(td), u_star.unsqueeze(-1), floor)
-
-        return (potential(batch.get("next")) - potential(batch)).unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
+        change = log_gap_reward(
+            mean_utility(batch.get("next")), mean_utility(batch), u_star.unsqueeze(-1), float(self.settings.gap_floor)
+        )
+        return change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
 
     def _update(self) -> torch.Tensor:
         loss = self.loss(self.buffer.sample())["loss"]

@@ -130,26 +130,3 @@ def rates_from_sums(sums: torch.Tensor, num_relaying: torch.Tensor, num_uavs: in
     if cfg.lease_rule:
         r.select(-1, 1).masked_fill_(num_relaying == 0, 0.0)
     return r
-
-
-def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
-    """Eq. 7: weighted change of both rates.  Works on tensors and on plain floats (numba)."""
-    return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
-
-
-LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
-
-
-def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
-    """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
-    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
-    return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
-
-
-def best_so_far_reward(total, best):
-    """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
-
-    Written with arithmetic only so it serves tensors and numba-compiled scalars alike.
-    """
-    diff = total - best
-    return diff * (1 + 9 * (diff > 0))

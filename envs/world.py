@@ -30,13 +30,10 @@ import torch
 
 from . import streams
 from .channel import (
-    best_so_far_reward,
-    delta_reward,
     direct_terms,
     fixed_layout,
     link_gains,
     link_state_gains,
-    log_gap_potential,
     rates,
     rates_from_sums,
     relay_contributions,
@@ -45,6 +42,7 @@ from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
 from .grid import cells_of, grid_neighbours, joint_action_valid
 from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .optimum import optimum as exact_optimum
+from .rewards import best_so_far_reward, delta_reward, log_gap_reward
 
 _POSITIONS, _TASKS, _FADING, _FADING_DIRECT, _LAYOUT = 1, 2, 3, 4, 16
 SEED_LIMIT = 2**63  # world seeds are int64
@@ -576,7 +574,7 @@ class World:
             reward = delta_reward(r[:, 0], r[:, 1], prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
         elif cfg.reward == "log_gap":  # of the mean-channel utility, as the yardstick measures it
             mean = (r, prev) if cfg.fading == "none" else (self._sum_rates(new_code), self._sum_rates(code))
-            reward = log_gap_potential(mean[0].sum(-1), self._u_star) - log_gap_potential(mean[1].sum(-1), self._u_star)
+            reward = log_gap_reward(mean[0].sum(-1), mean[1].sum(-1), self._u_star)
         else:
             total = r.sum(-1)
             reward = best_so_far_reward(total, self._s.best)

@@ -874,7 +874,7 @@ def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(o
 def test_log_gap_reward_is_the_change_of_the_potential_of_the_mean_channel_utility(options):
     """reward='log_gap': each step's reward is the change of -log(1 - U/U* + floor), U the mean-channel utility of
     the configuration and U* the exact optimum of the world's layout, whatever the fading draws."""
-    from uavrl.envs.channel import log_gap_potential
+    from uavrl.envs.rewards import log_gap_potential
 
     env = UAVSpectrumEnv(batch_size=8, grid=(4, 4), reward="log_gap", seed=1, **options)
     td = env.rollout(10, RandomPolicy(seed=2), break_when_any_done=False)

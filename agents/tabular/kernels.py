@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from uavrl.envs import streams
-from uavrl.envs.channel import best_so_far_reward, delta_reward
+from uavrl.envs.rewards import best_so_far_reward, delta_reward
 
 
 def use_workqueue_threads() -> None:

@@ -7,8 +7,8 @@ import math
 import torch
 
 from uavrl.envs import ModelConfig, streams
-from uavrl.envs.channel import best_so_far_reward, delta_reward
 from uavrl.envs.limits import table_bytes
+from uavrl.envs.rewards import best_so_far_reward, delta_reward
 from uavrl.envs.world import World
 from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT
 

@@ -1,0 +1,47 @@
+"""The team rewards of docs/model.md (``env.reward``, What the agent is rewarded for), each written once.
+
+``delta`` and ``best_so_far`` use arithmetic only, so the environment (torch, batched) and the tabular learner's
+compiled loops (``numba.njit`` of these same functions) compute them from the same source; ``log_gap`` is the DQN's
+objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.
+
+Example:
+    >>> import torch
+    >>> delta_reward(torch.tensor(2.0), torch.tensor(1.0), 1.5, 1.0, 1.0, 1.0)
+    tensor(0.5000)
+    >>> best_so_far_reward(3.0, 2.0), best_so_far_reward(1.0, 2.0)
+    (10.0, -1.0)
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
+    """Eq. 7: weighted change of both rates.  Works on tensors and on plain floats (numba)."""
+    return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
+
+
+LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
+
+
+def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
+    """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
+    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
+    return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
+
+
+def best_so_far_reward(total, best):
+    """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
+
+    Written with arithmetic only so it serves tensors and numba-compiled scalars alike.
+    """
+    diff = total - best
+    return diff * (1 + 9 * (diff > 0))
+
+
+def log_gap_reward(
+    utility: torch.Tensor, prev_utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR
+) -> torch.Tensor:
+    """``reward="log_gap"``: the change of :func:`log_gap_potential` from ``prev_utility`` to ``utility``."""
+    return log_gap_potential(utility, u_star, floor) - log_gap_potential(prev_utility, u_star, floor)
