@@ -7,7 +7,7 @@ keeps the two models comparable, see docs/model.md).  Shadowing is zero-mean in 
 
 Example:
     >>> import torch
-    >>> round(uma_av_los_probability(torch.tensor(200.0), torch.tensor(50.0)).item(), 3)  # TR 36.777's check value
+    >>> round(uma_av_los_probability(torch.tensor(200.0), torch.tensor(50.0)).item(), 3)  # the issue's check value
     0.967
 """
 

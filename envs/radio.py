@@ -34,8 +34,8 @@ AL_HOURANI = {
 ENVIRONMENTS = tuple(AL_HOURANI)
 
 # Where each model holds (docs/model.md, Channel models): the option's range and the reason given when it is left.
-# Al-Hourani's fit covers 700 MHz to 5.8 GHz (its eta are those of 2 GHz); TR 36.777 is an LTE study (below 6 GHz)
-# whose UMa-AV formulas hold for UAV heights 22.5 m < h <= 300 m and horizontal distances d_2D <= 4 km.
+# The carrier ranges are our choices (Al-Hourani's letter uses 2 GHz; TR 36.777 studies LTE bands below 6 GHz);
+# TR 36.777's UMa-AV formulas hold for UAV heights 22.5 m < h <= 300 m and horizontal distances d_2D <= 4 km.
 CARRIER_GHZ = {"al_hourani": (0.7, 5.8), "tr36777_uma": (0.5, 6.0)}
 UMA_AV_HEIGHT_M = (22.5, 300.0)
 UMA_AV_MAX_D2D_M = 4000.0
