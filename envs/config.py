@@ -60,8 +60,8 @@ class ModelConfig:
     ``altitude`` of ``None`` means the paper's ``h = L1`` cells (``altitude_m`` gives it in metres instead).
     ``channel`` picks the mean gain of a link (docs/model.md, Channel models): the power laws ``paper`` and
     ``reference_code`` read ``g0``, ``alpha`` (``None``: the channel's own, 1 and 2 or 2 and 4), powers and noise
-    in W; the physical models ``al_hourani`` and ``tr36777_uma`` read ``carrier_ghz``, ``bandwidth_mhz``,
-    ``noise_figure_db`` and powers in dBm.  ``rate_model``
+    in W; the physical models (``al_hourani``, ``tr36777_uma``, ``tr36777_umi``, ``tr36777_rma``) read
+    ``carrier_ghz``, ``bandwidth_mhz``, ``noise_figure_db`` and powers in dBm.  ``rate_model``
     ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
     ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.
@@ -155,7 +155,7 @@ class ModelConfig:
             g0, alpha = radio.POWER_LAWS[self.channel]
             object.__setattr__(self, "g0", g0 if self.g0 is None else self.g0)
             object.__setattr__(self, "alpha", alpha if self.alpha is None else self.alpha)
-            unread, reads = PHYSICAL_OPTIONS, "the physical channels 'al_hourani' and 'tr36777_uma'"
+            unread, reads = PHYSICAL_OPTIONS, f"the physical channels {', '.join(map(repr, radio.PHYSICAL_CHANNELS))}"
         else:
             unread, reads = POWER_LAW_OPTIONS, "the power-law channels 'paper' and 'reference_code' (powers in W)"
         for name in unread:
@@ -169,7 +169,8 @@ class ModelConfig:
             reason = "the authors' formula multiplies the power law's gains; use channel='paper' or 'reference_code'"
             raise InvalidOption("rate_model", self.rate_model, reason)
         if not self.is_physical and self.fading == "los_nlos":
-            reason = f"channel={self.channel!r} has no line-of-sight state: use 'al_hourani' or 'tr36777_uma'"
+            physical = " or ".join(map(repr, radio.PHYSICAL_CHANNELS))
+            reason = f"channel={self.channel!r} has no line-of-sight state: use {physical}"
             raise InvalidOption("fading", self.fading, reason)
         if self.is_physical and self.direct_links:
             reason = f"channel={self.channel!r} has no model of the ground-to-ground link PT-PR"

@@ -119,11 +119,9 @@ class _Channels:
             _, _, eta_los, eta_nlos = radio.AL_HOURANI[v["environment"]]
             return free + (eta_nlos if pessimistic else eta_los)
         h = v["altitude"] * v["cell_size"]
-        log_d, log_f = math.log10(metres), math.log10(v["carrier_ghz"])
-        los = 28.0 + 22 * log_d + 20 * log_f
-        if h > radio.UMA_AV_ALL_LOS_ABOVE_M:
+        los, nlos = radio.tr36777_losses_db(v["channel"], math.log10(metres), math.log10(h), v["carrier_ghz"], max)
+        if h > radio.TR36777[v["channel"]].all_los_above_m:
             return los
-        nlos = -17.5 + (46 - 7 * math.log10(h)) * log_d + 20 * math.log10(40 * math.pi * v["carrier_ghz"] / 3)
         return max(los, nlos) if pessimistic else min(los, nlos)
 
     def log_power(self, cells: float, node: int = 0) -> float:
@@ -210,20 +208,21 @@ def radio_problem(values: dict) -> tuple[str, str] | None:
     for name, (low, high, what) in ranges.items():
         if not (_is_number(v[name]) and low <= v[name] <= high):
             return name, f"{what} in [{low:g}, {high:g}]"
-    if channel == "tr36777_uma":
-        low, high = radio.UMA_AV_HEIGHT_M
+    if channel in radio.TR36777:
+        scenario = radio.TR36777[channel]
+        low, high = scenario.height_m
         metres = v["altitude"] * v["cell_size"]
         if not low < metres <= high:
             reason = (
-                f"the UAVs fly at {metres:g} m, and TR 36.777's UMa-AV model holds for heights in ({low:g}, "
-                f"{high:g}] m (altitude_m sets the height in metres)"
+                f"the UAVs fly at {metres:g} m, and TR 36.777's {scenario.name} model holds for heights in "
+                f"({low:g}, {high:g}] m (altitude_m sets the height in metres)"
             )
             return ("altitude_m" if v["altitude_m"] is not None else "altitude"), reason
         reach = max_ground_distance_cells(v["layout"], v["grid"], v["altitude"]) * v["cell_size"]
-        if reach > radio.UMA_AV_MAX_D2D_M:
+        if reach > scenario.max_d2d_m:
             reason = (
-                f"a UAV can be {reach:.4g} m from PT or PR along the ground, and TR 36.777's UMa-AV model holds "
-                f"to {radio.UMA_AV_MAX_D2D_M:g} m: use smaller cells or a smaller grid"
+                f"a UAV can be {reach:.4g} m from PT or PR along the ground, and TR 36.777's {scenario.name} model "
+                f"holds to {scenario.max_d2d_m:g} m: use smaller cells or a smaller grid"
             )
             return "cell_size", reason
     return None

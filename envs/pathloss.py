@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from .radio import AL_HOURANI, SPEED_OF_LIGHT, UMA_AV_ALL_LOS_ABOVE_M
+from .radio import AL_HOURANI, SPEED_OF_LIGHT, TR36777, tr36777_los_parameters, tr36777_losses_db
 
 AIR_TO_GROUND = (True, True, False, False)  # per node (PT, PR, S, E): is the UAV's link to it air-to-ground?
 
@@ -45,40 +45,34 @@ def al_hourani_states(
     return p_los, free + eta_los, free + eta_nlos
 
 
-def al_hourani_db(
-    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
-) -> torch.Tensor:
-    """The mean ``PL = FSPL(d) + eta_LoS P_LoS + eta_NLoS (1 - P_LoS)`` in dB (Al-Hourani et al. 2014)."""
-    return _mean(*al_hourani_states(horizontal_m, height_m, distance_m, carrier_ghz, environment))
+def _maximum(x: torch.Tensor, y) -> torch.Tensor:
+    return torch.maximum(x, y) if isinstance(y, torch.Tensor) else x.clamp(min=y)
+
+
+def tr36777_los_probability(channel: str, horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
+    """TR 36.777 Table B-1: 1 within ``d_1`` (and above the scenario's all-LoS height), else ``d_1 / d_2D +
+    exp(-d_2D / p_1) (1 - d_1 / d_2D)``, the scenario's ``p_1`` and ``d_1`` from
+    :func:`.radio.tr36777_los_parameters`."""
+    p1, d1 = tr36777_los_parameters(channel, torch.log10(height_m), _maximum)
+    ratio = d1 / horizontal_m.clamp(min=d1)  # 1 within d_1: the formula then gives 1 too
+    p_los = ratio + torch.exp(-horizontal_m / p1) * (1 - ratio)
+    return torch.where(height_m > TR36777[channel].all_los_above_m, torch.ones_like(p_los), p_los)
 
 
 def uma_av_los_probability(horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
-    """TR 36.777 Table B-1, UMa-AV: 1 within ``d_1`` (and above 100 m), else ``d_1 / d_2D + exp(-d_2D / p_1)
-    (1 - d_1 / d_2D)`` with ``p_1 = 4300 log10(h) - 3800`` and ``d_1 = max(460 log10(h) - 700, 18)`` metres."""
-    log_h = torch.log10(height_m)
-    d1 = (460 * log_h - 700).clamp(min=18.0)
-    p1 = 4300 * log_h - 3800
-    ratio = d1 / horizontal_m.clamp(min=d1)  # 1 within d_1: the formula then gives 1 too
-    p_los = ratio + torch.exp(-horizontal_m / p1) * (1 - ratio)
-    return torch.where(height_m > UMA_AV_ALL_LOS_ABOVE_M, torch.ones_like(p_los), p_los)
+    """TR 36.777 Table B-1, UMa-AV: ``p_1 = 4300 log10(h) - 3800`` and ``d_1 = max(460 log10(h) - 700, 18)`` metres,
+    ``P_LoS = 1`` above 100 m."""
+    return tr36777_los_probability("tr36777_uma", horizontal_m, height_m)
 
 
-def uma_av_states(
-    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
+def tr36777_states(
+    channel: str, horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """TR 36.777 Table B-2, UMa-AV: ``(P_LoS, PL_LoS, PL_NLoS)`` in dB with ``PL_LoS = 28 + 22 log10(d_3D) + 20
-    log10(f_c)`` and ``PL_NLoS = -17.5 + (46 - 7 log10(h)) log10(d_3D) + 20 log10(40 pi f_c / 3)``."""
-    log_d = torch.log10(distance_m)
-    los = 28.0 + 22 * log_d + 20 * math.log10(carrier_ghz)
-    nlos = -17.5 + (46 - 7 * torch.log10(height_m)) * log_d + 20 * math.log10(40 * math.pi * carrier_ghz / 3)
-    return uma_av_los_probability(horizontal_m, height_m), los, nlos
-
-
-def uma_av_db(
-    horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
-) -> torch.Tensor:
-    """The mean ``P_LoS PL_LoS + (1 - P_LoS) PL_NLoS`` in dB of :func:`uma_av_states`."""
-    return _mean(*uma_av_states(horizontal_m, height_m, distance_m, carrier_ghz))
+    """TR 36.777 Tables B-1 and B-2 (``channel`` ``tr36777_uma``, ``tr36777_umi`` or ``tr36777_rma``): ``(P_LoS,
+    PL_LoS, PL_NLoS)`` in dB (:func:`.radio.tr36777_losses_db`)."""
+    log_h = torch.log10(height_m)
+    los, nlos = tr36777_losses_db(channel, torch.log10(distance_m), log_h, carrier_ghz, _maximum)
+    return tr36777_los_probability(channel, horizontal_m, height_m), los, nlos
 
 
 def _mean(p_los: torch.Tensor, los_db: torch.Tensor, nlos_db: torch.Tensor) -> torch.Tensor:
@@ -101,7 +95,7 @@ def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[tor
     if cfg.channel == "al_hourani":
         ground = al_hourani_states(horizontal, height, distance, cfg.carrier_ghz, cfg.environment)
     else:
-        ground = uma_av_states(horizontal, height, distance, cfg.carrier_ghz)
+        ground = tr36777_states(cfg.channel, horizontal, height, distance, cfg.carrier_ghz)
     air = torch.tensor(AIR_TO_GROUND, device=uav_xyz.device)
     free = free_space_db(distance, cfg.carrier_ghz)
     p_los, los, nlos = ground

@@ -13,11 +13,12 @@ Example:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 # "paper" and "reference_code" are one law, g0 d^-alpha, with the parameters of the paper (g0 = 1, alpha = 2) and of
 # the authors' code (2 d^-4); the other two are air-to-ground models in physical units
 POWER_LAWS = {"paper": (1.0, 2.0), "reference_code": (2.0, 4.0)}  # channel: (g0, alpha)
-PHYSICAL_CHANNELS = ("al_hourani", "tr36777_uma")
+PHYSICAL_CHANNELS = ("al_hourani", "tr36777_uma", "tr36777_umi", "tr36777_rma")
 CHANNELS = (*POWER_LAWS, *PHYSICAL_CHANNELS)
 
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
@@ -34,12 +35,31 @@ AL_HOURANI = {
 ENVIRONMENTS = tuple(AL_HOURANI)
 
 # Where each model holds (docs/model.md, Channel models): the option's range and the reason given when it is left.
-# The carrier ranges are our choices (Al-Hourani's letter uses 2 GHz; TR 36.777 studies LTE bands below 6 GHz);
-# TR 36.777's UMa-AV formulas hold for UAV heights 22.5 m < h <= 300 m and horizontal distances d_2D <= 4 km.
-CARRIER_GHZ = {"al_hourani": (0.7, 5.8), "tr36777_uma": (0.5, 6.0)}
-UMA_AV_HEIGHT_M = (22.5, 300.0)
-UMA_AV_MAX_D2D_M = 4000.0
-UMA_AV_ALL_LOS_ABOVE_M = 100.0  # TR 36.777 Table B-1: P_LoS = 1 above 100 m, and Table B-2 has no NLoS loss there
+# The carrier ranges are our choices (Al-Hourani's letter uses 2 GHz; TR 36.777 studies LTE bands below 6 GHz).
+CARRIER_GHZ = {
+    "al_hourani": (0.7, 5.8),
+    "tr36777_uma": (0.5, 6.0),
+    "tr36777_umi": (0.5, 6.0),
+    "tr36777_rma": (0.5, 6.0),
+}
+
+
+@dataclass(frozen=True)
+class AerialScenario:
+    """One scenario of 3GPP TR 36.777 Annex B (Tables B-1, B-2) for aerial UEs: where its formulas hold (the UAV's
+    height ``h`` and the horizontal distance ``d_2D``, metres) and the height above which ``P_LoS = 1``."""
+
+    name: str
+    height_m: tuple[float, float]  # (low, high]: h in it
+    max_d2d_m: float
+    all_los_above_m: float
+
+
+TR36777 = {
+    "tr36777_uma": AerialScenario("UMa-AV", (22.5, 300.0), 4000.0, 100.0),
+    "tr36777_umi": AerialScenario("UMi-AV", (22.5, 300.0), 4000.0, math.inf),
+    "tr36777_rma": AerialScenario("RMa-AV", (10.0, 300.0), 10000.0, 40.0),
+}
 BANDWIDTH_MHZ = (1e-3, 1e4)  # 1 kHz to 10 GHz: what a thermal-noise floor of -174 dBm/Hz is used for
 NOISE_FIGURE_DB = (0.0, 30.0)  # a receiver adds noise: 0 dB is the ideal one
 POWER_DBM = (-100.0, 100.0)  # -100 dBm (0.1 pW) to 100 dBm (10 MW)
@@ -58,3 +78,30 @@ def free_space_db(distance_m: float, carrier_ghz: float) -> float:
     """``FSPL = 20 log10(4 pi f_c d / c)`` in dB of a distance in metres and a carrier in GHz (a float; the tensor
     form is :func:`uavrl.envs.pathloss.free_space_db`)."""
     return 20 * math.log10(4 * math.pi * carrier_ghz * 1e9 * distance_m / SPEED_OF_LIGHT)
+
+
+def tr36777_los_parameters(channel: str, log_h, maximum):
+    """TR 36.777 Table B-1: ``(p_1, d_1)`` in metres of the LoS probability ``d_1 / d_2D + exp(-d_2D / p_1)
+    (1 - d_1 / d_2D)`` beyond ``d_1``, for ``log_h = log10(h / 1 m)``.  Arithmetic and ``maximum(x, floor)`` only, so
+    plain floats and tensors share the formulas."""
+    if channel == "tr36777_uma":
+        return 4300 * log_h - 3800, maximum(460 * log_h - 700, 18.0)
+    if channel == "tr36777_umi":
+        return 233.98 * log_h - 0.95, maximum(294.05 * log_h - 432.94, 18.0)
+    return maximum(15021 * log_h - 16053, 1000.0), maximum(1350.8 * log_h - 1602, 18.0)
+
+
+def tr36777_losses_db(channel: str, log_d, log_h, carrier_ghz: float, maximum):
+    """TR 36.777 Table B-2: ``(PL_LoS, PL_NLoS)`` in dB for ``log_d = log10(d_3D / 1 m)`` and ``log_h``, the carrier in
+    GHz; ``maximum(x, y)`` of floats or tensors (see :func:`tr36777_los_parameters`).  The free-space term is the
+    standard's ``20 log10(40 pi d_3D f_c / 3)`` (c = 3e8 m/s)."""
+    log_f = math.log10(carrier_ghz)
+    free_space = 20 * math.log10(40 * math.pi * carrier_ghz / 3)  # plus 20 log10(d_3D)
+    if channel == "tr36777_uma":
+        los = 28.0 + 22 * log_d + 20 * log_f
+        return los, -17.5 + (46 - 7 * log_h) * log_d + free_space
+    if channel == "tr36777_umi":
+        los = maximum(20 * log_d + free_space, 30.9 + (22.25 - 0.5 * log_h) * log_d + 20 * log_f)
+        return los, maximum(los, 32.4 + (43.2 - 7.6 * log_h) * log_d + 20 * log_f)
+    los = maximum(23.9 - 1.8 * log_h, 20.0) * log_d + free_space
+    return los, maximum(los, -12 + (35 - 5.3 * log_h) * log_d + free_space)

@@ -53,6 +53,33 @@ def uma_av(r, h, f_ghz):
     return p * los + (1 - p) * nlos
 
 
+def tr36777_p_los(r, h, p1, d1, all_los_above):
+    if h > all_los_above:
+        return 1.0
+    return 1.0 if r <= d1 else d1 / r + math.exp(-r / p1) * (1 - d1 / r)
+
+
+def umi_av(r, h, f_ghz):
+    """TR 36.777 Tables B-1 and B-2, UMi-AV, 22.5 m < h <= 300 m (free space as the standard writes it, c = 3e8)."""
+    d = math.hypot(r, h)
+    free = 20 * math.log10(40 * math.pi * d * f_ghz / 3)
+    los = max(free, 30.9 + (22.25 - 0.5 * math.log10(h)) * math.log10(d) + 20 * math.log10(f_ghz))
+    nlos = max(los, 32.4 + (43.2 - 7.6 * math.log10(h)) * math.log10(d) + 20 * math.log10(f_ghz))
+    p1, d1 = 233.98 * math.log10(h) - 0.95, max(294.05 * math.log10(h) - 432.94, 18)
+    p = tr36777_p_los(r, h, p1, d1, math.inf)
+    return p * los + (1 - p) * nlos
+
+
+def rma_av(r, h, f_ghz):
+    """TR 36.777 Tables B-1 and B-2, RMa-AV, 10 m < h <= 300 m: all in line of sight above 40 m."""
+    d = math.hypot(r, h)
+    los = max(23.9 - 1.8 * math.log10(h), 20) * math.log10(d) + 20 * math.log10(40 * math.pi * f_ghz / 3)
+    nlos = max(los, -12 + (35 - 5.3 * math.log10(h)) * math.log10(d) + 20 * math.log10(40 * math.pi * f_ghz / 3))
+    p1, d1 = max(15021 * math.log10(h) - 16053, 1000), max(1350.8 * math.log10(h) - 1602, 18)
+    p = tr36777_p_los(r, h, p1, d1, 40.0)
+    return p * los + (1 - p) * nlos
+
+
 def losses(channel, environment, f_ghz, h):
     """``mean_path_loss_db`` of a UAV at every horizontal distance from a ground node (PT) and an aerial one (S)."""
     cfg = SimpleNamespace(channel=channel, environment=environment, carrier_ghz=f_ghz, cell_size=1.0)
@@ -81,6 +108,21 @@ def test_uma_av_is_tr36777s_formula(f_ghz):
             assert got[i, 0].item() == pytest.approx(uma_av(r, h, f_ghz), abs=1e-9)
             if r > 0:
                 assert got[i, 3].item() == pytest.approx(fspl(r, f_ghz), abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("channel", "formula", "heights"),
+    [("tr36777_umi", umi_av, HEIGHTS), ("tr36777_rma", rma_av, (12.0, 20.0, 35.0, 40.0, 41.0, *HEIGHTS))],
+)
+@pytest.mark.parametrize("f_ghz", [0.5, 2.0, 6.0])
+def test_umi_and_rma_av_are_tr36777s_formulas(channel, formula, heights, f_ghz):
+    for h in heights:
+        got = losses(channel, "urban", f_ghz, h)
+        for i, r in enumerate(HORIZONTAL):
+            assert got[i, 0].item() == pytest.approx(formula(r, h, f_ghz), abs=1e-9)
+            assert got[i, 1].item() == got[i, 0].item()
+            if r > 0:  # UAV-S and UAV-E: air to air, free space
+                assert got[i, 2].item() == pytest.approx(fspl(r, f_ghz), abs=1e-9)
 
 
 def test_uma_av_gives_the_standards_check_value():
@@ -186,6 +228,9 @@ def test_physical_units():
         dict(channel="al_hourani", reward="log_gap", init_tasks="sensing"),
         dict(channel="tr36777_uma", altitude_m=60.0, cell_size=30.0, fading="los_nlos", reward="log_gap"),
         dict(channel="al_hourani", fading="los_nlos", layout="random"),
+        dict(channel="tr36777_umi", altitude_m=60.0, cell_size=30.0, fading="los_nlos"),
+        dict(channel="tr36777_rma", altitude_m=30.0, cell_size=30.0, fading="los_nlos", reward="log_gap"),
+        dict(channel="tr36777_rma", altitude_m=120.0, cell_size=200.0, layout="random"),
     ],
     ids=str,
 )
@@ -222,6 +267,9 @@ def test_each_channel_runs_end_to_end(options):
         (dict(channel="al_hourani", rate_model="reference_code"), "rate_model='reference_code' is invalid"),
         (dict(channel="tr36777_uma", altitude_m=10.0), "altitude_m=10.0 is invalid: the UAVs fly at 10 m"),
         (dict(channel="tr36777_uma", cell_size=1000.0, altitude_m=100.0), "cell_size=1000.0 is invalid: a UAV can"),
+        (dict(channel="tr36777_rma", altitude_m=8.0), "RMa-AV model holds for heights in (10, 300] m"),
+        (dict(channel="tr36777_umi", altitude_m=400.0), "UMi-AV model holds for heights in (22.5, 300] m"),
+        (dict(channel="tr36777_rma", cell_size=3000.0, altitude_m=100.0), "RMa-AV model holds to 10000 m"),
         (dict(altitude=3.0, altitude_m=30.0), "altitude_m=30.0 is invalid: give the height once"),
         (dict(altitude_m=-5.0), "altitude_m=-5.0 is invalid: give a finite positive height in metres"),
         (dict(preset="a2g_urban", cell_size=1e-200), "cell_size=1e-200 is invalid: the channel gain 10^(-PL / 10)"),
