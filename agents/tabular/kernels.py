@@ -4,8 +4,16 @@
 ``_episode_shared`` feeds one table from ``R`` worlds synchronously;
 :func:`_choose_batched` is :func:`_choose` over a batch of worlds in torch, so
 the torch backend of :class:`~uavrl.agents.tabular.TeamQLearner` makes the same
-choices from the same random numbers.  Call :func:`use_workqueue_threads`
-before the first parallel launch.
+choices from the same random numbers.  Both backends reward a step with
+:func:`uavrl.envs.rewards.team_reward` and sum its metrics with
+:func:`uavrl.evaluation.episode_step`, the same Python functions (numba
+compiles them for scalars here).  Call :func:`use_workqueue_threads` before
+the first parallel launch.
+
+numba's cache of these kernels (``cache=True``) is keyed by this file alone: after
+editing a function they compile from another module (those two, their helpers,
+:func:`uavrl.envs.streams._mix32`), delete ``__pycache__/kernels.*.nbi`` and ``.nbc`` beside this file, or the
+kernels run the old version (the tests comparing the two backends then fail).
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import os
 import numba
 import numpy as np
 import torch
+from numba.extending import register_jitable
 
 from uavrl.envs import streams
 from uavrl.envs.rewards import best_so_far_reward, delta_reward, episode_best, team_reward
@@ -24,7 +33,7 @@ from uavrl.evaluation import episode_start, episode_step
 # the reward and the episode metrics are written once, in arithmetic that serves the torch loop's tensors and these
 # loops' scalars: numba compiles that same Python source where a kernel calls them
 for _written_once in (delta_reward, best_so_far_reward, episode_best, team_reward, episode_start, episode_step):
-    numba.extending.register_jitable(_written_once)
+    register_jitable(_written_once)
 
 
 def use_workqueue_threads() -> None:
