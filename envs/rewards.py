@@ -1,7 +1,8 @@
 """The team rewards of docs/model.md (``env.reward``, What the agent is rewarded for), each written once.
 
-``delta`` and ``best_so_far`` use arithmetic only, so the environment (torch, batched) and the tabular learner's
-compiled loops (``numba.njit`` of these same functions) compute them from the same source; ``log_gap`` is the DQN's
+``delta`` and ``best_so_far`` (and :func:`team_reward`, which picks one of them and tracks the episode's best) use
+arithmetic only, so the environment and the tabular learner's torch loop (batched tensors) and its compiled loops
+(numba compiles these same functions for scalars) compute them from the same source; ``log_gap`` is the DQN's
 objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.
 
 Example:
@@ -10,6 +11,8 @@ Example:
     tensor(0.5000)
     >>> best_so_far_reward(3.0, 2.0), best_so_far_reward(1.0, 2.0)
     (10.0, -1.0)
+    >>> team_reward(2.0, 1.0, 1.5, 1.0, 2.5, True, 1.0, 1.0), team_reward(2.0, 1.0, 1.5, 1.0, 2.5, False, 1.0, 1.0)
+    ((5.0, 3.0), (0.5, 2.5))
 """
 
 from __future__ import annotations
@@ -22,15 +25,6 @@ def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
     return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
 
 
-LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
-
-
-def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
-    """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
-    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
-    return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
-
-
 def best_so_far_reward(total, best):
     """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
 
@@ -38,6 +32,34 @@ def best_so_far_reward(total, best):
     """
     diff = total - best
     return diff * (1 + 9 * (diff > 0))
+
+
+def episode_best(total, best):
+    """``max(total, best)``, as a selection: bit for bit the larger one (rates are finite) on tensors and numba
+    scalars alike, where ``best + (total - best)`` could round."""
+    return total * (total > best) + best * (total <= best)
+
+
+def team_reward(r_pu, r_se, prev_r_pu, prev_r_se, best, use_best_so_far, beta1, beta2):
+    """The reward of a step to rates ``(r_pu, r_se)`` from ``(prev_r_pu, prev_r_se)``, and the episode's best
+    ``R_PU + R_SE`` after it (``best``: before it, 0 at the start; kept as it is for ``delta``).
+
+    ``use_best_so_far`` picks :func:`best_so_far_reward` over :func:`delta_reward` (``env.reward``; ``log_gap``
+    is :func:`log_gap_reward`, on tensors only).  Tensors or numba scalars, as those.
+    """
+    if use_best_so_far:
+        total = r_pu + r_se
+        return best_so_far_reward(total, best), episode_best(total, best)
+    return delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2), best
+
+
+LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
+
+
+def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
+    """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
+    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
+    return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
 
 
 def log_gap_reward(

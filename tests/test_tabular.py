@@ -7,7 +7,7 @@ import torch
 
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
 from uavrl.compat import make_collector
-from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs import UAVSpectrumEnv, make_config, streams
 from uavrl.evaluation import EPISODE_METRICS, episode_metrics, evaluate
 
 
@@ -31,6 +31,63 @@ def test_q_update_matches_hand_worked_step():
     assert learner.q[0, 0, 5].item() == 2.0 and learner.q[0, 1, 0].item() == 9.0
 
 
+def reference_episode(learner: TeamQLearner) -> dict[str, torch.Tensor]:
+    """The learner's next episode written the direct way, in plain Python floats over the model's tables: updates
+    its Q tables, episode and configuration as ``run_episode`` does, and returns each step's ``r_pu``, ``r_se``,
+    ``task_switches``, ``moves`` ``[R, T]``.
+
+    Same starts and random numbers as the learner (inputs here, not under test), same arithmetic in the same order:
+    epsilon-greedy over the valid joint actions, ties broken by the uniform; the target's max over the next row as
+    it was before the step's update; with ``shared_table`` every world reads the table, then each visited entry
+    moves towards the mean of its worlds' targets, added in world order.
+    """
+    m, cfg = learner.model, learner.cfg
+    R, T, T2, A = learner.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
+    alpha, gamma, eps = learner.alpha, learner.gamma, learner.epsilon
+    q = learner.q.tolist()
+    rates, row, valid = m.rates.tolist(), m.row.tolist(), m.valid.tolist()
+    next_cells, next_tasks, moves, switches = (x.tolist() for x in (m.next_cells, m.next_tasks, m.moves, m.switches))
+    k = learner._episode_starts().tolist()
+    heads = learner._stream_heads()
+    uniforms = (streams.lane_bits(heads[:, None], torch.arange(T)).double() * streams.UNIFORM_SCALE).tolist()
+    table = [0] * R if learner.shared_table else list(range(R))
+    prev, best = [rates[kw] for kw in k], [0.0] * R
+    steps = {key: [[0.0] * T for _ in range(R)] for key in ("r_pu", "r_se", "task_switches", "moves")}
+    for step in range(T):
+        targets = {}
+        for w in range(R):
+            p, t, q_row = k[w] // T2, k[w] % T2, q[table[w]][row[k[w]]]
+            actions = [a for a in range(A) if valid[p][a]]
+            u = uniforms[w][step]
+            if u < eps:
+                j = actions[int(u / eps * len(actions))]
+            else:
+                ties = [a for a in actions if q_row[a] == max(q_row[b] for b in actions)]
+                j = ties[int((u - eps) / (1 - eps) * len(ties))]
+            k2 = next_cells[p][j] * T2 + next_tasks[t][j]
+            r_pu, r_se = rates[k2]
+            if cfg.reward == "best_so_far":  # 10 (S - M) above the episode's best M, S - M below
+                gain = r_pu + r_se - best[w]
+                reward = 10 * gain if gain > 0 else gain
+                best[w] = max(best[w], r_pu + r_se)
+            else:  # eq. 7
+                reward = cfg.beta1 * (r_pu - prev[w][0]) + cfg.beta2 * (r_se - prev[w][1])
+            next_row, next_actions = q[table[w]][row[k2]], [a for a in range(A) if valid[k2 // T2][a]]
+            target = reward + gamma * max(next_row[a] for a in next_actions)
+            targets.setdefault((table[w], row[k[w]], j), []).append(target)
+            for key, value in zip(steps, (r_pu, r_se, switches[t][j], moves[p][j]), strict=True):
+                steps[key][w][step] = float(value)
+            prev[w], k[w] = (r_pu, r_se), k2
+        for (n, s, j), visits in targets.items():
+            total = 0.0
+            for target in visits:
+                total += target
+            q[n][s][j] = (1 - alpha) * q[n][s][j] + alpha * (total / len(visits))
+    learner.q.copy_(torch.tensor(q, dtype=torch.float64))
+    learner.episode, learner._configuration = learner.episode + 1, torch.tensor(k)
+    return {key: torch.tensor(v, dtype=torch.float64) for key, v in steps.items()}
+
+
 @pytest.mark.parametrize("shared", [False, True])
 @pytest.mark.parametrize(
     "options",
@@ -41,37 +98,33 @@ def test_q_update_matches_hand_worked_step():
         dict(preset="paper", reset_positions="keep", grid=(2, 3), num_uavs=3),
     ],
 )
-def test_numba_and_torch_loops_give_identical_tables(shared, options):
+def test_both_loops_learn_the_reference_episodes_bit_for_bit(shared, options):
+    """After every episode, both backends' Q tables are those of the learner written the direct way, and their
+    episode metrics are the steps' sums added in step order (bit for bit) and what episode_metrics, the DQN's and
+    the evaluation's form, makes of the steps."""
     options = {"grid": (3, 3), "num_uavs": 2, **options}
     cfg = make_config(options.pop("preset"), max_steps=150, **options)
-    fast = TeamQLearner(cfg, runs=3, seed=4, shared_table=shared, backend="numba")
-    plain = TeamQLearner(cfg, runs=3, seed=4, shared_table=shared, backend="torch")
-    for episode in range(3):
-        a, b = fast.run_episode(record_steps=episode == 1), plain.run_episode(record_steps=episode == 1)
-        assert a.keys() == b.keys()
-        for key in EPISODE_METRICS:
-            assert torch.equal(a[key], b[key]), key
-        for key in a.get("steps", {}):
-            assert torch.equal(a["steps"][key], b["steps"][key]), key
-    assert torch.equal(fast.q, plain.q)
-    assert fast.q.abs().sum() > 0
-
-
-@pytest.mark.parametrize("backend", ["numba", "torch"])
-def test_episode_metrics_are_those_of_the_shared_definition(backend):
-    """The learner sums its metrics while it steps; they are what uavrl.evaluation.episode_metrics makes of the
-    episode's steps (the sums up to rounding: added in step order there, pairwise here)."""
-    cfg = make_config("paper", grid=(3, 3), num_uavs=2, max_steps=40)
-    learner = TeamQLearner(cfg, runs=4, seed=1, backend=backend)
+    learners = [TeamQLearner(cfg, runs=3, seed=4, shared_table=shared, backend=b) for b in ("numba", "torch")]
+    reference = TeamQLearner(cfg, runs=3, seed=4, shared_table=shared)
+    u_star = torch.full((3,), reference.model.u_star, dtype=torch.float64)
     for _ in range(3):
-        out = learner.run_episode(record_steps=True)
-        u_star = torch.full((4,), learner.model.u_star, dtype=torch.float64)
-        steps = out["steps"]
+        steps = reference_episode(reference)
         expected = episode_metrics(steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], u_star)
-        assert list(expected) == list(EPISODE_METRICS)
-        for key, value in expected.items():
-            torch.testing.assert_close(out[key], value, rtol=1e-12, atol=0)
-        assert (out["steps_to_90"] < 40).any() and torch.equal(out["moves"], out["moves"].round())
+        for learner in learners:
+            metrics = learner.run_episode()
+            assert torch.equal(learner.q, reference.q), learner.backend
+            assert list(metrics) == list(expected) == list(EPISODE_METRICS)
+            for key in EPISODE_METRICS:
+                torch.testing.assert_close(metrics[key], expected[key], rtol=1e-12, atol=0)
+            for key in ("task_switches", "moves", "steps_to_90"):
+                assert torch.equal(metrics[key], expected[key]), key
+            sums = {"sum_r_pu": steps["r_pu"], "sum_r_se": steps["r_se"], "sum_utility": steps["r_pu"] + steps["r_se"]}
+            for key, values in sums.items():
+                in_order = values[:, 0].clone()
+                for t in range(1, cfg.max_steps):
+                    in_order += values[:, t]
+                assert torch.equal(metrics[key], in_order), key
+    assert reference.q.abs().sum() > 0 and (expected["steps_to_90"] < cfg.max_steps).any()
 
 
 def test_same_seed_same_tables_and_different_seed_differs():

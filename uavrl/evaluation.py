@@ -49,7 +49,7 @@ EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layout
 DEFAULT_GAMMA = 0.9
 NINETY_PERCENT = 0.9
 # the per-episode metrics of every agent's training (docs/model.md, "What the numbers mean"; train/<name>), in the
-# order of episode_metrics
+# order of episode_metrics and of the running metrics of episode_start / episode_step
 EPISODE_METRICS = ("sum_r_pu", "sum_r_se", "sum_utility", "task_switches", "moves", "steps_to_90")
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
@@ -101,6 +101,35 @@ def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> d
         "moves": moves.double().sum(-1),
         "steps_to_90": first.double(),
     }
+
+
+def episode_start(zero, num_steps):
+    """The running metrics of an episode of ``num_steps`` steps before its first step: a tuple in the order of
+    :data:`EPISODE_METRICS`, each ``zero`` (``0.0``, or a tensor of zeros ``[W]`` for ``W`` episodes) plus its start
+    value.  ``steps_to_90`` starts at ``num_steps``, what it stays at if 90% of U* is never reached."""
+    return zero, zero, zero, zero, zero, zero + num_steps
+
+
+def episode_step(metrics, step, r_pu, r_se, task_switches, moves, u90):
+    """The running metrics ``metrics`` (:func:`episode_start`) after step number ``step`` (from 1) of the episode,
+    to rates ``(r_pu, r_se)`` with ``task_switches`` and ``moves``; ``u90`` is 90% of U*.
+
+    The metrics of :func:`episode_metrics`, one step at a time: the sums add the steps in order; ``steps_to_90``
+    becomes the first step whose utility reaches ``u90``.  Arithmetic only, so it serves the tabular learner's
+    torch loop (tensors ``[W]``) and, compiled by numba, its scalar loops: both add the same numbers in the same
+    order, bit for bit.
+    """
+    sum_r_pu, sum_r_se, sum_utility, sum_switches, sum_moves, steps_to_90 = metrics
+    utility = r_pu + r_se
+    first = (utility >= u90) * (step < steps_to_90)
+    return (
+        sum_r_pu + r_pu,
+        sum_r_se + r_se,
+        sum_utility + utility,
+        sum_switches + task_switches,
+        sum_moves + moves,
+        steps_to_90 + (step - steps_to_90) * first,
+    )
 
 
 @functools.lru_cache(maxsize=4)

@@ -37,8 +37,8 @@ Example:
     >>> from uavrl.envs import make_config
     >>> learner = TeamQLearner(make_config("paper", grid=(3, 3), max_steps=50), runs=2, seed=0)
     >>> metrics = learner.run_episode()
-    >>> learner.q.shape, metrics["sum_utility"].shape, learner.run_episode(record_steps=True)["steps"]["r_pu"].shape
-    (torch.Size([2, 81, 36]), torch.Size([2]), torch.Size([2, 50]))
+    >>> learner.q.shape, metrics["sum_utility"].shape, bool((metrics["steps_to_90"] <= 50).all())
+    (torch.Size([2, 81, 36]), torch.Size([2]), True)
 """
 
 from uavrl.envs.limits import table_bytes

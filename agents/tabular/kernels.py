@@ -4,8 +4,16 @@
 ``_episode_shared`` feeds one table from ``R`` worlds synchronously;
 :func:`_choose_batched` is :func:`_choose` over a batch of worlds in torch, so
 the torch backend of :class:`~uavrl.agents.tabular.TeamQLearner` makes the same
-choices from the same random numbers.  Call :func:`use_workqueue_threads`
-before the first parallel launch.
+choices from the same random numbers.  Both backends reward a step with
+:func:`uavrl.envs.rewards.team_reward` and sum its metrics with
+:func:`uavrl.evaluation.episode_step`, the same Python functions (numba
+compiles them for scalars here).  Call :func:`use_workqueue_threads` before
+the first parallel launch.
+
+numba's cache of these kernels (``cache=True``) is keyed by this file alone: after
+editing a function they compile from another module (those two, their helpers,
+:func:`uavrl.envs.streams._mix32`), delete ``__pycache__/kernels.*.nbi`` and ``.nbc`` beside this file, or the
+kernels run the old version (the tests comparing the two backends then fail).
 """
 
 from __future__ import annotations
@@ -16,9 +24,16 @@ import os
 import numba
 import numpy as np
 import torch
+from numba.extending import register_jitable
 
 from uavrl.envs import streams
-from uavrl.envs.rewards import best_so_far_reward, delta_reward
+from uavrl.envs.rewards import best_so_far_reward, delta_reward, episode_best, team_reward
+from uavrl.evaluation import episode_start, episode_step
+
+# the reward and the episode metrics are written once, in arithmetic that serves the torch loop's tensors and these
+# loops' scalars: numba compiles that same Python source where a kernel calls them
+for _written_once in (delta_reward, best_so_far_reward, episode_best, team_reward, episode_start, episode_step):
+    register_jitable(_written_once)
 
 
 def use_workqueue_threads() -> None:
@@ -34,8 +49,6 @@ def use_workqueue_threads() -> None:
         numba.config.THREADING_LAYER = "workqueue"
 
 
-_best_so_far = numba.njit(best_so_far_reward)
-_delta = numba.njit(delta_reward)
 _mix32 = numba.njit(streams._mix32)  # the random streams' mixer, compiled for ints: bit for bit the torch one
 
 
@@ -93,27 +106,20 @@ def _log2(power_of_two):
 
 
 @numba.njit(cache=True, inline="always")
-def _record(out, r, first, r_pu, r_se, moves, switches, u90):
-    """Add one step to run ``r``'s episode metrics ``out[r]`` (the columns of :data:`EPISODE_METRICS`, in that
-    order); ``first`` is the step number (from 1) of this step.  Sums in step order, as the torch loop adds them."""
-    utility = r_pu + r_se
-    out[r, 0] += r_pu
-    out[r, 1] += r_se
-    out[r, 2] += utility
-    out[r, 3] += switches
-    out[r, 4] += moves
-    if out[r, 5] < 0 and utility >= u90:
-        out[r, 5] = first
+def _store(out, r, metrics):
+    """Run ``r``'s episode metrics (:func:`~uavrl.evaluation.episode_step`) to ``out[r]``, the columns in their
+    order (:data:`~uavrl.evaluation.EPISODE_METRICS`)."""
+    for column in range(len(metrics)):
+        out[r, column] = metrics[column]
 
 
 @numba.njit(cache=True)
-def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
+def _run_episode(q, r, k, heads, T, model, learning, out):
     """Run ``r``'s episode of ``T`` steps on table ``q[r]`` from configuration ``k``; returns the last configuration.
 
     Step ``t`` draws lane ``t`` of the random stream with head ``heads[r]``
-    (:func:`uavrl.envs.streams.stream_heads`).  The episode's metrics go to
-    ``out[r]`` (:func:`_record`); when ``steps_out`` has the episode's length,
-    each step's (R_PU, R_SE, moves, switches) also goes to ``steps_out[r, t]``.
+    (:func:`uavrl.envs.streams.stream_heads`).  The episode's metrics
+    (:func:`~uavrl.evaluation.episode_step`) go to ``out[r]``.
 
     ``model`` holds the tables of :attr:`TabularModel.kernel_tables`, ``learning`` the constants
     ``(alpha, gamma, epsilon, beta1, beta2, use_best_so_far, 0.9 U*)``.  The scan of the next state's row that
@@ -123,9 +129,10 @@ def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
     """
     rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
     alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
-    T2, record_steps, head = next_tasks.shape[0], steps_out.shape[1] > 0, heads[r]
+    T2, head = next_tasks.shape[0], heads[r]
     shift, task_mask = _log2(T2), T2 - 1
     prev_pu, prev_se, best = rates[k, 0], rates[k, 1], 0.0
+    metrics = episode_start(0.0, T)
     p = k >> shift
     v_best, ties, best_j = _scan(q, r, row_t[k], valid, p, n_valid[p])
     for step in range(T):
@@ -134,43 +141,38 @@ def _run_episode(q, r, k, heads, T, model, learning, out, steps_out):
         j = _choose(q, r, s, valid, p, n_valid[p], u, epsilon, v_best, ties, best_j)
         k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
         r_pu, r_se = rates[k2, 0], rates[k2, 1]
-        if use_best:
-            reward = _best_so_far(r_pu + r_se, best)
-            best = max(best, r_pu + r_se)
-        else:
-            reward = _delta(r_pu, r_se, prev_pu, prev_se, beta1, beta2)
+        reward, best = team_reward(r_pu, r_se, prev_pu, prev_se, best, use_best, beta1, beta2)
         prev_pu, prev_se = r_pu, r_se
         s2, p2 = row_t[k2], k2 >> shift
         v_best, ties, best_j = _scan(q, r, s2, valid, p2, n_valid[p2])
         q[r, s, j] = (1 - alpha) * q[r, s, j] + alpha * (reward + gamma * v_best)
         if s2 == s:
             v_best, ties, best_j = _scan(q, r, s2, valid, p2, n_valid[p2])
-        _record(out, r, step + 1, r_pu, r_se, moves_t[p, j], switches_t[t, j], u90)
-        if record_steps:
-            steps_out[r, step, 0], steps_out[r, step, 1] = r_pu, r_se
-            steps_out[r, step, 2], steps_out[r, step, 3] = moves_t[p, j], switches_t[t, j]
+        metrics = episode_step(metrics, step + 1, r_pu, r_se, switches_t[t, j], moves_t[p, j], u90)
         k = k2
+    _store(out, r, metrics)
     return k
 
 
 @numba.njit(cache=True, parallel=True)
-def _episode_per_run(q, k0, heads, T, model, learning, out, steps_out):
+def _episode_per_run(q, k0, heads, T, model, learning, out):
     """One episode of ``R`` independent runs in parallel, run ``r`` on table ``q[r]`` (:func:`_run_episode`)."""
     for r in numba.prange(len(heads)):
-        k0[r] = _run_episode(q, r, k0[r], heads, T, model, learning, out, steps_out)
+        k0[r] = _run_episode(q, r, k0[r], heads, T, model, learning, out)
 
 
 @numba.njit(cache=True)
-def _episode_shared(q, k0, heads, T, model, learning, out, steps_out):
+def _episode_shared(q, k0, heads, T, model, learning, out):
     """One episode of ``R`` worlds feeding the single table ``q[0]`` synchronously (see module doc); arguments as
     :func:`_run_episode`'s."""
     rates, row_t, valid, n_valid, next_cells, next_tasks, moves_t, switches_t = model
     alpha, gamma, epsilon, beta1, beta2, use_best, u90 = learning
-    R, T2, record_steps = len(heads), next_tasks.shape[0], steps_out.shape[1] > 0
+    R, T2 = len(heads), next_tasks.shape[0]
     shift, task_mask = _log2(T2), T2 - 1
     A = q.shape[2]
     prev = np.empty((R, 2))
     best = np.zeros(R)
+    metrics = [episode_start(0.0, T)] * R
     s_w = np.empty(R, np.int64)
     j_w = np.empty(R, np.int64)
     target_w = np.empty(R)
@@ -187,19 +189,12 @@ def _episode_shared(q, k0, heads, T, model, learning, out, steps_out):
             j = _choose(q, 0, s, valid, p, n_valid[p], u, epsilon, v_best, ties, best_j)
             k2 = (next_cells[p, j] << shift) + next_tasks[t, j]
             r_pu, r_se = rates[k2, 0], rates[k2, 1]
-            if use_best:
-                reward = _best_so_far(r_pu + r_se, best[w])
-                best[w] = max(best[w], r_pu + r_se)
-            else:
-                reward = _delta(r_pu, r_se, prev[w, 0], prev[w, 1], beta1, beta2)
+            reward, best[w] = team_reward(r_pu, r_se, prev[w, 0], prev[w, 1], best[w], use_best, beta1, beta2)
             prev[w, 0], prev[w, 1] = r_pu, r_se
             s_w[w], j_w[w], k0[w] = s, j, k2
             p2 = k2 >> shift
             target_w[w] = reward + gamma * _scan(q, 0, row_t[k2], valid, p2, n_valid[p2])[0]
-            _record(out, w, step + 1, r_pu, r_se, moves_t[p, j], switches_t[t, j], u90)
-            if record_steps:
-                steps_out[w, step, 0], steps_out[w, step, 1] = r_pu, r_se
-                steps_out[w, step, 2], steps_out[w, step, 3] = moves_t[p, j], switches_t[t, j]
+            metrics[w] = episode_step(metrics[w], step + 1, r_pu, r_se, switches_t[t, j], moves_t[p, j], u90)
         for w in range(R):
             f = s_w[w] * A + j_w[w]
             total[f] += target_w[w]
@@ -210,6 +205,8 @@ def _episode_shared(q, k0, heads, T, model, learning, out, steps_out):
                 q[0, s_w[w], j_w[w]] = (1 - alpha) * q[0, s_w[w], j_w[w]] + alpha * (total[f] / count[f])
                 total[f] = 0.0
                 count[f] = 0
+    for w in range(R):
+        _store(out, w, metrics[w])
 
 
 # ----------------------------------------------------------------------------- the same choice in torch

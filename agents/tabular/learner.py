@@ -8,9 +8,9 @@ import torch
 
 from uavrl.envs import ModelConfig, streams
 from uavrl.envs.limits import table_bytes
-from uavrl.envs.rewards import best_so_far_reward, delta_reward
+from uavrl.envs.rewards import team_reward
 from uavrl.envs.world import World
-from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT
+from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
 from .tables import DEFAULT_MEMORY_BUDGET, TabularModel
@@ -107,31 +107,22 @@ class TeamQLearner:
         episode = torch.full((self.runs,), self.episode, dtype=torch.long, device=self.device)
         return streams.stream_heads(self._run_keys, episode, _LEARNER_STREAM)
 
-    def run_episode(self, record_steps: bool = False) -> dict[str, torch.Tensor]:
+    def run_episode(self) -> dict[str, torch.Tensor]:
         """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
-        :data:`~uavrl.evaluation.EPISODE_METRICS`, as :func:`~uavrl.evaluation.episode_metrics` defines them), and
-        with ``record_steps`` also ``"steps"``: each step's ``r_pu``, ``r_se``, ``moves``, ``task_switches``
-        ``[R, T]``."""
+        :data:`~uavrl.evaluation.EPISODE_METRICS`, summed step by step by :func:`~uavrl.evaluation.episode_step`)."""
         k0 = self._episode_starts()
         heads = self._stream_heads()
-        metrics = torch.zeros(self.runs, len(EPISODE_METRICS), dtype=torch.float64, device=self.device)
-        metrics[:, -1] = -1  # steps to 90% of U*: not reached yet
-        steps = torch.empty(self.runs, self.cfg.max_steps if record_steps else 0, 4, dtype=torch.float64)
-        steps = steps.to(self.device)
-        (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, heads, metrics, steps)
-        metrics[:, -1].masked_fill_(metrics[:, -1] < 0, self.cfg.max_steps)
+        metrics = (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, heads)
         self.episode += 1
-        out = dict(zip(EPISODE_METRICS, metrics.unbind(-1), strict=True))
-        if record_steps:
-            out["steps"] = dict(zip(("r_pu", "r_se", "moves", "task_switches"), steps.unbind(-1), strict=True))
-        return out
+        return dict(zip(EPISODE_METRICS, metrics, strict=True))
 
     def _learning_constants(self) -> tuple:
         cfg, u90 = self.cfg, NINETY_PERCENT * self.model.u_star
         return (self.alpha, self.gamma, self.epsilon, cfg.beta1, cfg.beta2, cfg.reward == "best_so_far", u90)
 
-    def _episode_numba(self, k0, heads, metrics, steps):
+    def _episode_numba(self, k0, heads) -> tuple[torch.Tensor, ...]:
         k = k0.numpy().copy()
+        metrics = torch.empty(self.runs, len(EPISODE_METRICS), dtype=torch.float64)
         kernel = _episode_shared if self.shared_table else _episode_per_run
         use_workqueue_threads()
         kernel(
@@ -142,11 +133,11 @@ class TeamQLearner:
             self.model.kernel_tables,
             self._learning_constants(),
             metrics.numpy(),
-            steps.numpy(),
         )
         self._configuration = torch.from_numpy(k)
+        return metrics.unbind(-1)
 
-    def _episode_torch(self, k0, heads, metrics, steps):
+    def _episode_torch(self, k0, heads) -> tuple[torch.Tensor, ...]:
         m, cfg, q = self.model, self.cfg, self.q
         R, T, T2, A = self.runs, cfg.max_steps, m.num_task_codes, cfg.num_joint_actions
         tables = (
@@ -159,6 +150,7 @@ class TeamQLearner:
         u = streams.lane_bits(heads.unsqueeze(-1), lanes).double() * streams.UNIFORM_SCALE  # the kernel's uniforms
         prev = m.rates[k]
         best = torch.zeros(R, dtype=torch.float64, device=self.device)
+        metrics = episode_start(torch.zeros_like(best), T)
         u90 = self._learning_constants()[-1]
         for step in range(T):
             p, t = k // T2, k % T2
@@ -167,11 +159,9 @@ class TeamQLearner:
             p2, t2 = m.next_cells[p, j].long(), m.next_tasks[t, j].long()
             k2 = p2 * T2 + t2
             r_pu, r_se = m.rates[k2].unbind(-1)
-            if cfg.reward == "best_so_far":
-                reward = best_so_far_reward(r_pu + r_se, best)
-                best = torch.maximum(best, r_pu + r_se)
-            else:
-                reward = delta_reward(r_pu, r_se, prev[:, 0], prev[:, 1], cfg.beta1, cfg.beta2)
+            reward, best = team_reward(
+                r_pu, r_se, prev[:, 0], prev[:, 1], best, cfg.reward == "best_so_far", cfg.beta1, cfg.beta2
+            )
             prev = m.rates[k2]
             next_q = q[tables, m.row[k2]].masked_fill(~m.valid[p2], -math.inf).amax(-1)
             target = reward + self.gamma * next_q
@@ -185,19 +175,12 @@ class TeamQLearner:
                 q0[flat] = (1 - self.alpha) * q0[flat] + self.alpha * (total[flat] / count[flat])
             else:
                 q[tables, s, j] = (1 - self.alpha) * q[tables, s, j] + self.alpha * target
-            moves, switches = m.moves[p, j].double(), m.switches[t, j].double()
-            # the kernel's _record, in the same order: the sums come out bit for bit the same
-            utility = r_pu + r_se
-            metrics[:, 0] += r_pu
-            metrics[:, 1] += r_se
-            metrics[:, 2] += utility
-            metrics[:, 3] += switches
-            metrics[:, 4] += moves
-            metrics[:, 5].masked_fill_((metrics[:, 5] < 0) & (utility >= u90), step + 1)
-            if steps.shape[1]:
-                steps[:, step] = torch.stack([r_pu, r_se, moves, switches], -1)
+            metrics = episode_step(
+                metrics, step + 1, r_pu, r_se, m.switches[t, j].double(), m.moves[p, j].double(), u90
+            )
             k = k2
         self._configuration = k
+        return metrics
 
     # checkpoints
     def state_dict(self) -> dict:
