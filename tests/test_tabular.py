@@ -127,6 +127,18 @@ def test_both_loops_learn_the_reference_episodes_bit_for_bit(shared, options):
     assert reference.q.abs().sum() > 0 and (expected["steps_to_90"] < cfg.max_steps).any()
 
 
+def test_the_kernels_name_the_digest_of_the_functions_they_compile_from_other_modules():
+    """numba's cache is keyed by kernels.py alone: a change of the reward, the metrics or the stream mixer must come
+    with an edit of kernels.py (its digest), or the compiled loops would keep running the old code."""
+    from uavrl.agents.tabular import kernels
+
+    digest = kernels.sources_digest(kernels.COMPILED_ELSEWHERE)
+    assert kernels.COMPILED_ELSEWHERE_DIGEST == digest, (
+        f"a function the numba kernels compile changed: set COMPILED_ELSEWHERE_DIGEST = {digest!r} in "
+        "agents/tabular/kernels.py (that edit makes numba recompile)"
+    )
+
+
 def test_same_seed_same_tables_and_different_seed_differs():
     cfg = make_config("paper", grid=(3, 3), num_uavs=2, max_steps=200)
     tables = []

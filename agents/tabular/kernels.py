@@ -10,14 +10,17 @@ choices from the same random numbers.  Both backends reward a step with
 compiles them for scalars here).  Call :func:`use_workqueue_threads` before
 the first parallel launch.
 
-numba's cache of these kernels (``cache=True``) is keyed by this file alone: after
-editing a function they compile from another module (those two, their helpers,
-:func:`uavrl.envs.streams._mix32`), delete ``__pycache__/kernels.*.nbi`` and ``.nbc`` beside this file, or the
-kernels run the old version (the tests comparing the two backends then fail).
+numba's cache of these kernels (``cache=True``) is keyed by this file alone, but
+they also compile functions of other modules (:data:`COMPILED_ELSEWHERE`).
+:data:`COMPILED_ELSEWHERE_DIGEST` is the digest of their source: a change there
+fails ``tests/test_tabular.py`` until the digest here is updated, and that edit of
+this file is what makes numba compile the kernels anew.
 """
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import math
 import os
 
@@ -32,8 +35,17 @@ from uavrl.evaluation import episode_start, episode_step
 
 # the reward and the episode metrics are written once, in arithmetic that serves the torch loop's tensors and these
 # loops' scalars: numba compiles that same Python source where a kernel calls them
-for _written_once in (delta_reward, best_so_far_reward, episode_best, team_reward, episode_start, episode_step):
+COMPILED_ELSEWHERE = (delta_reward, best_so_far_reward, episode_best, team_reward, episode_start, episode_step)
+for _written_once in COMPILED_ELSEWHERE:
     register_jitable(_written_once)
+COMPILED_ELSEWHERE += (streams._mix32,)
+COMPILED_ELSEWHERE_DIGEST = "2ff56c829cb4e65f"  # sources_digest(COMPILED_ELSEWHERE): see the module docstring
+
+
+def sources_digest(functions) -> str:
+    """SHA-256 (first 16 hex digits) of the functions' source text, in order."""
+    text = "".join(inspect.getsource(function) for function in functions)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def use_workqueue_threads() -> None:
