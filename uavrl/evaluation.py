@@ -44,9 +44,11 @@ from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_config
 from uavrl.envs.grid import cells_of
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
 from uavrl.envs.world import World
+from uavrl.schema import EvalSchema
 
-EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
-DEFAULT_GAMMA = 0.9
+# the command line's eval.* defaults (uavrl/schema.py): the seed is far from training seeds, so the evaluation's
+# worlds (and random layouts) are held out
+NUM_STARTS, EVAL_SEED, DEFAULT_GAMMA = EvalSchema.num_starts, EvalSchema.seed, EvalSchema.gamma
 NINETY_PERCENT = 0.9
 # the per-episode metrics of every agent's training (docs/model.md, "What the numbers mean"; train/<name>), in the
 # order of episode_metrics
@@ -177,7 +179,7 @@ def evaluate(
     policy,
     cfg: ModelConfig,
     *,
-    num_starts: int = 64,
+    num_starts: int = NUM_STARTS,
     horizon: int | None = None,
     seed: int = EVAL_SEED,
     device="cpu",
@@ -194,7 +196,7 @@ def evaluate(
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg)
+    horizon = horizon or default_horizon(cfg.grid)
     check_memory(cfg, num_starts, horizon, 0, memory_budget)
     env = UAVSpectrumEnv(
         batch_size=num_starts,
@@ -229,7 +231,7 @@ def evaluation_starts(
     start, ``U*`` ``[B]``, the start references and the horizon.
     """
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg)
+    horizon = horizon or default_horizon(cfg.grid)
     world = World(cfg.replace(max_steps=horizon), num_starts, device, seed, memory_budget=memory_budget)
     start = world.reset()
     u_star = world.optimum()[0]

@@ -29,8 +29,9 @@ import torch
 from uavrl.envs import ModelConfig
 from uavrl.evaluation import EVAL_SEED, default_horizon
 from uavrl.io import save_bytes
+from uavrl.schema import RunEvalSchema
 
-DEFAULT_STARTS = 3
+DEFAULT_STARTS = RunEvalSchema.video_starts
 
 
 def video_settings(cfg, device) -> dict:
@@ -82,7 +83,7 @@ def comparison_frames(
     from uavrl.envs.render import tile
 
     _check_whole("starts", starts)
-    horizon = horizon or default_horizon(cfg)
+    horizon = horizon or default_horizon(cfg.grid)
     played = rollout_frames(policy, cfg, starts, horizon, seed, device, label)
     oracle = rollout_frames(OraclePolicy(cfg), cfg, starts, horizon, seed, device, "oracle")
     return np.stack(
