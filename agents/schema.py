@@ -16,12 +16,10 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.rules import UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
+from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
 
-REAL = Any  # a real number as typed (int or float: OmegaConf would turn 0 into 0.0), checked by its rule
 METHODS = ("q_learning", "value_iteration")
 MEMORY_BUDGET = positive()
 

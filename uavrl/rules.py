@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 _ABSENT = object()
+REAL = Any  # a schema's real number as typed (int or float: OmegaConf would turn 0 into 0.0), checked by its rule
 
 
 @dataclass(frozen=True)

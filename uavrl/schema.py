@@ -32,11 +32,12 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from uavrl.agents import AGENTS
-from uavrl.agents.schema import AGENT_SCHEMAS, REAL
-from uavrl.envs.config import PRESETS, ModelConfig, make_config, preset_options
+from uavrl.agents.schema import AGENT_SCHEMAS
+from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.rules import (
     DEVICE,
+    REAL,
     SEED,
     flag,
     grid_sizes,
@@ -124,12 +125,17 @@ EnvSchema.__doc__ = """The model's options (:class:`uavrl.envs.ModelConfig`'s fi
 
 
 def preset_env(preset: str) -> EnvSchema:
-    """The ``env`` config of ``env=<preset>``: the preset's shape (grid, UAVs, episode length) and the options it
-    sets; the others null."""
+    """The ``env`` config of ``env=<preset>``: the preset's shape (grid, UAVs, episode length), the options it sets
+    and, for a physical channel, the radio's numbers it runs with (as its runs' ``config.yaml`` record them); the
+    others null."""
     model = make_config(preset)
-    shape = dict(grid=list(model.grid), num_uavs=model.num_uavs, max_steps=model.max_steps)
-    options = {name: list(v) if isinstance(v, tuple) else v for name, v in preset_options(preset).items()}
-    return EnvSchema(name=preset, preset=preset, **{**shape, **options})
+    options = dict(grid=model.grid, num_uavs=model.num_uavs, max_steps=model.max_steps)
+    if model.is_physical:
+        options |= {name: getattr(model, name) for name in PHYSICAL_OPTIONS}
+    options |= preset_options(preset)
+    return EnvSchema(
+        name=preset, preset=preset, **{k: list(v) if isinstance(v, tuple) else v for k, v in options.items()}
+    )
 
 
 @dataclass
