@@ -44,6 +44,7 @@ from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_config
 from uavrl.envs.grid import cells_of
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
 from uavrl.envs.world import World
+from uavrl.rules import refuse, rule_of
 from uavrl.schema import EvalSchema
 
 # the command line's eval.* defaults (uavrl/schema.py): the seed is far from training seeds, so the evaluation's
@@ -57,15 +58,10 @@ LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
 def check_settings(gamma, horizon, num_starts) -> None:
-    """One-line errors for evaluation settings, named as on the command line."""
-    if not (isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and 0 < gamma <= 1):
-        raise ValueError(f"eval.gamma={gamma!r} is invalid: the yardstick's discount must lie in (0, 1]")
-    if horizon is not None and not (isinstance(horizon, int) and not isinstance(horizon, bool) and horizon >= 1):
-        raise ValueError(
-            f"eval.horizon={horizon!r} is invalid: give a whole number of steps >= 1, or null for the default"
-        )
-    if not (isinstance(num_starts, int) and not isinstance(num_starts, bool) and num_starts >= 1):
-        raise ValueError(f"eval.num_starts={num_starts!r} is invalid: give a whole number of starts >= 1")
+    """One-line errors for evaluation settings by their rules (:class:`~uavrl.schema.EvalSchema`), named as on the
+    command line."""
+    for name, value in (("gamma", gamma), ("horizon", horizon), ("num_starts", num_starts)):
+        refuse(f"eval.{name}", value, rule_of(EvalSchema, name))
 
 
 def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
