@@ -44,8 +44,9 @@ import yaml
 
 from uavrl.envs.limits import default_horizon
 from uavrl.io import quoted, save_text
-from uavrl.rules import SEED, Rule, interval, optional, shown, whole
+from uavrl.rules import Rule, rules_of, shown, whole
 from uavrl.runs import flat_settings
+from uavrl.schema import RunSchema
 
 # the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
 METRICS = {
@@ -140,19 +141,20 @@ GRID = Rule(
     lambda v: isinstance(v, tuple) and len(v) > 0 and all(whole(1).accepts(g) for g in v),
     "it must be a list of whole numbers >= 1, e.g. [6, 6]",
 )
+RUN = rules_of(RunSchema)
 # what the report reads of a run's config.yaml: the grouping, the setting's description, the curves' scale
 REQUIRED_SETTINGS: dict[str, Rule] = {
-    "seed": SEED,
+    "seed": RUN["seed"],
     "env.name": NAME,
     "env.preset": NAME,
     "env.grid": GRID,
     "env.num_uavs": whole(1),
     "env.max_steps": whole(1),
-    "eval.num_starts": whole(1),
-    "eval.gamma": interval(0.0, 1.0, low_open=True),
+    "eval.num_starts": RUN["eval.num_starts"],
+    "eval.gamma": RUN["eval.gamma"],
 }
 OPTIONAL_SETTINGS: dict[str, Rule] = {
-    "eval.horizon": optional(whole(1), "max(20, 2 (L1 + L2)) steps"),
+    "eval.horizon": RUN["eval.horizon"],
     "scenario.name": NAME,
     "agent.name": NAME,
 }
