@@ -6,9 +6,10 @@ The registry maps each name to a function that imports the agent's class, so
 that naming an agent (``uavrl.settings`` checks ``agent.name`` before torch is
 imported) costs nothing, and ``agent=tabular`` never imports the DQN's modules.
 
-A new agent: a subclass of ``Agent`` in its own module, one entry here, a
-config ``configs/agent/<name>.yaml``, its settings' rules in ``uavrl.settings``;
-``tests/test_agents.py`` then runs the contract test over it.
+A new agent: a subclass of ``Agent`` in its own module, one entry here, its
+settings (defaults and rules) in :mod:`uavrl.agents.schema`, a config
+``configs/agent/<name>.yaml``; ``tests/test_agents.py`` then runs the contract
+test over it.
 """
 
 from __future__ import annotations

@@ -58,6 +58,7 @@ from torchrl.objectives import DQNLoss, LossModule, QMixerLoss, SoftUpdate
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.schema import agent_rules
 from uavrl.compat import load_buffer_state, make_collector, written_into
 from uavrl.envs import (
     NODE_FEATURES,
@@ -73,7 +74,7 @@ from uavrl.envs.config import RELAYING, SENSING
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rewards import log_gap_reward
 from uavrl.evaluation import episode_metrics
-from uavrl.settings import RUN_SETTINGS, check
+from uavrl.rules import check
 
 MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
@@ -302,8 +303,9 @@ class DoubleQMixerLoss(QMixerLoss):
 
 # ----------------------------------------------------------------------------- settings
 def check_settings(env_cfg: ModelConfig, a) -> None:
-    """One-line errors for settings the agent cannot run: the rules of :mod:`uavrl.settings`, then the head's size."""
-    check(a, RUN_SETTINGS, section="agent")
+    """One-line errors for settings the agent cannot run: the rules of its schema (:mod:`uavrl.agents.schema`), then
+    the head's size."""
+    check(a, agent_rules("dqn"), section="agent")
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "

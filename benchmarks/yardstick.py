@@ -88,7 +88,7 @@ def steps_to_level(policy, cfg, starts: int, level: float = 0.999):
     from uavrl.envs import UAVSpectrumEnv
     from uavrl.evaluation import EVAL_SEED, default_horizon
 
-    horizon = default_horizon(cfg)
+    horizon = default_horizon(cfg.grid)
     env = UAVSpectrumEnv(batch_size=starts, config=cfg.replace(max_steps=horizon), seed=EVAL_SEED)
     start = env.reset()
     if hasattr(policy, "bind_env"):

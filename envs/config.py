@@ -300,6 +300,12 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
 
+def preset_options(preset: str) -> dict:
+    """The options the preset ``preset`` sets; every other option keeps :class:`ModelConfig`'s default."""
+    _choice("preset", preset, PRESETS)
+    return dict(_PRESETS[preset])
+
+
 def _choice(name, value, allowed):
     if value not in allowed:
         raise InvalidOption(name, value, f"allowed values are {', '.join(map(repr, allowed))}")

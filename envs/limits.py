@@ -439,9 +439,9 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     return reachable + max(relaxation, candidates)
 
 
-def default_horizon(cfg) -> int:
-    """Greedy evaluation length (``eval.horizon`` null): enough steps to cross the grid twice."""
-    return max(20, 2 * (cfg.grid[0] + cfg.grid[1]))
+def default_horizon(grid) -> int:
+    """Greedy evaluation length on a ``(L1, L2)`` grid (``eval.horizon`` null): enough steps to cross it twice."""
+    return max(20, 2 * sum(grid))
 
 
 def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:

@@ -59,3 +59,31 @@ def test_a_second_process_loads_the_learner_kernels_from_the_cache(tmp_path):
         assert done.returncode == 0, done.stderr[-2000:]
     loaded = ["_episode_per_run 1 hits 0 misses", "_episode_shared 1 hits 0 misses"]
     assert done.stdout.split("\n")[:2] == loaded, done.stdout
+
+
+def test_no_module_imports_upward():
+    """docs/architecture.md's layers: the model (``envs/``) imports nothing of the agents or commands, the agents and
+    the modules beside them nothing of the commands; no command imports ``uavrl.train``."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    commands = {"train", "evaluate", "reproduce", "report", "benchmarl", "render", "cli", "settings", "config"}
+    commands |= {"runs", "rundir"}
+    agents_layer = {"evaluation", "checkpoints", "logger", "compat", "video", "schema", "rules", "io"}
+    layers = {"model": [*root.glob("envs/*.py")], "agents": [*root.glob("agents/**/*.py")]}
+    layers["agents"] += [root / "uavrl" / f"{name}.py" for name in agents_layer]
+    layers["commands"] = [root / "uavrl" / f"{name}.py" for name in commands]
+    above = {
+        "model": tuple(f"uavrl.{name}" for name in (*commands, *agents_layer, "agents")),
+        "agents": tuple(f"uavrl.{name}" for name in commands),
+        "commands": ("uavrl.train",),
+    }
+    upward = []
+    for layer, files in layers.items():
+        for file in files:
+            for node in ast.walk(ast.parse(file.read_text())):
+                names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+                names += [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
+                upward += [f"{file.relative_to(root)}: {n}" for n in names if n.startswith(above[layer])]
+    assert upward == []

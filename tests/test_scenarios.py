@@ -92,3 +92,34 @@ def test_a_scenario_run_is_named_after_it(compose_cfg, tmp_path, monkeypatch):
     assert run_dir.parent == Path("runs/dqn/rayleigh")
     saved = OmegaConf.load(run_dir / "config.yaml")
     assert saved.scenario.name == "rayleigh" and saved.env.fading == "rayleigh"
+
+
+def test_each_benchmarl_task_of_a_scenario_points_at_it(tmp_path):
+    """``task=uavrl/<name>`` of ``python -m uavrl.benchmarl`` is the scenario ``<name>``, written once: its task file
+    holds the task's name and the scenario it is; composed, it gives the scenario's model."""
+    from hydra import compose, initialize_config_dir
+
+    from uavrl.config import config_dir
+
+    tasks = sorted((Path(config_dir()) / "task" / "uavrl").glob("*.yaml"))
+    of_scenarios = [task.stem for task in tasks if task.stem in SCENARIOS]
+    assert of_scenarios == ["n6_10x10", "paper_6x6"]
+    for name in of_scenarios:
+        saved = OmegaConf.to_container(OmegaConf.load(Path(config_dir()) / "task" / "uavrl" / f"{name}.yaml"))
+        assert saved == {"defaults": [{"/scenario": name}], "task": {"name": name}}
+    # configs/benchmarl.yaml without BenchMARL's groups (they need the extra)
+    primary = {"defaults": ["benchmarl_schema", {"env": "paper"}, {"task": "uavrl/paper_6x6"}, "_self_"]}
+    primary["hydra"] = {"searchpath": [f"file://{config_dir()}"]}
+    OmegaConf.save(OmegaConf.create(primary), tmp_path / "primary.yaml")
+    with initialize_config_dir(config_dir=str(tmp_path), version_base=None):
+        for name in of_scenarios:
+            cfg = compose("primary", overrides=[f"task=uavrl/{name}"])
+            grid, uavs, preset, _, _ = SCENARIOS[name]
+            model = model_config(cfg)
+            assert (model.grid, model.num_uavs, cfg.env.preset, cfg.env.name, cfg.task.name) == (
+                grid,
+                uavs,
+                preset,
+                name,
+                name,
+            )

@@ -15,16 +15,17 @@ from __future__ import annotations
 import importlib.util
 import sys
 import time
-from datetime import datetime
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
-from uavrl.io import claim_dir, save_json, save_text
-from uavrl.rundir import RunDirectory, hold
-from uavrl.settings import RUN_SETTINGS, check
+from uavrl.io import save_json, save_text
+from uavrl.rules import check
+from uavrl.rundir import RunDirectory
+from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
+from uavrl.settings import BENCHMARL_SETTINGS
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
 
@@ -41,7 +42,7 @@ def check_settings(cfg: DictConfig) -> str:
     """Every setting refused in one line before anything is built; returns the algorithm's name."""
     from benchmarl.algorithms import algorithm_config_registry
 
-    check(cfg, RUN_SETTINGS)
+    check(cfg, BENCHMARL_SETTINGS)
     model_config(cfg)
     name = algorithm_name(cfg)
     if not algorithm_config_registry[name].supports_discrete_actions():
@@ -50,17 +51,24 @@ def check_settings(cfg: DictConfig) -> str:
             f"algorithm={name} is invalid: it acts in continuous action spaces only, and the UAVs' actions are "
             f"discrete; allowed algorithms are {', '.join(discrete)}"
         )
-    if cfg.run_dir and (Path(cfg.run_dir) / "metrics.json").exists():
-        raise FileExistsError(f"run_dir={cfg.run_dir!r} already holds a finished run: pick another run_dir")
+    if cfg.run_dir and finished(Path(cfg.run_dir)):
+        raise FileExistsError(already_finished(cfg.run_dir))
     return name
 
 
+def finished(run_dir: Path) -> bool:
+    return (run_dir / "metrics.json").exists()
+
+
+def already_finished(run_dir) -> str:
+    return f"run_dir={run_dir!r} already holds a finished run: pick another run_dir"
+
+
 def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
-    """``run_dir`` or a new ``runs/benchmarl_<algorithm>/<env>/<timestamp>``, locked as ``uavrl.train``'s are."""
-    if cfg.run_dir:
-        return hold(cfg.run_dir, "run_dir")
-    base = Path("runs") / f"benchmarl_{algorithm}" / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
-    return hold(claim_dir(base), "run_dir", created=True)
+    """``run_dir`` or a new ``runs/benchmarl_<algorithm>/<env>/<timestamp>``, claimed and locked as ``uavrl.train``'s
+    are (:func:`uavrl.runs.claim_run_dir`)."""
+    refusal = already_finished(cfg.run_dir) if cfg.run_dir else ""
+    return claim_run_dir(cfg.run_dir, f"benchmarl_{algorithm}", cfg.env.name, finished, refusal)
 
 
 def train(cfg: DictConfig, overrides=()) -> Path:
@@ -83,7 +91,6 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     )
 
     from uavrl.agents.benchmarl import UAVTask, YardstickCallback
-    from uavrl.train import eval_settings, yardstick_line
 
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)

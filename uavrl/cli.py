@@ -27,7 +27,7 @@ from omegaconf.errors import OmegaConfBaseException
 from uavrl.config import MOVED, config_dir
 from uavrl.envs.config import InvalidOption
 from uavrl.io import claim_dir
-from uavrl.settings import shown
+from uavrl.rules import shown
 
 Command = Callable[[DictConfig, list], object]
 # settings that moved: an override of the old name says the new one

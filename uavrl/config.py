@@ -63,7 +63,7 @@ def saved_config(saved: dict, source: str = "the saved run") -> DictConfig:
     from omegaconf.errors import OmegaConfBaseException
 
     from uavrl.envs.config import InvalidOption
-    from uavrl.settings import RUN_SETTINGS, check
+    from uavrl.settings import check_run
 
     for name, value in _settings_of(saved):
         if isinstance(value, str) and "${" in value:
@@ -86,7 +86,7 @@ def saved_config(saved: dict, source: str = "the saved run") -> DictConfig:
             group, key = old.split(".")
             del cfg[group][key]
     try:
-        check(cfg, RUN_SETTINGS)
+        check_run(cfg)
         model_config(cfg)
     except InvalidOption as err:
         raise ValueError(f"{source}: in its saved config, {err.renamed(RUN_OPTION_SETTINGS)}") from None
@@ -104,19 +104,3 @@ def _settings_of(saved: dict, prefix: str = ""):
             yield from ((f"{prefix}{key}[{i}]", item) for i, item in enumerate(value))
         else:
             yield f"{prefix}{key}", value
-
-
-def flat_hparams(cfg: DictConfig) -> dict:
-    """Scalar hyper-parameters with dotted names (TensorBoard's hparams reject nesting)."""
-    out = {}
-
-    def walk(node, prefix):
-        for key, value in node.items():
-            name = f"{prefix}{key}"
-            if isinstance(value, dict):
-                walk(value, name + ".")
-            else:
-                out[name] = value if isinstance(value, (int, float, str, bool)) else str(value)
-
-    walk(OmegaConf.to_container(cfg, resolve=True), "")
-    return out

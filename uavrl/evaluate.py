@@ -25,14 +25,14 @@ from uavrl.checkpoints import (
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import quoted, save_json
-from uavrl.settings import RUN_SETTINGS, check, check_evaluation_floor, check_video_cost
-from uavrl.train import eval_settings
+from uavrl.runs import eval_settings
+from uavrl.settings import check_evaluation_floor, check_run, check_video_cost
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None) -> None:
     """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
     anything heavy is imported."""
-    check(cfg, RUN_SETTINGS)
+    check_run(cfg)
     check_evaluation_floor(cfg, bool(cfg.eval.video) if video is None else video)
     if not cfg.checkpoint:
         raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")

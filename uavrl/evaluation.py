@@ -44,9 +44,12 @@ from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_config
 from uavrl.envs.grid import cells_of
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
 from uavrl.envs.world import World
+from uavrl.rules import refuse, rule_of
+from uavrl.schema import EvalSchema
 
-EVAL_SEED = 1_000_003  # far from training seeds: eval worlds (and random layouts) are held out
-DEFAULT_GAMMA = 0.9
+# the command line's eval.* defaults (uavrl/schema.py): the seed is far from training seeds, so the evaluation's
+# worlds (and random layouts) are held out
+NUM_STARTS, EVAL_SEED, DEFAULT_GAMMA = EvalSchema.num_starts, EvalSchema.seed, EvalSchema.gamma
 NINETY_PERCENT = 0.9
 # the per-episode metrics of every agent's training (docs/model.md, "What the numbers mean"; train/<name>), in the
 # order of episode_metrics and of the running metrics of episode_start / episode_step
@@ -55,15 +58,10 @@ LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
 def check_settings(gamma, horizon, num_starts) -> None:
-    """One-line errors for evaluation settings, named as on the command line."""
-    if not (isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and 0 < gamma <= 1):
-        raise ValueError(f"eval.gamma={gamma!r} is invalid: the yardstick's discount must lie in (0, 1]")
-    if horizon is not None and not (isinstance(horizon, int) and not isinstance(horizon, bool) and horizon >= 1):
-        raise ValueError(
-            f"eval.horizon={horizon!r} is invalid: give a whole number of steps >= 1, or null for the default"
-        )
-    if not (isinstance(num_starts, int) and not isinstance(num_starts, bool) and num_starts >= 1):
-        raise ValueError(f"eval.num_starts={num_starts!r} is invalid: give a whole number of starts >= 1")
+    """One-line errors for evaluation settings by their rules (:class:`~uavrl.schema.EvalSchema`), named as on the
+    command line."""
+    for name, value in (("gamma", gamma), ("horizon", horizon), ("num_starts", num_starts)):
+        refuse(f"eval.{name}", value, rule_of(EvalSchema, name))
 
 
 def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
@@ -206,7 +204,7 @@ def evaluate(
     policy,
     cfg: ModelConfig,
     *,
-    num_starts: int = 64,
+    num_starts: int = NUM_STARTS,
     horizon: int | None = None,
     seed: int = EVAL_SEED,
     device="cpu",
@@ -223,7 +221,7 @@ def evaluate(
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg)
+    horizon = horizon or default_horizon(cfg.grid)
     check_memory(cfg, num_starts, horizon, 0, memory_budget)
     env = UAVSpectrumEnv(
         batch_size=num_starts,
@@ -258,7 +256,7 @@ def evaluation_starts(
     start, ``U*`` ``[B]``, the start references and the horizon.
     """
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg)
+    horizon = horizon or default_horizon(cfg.grid)
     world = World(cfg.replace(max_steps=horizon), num_starts, device, seed, memory_budget=memory_budget)
     start = world.reset()
     u_star = world.optimum()[0]

@@ -42,8 +42,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from uavrl.envs.limits import default_horizon
 from uavrl.io import quoted, save_text
-from uavrl.settings import SEED, Rule, interval, optional, shown, whole
+from uavrl.rules import Rule, rules_of, shown, whole
+from uavrl.runs import flat_settings
+from uavrl.schema import RunSchema
 
 # the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
 METRICS = {
@@ -124,16 +127,6 @@ class Cell:
         return [run.metrics[metric] for run in self.runs if metric in run.metrics]
 
 
-def flat(config: dict, prefix: str = "") -> dict:
-    out = {}
-    for key, value in config.items():
-        if isinstance(value, dict):
-            out.update(flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = tuple(value) if isinstance(value, list) else value
-    return out
-
-
 class DamagedRun(ValueError):
     """A run directory whose files the report cannot use; the message names the file and why, in one line."""
 
@@ -148,19 +141,20 @@ GRID = Rule(
     lambda v: isinstance(v, tuple) and len(v) > 0 and all(whole(1).accepts(g) for g in v),
     "it must be a list of whole numbers >= 1, e.g. [6, 6]",
 )
+RUN = rules_of(RunSchema)
 # what the report reads of a run's config.yaml: the grouping, the setting's description, the curves' scale
 REQUIRED_SETTINGS: dict[str, Rule] = {
-    "seed": SEED,
+    "seed": RUN["seed"],
     "env.name": NAME,
     "env.preset": NAME,
     "env.grid": GRID,
     "env.num_uavs": whole(1),
     "env.max_steps": whole(1),
-    "eval.num_starts": whole(1),
-    "eval.gamma": interval(0.0, 1.0, low_open=True),
+    "eval.num_starts": RUN["eval.num_starts"],
+    "eval.gamma": RUN["eval.gamma"],
 }
 OPTIONAL_SETTINGS: dict[str, Rule] = {
-    "eval.horizon": optional(whole(1), "max(20, 2 (L1 + L2)) steps"),
+    "eval.horizon": RUN["eval.horizon"],
     "scenario.name": NAME,
     "agent.name": NAME,
 }
@@ -178,7 +172,7 @@ class SavedYamlLoader(yaml.SafeLoader):
 
 
 def brief(value) -> str:
-    """A value as typed (:func:`uavrl.settings.shown`), cut to 60 characters for a one-line message."""
+    """A value as typed (:func:`uavrl.rules.shown`), cut to 60 characters for a one-line message."""
     text = shown(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
@@ -230,7 +224,7 @@ def read_config(path: Path) -> dict:
         raise DamagedRun(f"config.yaml is not valid YAML ({' '.join(str(err).split())})") from None
     if not isinstance(data, dict):
         raise DamagedRun(f"config.yaml holds {kind(data)}, not a mapping of settings")
-    config = flat(data)
+    config = {name: tuple(v) if isinstance(v, list) else v for name, v in flat_settings(data).items()}
     for name, value in config.items():
         if any("${" in text for text in strings(value)):
             raise DamagedRun(
@@ -324,12 +318,6 @@ def differing(runs: list[Run], keep) -> list[str]:
     return [name for name in names if len({repr(run.config.get(name)) for run in runs}) > 1]
 
 
-def shown_value(value) -> str:
-    if isinstance(value, tuple):
-        return "[" + ",".join(map(str, value)) + "]"
-    return "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value)
-
-
 def group(runs: list[Run]) -> dict[str, list[Cell]]:
     """Cells by setting; within a setting, by agent and the settings that differ between that agent's runs."""
     by_setting: dict[str, list[Run]] = {}
@@ -341,10 +329,10 @@ def group(runs: list[Run]) -> dict[str, list[Cell]]:
         split = differing(setting_runs, lambda n: n.startswith(("env.", "eval.")) and n != "env.max_steps")
         by_cell: dict[tuple, Cell] = {}
         for run in setting_runs:
-            label = " ".join([setting, *(f"{n}={shown_value(run.config.get(n))}" for n in split)])
+            label = " ".join([setting, *(f"{n}={shown(run.config.get(n), label=True)}" for n in split)])
             same_agent = [r for r in setting_runs if r.agent == run.agent]
             variant = differing(same_agent, lambda n: not n.startswith(("env.", "eval.")) or n == "env.max_steps")
-            agent = " ".join([run.agent, *(f"{n}={shown_value(run.config.get(n))}" for n in variant)])
+            agent = " ".join([run.agent, *(f"{n}={shown(run.config.get(n), label=True)}" for n in variant)])
             by_cell.setdefault((label, agent), Cell(label, agent)).runs.append(run)
         for (label, _), cell in by_cell.items():
             cells.setdefault(label, []).append(cell)
@@ -456,9 +444,9 @@ def baseline_lines(ax, cells: list[Cell], value) -> None:
 def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
     learners = [c for c in cells if not c.is_baseline]
     baselines = [c for c in cells if c.is_baseline]
-    shown = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
-    figure, axes = pyplot().subplots(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
-    for ax, metric in zip(axes[0], shown, strict=True):
+    plotted = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
+    figure, axes = pyplot().subplots(1, len(plotted), figsize=(3.2 * len(plotted), 3.6), squeeze=False)
+    for ax, metric in zip(axes[0], plotted, strict=True):
         for x, cell in enumerate(learners):
             values = cell.values(metric)
             if not values:
@@ -479,9 +467,8 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
 
 
 def eval_horizon(run: Run) -> int:
-    """The evaluation's steps per rollout (``eval.horizon``, default ``max(20, 2 (L1 + L2))`` as in
-    ``uavrl.evaluation.default_horizon``)."""
-    return run.config.get("eval.horizon") or max(20, 2 * sum(run.config["env.grid"]))
+    """The evaluation's steps per rollout: ``eval.horizon``, or :func:`uavrl.envs.limits.default_horizon`."""
+    return run.config.get("eval.horizon") or default_horizon(run.config["env.grid"])
 
 
 def evaluated_utility_per_step(run: Run) -> float | None:

@@ -20,6 +20,7 @@ directory; one that holds another variant is refused unless ``overwrite=true``
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import sys
@@ -28,11 +29,13 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
-from uavrl.config import config_dir
 from uavrl.envs.config import make_config
 from uavrl.io import quoted, save_json, save_text, save_torch
-from uavrl.settings import REPRODUCE_SETTINGS, check, check_reproduce_costs, shown
+from uavrl.rules import check, shown
+from uavrl.schema import ReproduceSchema
+from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
@@ -44,16 +47,11 @@ COMMANDS = ("table2", "figures")
 PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
 OUTPUTS = ("variant.json", "table2.md", "table2.json", "history_*.pt", "fig*.png", "tensorboard")
 REFUSAL = "give another out_dir, or overwrite=true to replace them"
-# the paper's learner (eqs. 9-10): agent=tabular's settings, whatever configs/agent/tabular.yaml says
-PAPER_LEARNER = dict(
-    name="tabular",
-    method="q_learning",
-    alpha=0.1,
-    gamma=0.3,
-    epsilon=0.1,
-    shared_table=False,
-    backend="numba",
-)
+# the paper's learner (eqs. 9-10): the defaults of agent=tabular, whatever a command line or scenario gives it
+PAPER_LEARNER = {
+    name: getattr(TabularSchema, name)
+    for name in ("name", "method", "alpha", "gamma", "epsilon", "shared_table", "backend")
+}
 # how the model's options are typed on this command line
 OPTION_SETTINGS = {"grid": "grids", "max_steps": "steps"}
 
@@ -73,8 +71,9 @@ def variant(cfg: DictConfig) -> dict:
 
 
 def variant_name(cfg: DictConfig) -> str:
-    """``paper`` for the paper's settings (those of configs/reproduce.yaml), else the settings that differ."""
-    paper = OmegaConf.load(Path(config_dir()) / "reproduce.yaml")
+    """``paper`` for the paper's settings (the defaults of :class:`~uavrl.schema.ReproduceSchema`), else the
+    settings that differ."""
+    paper = dataclasses.asdict(ReproduceSchema())
     changed = {key: value for key, value in variant(cfg).items() if value != paper[key]}
     return "_".join(f"{key}-{_in_name(value)}" for key, value in changed.items()) or "paper"
 

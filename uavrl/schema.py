@@ -1,42 +1,87 @@
-"""Schemas of the Hydra configs, registered with Hydra's ConfigStore (standard library, omegaconf and hydra only).
+"""The one home of every command-line setting: its default, type, rule and meaning (standard library only; Hydra is
+imported by :func:`register`).
 
-``configs/config.yaml`` starts from :class:`RunSchema`, each ``configs/env/*.yaml``
-from :class:`EnvSchema` and each ``configs/agent/*.yaml`` from its agent's
-schema, so Hydra refuses an unknown key or a value of the wrong type while it
-composes the config (``uavrl.cli`` words the refusal as the rules of
-:mod:`uavrl.settings` do); the rules then check the ranges.  Real-valued
-settings are typed ``Any``: OmegaConf would turn ``0`` into ``0.0``, and a
-refusal names the value as typed.
+Each setting is a field of a dataclass schema (:func:`uavrl.rules.setting`): the run's here (:class:`RunSchema`,
+:class:`ReproduceSchema`, :class:`BenchmarlSchema`), each agent's in :mod:`uavrl.agents.schema`, and the model's
+options in :class:`uavrl.envs.ModelConfig`, from whose fields :class:`EnvSchema` is made (every option null: the
+preset's value).  From them come
+
+- Hydra's configs: :func:`register` stores the schemas in Hydra's ConfigStore, so ``configs/*.yaml`` hold no
+  default and Hydra refuses an unknown key or a value of the wrong type while it composes (``uavrl.cli`` words the
+  refusal); the presets of ``envs/config.py`` are the ``env`` group's options;
+- the checks of the commands: :mod:`uavrl.settings` reads the rules (:func:`uavrl.rules.rules_of`);
+- the library's defaults: :func:`uavrl.evaluation.evaluate` and the agents read the same fields;
+- the table of ``docs/settings.md``: :func:`settings_markdown` (``python -m uavrl.schema > docs/settings.md``).
+
+Real-valued settings are typed ``Any``: OmegaConf would turn ``0`` into ``0.0``, and a refusal names the value as
+typed.
 
 Example:
     >>> from uavrl.cli import compose_config
     >>> cfg = compose_config("config", ["agent=dqn", "env.grid=[4,4]"])
-    >>> type(cfg.agent).__name__, cfg.env.max_steps, cfg.env.layout
-    ('DictConfig', 30, None)
+    >>> type(cfg.agent).__name__, cfg.env.max_steps, cfg.env.layout, cfg.agent.gamma
+    ('DictConfig', 30, None, 0.7)
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+import re
+import typing
+from dataclasses import dataclass
 from typing import Any, Optional
 
-REAL = Any  # a real number as typed (int or float), checked by uavrl.settings or uavrl.envs.ModelConfig
+from uavrl.agents import AGENTS
+from uavrl.agents.schema import AGENT_SCHEMAS
+from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.rules import (
+    DEVICE,
+    REAL,
+    SEED,
+    flag,
+    grid_sizes,
+    interval,
+    names_among,
+    one_of,
+    optional,
+    path,
+    positive,
+    section,
+    setting,
+    shown,
+    whole,
+)
+
+STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
 
 
 @dataclass
 class TrainSchema:
-    checkpoint_every: int = 50
-    log_every: int = 1
-    step_budget: int = 10**10
+    checkpoint_every: int = setting(
+        50, whole(1), "iterations (episodes for the tabular agent) between atomic checkpoints"
+    )
+    log_every: int = setting(1, whole(1), "iterations between TensorBoard points")
+    step_budget: int = setting(
+        STEP_BUDGET, whole(1), "team steps of training and evaluation; a run that needs more is refused at once"
+    )
 
 
 @dataclass
 class EvalSchema:
-    num_starts: int = 64
-    horizon: Optional[int] = None
-    gamma: REAL = 0.9
-    seed: int = 1000003
-    every: int = 0
+    """The shared evaluation (:mod:`uavrl.evaluation`), whose library defaults these are too."""
+
+    num_starts: int = setting(64, whole(1), "fixed, seeded starts of the greedy evaluation")
+    horizon: Optional[int] = setting(
+        None, optional(whole(1), "max(20, 2 (L1 + L2)) steps"), "steps per greedy rollout; null: max(20, 2 (L1 + L2))"
+    )
+    gamma: REAL = setting(
+        0.9,
+        interval(0.0, 1.0, low_open=True),
+        "the yardstick's discount (eval/return, eval/return_ratio), whatever the agent trains with",
+    )
+    seed: int = setting(1_000_003, SEED, "held out from training seeds (and layouts)")
+    every: int = setting(0, whole(0), "iterations between evaluations during training; 0: only at the end")
 
 
 @dataclass
@@ -44,141 +89,122 @@ class RunEvalSchema(EvalSchema):
     """The evaluation of ``uavrl.train`` and ``uavrl.evaluate``, with a video of the greedy policy beside the oracle
     (``uavrl/video.py``)."""
 
-    video: bool = False
-    video_starts: int = 3
-    video_fps: int = 4
+    video: bool = setting(
+        False,
+        flag(),
+        "also a video of the greedy policy beside the oracle: TensorBoard's eval/video, and video.gif (video.mp4 "
+        "with the [video] extra) beside the checkpoint for uavrl.evaluate",
+    )
+    video_starts: int = setting(3, whole(1), "the evaluation's first starts, one row each")
+    video_fps: int = setting(4, whole(1), "frames (steps) per second")
 
 
-@dataclass
-class EnvSchema:
-    """The model's options (:class:`uavrl.envs.ModelConfig`); null keeps the preset's value."""
-
-    name: str = "paper"
-    preset: str = "paper"
-    grid: list[int] = field(default_factory=lambda: [6, 6])
-    num_uavs: int = 2
-    max_steps: int = 100
-    layout: Optional[str] = None
-    cell_size: REAL = None
-    altitude: REAL = None
-    altitude_m: REAL = None
-    channel: Optional[str] = None
-    alpha: REAL = None
-    g0: REAL = None
-    fading: Optional[str] = None
-    p_pt: REAL = None
-    p_s: REAL = None
-    p_u: REAL = None
-    noise: REAL = None
-    environment: Optional[str] = None
-    carrier_ghz: REAL = None
-    bandwidth_mhz: REAL = None
-    noise_figure_db: REAL = None
-    p_pt_dbm: REAL = None
-    p_s_dbm: REAL = None
-    p_u_dbm: REAL = None
-    direct_links: Optional[bool] = None
-    lease_rule: Optional[bool] = None
-    rate_model: Optional[str] = None
-    reference_gain: REAL = None
-    reward: Optional[str] = None
-    beta1: REAL = None
-    beta2: REAL = None
-    init_tasks: Optional[str] = None
-    reset_positions: Optional[str] = None
-    state_includes_tasks: Optional[bool] = None
+def _option_type(hint) -> Any:
+    """The type Hydra checks a model option's value against (null always allowed: the preset's value)."""
+    if hint in (int, str, bool):
+        return Optional[hint]
+    if typing.get_origin(hint) is tuple:
+        return Optional[list[int]]
+    return REAL
 
 
-@dataclass
-class TabularSchema:
-    name: str = "tabular"
-    method: str = "q_learning"
-    alpha: REAL = 0.1
-    gamma: REAL = 0.3
-    epsilon: REAL = 0.1
-    shared_table: bool = False
-    backend: str = "numba"
-    memory_budget: REAL = 4 * 2**30
-    episodes: int = 200
-    runs: int = 10
+EnvSchema = dataclasses.make_dataclass(
+    "EnvSchema",
+    [
+        ("name", str, setting(ModelConfig.preset, doc="the name of the setting: run directories and reports")),
+        ("preset", str, setting(ModelConfig.preset, doc=f"the preset of the options left null: {', '.join(PRESETS)}")),
+        *(
+            (name, _option_type(hint), setting(None))
+            for name, hint in typing.get_type_hints(ModelConfig).items()
+            if name != "preset"
+        ),
+    ],
+)
+EnvSchema.__module__ = __name__
+EnvSchema.__doc__ = """The model's options (:class:`uavrl.envs.ModelConfig`'s fields); null keeps the preset's value."""
 
 
-@dataclass
-class DQNSchema:
-    name: str = "dqn"
-    head: str = "factored"
-    mixer: str = "vdn"
-    worlds: int = 64
-    hidden: int = 128
-    depth: int = 2
-    mixing_embed_dim: int = 32
-    objective: str = "log_gap"
-    gap_floor: REAL = 0.0001
-    gamma: REAL = 0.7
-    lr: REAL = 0.0005
-    lr_end: REAL = 0.00005
-    batch_size: int = 256
-    buffer_size: int = 50000
-    updates: int = 32
-    learning_starts: int = 2000
-    tau: REAL = 0.01
-    eps_start: REAL = 1.0
-    eps_end: REAL = 0.05
-    eps_fraction: REAL = 0.5
-    max_grad_norm: REAL = 10.0
-    iterations: int = 500
-    memory_budget: REAL = 4 * 2**30
-
-
-@dataclass
-class BaselineSchema:
-    name: str = "random"
-    memory_budget: REAL = 4 * 2**30
+def preset_env(preset: str) -> EnvSchema:
+    """The ``env`` config of ``env=<preset>``: the preset's shape (grid, UAVs, episode length), the options it sets
+    and, for a physical channel, the radio's numbers it runs with (as its runs' ``config.yaml`` record them); the
+    others null."""
+    model = make_config(preset)
+    options = dict(grid=model.grid, num_uavs=model.num_uavs, max_steps=model.max_steps)
+    if model.is_physical:
+        options |= {name: getattr(model, name) for name in PHYSICAL_OPTIONS}
+    options |= preset_options(preset)
+    return EnvSchema(
+        name=preset, preset=preset, **{k: list(v) if isinstance(v, tuple) else v for k, v in options.items()}
+    )
 
 
 @dataclass
 class ScenarioSchema:
     """``configs/scenario/<name>.yaml``: a named setting of the environment; its budgets are in ``budget/``."""
 
-    name: str = "paper_6x6"
-    agents: list[str] = field(default_factory=lambda: ["tabular", "dqn", "random", "oracle"])  # the agents it runs
+    name: str = setting("paper_6x6", doc="the scenario's name")
+    agents: list[str] = setting(
+        rule=names_among(tuple(AGENTS), "agents"), doc="the agents it runs", factory=lambda: list(AGENTS)
+    )
 
 
 @dataclass
 class RunSchema:
-    """``configs/config.yaml``: the run's settings; ``env`` and ``agent`` come from their groups."""
+    """``configs/config.yaml``: ``python -m uavrl.train`` and ``uavrl.evaluate``; ``env`` and ``agent`` come from
+    their groups."""
 
-    seed: int = 0
-    device: str = "cpu"
-    num_threads: int = 1
-    run_dir: Optional[str] = None
-    sweep_dir: Optional[str] = None
-    resume: Optional[str] = None
-    checkpoint: Optional[str] = None
-    progress: bool = True
-    train: TrainSchema = field(default_factory=TrainSchema)
-    eval: RunEvalSchema = field(default_factory=RunEvalSchema)
-    env: EnvSchema = field(default_factory=EnvSchema)
-    agent: Any = None
-    scenario: Optional[ScenarioSchema] = None  # null: env and agent as given; scenario=<name>: configs/scenario/
+    seed: int = setting(0, SEED, "seeds the run: its worlds, networks and exploration")
+    device: str = setting("cpu", DEVICE, "the torch device")
+    num_threads: int = setting(1, whole(1), "torch.set_num_threads; 1 is fastest for small tensors on a 2-core CPU")
+    run_dir: Optional[str] = setting(
+        None,
+        optional(path(), "runs/<agent>/<env>/<timestamp>"),
+        "the run directory; null: runs/<agent>/<env>/<timestamp>",
+    )
+    sweep_dir: Optional[str] = setting(
+        None,
+        optional(path(), "runs/sweeps/<timestamp> for a sweep (-m)"),
+        "a sweep's (-m) jobs run in <sweep_dir>/<their overrides>/seed=<seed>; null: runs/sweeps/<timestamp>",
+    )
+    resume: Optional[str] = setting(
+        None, optional(path(), "a new run"), "a run directory to continue from its last checkpoint"
+    )
+    checkpoint: Optional[str] = setting(
+        None, optional(path(), "unset"), "uavrl.evaluate: a checkpoint.pt or run directory to evaluate"
+    )
+    progress: bool = setting(True, flag(), "a progress bar with rate and ETA")
+    train: TrainSchema = section(TrainSchema)
+    eval: RunEvalSchema = section(RunEvalSchema)
+    env: EnvSchema = section(EnvSchema, "env=<preset>, then any option: the model's options (docs/model.md)")
+    agent: Any = None  # agent=<name>: the agent's schema (uavrl/agents/schema.py)
+    scenario: Optional[ScenarioSchema] = section(
+        ScenarioSchema, "null: env and agent as given; scenario=<name>: configs/scenario/", optional=True
+    )
 
 
 @dataclass
 class BenchmarlTaskSchema:
-    name: str = "paper_6x6"
+    name: str = setting("paper_6x6", doc="the task's name in BenchMARL")
 
 
 @dataclass
 class BenchmarlSchema:
-    """``configs/benchmarl.yaml``: our settings, the model's options and the task's name; BenchMARL's own groups
-    (``experiment``, ``algorithm``, ``model``, ``critic_model``) bring their schemas from BenchMARL."""
+    """``configs/benchmarl.yaml``: our settings, the model's options and the task (a scenario's name); BenchMARL's
+    own groups (``experiment``, ``algorithm``, ``model``, ``critic_model``) bring their schemas from BenchMARL."""
 
-    seed: int = 0
-    num_threads: int = 1
-    run_dir: Optional[str] = None
-    eval: EvalSchema = field(default_factory=EvalSchema)
-    env: EnvSchema = field(default_factory=EnvSchema)
-    task: BenchmarlTaskSchema = field(default_factory=BenchmarlTaskSchema)
+    seed: int = setting(0, SEED, "seeds BenchMARL's experiment")
+    num_threads: int = setting(1, whole(1), "torch.set_num_threads")
+    run_dir: Optional[str] = setting(
+        None,
+        optional(path(), "runs/benchmarl_<algorithm>/<env>/<timestamp>"),
+        "the run directory; null: runs/benchmarl_<algorithm>/<env>/<timestamp>",
+    )
+    eval: EvalSchema = section(
+        EvalSchema, "the shared evaluation, at each of BenchMARL's evaluations and at the end (eval.every: unused)"
+    )
+    env: EnvSchema = section(EnvSchema)
+    task: BenchmarlTaskSchema = section(BenchmarlTaskSchema)
+    scenario: Optional[ScenarioSchema] = section(ScenarioSchema, "the task's scenario", optional=True)
     experiment: Any = None
     algorithm: Any = None
     model: Any = None
@@ -187,33 +213,45 @@ class BenchmarlSchema:
 
 @dataclass
 class ReproduceSchema:
-    """``configs/reproduce.yaml``."""
+    """``configs/reproduce.yaml``: ``python -m uavrl.reproduce``; the defaults are the paper's protocol."""
 
-    command: str = "table2"
-    grids: list[int] = field(default_factory=lambda: [2, 3, 4, 5, 6, 8, 10])
-    num_uavs: int = 2
-    runs: int = 10
-    episodes: int = 200
-    steps: Optional[int] = None
-    seed: int = 0
-    state_includes_tasks: bool = False
-    eval_starts: int = 64
-    figure_grid: int = 6
-    out_dir: Optional[str] = None
-    overwrite: bool = False
-    progress: bool = True
-    num_threads: int = 1
-    numba_threads: int = 0
-    memory_budget: REAL = 4 * 2**30
-    step_budget: int = 10**10
-
-
-AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}
+    command: str = setting("table2", one_of("table2", "figures", what="commands"), "table2 or figures")
+    grids: list[int] = setting(rule=grid_sizes(), doc="the grids of Table II", factory=lambda: [2, 3, 4, 5, 6, 8, 10])
+    num_uavs: int = setting(2, whole(1), "UAVs on every grid")
+    runs: int = setting(10, whole(1), "independent runs per grid")
+    episodes: int = setting(200, whole(1), "episodes per run")
+    steps: Optional[int] = setting(
+        None,
+        optional(whole(1), "Table II's steps for each grid"),
+        "steps per episode; null: Table II's for each grid",
+    )
+    seed: int = setting(0, SEED, "seeds the runs")
+    state_includes_tasks: bool = setting(
+        False, flag(), "the paper's state is the joint location only (Table I); true: the full configuration"
+    )
+    eval_starts: int = setting(EvalSchema.num_starts, whole(1), "fixed starts of the final greedy evaluation, per run")
+    figure_grid: int = setting(6, whole(1), "the grid of Figs. 3-5")
+    out_dir: Optional[str] = setting(
+        None,
+        optional(path(), "reproduction/<variant>"),
+        "null: reproduction/paper for these settings, else reproduction/<the settings that differ>",
+    )
+    overwrite: bool = setting(
+        False, flag(), "true: replace the results of other settings in out_dir (refused otherwise)"
+    )
+    progress: bool = setting(True, flag(), "a progress bar")
+    num_threads: int = setting(1, whole(1), "torch threads")
+    numba_threads: int = setting(0, whole(0), "learner threads (runs in parallel); 0: all cores")
+    memory_budget: REAL = setting(
+        DEFAULT_MEMORY_BUDGET, positive(), "bytes the learner's tables of one grid may take, all runs together"
+    )
+    step_budget: int = setting(STEP_BUDGET, whole(1), "team steps of the whole protocol; more is refused at once")
 
 
 def register() -> None:
     """Store the schemas in Hydra's ConfigStore (before composing): ``run_schema``, ``reproduce_schema``,
-    ``benchmarl_schema``, ``schema/env``, ``schema/scenario``, ``schema/agent/<name>``."""
+    ``benchmarl_schema``, ``schema/env``, ``schema/scenario``, ``schema/agent/<name>``, and ``env/<preset>`` for
+    each preset of ``envs/config.py``."""
     from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
@@ -223,4 +261,75 @@ def register() -> None:
     store.store(group="schema", name="env", node=EnvSchema)
     store.store(group="schema", name="scenario", node=ScenarioSchema)
     for name, schema in AGENT_SCHEMAS.items():
-        store.store(group="schema/agent", name=name, node=schema)
+        store.store(group="schema/agent", name=name, node=schema(name=name))
+    for preset in PRESETS:
+        store.store(group="env", name=preset, node=preset_env(preset))
+
+
+# ---------------------------------------------------------------------------------- the table of the docs
+def _markdown(text: str) -> str:
+    """Text for a cell of a markdown table: ``|``, ``<`` and ``*`` escaped, a docstring's roles as code."""
+    text = re.sub(r":\w+:`~?([\w.]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", " ".join(text.split()))
+    return re.sub(r"([|<*])", r"\\\1", text.replace("``", "`"))
+
+
+def _rows(schema: type, prefix: str = "") -> list[str]:
+    """One row per setting of ``schema`` (nested schemas' too; an optional one as one row, null until chosen)."""
+    rows = []
+    for field in dataclasses.fields(schema):
+        name = f"{prefix}.{field.name}" if prefix else field.name
+        nested, rule, doc = field.metadata.get("section"), field.metadata.get("rule"), field.metadata.get("doc", "")
+        if nested is not None and field.default is dataclasses.MISSING:
+            rows += [] if nested is EnvSchema else _rows(nested, name)
+            continue
+        if rule is None and not doc:
+            continue
+        default = field.default if field.default_factory is dataclasses.MISSING else field.default_factory()
+        shown_default = default if isinstance(default, str) else shown(default)
+        allowed = "" if rule is None else rule.allowed
+        rows.append(f"| `{name}` | `{shown_default}` | {_markdown(allowed)} | {_markdown(doc)} |")
+    return rows
+
+
+def _table(title: str, lead: str, schema: type, prefix: str = "") -> list[str]:
+    header = ["| setting | default | allowed | meaning |", "|---|---|---|---|"]
+    return [f"## {title}", "", lead, "", *header, *_rows(schema, prefix), ""]
+
+
+def settings_markdown() -> str:
+    """``docs/settings.md``: every setting of the commands with its default, rule and meaning, from the schemas."""
+    agents: dict[type, list[str]] = {}
+    for name, schema in AGENT_SCHEMAS.items():
+        agents.setdefault(schema, []).append(name)
+    lines = [
+        "# Settings",
+        "",
+        "Every setting of the commands, with its default, what it allows and what it means, generated from the",
+        "schemas that are the one home of each (`uavrl/schema.py`, `agents/schema.py`) by",
+        "`python -m uavrl.schema > docs/settings.md`; `tests/test_schema.py` fails when this file and the schemas",
+        "disagree. A value outside its rule is refused in one line before anything runs.",
+        "",
+        "The model's options (`env.*`) are the fields of `ModelConfig` (`envs/config.py`; their meanings:",
+        f"docs/model.md). `env=<preset>` ({', '.join(PRESETS)}) chooses a preset of `envs/config.py`, and an",
+        "option left null keeps the preset's value.",
+        "",
+        *_table(
+            "python -m uavrl.train, python -m uavrl.evaluate",
+            "`configs/config.yaml`; the agent's settings follow, by `agent=<name>`.",
+            RunSchema,
+        ),
+    ]
+    for schema, names in agents.items():
+        chosen = ", ".join(f"agent={name}" for name in names)
+        lines += _table(chosen, _markdown(schema.__doc__), schema, "agent")
+    lines += _table("python -m uavrl.reproduce", "`configs/reproduce.yaml`.", ReproduceSchema)
+    lines += _table(
+        "python -m uavrl.benchmarl",
+        "`configs/benchmarl.yaml`; BenchMARL's own `experiment.*`, `algorithm.*` and `model.*` keep their names.",
+        BenchmarlSchema,
+    )
+    return "\n".join(lines).rstrip() + "\n"
+
+
+if __name__ == "__main__":
+    print(settings_markdown(), end="")

@@ -1,26 +1,26 @@
 """What every command-line setting allows, checked before torch is imported.
 
-One table maps each setting, dotted as typed on the command line, to its rule.
-A setting missing from a config (another agent's, or one a newer config adds)
-is skipped, so a new setting is one line here.  A refusal is one line that
-names the setting, the value and what is allowed::
+The rules live with the settings' defaults in the schemas (:mod:`uavrl.schema`, :mod:`uavrl.agents.schema`); the
+tables here are read from them: the run's settings, then the chosen agent's own (another agent's rules never
+apply).  A setting missing from a config (one a saved run's config predates) is skipped.  A refusal is one line
+that names the setting, the value and what is allowed::
 
     agent.episodes=0 is invalid: it must be a whole number >= 1
 
-Only the standard library and omegaconf are imported, so a bad override is
-refused in a fraction of a second.
+Before anything is built, :func:`check_run_costs` and :func:`check_reproduce_costs` refuse a run that would need
+more memory or team steps than its budgets.  Only the standard library and omegaconf are imported, so a bad
+override is refused in a fraction of a second.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
-from typing import Any, Callable
 
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents import AGENTS
+from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules
 from uavrl.envs.config import make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
@@ -32,154 +32,28 @@ from uavrl.envs.limits import (
     table_bytes,
     world_bytes,
 )
+from uavrl.rules import Rule, check, one_of, rules_of
+from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema, TrainSchema
 
-_ABSENT = object()
 PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
 
-
-@dataclass(frozen=True)
-class Rule:
-    accepts: Callable[[Any], bool]
-    allowed: str  # completes "<setting>=<value> is invalid: ..."
-
-
-def _is_whole(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_real(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def whole(low: int) -> Rule:
-    return Rule(lambda v: _is_whole(v) and v >= low, f"it must be a whole number >= {low}")
-
-
-def interval(low: float, high: float, *, low_open: bool = False) -> Rule:
-    def accepts(v):
-        return _is_real(v) and (low < v if low_open else low <= v) and v <= high
-
-    return Rule(accepts, f"it must lie in {'(' if low_open else '['}{low}, {high}]")
-
-
-def positive() -> Rule:
-    return Rule(lambda v: _is_real(v) and v > 0, "it must be positive")
-
-
-def one_of(*choices: str, what: str = "values") -> Rule:
-    return Rule(lambda v: v in choices, f"allowed {what} are {', '.join(map(repr, choices))}")
-
-
-def flag() -> Rule:
-    return Rule(lambda v: isinstance(v, bool), "it must be true or false")
-
-
-def path() -> Rule:
-    return Rule(lambda v: isinstance(v, str) and v != "", "it must be a path")
-
-
-def optional(rule: Rule, meaning: str) -> Rule:
-    return Rule(lambda v: v is None or rule.accepts(v), f"{rule.allowed}, or null ({meaning})")
-
-
-def grid_sizes() -> Rule:
-    def accepts(v):
-        return isinstance(v, list) and len(v) > 0 and all(_is_whole(g) and g >= 1 for g in v)
-
-    return Rule(accepts, "give a list of grid sizes >= 1, e.g. [2,3,6]")
-
-
-def agent_names() -> Rule:
-    return Rule(
-        lambda v: isinstance(v, list) and len(v) > 0 and set(v) <= set(AGENTS),
-        f"give a list of agents among {', '.join(map(repr, AGENTS))}",
-    )
-
-
-SEED = Rule(lambda v: _is_whole(v) and 0 <= v < 2**63, "it must be a whole number in [0, 2^63)")
-DEVICE = Rule(
-    lambda v: isinstance(v, str) and bool(re.fullmatch(r"cpu|cuda(:\d+)?", v)), "use 'cpu', 'cuda' or 'cuda:<index>'"
-)
-UNIT = interval(0.0, 1.0)
-
-# python -m uavrl.train and python -m uavrl.evaluate (configs/config.yaml and configs/agent/*.yaml);
+# python -m uavrl.train and python -m uavrl.evaluate (configs/config.yaml): the run's settings and the agent's name;
 # the env.* options are checked by the model itself (uavrl.envs.ModelConfig)
-RUN_SETTINGS: dict[str, Rule] = {
-    "seed": SEED,
-    "device": DEVICE,
-    "num_threads": whole(1),
-    "run_dir": optional(path(), "runs/<agent>/<env>/<timestamp>"),
-    "resume": optional(path(), "a new run"),  # its files are checked by uavrl.train
-    "checkpoint": optional(path(), "unset"),  # its files are checked by uavrl.evaluate
-    "progress": flag(),
-    "train.checkpoint_every": whole(1),
-    "train.log_every": whole(1),
-    "train.step_budget": whole(1),
-    "eval.num_starts": whole(1),
-    "eval.horizon": optional(whole(1), "max(20, 2 (L1 + L2)) steps"),
-    "eval.seed": SEED,
-    "eval.every": whole(0),
-    "eval.gamma": interval(0.0, 1.0, low_open=True),
-    "eval.video": flag(),
-    "eval.video_starts": whole(1),
-    "eval.video_fps": whole(1),
-    "agent.name": one_of(*AGENTS, what="agents"),
-    "sweep_dir": optional(path(), "runs/sweeps/<timestamp> for a sweep (-m)"),
-    "scenario.agents": agent_names(),
-    # agent=tabular
-    "agent.method": one_of("q_learning", "value_iteration", what="methods"),
-    "agent.alpha": interval(0.0, 1.0, low_open=True),
-    "agent.epsilon": UNIT,
-    "agent.shared_table": flag(),
-    "agent.backend": one_of("numba", "torch", what="backends"),
-    "agent.memory_budget": positive(),
-    "agent.episodes": whole(1),
-    "agent.runs": whole(1),
-    # agent=dqn
-    "agent.iterations": whole(1),
-    "agent.head": one_of("factored", "joint", what="heads"),
-    "agent.mixer": one_of("vdn", "qmix", what="mixers"),
-    "agent.objective": one_of("delta", "log_gap", what="objectives"),
-    "agent.gap_floor": positive(),
-    "agent.worlds": whole(1),
-    "agent.hidden": whole(1),
-    "agent.depth": whole(1),
-    "agent.mixing_embed_dim": whole(1),
-    "agent.batch_size": whole(1),
-    "agent.buffer_size": whole(1),
-    "agent.updates": whole(1),
-    "agent.learning_starts": whole(0),
-    "agent.tau": UNIT,
-    "agent.eps_start": UNIT,
-    "agent.eps_end": UNIT,
-    "agent.eps_fraction": UNIT,
-    "agent.lr": positive(),
-    "agent.lr_end": positive(),
-    "agent.max_grad_norm": positive(),
-    # agent=tabular and agent=dqn
-    "agent.gamma": UNIT,
-}
+RUN_SETTINGS: dict[str, Rule] = rules_of(RunSchema) | {"agent.name": one_of(*AGENTS, what="agents")}
+# the settings of each agent (configs/agent/<name>.yaml)
+AGENT_SETTINGS: dict[str, dict[str, Rule]] = {name: agent_rules(name) for name in AGENT_SCHEMAS}
+# python -m uavrl.reproduce (configs/reproduce.yaml) and python -m uavrl.benchmarl (configs/benchmarl.yaml)
+REPRODUCE_SETTINGS: dict[str, Rule] = rules_of(ReproduceSchema)
+BENCHMARL_SETTINGS: dict[str, Rule] = rules_of(BenchmarlSchema)
 
-# python -m uavrl.reproduce (configs/reproduce.yaml)
-REPRODUCE_SETTINGS: dict[str, Rule] = {
-    "command": one_of("table2", "figures", what="commands"),
-    "grids": grid_sizes(),
-    "num_uavs": whole(1),
-    "runs": whole(1),
-    "episodes": whole(1),
-    "steps": optional(whole(1), "Table II's steps for each grid"),
-    "seed": SEED,
-    "state_includes_tasks": flag(),
-    "eval_starts": whole(1),
-    "figure_grid": whole(1),
-    "out_dir": optional(path(), "reproduction/<variant>"),
-    "overwrite": flag(),
-    "progress": flag(),
-    "num_threads": whole(1),
-    "numba_threads": whole(0),
-    "memory_budget": positive(),
-    "step_budget": whole(1),
-}
+
+def check_run(cfg: DictConfig) -> None:
+    """A one-line ValueError for the first setting of a run's config that breaks its rule: the run's settings, then
+    those of its agent."""
+    check(cfg, RUN_SETTINGS)
+    name = OmegaConf.select(cfg, "agent.name")
+    if name is not None:
+        check(cfg, AGENT_SETTINGS[name])
 
 
 def check_scenario(cfg: DictConfig) -> None:
@@ -190,34 +64,7 @@ def check_scenario(cfg: DictConfig) -> None:
         raise ValueError(f"agent={cfg.agent.name} is invalid with scenario={scenario.name}: its agents are {allowed}")
 
 
-def shown(value) -> str:
-    """A value as it is typed in an override: ``null``, ``true``, ``'text'``, ``[2, 3]``."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(shown(v) for v in value) + "]"
-    return repr(value)
-
-
-def check(cfg: DictConfig, table: dict[str, Rule], section: str = "") -> None:
-    """A one-line ValueError for the first setting of ``table`` (within ``section`` of ``cfg``) that breaks its rule."""
-    prefix = f"{section}." if section else ""
-    for name, rule in table.items():
-        if not name.startswith(prefix):
-            continue
-        value = OmegaConf.select(cfg, name[len(prefix) :], default=_ABSENT)
-        if value is _ABSENT:
-            continue
-        if isinstance(value, (DictConfig, ListConfig)):
-            value = OmegaConf.to_container(value, resolve=True)
-        if not rule.accepts(value):
-            raise ValueError(f"{name}={shown(value)} is invalid: {rule.allowed}")
-
-
 # ------------------------------------------------------------------------------------------ what a run costs
-DEFAULT_STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
 START_BLOCK = 256  # agents/tabular/learner.py: episodes whose starts one World draws for all runs
 
 
@@ -285,11 +132,11 @@ def check_run_costs(cfg: DictConfig, model) -> None:
     check_optimum_exists(model, "env.num_uavs")
     a = cfg.agent
     memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)
-    step_budget = OmegaConf.select(cfg, "train.step_budget", default=DEFAULT_STEP_BUDGET)
-    horizon = cfg.eval.horizon or default_horizon(model)
+    step_budget = OmegaConf.select(cfg, "train.step_budget", default=TrainSchema.step_budget)
+    horizon = cfg.eval.horizon or default_horizon(model.grid)
     starts = int(cfg.eval.num_starts)
     T, steps, memory, tables = model.max_steps, [], [], 0
-    if a.name == "tabular" and a.get("method", "q_learning") == "q_learning":
+    if a.name == "tabular" and a.get("method", TabularSchema.method) == "q_learning":
         tables = 1 if a.shared_table else int(a.runs)
         training = {"agent.episodes": int(a.episodes), "agent.runs": int(a.runs), "env.max_steps": T}
         steps.append(Cost(_product(training), training, "training"))
@@ -329,7 +176,7 @@ def check_evaluation_floor(cfg: DictConfig, video: bool) -> None:
     for the smallest model (one UAV on one cell, the shortest default horizon): every evaluation builds its starts'
     worlds.  The model's own estimate follows once the checkpoint is read."""
     smallest = make_config("paper", grid=(1, 1), num_uavs=1)
-    horizon = cfg.eval.horizon or default_horizon(smallest)
+    horizon = cfg.eval.horizon or default_horizon(smallest.grid)
     starts = int(cfg.eval.num_starts)
     what = "the evaluation's worlds, even of the smallest model (1 UAV on 1 cell)"
     costs = [Cost(world_bytes(smallest, starts), {"eval.num_starts": starts}, what)]
@@ -342,7 +189,7 @@ def check_evaluation_floor(cfg: DictConfig, video: bool) -> None:
 def check_video_cost(cfg: DictConfig, model) -> None:
     """A one-line refusal, before any frame is drawn, when the video of ``cfg.eval`` on ``model`` (a run read from
     its checkpoint) would need more than ``agent.memory_budget``."""
-    horizon = cfg.eval.horizon or default_horizon(model)
+    horizon = cfg.eval.horizon or default_horizon(model.grid)
     budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
     refuse_over([video_cost(int(cfg.eval.video_starts), horizon)], budget, "agent.memory_budget", "bytes")
 
@@ -377,7 +224,7 @@ def check_reproduce_costs(cfg: DictConfig, models: list) -> None:
     runs, episodes, starts, steps = int(cfg.runs), int(cfg.episodes), int(cfg.eval_starts), []
     for model in models:
         check_optimum_exists(model, "num_uavs")
-        horizon = default_horizon(model)
+        horizon = default_horizon(model.grid)
         training = {"runs": runs, "episodes": episodes, "steps": model.max_steps}
         steps.append(Cost(_product(training), training, f"training on {model.grid[0]}x{model.grid[1]}"))
         evaluation = {"eval_starts": starts, "runs": runs, "its horizon": horizon}

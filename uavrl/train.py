@@ -20,7 +20,6 @@ from __future__ import annotations
 import random
 import sys
 import time
-from datetime import datetime
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -37,20 +36,11 @@ from uavrl.checkpoints import (
     saved_agent,
 )
 from uavrl.cli import run_command
-from uavrl.config import RUN_OPTION_SETTINGS, flat_hparams, model_config, saved_config
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.io import WriteError, claim_dir, quoted, save_json, save_text
-from uavrl.rundir import (
-    Interrupted,
-    Interrupts,
-    RunDirectory,
-    hold,
-    missing_parents,
-    path_argument,
-    resume_command,
-    tidy,
-)
-from uavrl.settings import RUN_SETTINGS, check, check_run_costs, check_scenario
+from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
+from uavrl.io import WriteError, quoted, save_json, save_text
+from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
+from uavrl.runs import claim_run_dir, eval_settings, flat_hparams, yardstick_line
+from uavrl.settings import check_run, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -58,7 +48,7 @@ RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
 
 def check_settings(cfg: DictConfig) -> None:
     """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
-    check(cfg, RUN_SETTINGS)
+    check_run(cfg)
     check_scenario(cfg)
     check_run_costs(cfg, model_config(cfg))
     if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
@@ -67,18 +57,6 @@ def check_settings(cfg: DictConfig) -> None:
         raise NotADirectoryError(f"run_dir={quoted(cfg.run_dir)} is a file, not a directory: give a directory")
     if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
         raise FileExistsError(already_a_run(cfg.run_dir))
-
-
-def eval_settings(cfg: DictConfig, device) -> dict:
-    """Keyword arguments of :func:`uavrl.evaluation.evaluate` from ``cfg.eval``."""
-    return dict(
-        num_starts=cfg.eval.num_starts,
-        horizon=cfg.eval.horizon,
-        seed=int(cfg.eval.seed),
-        device=device,
-        gamma=cfg.eval.gamma,
-        memory_budget=OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET),  # BenchMARL: none
-    )
 
 
 def seed_everything(seed: int) -> None:
@@ -95,15 +73,8 @@ def hold_run_dir(cfg: DictConfig) -> RunDirectory:
     from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>``."""
     if cfg.resume:
         return hold(run_directory(cfg.resume, "resume"), "resume")
-    if cfg.run_dir:
-        held = hold(cfg.run_dir, "run_dir")
-        if checkpoint_files(held.path):  # a run started there since the settings were checked
-            held.release()
-            raise FileExistsError(already_a_run(cfg.run_dir))
-        return held
-    base = Path("runs") / cfg.agent.name / cfg.env.name / datetime.now().strftime("%Y%m%d-%H%M%S")
-    parents = missing_parents(base)
-    return hold(claim_dir(base), "run_dir", created=True, created_parents=parents)
+    refusal = already_a_run(cfg.run_dir) if cfg.run_dir else ""
+    return claim_run_dir(cfg.run_dir, cfg.agent.name, cfg.env.name, checkpoint_files, refusal)
 
 
 def already_a_run(run_dir) -> str:
@@ -141,7 +112,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
     for key in RESUMABLE_OVERRIDES:
         saved[key] = cfg[key]
     saved.resume = saved.run_dir = str(run_dir)
-    check(saved, RUN_SETTINGS)
+    check_run(saved)
     return saved, checkpoint, file, not skipped
 
 
@@ -346,20 +317,6 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"evaluate it again: python -m uavrl.evaluate {path_argument('checkpoint', run_dir)}",
         ]
     )
-
-
-def yardstick_line(cfg: DictConfig, result: dict) -> str:
-    """Against exact optimal control (README, The yardstick): return ratio and steps to 0.999 U*."""
-    parts = []
-    if "eval/return_ratio" in result:
-        parts.append(
-            f"return ratio {result['eval/return_ratio']:.4f} (discounted gain / the exact best, gamma {cfg.eval.gamma})"
-        )
-    reach = f"0.999 U* reached from {result['eval/reach_999']:.0%} of starts"
-    if "eval/step_ratio_999" in result:
-        fewest = "fewest" if result["eval/min_steps_exact"] == 1.0 else "a lower bound on the fewest"
-        reach += f" in {result['eval/step_ratio_999']:.2f}x {fewest} steps"
-    return "yardstick: " + "; ".join([*parts, reach])
 
 
 if __name__ == "__main__":

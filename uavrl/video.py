@@ -29,19 +29,15 @@ import torch
 from uavrl.envs import ModelConfig
 from uavrl.evaluation import EVAL_SEED, default_horizon
 from uavrl.io import save_bytes
+from uavrl.rules import refuse, rule_of
+from uavrl.schema import RunEvalSchema
 
-DEFAULT_STARTS = 3
+DEFAULT_STARTS = RunEvalSchema.video_starts
 
 
 def video_settings(cfg, device) -> dict:
     """Keyword arguments of :func:`comparison_frames` from a run's ``cfg.eval``."""
     return dict(starts=cfg.eval.video_starts, horizon=cfg.eval.horizon, seed=int(cfg.eval.seed), device=device)
-
-
-def _check_whole(name: str, value) -> None:
-    """A one-line error unless ``value`` is a whole number >= 1 (the commands check ``eval.video_*`` before)."""
-    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-        raise ValueError(f"{name}={value!r} is invalid: it must be a whole number >= 1")
 
 
 def rollout_frames(policy, cfg: ModelConfig, starts: int, horizon: int, seed: int, device, label: str) -> list:
@@ -81,8 +77,8 @@ def comparison_frames(
     from uavrl.agents.baselines import OraclePolicy
     from uavrl.envs.render import tile
 
-    _check_whole("starts", starts)
-    horizon = horizon or default_horizon(cfg)
+    refuse("starts", starts, rule_of(RunEvalSchema, "video_starts"))
+    horizon = horizon or default_horizon(cfg.grid)
     played = rollout_frames(policy, cfg, starts, horizon, seed, device, label)
     oracle = rollout_frames(OraclePolicy(cfg), cfg, starts, horizon, seed, device, "oracle")
     return np.stack(
@@ -97,7 +93,7 @@ def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
     """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4."""
     import imageio.v3 as iio
 
-    _check_whole("fps", fps)
+    refuse("fps", fps, rule_of(RunEvalSchema, "video_fps"))
     if extension == ".gif":
         return iio.imwrite("<bytes>", frames, extension=".gif", duration=1000 / fps, loop=0)
     # H.264 in yuv420p needs even sides

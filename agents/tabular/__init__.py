@@ -41,11 +41,12 @@ Example:
     (torch.Size([2, 81, 36]), torch.Size([2]), True)
 """
 
-from uavrl.envs.limits import table_bytes
+from uavrl.agents.schema import METHODS
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, table_bytes
 
-from .agent import METHODS, TabularAgent
+from .agent import TabularAgent
 from .learner import TeamQLearner
-from .tables import DEFAULT_MEMORY_BUDGET, TabularModel, exact_q_table
+from .tables import TabularModel, exact_q_table
 
 __all__ = [
     "DEFAULT_MEMORY_BUDGET",

@@ -7,12 +7,12 @@ import time
 import torch
 
 from uavrl.agents.base import Agent
+from uavrl.agents.schema import TabularSchema
 from uavrl.envs import ModelConfig
+from uavrl.rules import refuse, rule_of
 
 from .learner import TeamQLearner
 from .tables import exact_q_table
-
-METHODS = ("q_learning", "value_iteration")
 
 
 class TabularAgent(Agent):
@@ -25,11 +25,8 @@ class TabularAgent(Agent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        self.method = a.get("method", "q_learning")
-        if self.method not in METHODS:
-            raise ValueError(
-                f"agent.method={self.method!r} is invalid: allowed methods are {', '.join(map(repr, METHODS))}"
-            )
+        self.method = a.get("method", TabularSchema.method)  # run directories saved before it existed
+        refuse("agent.method", self.method, rule_of(TabularSchema, "method"))
         self.env_cfg, self.device = env_cfg, torch.device(device)
         if self.method == "value_iteration":
             if not 0 < float(a.gamma) <= 1:

@@ -20,6 +20,7 @@ from uavrl.envs.world import World
 from uavrl.evaluation import (
     DEFAULT_GAMMA,
     EVAL_SEED,
+    NUM_STARTS,
     check_memory,
     check_settings,
     default_horizon,
@@ -45,7 +46,7 @@ def evaluate_tables(
     tables: torch.Tensor,
     cfg: ModelConfig,
     *,
-    num_starts: int = 64,
+    num_starts: int = NUM_STARTS,
     horizon: int | None = None,
     seed: int = EVAL_SEED,
     device="cpu",
@@ -60,7 +61,7 @@ def evaluate_tables(
     tables' rollouts stepped together in one world of ``R x num_starts``.
     """
     check_settings(gamma, horizon, num_starts)
-    check_memory(cfg, num_starts, horizon or default_horizon(cfg), len(tables), memory_budget)
+    check_memory(cfg, num_starts, horizon or default_horizon(cfg.grid), len(tables), memory_budget)
     world, start, u_star, references, horizon = evaluation_starts(
         cfg, num_starts, horizon, seed, device, gamma, memory_budget
     )

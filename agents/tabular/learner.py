@@ -6,14 +6,16 @@ import math
 
 import torch
 
+from uavrl.agents.schema import TabularSchema
 from uavrl.envs import ModelConfig, streams
 from uavrl.envs.limits import table_bytes
 from uavrl.envs.rewards import team_reward
 from uavrl.envs.world import World
 from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
+from uavrl.rules import refuse, rule_of
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
-from .tables import DEFAULT_MEMORY_BUDGET, TabularModel
+from .tables import TabularModel
 
 _START_BLOCK = 256  # episodes whose starts are drawn together
 _LEARNER_STREAM = 1 << 20  # the purpose of the learner's draws in the random streams (the world's are small numbers)
@@ -26,9 +28,12 @@ class TeamQLearner:
         cfg: the model.
         runs: independent runs (each its own table), or worlds feeding one table with ``shared_table``.
         seed: seeds the episode starts (drawn by the env's reset) and the learner's random numbers.
-        alpha, gamma, epsilon: eq. 9-10 constants (paper: 0.1, 0.3, 0.1).
+        alpha, gamma, epsilon: eq. 9-10 constants.
         backend: ``"numba"`` (CPU) or ``"torch"`` (any device).
         memory_budget: refuse tables larger than this many bytes.
+
+    The defaults and the rules of these settings are ``agent=tabular``'s (:class:`~uavrl.agents.schema.TabularSchema`):
+    the paper's learner.
     """
 
     def __init__(
@@ -36,25 +41,19 @@ class TeamQLearner:
         cfg: ModelConfig,
         runs: int = 1,
         seed: int = 0,
-        alpha=0.1,
-        gamma=0.3,
-        epsilon=0.1,
-        shared_table=False,
-        backend="numba",
+        alpha=TabularSchema.alpha,
+        gamma=TabularSchema.gamma,
+        epsilon=TabularSchema.epsilon,
+        shared_table=TabularSchema.shared_table,
+        backend=TabularSchema.backend,
         device="cpu",
-        memory_budget=DEFAULT_MEMORY_BUDGET,
+        memory_budget=TabularSchema.memory_budget,
     ):
-        if backend not in ("numba", "torch"):
-            raise ValueError(f"backend={backend!r} is invalid: allowed values are 'numba', 'torch'")
+        settings = dict(runs=runs, alpha=alpha, gamma=gamma, epsilon=epsilon, backend=backend)
+        for name, value in settings.items():
+            refuse(name, value, rule_of(TabularSchema, name))
         if backend == "numba" and torch.device(device).type != "cpu":
             raise ValueError(f"backend='numba' runs on the CPU, not device={device!r}: use backend='torch' there")
-        if int(runs) < 1:
-            raise ValueError(f"runs={runs} is invalid: give at least 1")
-        for name, value, low in (("alpha", alpha, 0.0), ("gamma", gamma, 0.0), ("epsilon", epsilon, 0.0)):
-            if not (low <= float(value) <= 1.0) or (name == "alpha" and float(value) == 0.0):
-                raise ValueError(
-                    f"{name}={value} is invalid: it must lie in {'(0, 1]' if name == 'alpha' else '[0, 1]'}"
-                )
         if cfg.reward == "log_gap":
             raise ValueError(
                 "env.reward='log_gap' is invalid for agent=tabular: its table learns the paper's reward 'delta' or the "

@@ -17,10 +17,9 @@ from uavrl.envs.channel import rates
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
-from uavrl.envs.limits import row_itemsize, valid_list_itemsize
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, row_itemsize, valid_list_itemsize
 from uavrl.envs.optimum import optimum
 
-DEFAULT_MEMORY_BUDGET = 4 * 2**30
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
 
 

@@ -1,0 +1,111 @@
+"""Every agent's settings (``agent.*``): each one's default, type, rule and meaning, declared once in the agent's
+schema (standard library and :mod:`uavrl.rules` only).
+
+Hydra starts ``configs/agent/<name>.yaml`` from the agent's schema (registered by :mod:`uavrl.schema`), the commands
+check ``agent.*`` against the rules of the chosen agent's schema only (a new agent's ``agent.alpha`` follows its own
+rule, or none), the library's defaults (:class:`~uavrl.agents.tabular.TeamQLearner`) read the same fields, and
+``docs/settings.md`` is generated from them.
+
+Example:
+    >>> TabularSchema.alpha, agent_rules("tabular")["agent.alpha"].allowed
+    (0.1, 'it must lie in (0.0, 1.0]')
+    >>> "agent.alpha" in agent_rules("dqn")
+    False
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
+
+METHODS = ("q_learning", "value_iteration")
+MEMORY_BUDGET = positive()
+
+
+@dataclass
+class TabularSchema:
+    """``agent=tabular`` (:class:`~uavrl.agents.tabular.TabularAgent`): the defaults are the paper's learner (eqs.
+    9-10) and protocol (10 runs x 200 episodes of ``env.max_steps`` steps)."""
+
+    name: str = setting("tabular")
+    method: str = setting(
+        "q_learning",
+        one_of(*METHODS, what="methods"),
+        "q_learning (the paper's learner) or value_iteration (exact Q*, the paper's \"offline\" remark)",
+    )
+    alpha: REAL = setting(0.1, interval(0.0, 1.0, low_open=True), "the learning rate of eq. 9")
+    gamma: REAL = setting(0.3, UNIT, "the discount of the learner's (or the solved) Q")
+    epsilon: REAL = setting(0.1, UNIT, "the exploration rate of the epsilon-greedy joint action")
+    shared_table: bool = setting(False, flag(), "true: the runs' worlds feed one table instead of one table each")
+    backend: str = setting(
+        "numba", one_of("numba", "torch", what="backends"), "numba (compiled CPU loop) or torch (batched, any device)"
+    )
+    memory_budget: REAL = setting(
+        DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the tables, the worlds or the evaluation; more is refused"
+    )
+    episodes: int = setting(200, whole(1), "iterations: one episode of every run each")
+    runs: int = setting(10, whole(1), "independent runs (each its own table)")
+
+
+@dataclass
+class DQNSchema:
+    """``agent=dqn`` (:class:`~uavrl.agents.dqn.DQNAgent`)."""
+
+    name: str = setting("dqn")
+    head: str = setting(
+        "factored",
+        one_of("factored", "joint", what="heads"),
+        "factored: per-UAV heads mixed by agent.mixer; joint: one head over the 6^N joint actions (N <= 4)",
+    )
+    mixer: str = setting(
+        "vdn",
+        one_of("vdn", "qmix", what="mixers"),
+        "vdn (the sum of the UAVs' values) or qmix (monotonic, state-conditioned); factored head only",
+    )
+    worlds: int = setting(64, whole(1), "parallel worlds, each plays one episode per iteration")
+    hidden: int = setting(128, whole(1), "units per hidden layer")
+    depth: int = setting(2, whole(1), "hidden layers of the torso over the joint observation")
+    mixing_embed_dim: int = setting(32, whole(1), "qmix only")
+    objective: str = setting(
+        "log_gap",
+        one_of("delta", "log_gap", what="objectives"),
+        "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward",
+    )
+    gap_floor: REAL = setting(0.0001, positive(), "log_gap only: gaps below this fraction of U* count as closed")
+    gamma: REAL = setting(0.7, UNIT, "the discount; 0.9 left greedy policies oscillating near U* (BENCHMARKS.md)")
+    lr: REAL = setting(0.0005, positive(), "Adam's learning rate, annealed linearly over the run to agent.lr_end")
+    lr_end: REAL = setting(0.00005, positive(), "the learning rate at the end of the run")
+    batch_size: int = setting(256, whole(1), "transitions per gradient step")
+    buffer_size: int = setting(50000, whole(1), "transitions (the checkpoint keeps them: ~120 MB for N = 6 on 10x10)")
+    updates: int = setting(32, whole(1), "gradient steps per iteration")
+    learning_starts: int = setting(2000, whole(0), "transitions in the buffer before the first gradient step")
+    tau: REAL = setting(0.01, UNIT, "soft target update per gradient step")
+    eps_start: REAL = setting(1.0, UNIT, "epsilon-greedy exploration, annealed linearly from this...")
+    eps_end: REAL = setting(0.05, UNIT, "...to this...")
+    eps_fraction: REAL = setting(0.5, UNIT, "...over this fraction of the run's frames")
+    max_grad_norm: REAL = setting(10.0, positive(), "the gradients' norm is clipped to this")
+    iterations: int = setting(500, whole(1), "one episode in every world per iteration")
+    memory_budget: REAL = setting(
+        DEFAULT_MEMORY_BUDGET,
+        MEMORY_BUDGET,
+        "bytes of the worlds, a batch, the replay buffer or the evaluation; more is refused",
+    )
+
+
+@dataclass
+class BaselineSchema:
+    """``agent=random`` and ``agent=oracle`` (:mod:`uavrl.agents.baselines`): nothing to train."""
+
+    name: str = setting("random")
+    memory_budget: REAL = setting(DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the evaluation; more is refused")
+
+
+# the schema of each agent of uavrl.agents.AGENTS, by name
+AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}
+
+
+def agent_rules(name: str) -> dict[str, Rule]:
+    """The rules of the settings of the agent ``name``, as typed (``agent.alpha``)."""
+    return rules_of(AGENT_SCHEMAS[name], "agent")

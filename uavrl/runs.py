@@ -1,0 +1,79 @@
+"""What the commands share about a run (standard library and omegaconf; the run directory's lock from
+:mod:`uavrl.rundir`): a new run's directory, its evaluation's settings, its settings as flat names, the line of its
+yardstick.  ``uavrl.train``, ``uavrl.evaluate``, ``uavrl.benchmarl`` and ``uavrl.report`` import them from here.
+
+Example:
+    >>> flat_settings({"agent": {"name": "dqn", "gamma": 0.7}, "env": {"grid": [6, 6]}})
+    {'agent.name': 'dqn', 'agent.gamma': 0.7, 'env.grid': [6, 6]}
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import Callable
+
+from omegaconf import DictConfig, OmegaConf
+
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.io import claim_dir
+from uavrl.rundir import RunDirectory, hold, missing_parents
+
+
+def claim_run_dir(run_dir, agent: str, env: str, holds_run: Callable[[Path], bool], refusal: str) -> RunDirectory:
+    """The held directory of a new run (:mod:`uavrl.rundir`): ``run_dir`` if given, refused with ``refusal`` when
+    it holds a run (``holds_run``) once locked (a run may have started there since the settings were checked);
+    else a new ``runs/<agent>/<env>/<timestamp>`` (``-1``, ``-2``, ... when taken), removed with the folders made
+    for it if the run fails before it saved anything."""
+    if run_dir:
+        held = hold(run_dir, "run_dir")
+        if holds_run(held.path):
+            held.release()
+            raise FileExistsError(refusal)
+        return held
+    base = Path("runs") / agent / env / datetime.now().strftime("%Y%m%d-%H%M%S")
+    parents = missing_parents(base)
+    return hold(claim_dir(base), "run_dir", created=True, created_parents=parents)
+
+
+def eval_settings(cfg: DictConfig, device) -> dict:
+    """Keyword arguments of :func:`uavrl.evaluation.evaluate` from ``cfg.eval``."""
+    return dict(
+        num_starts=cfg.eval.num_starts,
+        horizon=cfg.eval.horizon,
+        seed=int(cfg.eval.seed),
+        device=device,
+        gamma=cfg.eval.gamma,
+        memory_budget=OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET),  # BenchMARL: none
+    )
+
+
+def flat_settings(config: dict, prefix: str = "") -> dict:
+    """A nested config's leaves by dotted name (``agent.gamma``), as they are."""
+    out = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out.update(flat_settings(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def flat_hparams(cfg: DictConfig) -> dict:
+    """Scalar hyper-parameters with dotted names (TensorBoard's hparams reject nesting)."""
+    settings = flat_settings(OmegaConf.to_container(cfg, resolve=True))
+    return {name: v if isinstance(v, (int, float, str, bool)) else str(v) for name, v in settings.items()}
+
+
+def yardstick_line(cfg: DictConfig, result: dict) -> str:
+    """Against exact optimal control (README, The yardstick): return ratio and steps to 0.999 U*."""
+    parts = []
+    if "eval/return_ratio" in result:
+        parts.append(
+            f"return ratio {result['eval/return_ratio']:.4f} (discounted gain / the exact best, gamma {cfg.eval.gamma})"
+        )
+    reach = f"0.999 U* reached from {result['eval/reach_999']:.0%} of starts"
+    if "eval/step_ratio_999" in result:
+        fewest = "fewest" if result["eval/min_steps_exact"] == 1.0 else "a lower bound on the fewest"
+        reach += f" in {result['eval/step_ratio_999']:.2f}x {fewest} steps"
+    return "yardstick: " + "; ".join([*parts, reach])
