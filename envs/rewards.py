@@ -45,3 +45,29 @@ def log_gap_reward(
 ) -> torch.Tensor:
     """``reward="log_gap"``: the change of :func:`log_gap_potential` from ``prev_utility`` to ``utility``."""
     return log_gap_potential(utility, u_star, floor) - log_gap_potential(prev_utility, u_star, floor)
+
+
+class TeamReward:
+    """The reward part: ``env.reward`` for a step of ``B`` worlds, from their rates ``[B, 2]`` (R_PU, R_SE).
+
+    ``random_channel`` is the fading part's ``random`` (:mod:`uavrl.envs.fading`): ``log_gap`` measures the gap
+    to ``U*`` as the evaluation does, on the mean channel, so under a random channel it reads the configurations'
+    mean-channel rates (``mean_rates()``, asked for only then) instead of the step's draw.
+    """
+
+    def __init__(self, cfg, random_channel: bool):
+        self.kind, self.betas = cfg.reward, (cfg.beta1, cfg.beta2)
+        self.reads_mean_channel = cfg.reward == "log_gap" and random_channel
+
+    def __call__(self, rates, prev_rates, best, u_star, mean_rates) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(reward [B], best [B])`` of a step from ``prev_rates`` to ``rates``: ``best`` is the episode's best
+        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``),
+        ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
+        if self.kind == "delta":
+            return delta_reward(rates[:, 0], rates[:, 1], prev_rates[:, 0], prev_rates[:, 1], *self.betas), best
+        if self.kind == "log_gap":
+            if self.reads_mean_channel:
+                rates, prev_rates = mean_rates()
+            return log_gap_reward(rates.sum(-1), prev_rates.sum(-1), u_star), best
+        total = rates.sum(-1)
+        return best_so_far_reward(total, best), torch.maximum(best, total)
