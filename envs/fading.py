@@ -10,15 +10,15 @@
   at the UAVs' cells ``[W, N, 4, ...]`` and the worlds' random streams (:mod:`.streams`, one purpose per draw);
 - ``direct(snr, keys, counters)``: the direct links' SNRs ``[W, 2]`` this step (``direct_links``).
 
-The mean gain is the channel model's (:func:`uavrl.envs.channel.link_gains`), and the Rayleigh power
+The mean gain is the channel model's (:func:`uavrl.envs.channel.link_gains`), and the Rayleigh and Rician power
 gains ``X`` have mean 1, so ``U*``, the exact solver and the bounds are those of the mean channel.
 
 Example:
     >>> import torch
     >>> from uavrl.envs import make_config, streams
-    >>> part = fading_part(make_config("paper", fading="rayleigh"))
-    >>> part.random
-    True
+    >>> part = fading_part(make_config("paper", fading="rician", rician_k_db=9.0))
+    >>> part.random, [round(share, 4) for share in part.shares]  # K / (K + 1) and 1 / (K + 1), K = 10^0.9
+    (True, [0.8882, 0.1118])
     >>> x = part.gains(torch.ones(3, 2, 4), streams.world_keys(0, 3), torch.zeros(3, dtype=torch.long))
     >>> x.shape, bool((x >= 0).all())  # unit mean gains: the draws X themselves
     (torch.Size([3, 2, 4]), True)
@@ -43,6 +43,26 @@ def _uniforms(keys: torch.Tensor, counters: torch.Tensor, purpose: int, shape) -
 def exp1(uniforms: torch.Tensor) -> torch.Tensor:
     """``Exp(1)`` power gains (Rayleigh fading) by inversion of uniforms in ``[0, 1)``."""
     return -torch.log1p(-uniforms)
+
+
+def rician_shares(k_db: float) -> tuple[float, float]:
+    """``(K / (K + 1), 1 / (K + 1))``, the line-of-sight and the scattered share of the mean power, of the K-factor
+    ``k_db`` in dB; computed from ``10^(-|k_db| / 10)``, so no finite ``k_db`` overflows."""
+    t = 10 ** (-abs(k_db) / 10)
+    big, small = 1 / (1 + t), t / (1 + t)
+    return (big, small) if k_db >= 0 else (small, big)
+
+
+def rician_power(uniforms: torch.Tensor, shares: tuple[float, float]) -> torch.Tensor:
+    """``X = |sqrt(K / (K + 1)) + sqrt(1 / (K + 1)) CN(0, 1)|^2`` from uniforms ``[..., 2]``: ``[...]``, mean 1.
+
+    Box-Muller turns the pair ``(u1, u2)`` into two independent ``N(0, 1)``, ``r cos(2 pi u2)`` and
+    ``r sin(2 pi u2)`` with ``r = sqrt(-2 ln(1 - u1))``; ``CN(0, 1)`` is their sum ``(n1 + i n2) / sqrt(2)``.
+    """
+    u1, u2 = uniforms.unbind(-1)
+    scattered = math.sqrt(shares[1] / 2) * torch.sqrt(-2 * torch.log1p(-u1))
+    angle = (2 * math.pi) * u2
+    return (math.sqrt(shares[0]) + scattered * torch.cos(angle)) ** 2 + (scattered * torch.sin(angle)) ** 2
 
 
 class Fading:
@@ -95,7 +115,27 @@ class LosNlos(Fading):
         return torch.where(_uniforms(keys, counters, streams.FADING, p_los.shape) < p_los, los, nlos)
 
 
-FADING_PARTS: dict[str, type[Fading]] = {part.name: part for part in (Fading, Rayleigh, LosNlos)}
+class Rician(Fading):
+    """Every link (UAV-node and direct, on any channel model) in line of sight with K-factor ``rician_k_db``: its
+    power gain times a fresh Rician ``X`` of mean 1 (:func:`rician_power`)."""
+
+    name, random = "rician", True
+
+    def __init__(self, cfg: ModelConfig):
+        super().__init__(cfg)
+        self.shares = rician_shares(cfg.rician_k_db)
+
+    def table(self, cell_xyz, nodes, mean_gains):
+        return mean_gains
+
+    def gains(self, rows, keys, counters):
+        return rows * rician_power(_uniforms(keys, counters, streams.RICIAN, (*rows.shape, 2)), self.shares)
+
+    def direct(self, snr, keys, counters):
+        return snr * rician_power(_uniforms(keys, counters, streams.RICIAN_DIRECT, (len(snr), 2, 2)), self.shares)
+
+
+FADING_PARTS: dict[str, type[Fading]] = {part.name: part for part in (Fading, Rayleigh, LosNlos, Rician)}
 
 
 def fading_part(cfg: ModelConfig) -> Fading:

@@ -66,6 +66,7 @@ class EnvSchema:
     alpha: REAL = None
     g0: REAL = None
     fading: Optional[str] = None
+    rician_k_db: REAL = None
     p_pt: REAL = None
     p_s: REAL = None
     p_u: REAL = None
