@@ -2,7 +2,8 @@
 
 ``delta`` and ``best_so_far`` use arithmetic only, so the environment (torch, batched) and the tabular learner's
 compiled loops (``numba.njit`` of these same functions) compute them from the same source; ``log_gap`` is the DQN's
-objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.
+objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.  :class:`TeamReward` is the
+World's reward part: ``env.reward`` dispatched to these functions, with ``log_gap``'s mean-channel rule.
 
 Example:
     >>> import torch
