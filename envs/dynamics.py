@@ -64,12 +64,12 @@ class Dynamics:
         """The state of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams): distinct random
         cells (the N smallest of C random keys) and tasks per ``init_tasks``."""
         cfg, N = self.cfg, self.cfg.num_uavs
-        cell = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells).topk(N, dim=-1, largest=False)
+        smallest = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells).topk(N, dim=-1, largest=False)
         if cfg.init_tasks == "random":
             task = streams.random_bits(keys, counters, streams.TASKS, N) & 1
         else:
             task = torch.full((len(keys), N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=keys.device)
-        return {"cell": cell.indices, "task": task}
+        return {"cell": smallest.indices, "task": task}
 
     def step(self, state, action: torch.Tensor) -> dict[str, torch.Tensor]:
         """The state after every world's joint action ``[B, N]`` (0..5, checked by the caller) from ``state`` (its

@@ -413,7 +413,9 @@ class World:
         """Direct-link SNRs ``[Bt or W, 2]`` broadcastable to all worlds (or to ``worlds``)."""
         return self._direct if worlds is None or len(self._direct) == 1 else self._direct[worlds]
 
-    def _rates(self, cell, task, code, worlds: torch.Tensor | None = None) -> torch.Tensor:
+    def _rates(
+        self, cell: torch.Tensor, task: torch.Tensor, code: torch.Tensor, worlds: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """``[W, 2]`` (R_PU, R_SE) of the configurations ``cell``, ``task`` (``code``) ``[W, N]`` of all worlds (or of
         ``worlds``): a fresh draw of a random channel (the fading part), else the mean channel's per-code tables."""
         cfg = self.cfg
