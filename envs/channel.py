@@ -2,7 +2,15 @@
 
 This is the one implementation of docs/model.md (Where the four nodes are, How good a configuration is, Channel
 models).  The environment, the exact optimum, the tabular learners' lookup tables and the tests all call these
-functions, so they cannot disagree about a rate.
+functions, so they cannot disagree about a rate.  It holds two of the World's parts (docs/architecture.md):
+
+- the channel model: :func:`link_gains`, the mean power gain ``|h|^2`` of every UAV-node link (the power laws, or a
+  physical model's mean path loss from :mod:`.pathloss`), :func:`direct_terms` of the direct links, and
+  :func:`link_state_gains`, the LoS and NLoS gains ``fading=los_nlos`` draws from; a fading part
+  (:mod:`.fading`) multiplies or picks among these gains, never recomputes them;
+- the rate model (``rate_model``: ``af``, or the authors' ``reference_code``): :func:`relay_contributions`, what a
+  UAV adds inside its network's logarithm from its links' gains, and :func:`rates` / :func:`rates_from_sums`, the
+  rates from those sums (the 1/2 factor, the lease rule, the authors' both-tasks rule).
 
 Shapes: ``...`` is any batch shape (worlds, configurations); ``N`` UAVs; the
 four fixed nodes are ordered ``(PT, PR, S, E)``.  Positions are in cell units.

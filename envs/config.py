@@ -28,7 +28,7 @@ SENSING, RELAYING = 0, 1
 NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
-FADINGS = ("none", "rayleigh", "los_nlos")
+FADINGS = ("none", "rayleigh", "los_nlos", "rician")  # uavrl.envs.fading: one part each
 REWARDS = ("delta", "best_so_far", "log_gap")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
@@ -64,7 +64,8 @@ class ModelConfig:
     ``carrier_ghz``, ``bandwidth_mhz``, ``noise_figure_db`` and powers in dBm.  ``rate_model``
     ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
     ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
-    where ``reference_gain`` replaces the power products.
+    where ``reference_gain`` replaces the power products.  ``fading`` draws every link's power gain anew each step
+    (:mod:`uavrl.envs.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.
     """
 
     grid: tuple[int, int] = (6, 6)
@@ -78,6 +79,7 @@ class ModelConfig:
     alpha: float | None = None
     g0: float | None = None
     fading: str = "none"
+    rician_k_db: float = 9.0  # fading=rician's K-factor: TR 38.901's mean LoS K of UMa (docs/model.md, Channel models)
     p_pt: float = 0.01
     p_s: float = 0.02
     p_u: float = 0.02
@@ -129,10 +131,13 @@ class ModelConfig:
                 continue
             if not (_is_real(value) and math.isfinite(value) and value > 0):
                 raise InvalidOption(name, value, "it must be a finite positive number")
-        for name in ("beta1", "beta2"):
+        for name in ("beta1", "beta2", "rician_k_db"):
             value = getattr(self, name)
             if not (_is_real(value) and math.isfinite(value)):
                 raise InvalidOption(name, value, "it must be a finite number")
+        if self.fading != "rician" and self.rician_k_db != _DEFAULTS["rician_k_db"]:
+            reason = f"only fading='rician' reads it, not fading={self.fading!r}"
+            raise InvalidOption("rician_k_db", self.rician_k_db, reason)
         if self.direct_links and self.rate_model == "reference_code":
             raise InvalidOption("direct_links", True, "the authors' rate_model='reference_code' has no direct link")
         if self.altitude is not None and not (

@@ -352,11 +352,11 @@ class UAVSpectrumEnv(EnvBase):
         action = tensordict.get(("agents", "action"))
         self._check_action(action)
         out, reward, truncated = self.world.step(action)
-        truncated = truncated.unsqueeze(-1)
+        terminated, truncated = self.world.terminated.unsqueeze(-1), truncated.unsqueeze(-1)
         out["reward"] = reward.float().unsqueeze(-1)
-        out["done"] = truncated
-        out["terminated"] = torch.zeros_like(truncated)
-        out["truncated"] = truncated.clone()
+        out["done"] = terminated | truncated
+        out["terminated"] = terminated
+        out["truncated"] = truncated
         return self._outputs(out)
 
     render_mode = "rgb_array"  # frames come back as arrays (VMAS's and Gymnasium's name); no window opens

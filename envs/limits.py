@@ -37,6 +37,10 @@ _LOG_MIN = math.log10(sys.float_info.min)  # its smallest normal number, 2.2e-30
 _LOG_RESOLUTION = math.log10(sys.float_info.epsilon)  # below this s, 1 + s is 1 in float64 and log2(1 + s) is 0
 _LOG_FLOAT32_MAX = math.log10(3.4028234663852886e38)  # rewards are float32
 FADING_PEAK = 32 * math.log(2)  # the largest Exp(1) power gain drawn from a 32-bit uniform (fading=rayleigh)
+# The largest power gain each fading draws.  A Rician X = |a + b z|^2 with a^2 + b^2 = 1 and |z|^2 an Exp(1) draw is at
+# most (a + b sqrt(FADING_PEAK))^2 <= 1 + FADING_PEAK (Cauchy-Schwarz), whatever the K-factor; a LoS/NLoS draw gives
+# at most the LoS gain, which the physical channels' bounds already allow.
+FADING_PEAKS = {"none": 1.0, "rayleigh": FADING_PEAK, "los_nlos": 1.0, "rician": 1 + FADING_PEAK}
 # the options whose value the checks can blame, in the order they are tried
 PHYSICAL = (
     *("p_pt", "p_s", "p_u", "noise", "cell_size", "altitude", "alpha", "g0", "reference_gain"),
@@ -236,8 +240,7 @@ def physics_problem(values: dict) -> str | None:
     """
     v, channels = values, _Channels(values)
     per_node, direct = _distances(v)
-    # a LoS/NLoS draw (fading=los_nlos) gives at most the LoS gain, which the physical channels' bounds already allow
-    fade = math.log10(FADING_PEAK) if v["fading"] == "rayleigh" else 0.0
+    fade = math.log10(FADING_PEAKS[v["fading"]])
     law = "10^(-PL / 10)" if channels.physical else "g0 d^-alpha"
     for node, (name, (closest, _, _)) in enumerate(zip(NODE_NAMES, per_node, strict=True)):
         if closest == 0:

@@ -201,8 +201,7 @@ class WorldRenderer:
         if nodes.tobytes() != self._fitted:
             self._fit(nodes)
             self._fitted = nodes.tobytes()
-        code = state.code[index].cpu()
-        cells, tasks = (code >> 1).numpy(), (code & 1).numpy()
+        cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()
         xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
         relaying = tasks == RELAYING
         colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255

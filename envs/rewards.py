@@ -3,7 +3,8 @@
 ``delta`` and ``best_so_far`` (and :func:`team_reward`, which picks one of them and tracks the episode's best) use
 arithmetic only, so the environment and the tabular learner's torch loop (batched tensors) and its compiled loops
 (numba compiles these same functions for scalars) compute them from the same source; ``log_gap`` is the DQN's
-objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.
+objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.  :class:`TeamReward` is the
+World's reward part: ``env.reward`` dispatched to these functions, with ``log_gap``'s mean-channel rule.
 
 Example:
     >>> import torch
@@ -67,3 +68,27 @@ def log_gap_reward(
 ) -> torch.Tensor:
     """``reward="log_gap"``: the change of :func:`log_gap_potential` from ``prev_utility`` to ``utility``."""
     return log_gap_potential(utility, u_star, floor) - log_gap_potential(prev_utility, u_star, floor)
+
+
+class TeamReward:
+    """The reward part: ``env.reward`` for a step of ``B`` worlds, from their rates ``[B, 2]`` (R_PU, R_SE).
+
+    ``random_channel`` is the fading part's ``random`` (:mod:`uavrl.envs.fading`): ``log_gap`` measures the gap
+    to ``U*`` as the evaluation does, on the mean channel, so under a random channel it reads the configurations'
+    mean-channel rates (``mean_rates()``, asked for only then) instead of the step's draw.
+    """
+
+    def __init__(self, cfg, random_channel: bool):
+        self.kind, self.betas = cfg.reward, (cfg.beta1, cfg.beta2)
+        self.reads_mean_channel = cfg.reward == "log_gap" and random_channel
+
+    def __call__(self, rates, prev_rates, best, u_star, mean_rates) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(reward [B], best [B])`` of a step from ``prev_rates`` to ``rates``: ``best`` is the episode's best
+        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``),
+        ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
+        if self.kind == "log_gap":
+            if self.reads_mean_channel:
+                rates, prev_rates = mean_rates()
+            return log_gap_reward(rates.sum(-1), prev_rates.sum(-1), u_star), best
+        r_pu, r_se, use_best = rates[:, 0], rates[:, 1], self.kind == "best_so_far"
+        return team_reward(r_pu, r_se, prev_rates[:, 0], prev_rates[:, 1], best, use_best, *self.betas)

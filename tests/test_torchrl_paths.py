@@ -239,6 +239,8 @@ def test_the_examples_evaluation_logs_a_video(tmp_path):  # iql.py, qmix_vdn.py,
 # ----------------------------------------------------------------- devices, batched envs, collectors
 def world_tensors(world):
     tensors = {name: v for name, v in vars(world).items() if isinstance(v, torch.Tensor)}
+    for part_name, part in world.parts.items():
+        tensors.update({f"{part_name}.{name}": v for name, v in vars(part).items() if isinstance(v, torch.Tensor)})
     tensors.update({f"_s.{n}": getattr(world._s, n) for n in type(world._s).__slots__})
     return {name: v for name, v in tensors.items() if isinstance(v, torch.Tensor)}
 

@@ -16,6 +16,7 @@ import torch
 from uavrl.envs.channel import rates
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
+from uavrl.envs.fading import fading_part
 from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, row_itemsize, valid_list_itemsize
 from uavrl.envs.optimum import optimum
@@ -59,7 +60,7 @@ class TabularModel:
                 "layout='random' is invalid for agent=tabular: its state has no layout, so one table cannot serve "
                 "many; use agent=dqn"
             )
-        if cfg.fading != "none":
+        if fading_part(cfg).random:
             raise ValueError(
                 f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use "
                 "fading='none'"
@@ -146,7 +147,7 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
             f"env.reward={cfg.reward!r} is invalid for agent.method=value_iteration: it solves the paper's reward "
             "(the best_so_far reward depends on the episode's past, not on the configuration); use env.reward=delta"
         )
-    if cfg.layout == "random" or cfg.fading != "none":
+    if cfg.layout == "random" or fading_part(cfg).random:
         raise ValueError(
             "agent.method=value_iteration needs a fixed layout and deterministic channels (env.layout=line or "
             "reference_code, env.fading=none)"
