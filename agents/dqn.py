@@ -71,6 +71,7 @@ from uavrl.envs import (
 )
 from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
+from uavrl.envs.fading import fading_part
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rewards import log_gap_reward
 from uavrl.evaluation import episode_metrics
@@ -446,8 +447,8 @@ def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collec
 
 
 def _nodes_out_of_observation(transitions, observation_size: int) -> None:
-    """A replay buffer saved before issue 17 (the node positions in every UAV's observation, the state only with
-    QMIX) becomes today's in place, so an old run resumes bit for bit.
+    """A replay buffer of the earlier observation layout (the node positions in every UAV's observation, the state
+    only with QMIX) becomes the current one in place, so a run saved in that layout resumes bit for bit.
 
     ``transitions``: the storage of a buffer's ``state_dict`` or the ``TensorDict`` of the oldest checkpoints.
     """
@@ -550,7 +551,7 @@ class DQNAgent(Agent):
         self.iteration += 1
         nxt = batch.get("next")
         # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
-        reach_utility = mean_utility(nxt) if self.env_cfg.fading != "none" else None
+        reach_utility = mean_utility(nxt) if fading_part(self.env_cfg).random else None
         per_world = episode_metrics(
             *(nxt.get(key).squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")), u_star, reach_utility
         )

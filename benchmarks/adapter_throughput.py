@@ -11,7 +11,7 @@ than the run (no resets), and every step's outputs kept alive only until the nex
 * ``UAVSpectrumGymEnv.step`` (B = 1 only): the single env, for reference.
 
 Each figure is the median (and the best) of ``--repeats`` whole-loop timings after ``--warmup`` loops; the
-ratio is the vector env's median over ``UAVSpectrumEnv.step``'s (issue 24 asks >= 0.5 at B = 1024).
+ratio is the vector env's median over ``UAVSpectrumEnv.step``'s (the target: >= 0.5 at B = 1024).
 
 Usage::
 

@@ -8,7 +8,7 @@ The state is one ``[B, N]`` tensor per name of :data:`UAV_STATE`: ``cell`` (``y 
 - ``step(state, action)``: the values after the joint actions ``[B, N]`` (0..5), by name: a move off the grid stays,
   and clashing moves are cancelled (:meth:`Dynamics.resolve_moves`);
 - ``masks(cell)``: ``[B, N, 6]`` the actions that keep each UAV on the grid;
-- ``terminated(state)``: ``[B]`` whether a world's episode ends, or ``None`` when none can (today's model: episodes
+- ``terminated(state)``: ``[B]`` whether a world's episode ends, or ``None`` when none can (the model's episodes
   are truncated after ``max_steps``).
 
 A new per-UAV variable (a battery, say) is one more name in :data:`UAV_STATE`, its first value in ``start``, its
@@ -87,7 +87,7 @@ class Dynamics:
 
     def terminated(self, state) -> torch.Tensor | None:
         """``[B]`` whether each world's episode ended with its last step, ``None`` when none can end (no tensor a
-        step): today's model never ends one."""
+        step): without a battery no episode ends before ``max_steps``."""
         return None
 
     def resolve_moves(self, cells: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

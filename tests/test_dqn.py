@@ -248,7 +248,7 @@ def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
 
 @pytest.mark.parametrize("overrides", [["agent.mixer=vdn"], ["agent.mixer=qmix", "env.num_uavs=3"]])
 def test_checkpoint_with_nodes_in_the_observation_resumes_identically(overrides, make_agent):
-    """A replay buffer saved before issue 17 (nodes in every observation, state only for QMIX) loads as today's."""
+    """A replay buffer of the earlier layout (nodes in every observation, state only for QMIX) loads as the current."""
     agent = make_agent(*overrides, "agent.buffer_size=300", seed=2)
     for _ in range(2):
         agent.train_iteration()

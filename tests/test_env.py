@@ -297,7 +297,7 @@ def test_state_index_and_observation_layout():
             assert td["state_index"][w].item() == sum(d * base**i for i, d in enumerate(digits))
             obs, state = td["agents", "observation"][w], td["state"][w]
             assert obs.shape == (N, 3 + 10 + 3 * (N - 1)) and state.shape == (5 * N + 12,)
-            with_nodes = observation_with_nodes(obs, state)  # the layout before issue 17: nodes after the observation
+            with_nodes = observation_with_nodes(obs, state)  # the earlier layout: nodes after the observation
             assert torch.equal(with_nodes[:, : obs.shape[-1]], obs) and with_nodes.shape == (N, obs.shape[-1] + 12)
             xyt = [(x / (L1 - 1), y / (L2 - 1), float(t)) for (x, y), t in zip(xy_list(td, w), tasks, strict=True)]
             for i in range(N):

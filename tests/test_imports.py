@@ -1,4 +1,4 @@
-"""The tabular commands run without TorchRL: the physics is a world layer with no TorchRL import (issue 14)."""
+"""The tabular commands run without TorchRL: the physics is a world layer with no TorchRL import."""
 
 import subprocess
 import sys
