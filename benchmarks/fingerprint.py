@@ -51,6 +51,10 @@ WORLD_CASES = {
     "a2g_urban-highrise-random": ("a2g_urban", dict(environment="highrise", layout="random", num_uavs=3)),
     "tr36777_uma": ("a2g_urban", dict(channel="tr36777_uma", num_uavs=4)),
     "tr36777_uma-los_nlos": ("a2g_urban", dict(channel="tr36777_uma", fading="los_nlos", num_uavs=4)),
+    "paper-n3-rician": ("paper", dict(num_uavs=3, fading="rician", rician_k_db=6.0)),
+    "a2g_urban-rician-loggap": ("a2g_urban", dict(fading="rician", reward="log_gap", num_uavs=3)),
+    "tr36777_umi-los_nlos": ("a2g_urban", dict(channel="tr36777_umi", fading="los_nlos", num_uavs=4)),
+    "tr36777_rma-30m": ("a2g_urban", dict(channel="tr36777_rma", altitude_m=30.0, num_uavs=4)),
 }
 STEPS, WORLDS = 25, 6
 
@@ -87,6 +91,11 @@ AGENT_CASES = {
         *("agent=dqn", "agent.iterations=2", "env.max_steps=6", "agent.worlds=4", "agent.hidden=16"),
         *("agent.batch_size=16", "agent.buffer_size=40", "agent.updates=1", "agent.learning_starts=8"),
         *("env=a2g_urban", "env.num_uavs=3", "env.grid=[5,5]", "env.fading=los_nlos"),
+    ],
+    "dqn-rician": [
+        *("agent=dqn", "agent.iterations=2", "env.max_steps=8", "agent.worlds=8", "agent.hidden=16"),
+        *("agent.batch_size=32", "agent.buffer_size=100", "agent.updates=2", "agent.learning_starts=16"),
+        *("env.fading=rician", "env.num_uavs=3"),
     ],
     "random": ["agent=random"],
     "oracle": ["agent=oracle", "env.num_uavs=3"],
