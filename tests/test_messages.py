@@ -25,6 +25,11 @@ CASES = [
     (["train", "agent.episodes=ünï"], "error: agent.episodes='ünï' is invalid: it must be a whole number"),
     (["train", "ünï=3"], "error: ünï=3 cannot be read: token recognition error at: 'ü' (type setting=value, e.g."),
     (["train", "agent.episodes=[1"], "error: agent.episodes=[1 cannot be read: no viable alternative at input '[1'"),
+    (
+        ["train", "scenario.agents=[dqn]"],
+        "error: scenario.agents=[dqn] is invalid: no scenario is chosen; choose one first, e.g. scenario=paper_6x6",
+    ),
+    (["train", "env.fading=rician", "env.rician_k_db=x"], "error: env.rician_k_db='x' is invalid: it must be a finite"),
     (["train", "resume={odd}"], "error: resume={odd_quoted} does not exist"),
     (["train", "resume='{tmp}/my runs/ünï'"], "error: resume='{tmp}/my runs/ünï' does not exist"),
     (["train", "run_dir={run}"], "error: run_dir={run_quoted} already holds a run"),

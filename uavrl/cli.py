@@ -225,10 +225,15 @@ def compose_config(config_name: str, overrides: list[str], return_hydra_config: 
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
 
+    chosen = {override.split("=", 1)[0] for override in overrides}
     for override in overrides:
         key = override.split("=", 1)[0].lstrip("+~")
         if key in RENAMED:
             raise SystemExit(f"error: {key} is now {RENAMED[key]}: write {override.replace(key, RENAMED[key], 1)}")
+        # the run's scenario section is null unless one is chosen: Hydra cannot set a key inside it
+        if config_name == "config" and key.startswith("scenario.") and "scenario" not in chosen:
+            example = f"scenario=paper_6x6 {override}"
+            raise SystemExit(f"error: {override} is invalid: no scenario is chosen; choose one first, e.g. {example}")
     try:
         with initialize_config_dir(config_dir=config_dir(), version_base=None):
             return compose(config_name=config_name, overrides=overrides, return_hydra_config=return_hydra_config)
