@@ -19,7 +19,7 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
-from . import radio
+from . import power, radio
 from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
@@ -33,6 +33,11 @@ REWARDS = ("delta", "best_so_far", "log_gap")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
 RESET_POSITIONS = ("random", "keep")
+ENERGIES = power.ENERGIES
+BATTERY_INITS = power.BATTERY_INITS
+# the options only an energy model reads, and those only rotary_wing reads (docs/model.md, Energy and lifetime)
+ENERGY_OPTIONS = ("base", "battery_init")
+ROTARY_WING_OPTIONS = ("battery_wh", "slot_s", "circuit_power_w")
 CHANNELS = radio.CHANNELS
 ENVIRONMENTS = radio.ENVIRONMENTS
 PRESETS = ("paper", "reference_code", "a2g_urban")
@@ -65,7 +70,9 @@ class ModelConfig:
     ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
     ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.  ``fading`` draws every link's power gain anew each step
-    (:mod:`uavrl.envs.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.
+    (:mod:`uavrl.envs.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.  ``energy`` gives the
+    UAVs batteries (:mod:`uavrl.envs.energy`): a UAV leaves service for the ``base`` when its battery reaches the
+    reserve the flight there needs; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
     """
 
     grid: tuple[int, int] = (6, 6)
@@ -102,6 +109,12 @@ class ModelConfig:
     init_tasks: str = "random"
     reset_positions: str = "random"
     state_includes_tasks: bool = False
+    energy: str = "none"
+    base: tuple[int, int] | None = None  # the base's cell (x, y), on the grid or off it; an energy model needs one
+    battery_wh: float = power.BATTERY_WH
+    battery_init: str = "full"
+    slot_s: float = power.SLOT_S
+    circuit_power_w: float = power.CIRCUIT_POWER_W
     preset: str = field(default="paper", compare=False)
 
     def __post_init__(self):
@@ -152,6 +165,7 @@ class ModelConfig:
         if self.is_physical:
             self._check_radio()
         self._check_physics()
+        self._check_energy()
 
     def _resolve_channel(self):
         """``g0`` and ``alpha`` of ``None`` become the power law's own; a channel refuses the options it does not read
@@ -215,6 +229,65 @@ class ModelConfig:
                 raise InvalidOption(name, getattr(self, name), reason)
         name = changed[0] if changed else "grid"
         raise InvalidOption(name, getattr(self, name), problem)
+
+    def _check_energy(self):
+        """An energy model's options: refused where no model reads them, a base where one is needed, finite
+        positive numbers, and a battery that starts above the largest reserve (docs/model.md, Energy and
+        lifetime)."""
+        _choice("energy", self.energy, ENERGIES)
+        _choice("battery_init", self.battery_init, BATTERY_INITS)
+        for name in ("battery_wh", "slot_s", "circuit_power_w"):
+            value = getattr(self, name)
+            if not (_is_real(value) and math.isfinite(value) and value >= 0):
+                raise InvalidOption(name, value, "it must be a finite number >= 0")
+            if value == 0 and name != "circuit_power_w":  # a radio may draw nothing beyond its transmit power
+                raise InvalidOption(name, value, "it must be a finite positive number")
+        unread = ENERGY_OPTIONS + ROTARY_WING_OPTIONS if self.energy == "none" else ()
+        unread = ROTARY_WING_OPTIONS if self.energy == "follow_up" else unread
+        for name in unread:
+            if getattr(self, name) != _DEFAULTS[name]:
+                reads = "an energy model (follow_up, rotary_wing)" if name in ENERGY_OPTIONS else "energy='rotary_wing'"
+                raise InvalidOption(name, getattr(self, name), f"only {reads} reads it, not energy={self.energy!r}")
+        if self.energy == "none":
+            return
+        if self.base is None:
+            reason = "a UAV leaves service for its base: give base=[x, y], a cell on or off the grid"
+            raise InvalidOption("energy", self.energy, reason)
+        if not _is_pair(self.base):
+            raise InvalidOption("base", self.base, "give two integers x, y (cells; off the grid too), e.g. [-1, 0]")
+        base = tuple(int(b) for b in self.base)
+        object.__setattr__(self, "base", base)
+        L1, L2 = self.grid
+        if self.energy == "follow_up" and 0 <= base[0] < L1 and 0 <= base[1] < L2:
+            reason = f"follow_up's flight to the base is inter-region: give a cell off the {L1}x{L2} grid"
+            raise InvalidOption("base", list(base), reason)
+        if self.rate_model == "reference_code":
+            reason = "the authors' both-tasks rule counts every UAV, in service or not: use rate_model='af'"
+            raise InvalidOption("energy", self.energy, reason)
+        if self.reset_positions == "keep":
+            reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
+            raise InvalidOption("energy", self.energy, reason)
+        energies = self.step_energies
+        farthest = max(abs(x - base[0]) for x in (0, L1 - 1)) + max(abs(y - base[1]) for y in (0, L2 - 1))
+        need = energies.reserve(farthest)
+        lowest = energies.capacity * (power.UNIFORM_LOW if self.battery_init == "uniform" else 1.0)
+        if lowest <= need:
+            name = "battery_wh" if self.energy == "rotary_wing" else "base"
+            unit = "Wh" if self.energy == "rotary_wing" else "units"
+            scale = 3600.0 if self.energy == "rotary_wing" else 1.0
+            reason = (
+                f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
+                f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
+                f"{need / scale:.4g} {unit}: give a larger battery or a nearer base"
+            )
+            raise InvalidOption(name, getattr(self, name), reason)
+
+    @property
+    def step_energies(self) -> power.StepEnergies:
+        """What a step costs a UAV under ``energy`` (not ``none``): :func:`uavrl.envs.power.step_energies`."""
+        return power.step_energies(
+            self.energy, self.cell_size, self.slot_s, self.powers_w[2], self.circuit_power_w, self.battery_wh
+        )
 
     @property
     def num_cells(self) -> int:

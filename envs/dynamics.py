@@ -37,6 +37,7 @@ from .config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig
 from .grid import grid_neighbours
 
 UAV_STATE = ("cell", "task")  # the per-UAV variables, each a [B, N] tensor of the World's state
+NO_OP = 4  # "sense": the one action of a UAV out of service under an energy model (uavrl.envs.energy)
 
 
 def _lookup(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
@@ -58,7 +59,14 @@ class Dynamics:
         # task_after[2 a + task]: the task after action a (4 senses, 5 relays, a move keeps it)
         self.task_after = torch.tensor([0, 1] * 4 + [SENSING] * 2 + [RELAYING] * 2, device=device)
         self.cell_mask = torch.cat([self.neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=device)], -1)
-        self.cell_offset = torch.arange(num_worlds, device=device).unsqueeze(-1) * C  # world w's cells as w C + c
+        # under an energy model a UAV out of service sits on one more cell, C, off the grid: it stays there, and
+        # "sense" is its only action (uavrl.envs.energy)
+        self.slots = C + (cfg.energy != "none")
+        if self.slots > C:
+            self.move_to = torch.cat([self.move_to, self.move_to.new_full((NUM_ACTIONS,), C)])
+            away_mask = torch.arange(NUM_ACTIONS, device=device) == NO_OP
+            self.cell_mask = torch.cat([self.cell_mask, away_mask[None]])
+        self.cell_offset = torch.arange(num_worlds, device=device).unsqueeze(-1) * self.slots  # world w's cells
 
     def start(self, keys: torch.Tensor, counters: torch.Tensor) -> dict[str, torch.Tensor]:
         """The state of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams): distinct random
@@ -119,6 +127,5 @@ class Dynamics:
 
     def clashes(self, target: torch.Tensor) -> torch.Tensor:
         """``[W, N]``: does another UAV of the same world target the same cell?  By counting targets per cell."""
-        C = self.cfg.num_cells
         flat = (target + self.cell_offset[: len(target)]).view(-1)
-        return (torch.bincount(flat, minlength=len(target) * C).index_select(0, flat) > 1).view_as(target)
+        return (torch.bincount(flat, minlength=len(target) * self.slots).index_select(0, flat) > 1).view_as(target)

@@ -23,8 +23,9 @@ _GOLDEN = 0x61C88647  # below 2**31, so 32-bit values times it fit in int64
 
 # The purposes of the worlds' draws, one each, so a new draw changes none of the others: a reset's cells and tasks,
 # a step's fading of the UAV-node links and of the direct links (Rayleigh and LoS/NLoS; Rician), and round r of
-# layout=random's rejection sampler for its node pair p (every purpose from LAYOUT up: LAYOUT + 2 r + p).
-POSITIONS, TASKS, FADING, FADING_DIRECT, RICIAN, RICIAN_DIRECT = 1, 2, 3, 4, 5, 6
+# layout=random's rejection sampler for its node pair p (every purpose from LAYOUT up: LAYOUT + 2 r + p), and a
+# reset's battery levels (battery_init=uniform).
+POSITIONS, TASKS, FADING, FADING_DIRECT, RICIAN, RICIAN_DIRECT, BATTERY = 1, 2, 3, 4, 5, 6, 7
 LAYOUT = 16
 
 

@@ -9,7 +9,8 @@ the per-world random streams.  The parts are
   per-cell and per-code tables once per layout;
 - ``fading`` (:mod:`.fading`): the links' random power gains drawn each step, and whether the channel is random;
 - ``dynamics`` (:mod:`.dynamics`): the per-UAV state variables, their start, their step, the masks, termination;
-- ``reward`` (:class:`.rewards.TeamReward`): ``env.reward`` from the rates.
+- ``reward`` (:class:`.rewards.TeamReward`): ``env.reward`` from the rates;
+- ``energy`` (:mod:`.energy`, under ``env.energy`` other than ``none``): the batteries, who serves, termination.
 
 A step is their pipeline: dynamics, rates, reward, termination, observation.  :meth:`World.reset` and
 :meth:`World.step` return plain tensors (observations, masks, rates, rewards);
@@ -39,6 +40,7 @@ from . import streams
 from .channel import direct_terms, link_gains, rates, rates_from_sums, relay_contributions
 from .config import RELAYING, SENSING, InvalidOption, ModelConfig
 from .dynamics import UAV_STATE, Dynamics
+from .energy import ENERGY_STATE, energy_part
 from .fading import fading_part
 from .grid import cells_of, joint_action_valid
 from .layouts import Layouts
@@ -113,15 +115,27 @@ class _WorldsState:
     """The mutable per-world state, kept outside the ``nn.Module`` (whose ``__setattr__`` costs ~6 us a step per
     tensor).
 
-    Per UAV, one ``[B, N]`` tensor for each name of :data:`~uavrl.envs.dynamics.UAV_STATE` (``cell``, ``task``);
-    per world: ``r`` ``[B, 2]`` the current (R_PU, R_SE); ``best`` the episode's best ``R_PU + R_SE`` (the reward
-    part's memory for ``best_so_far``); ``steps`` the episode clock; ``terminated`` whether the last step ended the
-    episode (``None``: no world's); ``started`` whether a world has been reset; ``keys`` and ``counters`` the
-    per-world random streams; ``was_reset`` whether every world has been reset at least once (then every UAV has a
-    cell).
+    Per UAV, one ``[B, N]`` tensor for each name of :data:`~uavrl.envs.dynamics.UAV_STATE` (``cell``, ``task``)
+    and, under an energy model, of :data:`~uavrl.envs.energy.ENERGY_STATE` (``battery``, ``status``, ``timer``;
+    ``None`` without one); per world: ``r`` ``[B, 2]`` the current (R_PU, R_SE); ``best`` the episode's best
+    ``R_PU + R_SE`` (the reward part's memory for ``best_so_far``); ``steps`` the episode clock; ``terminated``
+    whether the last step ended the episode (``None``: no world's); ``started`` whether a world has been reset;
+    ``keys`` and ``counters`` the per-world random streams; ``was_reset`` whether every world has been reset at least
+    once (then every UAV has a cell).
     """
 
-    __slots__ = (*UAV_STATE, "r", "best", "steps", "terminated", "started", "counters", "keys", "was_reset")
+    __slots__ = (
+        *UAV_STATE,
+        *ENERGY_STATE,
+        "r",
+        "best",
+        "steps",
+        "terminated",
+        "started",
+        "counters",
+        "keys",
+        "was_reset",
+    )
 
     def __init__(self, **tensors):
         for name, value in tensors.items():
@@ -163,28 +177,33 @@ class World:
         self.fading = fading_part(cfg)
         self.dynamics = Dynamics(cfg, B, dev)
         self.reward = TeamReward(cfg, self.fading.random)
+        self.energy = energy_part(cfg, dev)
+        self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
         self._build_geometry()
         # per-layout tables: one shared row for a fixed layout, one per world for random ones (zeros until a reset)
         C, f64 = cfg.num_cells, torch.float64
         fixed = self.layouts.fixed
         Bt = 1 if fixed is not None else B
-        self._code_offset = None if Bt == 1 else torch.arange(B, device=dev).unsqueeze(-1) * (2 * C)
+        self._code_offset = None if Bt == 1 else torch.arange(B, device=dev).unsqueeze(-1) * (2 * self._slots)
         nodes = fixed if fixed is not None else torch.zeros(4, 3, dtype=f64, device=dev)
         self._nodes = nodes.expand(Bt, 4, 3).clone()
         self._cell_contrib = torch.zeros(Bt, C, 2, dtype=f64, device=dev)
-        self._code_obs = torch.zeros(Bt, 2 * C, 13, dtype=torch.float32, device=dev)  # own (x, y, task), contributions
-        self._code_rate = torch.zeros(Bt, 2 * C, 3, dtype=f64, device=dev)  # adds to (sum PU, sum SE, relaying count)
+        K = 2 * self._slots  # the codes
+        self._code_obs = torch.zeros(Bt, K, 13, dtype=torch.float32, device=dev)  # own (x, y, task), contributions
+        self._code_rate = torch.zeros(Bt, K, 3, dtype=f64, device=dev)  # adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, NODE_FEATURES, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
         self._u_star = torch.zeros(Bt, dtype=f64, device=dev)  # reward="log_gap" only: each layout's exact U*
         self._fading_table = None  # the fading part's table, its shape the part's: made by the first layout
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
         # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
-        self._pairs = self.num_uavs == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16
+        self._pairs = self.num_uavs == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16 and self.energy is None
         self._pair_obs = self._pair_state = self._pair_rates = None
         N, long = self.num_uavs, torch.long
+        energy_state = ENERGY_STATE if self.energy is not None else ()
         self._s = _WorldsState(
-            **{name: torch.zeros(B, N, dtype=long, device=dev) for name in UAV_STATE},
+            **{name: torch.zeros(B, N, dtype=long, device=dev) for name in (*UAV_STATE, *energy_state)},
+            **{name: None for name in ENERGY_STATE if name not in energy_state},
             r=torch.zeros(B, 2, dtype=f64, device=dev),
             best=torch.zeros(B, dtype=f64, device=dev),
             steps=torch.zeros(B, dtype=long, device=dev),
@@ -194,6 +213,8 @@ class World:
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
+        if self.energy is not None:
+            self._s.battery = torch.zeros(B, N, dtype=f64, device=dev)
         if fixed is not None:
             self._set_layout(torch.zeros(1, dtype=long, device=dev))
         self.set_seed(seed)
@@ -207,12 +228,15 @@ class World:
         x, y = c % L1, c // L1
         self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
         # digit base of the tabular state index s = sum_i d_i base^i, None when it overflows int64
-        self._state_base = (2 * C if cfg.state_includes_tasks else C) if cfg.has_state_index else None
+        tabular = cfg.has_state_index and self.energy is None  # the tabular state has no battery
+        self._state_base = (2 * C if cfg.state_includes_tasks else C) if tabular else None
         self._grid_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=f64, device=dev)
         self._node_scale = torch.tensor([L1, L2, cfg.height], dtype=f64, device=dev)
         self._cell_xy = torch.stack([x, y], -1)  # [C, 2]
+        if self.energy is not None:  # a UAV out of service is shown at the base
+            self._cell_xy = torch.cat([self._cell_xy, torch.tensor([cfg.base], device=dev)])
         # the per-code tables are indexed by a UAV's code 2 cell + task
-        code = torch.arange(2 * C, device=dev)
+        code = torch.arange(2 * self._slots, device=dev)
         self._code_cell, self._code_task = code >> 1, code & 1
         self._code_xyt = torch.cat(
             [self._cell_xy[self._code_cell] / self._grid_scale, self._code_task[:, None]], -1
@@ -238,22 +262,27 @@ class World:
 
     @property
     def parts(self) -> dict:
-        """The model's parts by name (docs/architecture.md, The World's parts)."""
-        return {"layouts": self.layouts, "fading": self.fading, "dynamics": self.dynamics, "reward": self.reward}
+        """The model's parts by name (docs/architecture.md, The World's parts); ``energy`` under an energy model."""
+        parts = {"layouts": self.layouts, "fading": self.fading, "dynamics": self.dynamics, "reward": self.reward}
+        return parts if self.energy is None else {**parts, "energy": self.energy}
 
     # ---------------------------------------------------------- sizes
     @property
     def observation_size(self) -> int:
         """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task).
+        Under an energy model, own battery (a fraction of the capacity) and service flag after the contributions,
+        and each other's after its (x, y, task).
 
         The 4 nodes' positions are the same for every UAV of a world: they are the last
         :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
-        return 3 + 10 + 3 * (self.num_uavs - 1)
+        per_uav = 3 if self.energy is None else 5
+        return per_uav + 10 + per_uav * (self.num_uavs - 1)
 
     @property
     def state_size(self) -> int:
-        """Per UAV (x, y, task) and its contributions at its cell, then the 4 nodes' (x, y, z)."""
-        return 5 * self.num_uavs + NODE_FEATURES
+        """Per UAV (x, y, task), its contributions at its cell (and its battery and service flag under an energy
+        model), then the 4 nodes' (x, y, z)."""
+        return (5 if self.energy is None else 7) * self.num_uavs + NODE_FEATURES
 
     def set_seed(self, seed: int | None):
         """World ``i`` draws from the stream of seed ``seed + i``; the episode counters restart."""
@@ -274,11 +303,17 @@ class World:
         scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
         neighbours = self.dynamics.neighbours
         around = torch.cat([torch.arange(C, device=self.device)[:, None], neighbours.where(neighbours >= 0, C)], -1)
-        cc, relay = self._code_cell, (self._code_task == RELAYING)[None, :]
-        local = scaled.index_select(1, around[cc].flatten()).view(k, 2 * C, 10).float()
+        K = 2 * self._slots
+        if self._slots > C:  # a UAV out of service (cell C) sees -1 everywhere, adds nothing and relays for no one
+            around = torch.cat([around, around.new_full((1, 5), C)])
+            on_grid = torch.cat([contrib, contrib.new_zeros(k, 1, 2)], 1)
+        else:
+            on_grid = contrib
+        cc, relay = self._code_cell, ((self._code_task == RELAYING) & (self._code_cell < C))[None, :]
+        local = scaled.index_select(1, around[cc].flatten()).view(k, K, 10).float()
         code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)  # [k, 2C, 13]
         # per code: what the UAV adds to the sum inside the PU log, the SE log, and to the relaying count
-        at_code, zero = contrib.index_select(1, cc), contrib.new_zeros(())
+        at_code, zero = on_grid.index_select(1, cc), contrib.new_zeros(())
         code_rate = torch.stack(
             [
                 torch.where(relay, at_code[..., 0], zero),
@@ -296,6 +331,8 @@ class World:
         }
         fading_table = self.fading.table(self._cell_xyz, nodes, gains)
         if fading_table is not None:
+            if self._slots > C:  # zero gains at the cell of a UAV out of service: it adds nothing
+                fading_table = torch.cat([fading_table, fading_table.new_zeros(k, 1, *fading_table.shape[2:])], 1)
             tables["_fading_table"] = fading_table
         if cfg.reward == "log_gap":
             tables["_u_star"] = exact_optimum(contrib, tables["_direct"], cfg)[0]
@@ -333,7 +370,7 @@ class World:
         """Rows ``[W, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[W, N]`` of all worlds (or of
         ``worlds``)."""
         if self._code_offset is not None:
-            code = code + (self._code_offset if worlds is None else worlds.unsqueeze(-1) * (2 * self.cfg.num_cells))
+            code = code + (self._code_offset if worlds is None else worlds.unsqueeze(-1) * (2 * self._slots))
         return table.view(-1, table.shape[-1]).index_select(0, code.view(-1)).view(*code.shape, table.shape[-1])
 
     def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -341,6 +378,8 @@ class World:
         layout)."""
         W, N = code.shape
         own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
+        if self.energy is not None:
+            return self._assemble_with_energy(code, own)
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
             parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
@@ -351,6 +390,17 @@ class World:
         observation = torch.cat(parts, -1) if len(parts) > 1 else own
         state = torch.cat([own[..., :5].reshape(W, 5 * N), self._node_obs.expand(W, NODE_FEATURES)], -1)
         return observation, state
+
+    def _assemble_with_energy(self, code: torch.Tensor, own: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`_assemble` of every world under an energy model: each UAV's battery and service flag after its
+        contributions, and after each other's (x, y, task)."""
+        W, N = code.shape
+        energy = self.energy.features(self._s)  # [W, N, 2]
+        seen = torch.cat([self._code_xyt.index_select(0, code.view(-1)).view(W, N, 3), energy], -1)  # [W, N, 5]
+        others = (torch.arange(N, device=code.device)[:, None] + torch.arange(1, N, device=code.device)) % N
+        observation = torch.cat([own, energy, seen[:, others].view(W, N, 5 * (N - 1))], -1)
+        per_uav = torch.cat([own[..., :5], energy], -1).view(W, 7 * N)
+        return observation, torch.cat([per_uav, self._node_obs.expand(W, NODE_FEATURES)], -1)
 
     def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate
@@ -445,6 +495,9 @@ class World:
         fresh = worlds[~s.started[worlds]] if cfg.reset_positions == "keep" else worlds
         for name, value in self.dynamics.start(s.keys[fresh], s.counters[fresh]).items():
             getattr(s, name)[fresh] = value
+        if self.energy is not None:  # every episode is a mission with fresh batteries (refused with keep)
+            for name, value in self.energy.start(s.keys[worlds], s.counters[worlds]).items():
+                getattr(s, name)[worlds] = value
         s.started[worlds] = True
         s.steps[worlds] = 0
         s.best[worlds] = 0.0
@@ -465,6 +518,9 @@ class World:
         s.counters += 1
         code = code.to(self.device)
         s.cell, s.task = code >> 1, code & 1
+        if self.energy is not None:
+            for name, value in self.energy.start(s.keys, s.counters).items():
+                setattr(s, name, value)
         s.started.fill_(True)
         s.steps.zero_()
         s.best.zero_()
@@ -488,6 +544,9 @@ class World:
         cell, task = s.cell, s.task
         for name, value in self.dynamics.step(s, action).items():
             setattr(s, name, value)
+        if self.energy is not None:
+            for name, value in self.energy.step(s, cell, action).items():
+                setattr(s, name, value)
         code = torch.add(s.task, s.cell, alpha=2)
         s.counters += 1
         prev = s.r
@@ -496,7 +555,7 @@ class World:
             s.r, prev, s.best, self._u_star, lambda: (self._sum_rates(code), self._sum_rates(cell * 2 + task))
         )
         s.steps += 1
-        s.terminated = self.dynamics.terminated(s)
+        s.terminated = self.dynamics.terminated(s) if self.energy is None else self.energy.terminated(s)
         new_cell, new_task = s.cell, s.task
         out = self._observe(
             code, new_cell, new_task, lambda: (new_cell != cell).sum(-1), lambda: (new_task != task).sum(-1)

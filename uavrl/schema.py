@@ -103,7 +103,7 @@ def _option_type(hint) -> Any:
     """The type Hydra checks a model option's value against (null always allowed: the preset's value)."""
     if hint in (int, str, bool):
         return Optional[hint]
-    if typing.get_origin(hint) is tuple:
+    if typing.get_origin(hint) is tuple or tuple in map(typing.get_origin, typing.get_args(hint)):  # grid, base
         return Optional[list[int]]
     return REAL
 

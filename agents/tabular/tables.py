@@ -65,6 +65,13 @@ class TabularModel:
                 f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use "
                 "fading='none'"
             )
+        if cfg.energy != "none":
+            levels = 100  # a battery in 1% steps, the coarsest that still tells a reserve from a full battery
+            raise ValueError(
+                f"energy={cfg.energy!r} is invalid for agent=tabular: its state would need each UAV's battery and "
+                f"service, {cfg.num_states:,} x ({levels} levels x 3 states)^{cfg.num_uavs} = "
+                f"{cfg.num_states * (3 * levels) ** cfg.num_uavs:.3g} rows; use agent=dqn"
+            )
         self.cfg, self.device = cfg, torch.device(device)
         N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
         dev = self.device

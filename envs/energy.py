@@ -1,0 +1,110 @@
+"""The energy part: the UAVs' batteries and their service (docs/model.md, Energy and lifetime).
+
+``env.energy`` names the model: ``none`` (the paper: no part, nothing allocated, no work in a step), ``follow_up``
+or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`Energy` adds the per-UAV variables
+:data:`ENERGY_STATE` to the World's state and gives
+
+- ``start(keys, counters)``: full batteries, or ``U[lo, 1]`` of the capacity from each world's stream
+  (``battery_init=uniform``), every UAV serving;
+- ``step(state, cell_before, action)``: after the dynamics part moved the UAVs, what the step cost each battery,
+  and who leaves service: a serving UAV whose battery is at or below the reserve of its cell (one more step, then
+  the flight to the base) flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
+  left), then is ``OUT``.  A UAV out of service sits on :attr:`Energy.away`, a cell index past the grid's whose
+  per-code rows add nothing to the rates, clash with nothing and allow only :data:`NO_OP`;
+- ``terminated(state)``: ``[B]`` no UAV serves any more.
+
+Example:
+    >>> import torch
+    >>> from uavrl.envs import make_config, streams
+    >>> part = Energy(make_config("paper", grid=(3, 3), energy="follow_up", base=(-1, 0)))
+    >>> part.steps_home.tolist()  # steps from each cell to the base, then the away cell's
+    [1, 2, 3, 2, 3, 4, 3, 4, 5, 0]
+    >>> start = part.start(streams.world_keys(0, 2), torch.ones(2, dtype=torch.long))
+    >>> start["battery"].tolist(), start["status"].tolist()
+    ([[5000.0, 5000.0], [5000.0, 5000.0]], [[0, 0], [0, 0]])
+"""
+
+from __future__ import annotations
+
+import torch
+
+from . import streams
+from .config import SENSING, ModelConfig
+from .dynamics import NO_OP
+from .grid import grid_neighbours
+from .power import UNIFORM_LOW
+
+ENERGY_STATE = ("battery", "status", "timer")  # per-UAV variables the part adds to the World's state, [B, N] each
+SERVING, RETURNING, OUT = 0, 1, 2  # a UAV's status
+
+
+class Energy:
+    """The batteries and service of the UAVs of the model ``cfg`` (``energy`` not ``none``; the module's
+    docstring)."""
+
+    def __init__(self, cfg: ModelConfig, device="cpu"):
+        self.cfg = cfg
+        self.energies = energies = cfg.step_energies
+        self.capacity = energies.capacity
+        C, (L1, _), (bx, by) = cfg.num_cells, cfg.grid, cfg.base
+        self.away = C  # the cell of a UAV out of service
+        cell = torch.arange(C, device=device)
+        steps = (cell % L1 - bx).abs() + (cell // L1 - by).abs()
+        flight = steps.double() * energies.fly + (steps > 0).double() * energies.arrive  # [C]
+        # the reserve of a cell: enough for its worst next step (stay, or move to a neighbour), then the flight home
+        neighbours = grid_neighbours(cfg.grid, device)
+        reach = torch.cat([cell[:, None], neighbours.where(neighbours >= 0, cell[:, None])], -1)
+        reserve = torch.maximum(energies.stay + flight, energies.move + flight[reach].amax(-1))
+        self.steps_home = torch.cat([steps, steps.new_zeros(1)])  # [C + 1]
+        self.reserve = torch.cat([reserve, reserve.new_full((1,), float("inf"))])  # [C + 1]: no one serves away
+
+    def start(self, keys: torch.Tensor, counters: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The batteries and status of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams)."""
+        shape = (len(keys), self.cfg.num_uavs)
+        if self.cfg.battery_init == "uniform":
+            low = UNIFORM_LOW
+            battery = (low + (1 - low) * streams.uniform(keys, counters, streams.BATTERY, shape[1])) * self.capacity
+        else:
+            battery = torch.full(shape, self.capacity, dtype=torch.float64, device=keys.device)
+        status = torch.full(shape, SERVING, dtype=torch.long, device=keys.device)
+        return {"battery": battery, "status": status, "timer": torch.zeros_like(status)}
+
+    def step(self, state, cell_before: torch.Tensor, action: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The per-UAV variables after a step, from ``state`` (its ``cell`` and ``task`` the dynamics part's after the
+        step, the rest before), the cells before it and the joint actions ``[B, N]``."""
+        e = self.energies
+        status, timer = state.status, state.timer
+        serving, returning = status == SERVING, status == RETURNING
+        moved = action < NO_OP if e.moves_by_action else state.cell != cell_before
+        arriving = returning & (timer == 1)
+        cost = torch.where(
+            serving,
+            torch.where(moved, e.move, e.stay),
+            torch.where(returning, torch.where(arriving, e.fly + e.arrive, e.fly), 0.0),
+        )
+        battery = state.battery - cost
+        timer = timer - returning.long()
+        status = torch.where(arriving, OUT, status)
+        leaving = serving & (battery <= self.reserve.index_select(0, state.cell.view(-1)).view_as(battery))
+        steps = self.steps_home.index_select(0, state.cell.view(-1)).view_as(timer)
+        return {
+            "battery": battery,
+            "status": torch.where(leaving, torch.where(steps > 0, RETURNING, OUT), status),
+            "timer": torch.where(leaving, steps, timer),
+            "cell": torch.where(leaving, self.away, state.cell),
+            "task": torch.where(leaving, SENSING, state.task),
+        }
+
+    def features(self, state) -> torch.Tensor:
+        """``[B, N, 2]`` float32 what the UAVs' observation and the state show: the battery as a fraction of the
+        capacity, and 1 for a UAV in service (0 out)."""
+        return torch.stack([state.battery / self.capacity, (state.status == SERVING).double()], -1).float()
+
+    def terminated(self, state) -> torch.Tensor:
+        """``[B]`` whether no UAV of a world serves any more."""
+        return (state.status != SERVING).all(-1)
+
+
+def energy_part(cfg: ModelConfig, device="cpu") -> Energy | None:
+    """The energy part of ``cfg.energy``; ``None`` for ``none`` (the World then does no energy work at all)."""
+    return None if cfg.energy == "none" else Energy(cfg, device)

@@ -1,0 +1,129 @@
+"""The energy models' constants, their sources and the energy of one step (docs/model.md, Energy and lifetime).
+
+Standard library only, like :mod:`.radio`: :class:`~uavrl.envs.config.ModelConfig` checks a battery against the
+reserve it needs before torch is imported, and :mod:`.energy` (the World's part) builds its tables from the same
+numbers.
+
+- ``rotary_wing``: Zeng, Xu, Zhang, "Energy Minimization for Wireless Communication with Rotary-Wing UAV", IEEE
+  TWC 18(4):2329-2345, 2019, eq. (12) with their Table I; joules.
+- ``follow_up``: the accounting of Shamsoshoara et al., "An Autonomous Spectrum Management Scheme for Unmanned
+  Aerial Vehicle Networks in Disaster Relief Operations", IEEE Access 8:58064-58079, 2020 (their code's
+  ``config.py``, ``Config_Power``, and ``energy.py``); the follow-up's own units.
+
+Example:
+    >>> round(propulsion_power(0.0), 1), round(propulsion_power(10.0), 1)  # hover, and 10 m/s (Zeng et al.)
+    (168.5, 126.0)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.energy: one part each, none for "none"
+BATTERY_INITS = ("full", "uniform")
+
+# Zeng, Xu, Zhang 2019, Table I: a rotary-wing UAV of weight W = 20 N
+WEIGHT_N = 20.0  # W, aircraft weight (N)
+AIR_DENSITY = 1.225  # rho (kg/m^3)
+ROTOR_RADIUS_M = 0.4  # R (m)
+ROTOR_DISC_AREA_M2 = 0.503  # A = pi R^2 (m^2)
+BLADE_ANGULAR_VELOCITY = 300.0  # Omega (rad/s)
+TIP_SPEED = 120.0  # U_tip = Omega R (m/s)
+ROTOR_SOLIDITY = 0.05  # s
+FUSELAGE_DRAG_RATIO = 0.6  # d0
+INDUCED_POWER_CORRECTION = 0.1  # k
+PROFILE_DRAG_COEFFICIENT = 0.012  # delta
+
+# Zeng et al. eq. (12): blade profile power P0 and induced power Pi in hover, mean rotor induced velocity v0 in hover
+BLADE_PROFILE_POWER = (
+    PROFILE_DRAG_COEFFICIENT
+    / 8
+    * AIR_DENSITY
+    * ROTOR_SOLIDITY
+    * ROTOR_DISC_AREA_M2
+    * BLADE_ANGULAR_VELOCITY**3
+    * ROTOR_RADIUS_M**3
+)
+INDUCED_POWER = (1 + INDUCED_POWER_CORRECTION) * WEIGHT_N**1.5 / math.sqrt(2 * AIR_DENSITY * ROTOR_DISC_AREA_M2)
+HOVER_INDUCED_VELOCITY = math.sqrt(WEIGHT_N / (2 * AIR_DENSITY * ROTOR_DISC_AREA_M2))
+
+# env.battery_wh's default: the DJI Phantom 4 Pro's Intelligent Flight Battery (5870 mAh at 15.2 V, 89.2 Wh), a
+# quadrotor of about the weight Zeng et al. model (1.39 kg; their W = 20 N is 2.04 kg)
+BATTERY_WH = 89.2
+# env.circuit_power_w's default: the static power of a pico cell, EARTH's power model (Auer et al., "How much energy
+# is needed to run a wireless network?", IEEE Wireless Communications 18(5):40-49, 2011, Table 2: P0 = 6.8 W at
+# P_max = 0.13 W), a radio of about a UAV relay's transmit power
+CIRCUIT_POWER_W = 6.8
+SLOT_S = 1.0  # env.slot_s's default: one step is a second
+# battery_init=uniform draws U[lo, 1] x capacity: lo = 4000 / 5000, the follow-up's U[4000, 5000] of its 5000
+UNIFORM_LOW = 0.8
+
+# the follow-up's Config_Power (units of its own): MaxEnergy, mob_consump_intra, mob_consump_inter, trans_consump
+FOLLOW_UP_CAPACITY = 5000.0
+FOLLOW_UP_MOVE = 1.0  # per move inside a region (charged per move action, as its update_energy_movement does)
+FOLLOW_UP_REGION_FLIGHT = 10.0  # per region of inter-region flight: the flight to the base crosses one region
+FOLLOW_UP_TRANSMISSION = 0.5  # per step of transmission, whatever the task
+
+
+def propulsion_power(speed: float) -> float:
+    """Zeng et al.'s eq. (12): the propulsion power in W of level flight at ``speed`` m/s (hover at 0)."""
+    v2 = speed * speed
+    v0_2 = HOVER_INDUCED_VELOCITY**2
+    blade = BLADE_PROFILE_POWER * (1 + 3 * v2 / TIP_SPEED**2)
+    induced = INDUCED_POWER * math.sqrt(math.sqrt(1 + v2 * v2 / (4 * v0_2 * v0_2)) - v2 / (2 * v0_2))
+    parasite = 0.5 * FUSELAGE_DRAG_RATIO * AIR_DENSITY * ROTOR_SOLIDITY * ROTOR_DISC_AREA_M2 * speed**3
+    return blade + induced + parasite
+
+
+@dataclass(frozen=True)
+class StepEnergies:
+    """What one step costs a UAV under an energy model (docs/model.md, Energy and lifetime).
+
+    ``move`` and ``stay``: a serving UAV's step that moves or not (hovering, a task switch, a cancelled move);
+    ``fly``: each step of the flight to the base; ``arrive``: once, on the step the flight reaches the base;
+    ``capacity``: a full battery; ``moves_by_action``: a move is charged by the action (the follow-up's code), not by
+    the cell changing.
+    """
+
+    move: float
+    stay: float
+    fly: float
+    arrive: float
+    capacity: float
+    moves_by_action: bool
+
+    def flight(self, steps: int) -> float:
+        """The energy of the flight to a base ``steps`` steps away."""
+        return steps * self.fly + (self.arrive if steps > 0 else 0.0)
+
+    def reserve(self, steps: int) -> float:
+        """The largest reserve at a cell ``steps`` from the base, where no neighbour lies farther (the farthest
+        cell): one more step, then the flight."""
+        return max(self.move, self.stay) + self.flight(steps)
+
+
+def step_energies(
+    energy: str, cell_size: float, slot_s: float, comm_power_w: float, circuit_power_w: float, battery_wh: float
+) -> StepEnergies:
+    """The :class:`StepEnergies` of ``energy`` (``follow_up`` or ``rotary_wing``): a move flies one cell at
+    ``cell_size / slot_s`` m/s; a serving UAV also transmits at ``comm_power_w`` and runs its radio's circuit."""
+    if energy == "follow_up":
+        return StepEnergies(
+            move=FOLLOW_UP_MOVE + FOLLOW_UP_TRANSMISSION,
+            stay=FOLLOW_UP_TRANSMISSION,
+            fly=0.0,
+            arrive=FOLLOW_UP_REGION_FLIGHT,
+            capacity=FOLLOW_UP_CAPACITY,
+            moves_by_action=True,
+        )
+    radio = comm_power_w + circuit_power_w
+    flying = propulsion_power(cell_size / slot_s)
+    return StepEnergies(
+        move=(flying + radio) * slot_s,
+        stay=(propulsion_power(0.0) + radio) * slot_s,
+        fly=flying * slot_s,
+        arrive=0.0,
+        capacity=battery_wh * 3600.0,
+        moves_by_action=False,
+    )
