@@ -88,6 +88,14 @@ def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
     return positions[..., 1] * width + positions[..., 0]
 
 
+def _cells_or_away(positions: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """The cells of ``positions``, and ``L1 L2`` (one past the grid's) for a UAV out of service: an energy model
+    shows it at its base, off the grid."""
+    x, y = positions[..., 0], positions[..., 1]
+    on_grid = (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
+    return torch.where(on_grid, y * grid[0] + x, grid[0] * grid[1])
+
+
 class TeamQNet(nn.Module):
     """Action values from the joint observation ``[*, N, F]``, the positions ``[*, N, 2]`` and the state.
 
@@ -151,8 +159,11 @@ class TeamQNet(nn.Module):
         embedding = self.torso(observation)  # [*, N, hidden], the same row for every UAV
         if self.joint:
             return self.head(embedding[..., 0, :])
-        cells = _cells(positions, self.width)
-        held = (self.neighbours[cells].unsqueeze(-1) == cells[..., None, None, :]).any(-1)  # [*, N, 4]
+        C = len(self.neighbours)
+        cells = _cells_or_away(positions, (self.width, C // self.width))
+        # [*, N, 4]: which of its neighbouring cells another UAV holds (none, for a UAV out of service)
+        held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
+        held &= (cells < C).unsqueeze(-1)
         own = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1), held.to(observation.dtype)], -1)
         first, last = self.head.params["0"], self.head.params["2"]  # the head's layers (Linear, ReLU, Linear)
         split = embedding.shape[-1]
@@ -197,16 +208,17 @@ class ValidGreedy(nn.Module):
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
     def _target_table(self) -> torch.Tensor:
-        """``[C, 6]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
-        out, but two UAVs given it would still collide there)."""
+        """``[C + 1, 6]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
+        out, but two UAVs given it would still collide there), where a UAV out of service stays."""
         cells = len(self.neighbours)
         stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, 2)
-        return torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
+        moves = torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
+        return torch.cat([moves, moves.new_full((1, NUM_ACTIONS), cells)])
 
     def forward(
         self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
     ) -> torch.Tensor:
-        cells = _cells(positions, self.width)
+        cells = _cells_or_away(positions, (self.width, len(self.neighbours) // self.width))
         batch = cells.shape[:-1]
         # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
         table = self._target_table()
@@ -534,8 +546,10 @@ class DQNAgent(Agent):
 
         def mean_utility(td: TensorDictBase) -> torch.Tensor:
             """``[W, T]`` mean-channel utility of the batch's configurations in the layouts they were played in."""
-            cells = td.get("positions")[..., 1] * self.env_cfg.grid[0] + td.get("positions")[..., 0]
-            contributions = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells]
+            C = self.env_cfg.num_cells
+            cells = _cells_or_away(td.get("positions"), self.env_cfg.grid)  # C: out of service, adds nothing
+            on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
+            contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
             r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], self.env_cfg)
             return r_pu + r_se
 

@@ -258,8 +258,8 @@ class ModelConfig:
         base = tuple(int(b) for b in self.base)
         object.__setattr__(self, "base", base)
         L1, L2 = self.grid
-        if self.energy == "follow_up" and 0 <= base[0] < L1 and 0 <= base[1] < L2:
-            reason = f"follow_up's flight to the base is inter-region: give a cell off the {L1}x{L2} grid"
+        if 0 <= base[0] < L1 and 0 <= base[1] < L2:  # a UAV shown at the base is then never one serving there
+            reason = f"a UAV out of service is shown at the base, off the grid: give a cell off the {L1}x{L2} grid"
             raise InvalidOption("base", list(base), reason)
         if self.rate_model == "reference_code":
             reason = "the authors' both-tasks rule counts every UAV, in service or not: use rate_model='af'"

@@ -588,6 +588,10 @@ class World:
         L1, L2 = self.cfg.grid
         x, y = positions[..., 0], positions[..., 1]
         off_grid = (x < 0) | (x >= L1) | (y < 0) | (y >= L2)
+        if self.energy is not None:  # a UAV out of service is at the base: it adds nothing
+            away = (x == self.cfg.base[0]) & (y == self.cfg.base[1])
+            off_grid, tasks = off_grid & ~away, tasks.masked_fill(away, SENSING)
+            positions = positions.masked_fill(away.unsqueeze(-1), 0)
         if off_grid.any():
             where = tuple(positions[off_grid][0].tolist())
             raise ValueError(f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in 0..{L2 - 1}")
@@ -596,6 +600,8 @@ class World:
             raise ValueError(f"tasks hold {tasks[bad_task][0].item()}: a task is 0 (sensing) or 1 (relaying)")
         cells = self.cells_of(positions)
         contrib = self._per_cell(self._cell_contrib, cells)
+        if self.energy is not None:
+            contrib = contrib.masked_fill(away.unsqueeze(-1), 0.0)
         direct = self.direct.view(self.num_worlds, *([1] * (cells.dim() - 2)), 2)
         r_pu, r_se = rates(contrib, tasks, direct, self.cfg)
         return r_pu, r_se, r_pu + r_se
