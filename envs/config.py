@@ -238,10 +238,11 @@ class ModelConfig:
         _choice("battery_init", self.battery_init, BATTERY_INITS)
         for name in ("battery_wh", "slot_s", "circuit_power_w"):
             value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value) and value >= 0):
-                raise InvalidOption(name, value, "it must be a finite number >= 0")
-            if value == 0 and name != "circuit_power_w":  # a radio may draw nothing beyond its transmit power
-                raise InvalidOption(name, value, "it must be a finite positive number")
+            may_be_zero = name == "circuit_power_w"  # a radio may draw nothing beyond its transmit power
+            if not (_is_real(value) and math.isfinite(value) and (value >= 0 if may_be_zero else value > 0)):
+                raise InvalidOption(
+                    name, value, f"it must be a finite {'number >= 0' if may_be_zero else 'positive number'}"
+                )
         unread = ENERGY_OPTIONS + ROTARY_WING_OPTIONS if self.energy == "none" else ()
         unread = ROTARY_WING_OPTIONS if self.energy == "follow_up" else unread
         for name in unread:
@@ -251,7 +252,7 @@ class ModelConfig:
         if self.energy == "none":
             return
         if self.base is None:
-            reason = "a UAV leaves service for its base: give base=[x, y], a cell on or off the grid"
+            reason = "a UAV leaves service for its base: give base=[x, y], a cell off the grid"
             raise InvalidOption("energy", self.energy, reason)
         if not _is_pair(self.base):
             raise InvalidOption("base", self.base, "give two integers x, y (cells; off the grid too), e.g. [-1, 0]")

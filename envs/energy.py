@@ -55,6 +55,12 @@ class Energy:
         neighbours = grid_neighbours(cfg.grid, device)
         reach = torch.cat([cell[:, None], neighbours.where(neighbours >= 0, cell[:, None])], -1)
         reserve = torch.maximum(energies.stay + flight, energies.move + flight[reach].amax(-1))
+        # a step's costs as float64 scalars (where() of Python floats would give float32)
+        self.move, self.stay, self.fly, self.fly_and_arrive, self.nothing = torch.tensor(
+            [energies.move, energies.stay, energies.fly, energies.fly + energies.arrive, 0.0],
+            dtype=torch.float64,
+            device=device,
+        ).unbind()
         self.steps_home = torch.cat([steps, steps.new_zeros(1)])  # [C + 1]
         self.reserve = torch.cat([reserve, reserve.new_full((1,), float("inf"))])  # [C + 1]: no one serves away
 
@@ -79,8 +85,8 @@ class Energy:
         arriving = returning & (timer == 1)
         cost = torch.where(
             serving,
-            torch.where(moved, e.move, e.stay),
-            torch.where(returning, torch.where(arriving, e.fly + e.arrive, e.fly), 0.0),
+            torch.where(moved, self.move, self.stay),
+            torch.where(returning, torch.where(arriving, self.fly_and_arrive, self.fly), self.nothing),
         )
         battery = state.battery - cost
         timer = timer - returning.long()
