@@ -324,6 +324,11 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "
             f"{env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
         )
+    if a.head == "joint" and env_cfg.energy != "none":
+        raise ValueError(
+            f"agent.head='joint' is invalid with env.energy={env_cfg.energy!r}: its joint action mask knows no UAV out "
+            "of service; use agent.head=factored"
+        )
 
 
 # ----------------------------------------------------------------------------- builders

@@ -51,9 +51,9 @@ HOVER_INDUCED_VELOCITY = math.sqrt(WEIGHT_N / (2 * AIR_DENSITY * ROTOR_DISC_AREA
 # env.battery_wh's default: the DJI Phantom 4 Pro's Intelligent Flight Battery (5870 mAh at 15.2 V, 89.2 Wh), a
 # quadrotor of about the weight Zeng et al. model (1.39 kg; their W = 20 N is 2.04 kg)
 BATTERY_WH = 89.2
-# env.circuit_power_w's default: the static power of a pico cell, EARTH's power model (Auer et al., "How much energy
-# is needed to run a wireless network?", IEEE Wireless Communications 18(5):40-49, 2011, Table 2: P0 = 6.8 W at
-# P_max = 0.13 W), a radio of about a UAV relay's transmit power
+# env.circuit_power_w's default: the static power of a pico cell in EARTH's power model (Auer et al., "How much
+# energy is needed to run a wireless network?", IEEE Wireless Communications 18(5):40-49, 2011, its table of base
+# station power models: P0 = 6.8 W at P_max = 0.13 W), a radio of about a UAV relay's transmit power
 CIRCUIT_POWER_W = 6.8
 SLOT_S = 1.0  # env.slot_s's default: one step is a second
 # battery_init=uniform draws U[lo, 1] x capacity: lo = 4000 / 5000, the follow-up's U[4000, 5000] of its 5000

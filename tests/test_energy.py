@@ -17,6 +17,7 @@ from uavrl.envs.world import World
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 BASE = (-1, 0)
+ENERGY_CLI = ("env.energy=rotary_wing", "env.base=[-1,0]")
 UP, DOWN, LEFT, RIGHT, SENSE, RELAY = range(6)
 
 
@@ -308,3 +309,14 @@ def test_an_energy_setting_without_base_is_one_line_on_the_command_line(tmp_path
     )
     assert result.returncode != 0 and result.stderr.strip().count("\n") == 0, result.stderr
     assert "env.energy='follow_up' is invalid: a UAV leaves service for its base: give env.base=" in result.stderr
+
+
+def test_the_dqns_joint_head_is_refused_under_an_energy_model(tmp_path):
+    result = subprocess.run(
+        [sys.executable, "-m", "uavrl.train", "agent=dqn", "agent.head=joint", *ENERGY_CLI]
+        + ["progress=false", f"run_dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode != 0 and result.stderr.strip().count("\n") == 0, result.stderr
+    assert "agent.head='joint' is invalid with env.energy='rotary_wing'" in result.stderr
