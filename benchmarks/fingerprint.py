@@ -9,7 +9,7 @@ line (on CPU, same torch, same machine)::
 
 Each line is ``<case> <digest>``: the World's outputs over a seeded random walk (every preset, channel, fading,
 reward, layout and episode rule), the TorchRL environment's rollout, the exact optimum, and each agent's training
-metrics, checkpoint and greedy evaluation after a few iterations.
+metrics, checkpoint and greedy evaluation after a few iterations; then the same for the energy models.
 """
 
 from __future__ import annotations
@@ -56,6 +56,30 @@ WORLD_CASES = {
     "tr36777_umi-los_nlos": ("a2g_urban", dict(channel="tr36777_umi", fading="los_nlos", num_uavs=4)),
     "tr36777_rma-30m": ("a2g_urban", dict(channel="tr36777_rma", altitude_m=30.0, num_uavs=4)),
 }
+# energy models (docs/model.md, Energy and lifetime): batteries small enough that UAVs leave service within the walk
+ENERGY_WORLD_CASES = {
+    "paper-n2-rotary": ("paper", dict(energy="rotary_wing", base=(-1, 0), battery_wh=0.6)),
+    "paper-n3-rotary-uniform-rayleigh-random": (
+        "paper",
+        dict(
+            num_uavs=3,
+            energy="rotary_wing",
+            base=(-1, -1),
+            battery_wh=0.7,
+            battery_init="uniform",
+            fading="rayleigh",
+            layout="random",
+        ),
+    ),
+    "paper-n3-follow_up-uniform-loggap": (
+        "paper",
+        dict(num_uavs=3, energy="follow_up", base=(6, 2), battery_init="uniform", reward="log_gap"),
+    ),
+    "a2g_urban-rotary-los_nlos": (
+        "a2g_urban",
+        dict(grid=(5, 5), num_uavs=3, energy="rotary_wing", base=(-1, 0), battery_wh=5.0, fading="los_nlos"),
+    ),
+}
 STEPS, WORLDS = 25, 6
 
 AGENT_CASES = {
@@ -100,6 +124,13 @@ AGENT_CASES = {
     "random": ["agent=random"],
     "oracle": ["agent=oracle", "env.num_uavs=3"],
     "oracle-a2g": ["agent=oracle", "env=a2g_urban", "env.num_uavs=3", "env.grid=[5,5]"],
+}
+ENERGY_AGENT_CASES = {
+    "dqn-rotary": [
+        *("agent=dqn", "agent.iterations=3", "env.max_steps=8", "agent.worlds=8", "agent.hidden=16"),
+        *("agent.batch_size=32", "agent.buffer_size=100", "agent.updates=2", "agent.learning_starts=16"),
+        *("env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=0.5"),
+    ],
 }
 COMMON = ["env.grid=[4,4]", "eval.num_starts=4", "progress=false"]
 
@@ -172,6 +203,15 @@ def main() -> None:
             for part, value in world_case(preset, options).items():
                 print(f"world:{name}:{part} {value}", flush=True)
     for name, overrides in AGENT_CASES.items():
+        if not only or name in only:
+            for part, value in agent_case(overrides).items():
+                print(f"agent:{name}:{part} {value}", flush=True)
+    # recorded after the settings above, so their lines keep their places in the recorded file
+    for name, (preset, options) in ENERGY_WORLD_CASES.items():
+        if not only or name in only:
+            for part, value in world_case(preset, options).items():
+                print(f"world:{name}:{part} {value}", flush=True)
+    for name, overrides in ENERGY_AGENT_CASES.items():
         if not only or name in only:
             for part, value in agent_case(overrides).items():
                 print(f"agent:{name}:{part} {value}", flush=True)

@@ -418,6 +418,8 @@ def world_bytes(cfg, batch_size: int) -> int:
     C, N, B = cfg.num_cells, cfg.num_uavs, batch_size
     layouts = B if cfg.layout == "random" else 1
     per_world = (16 + (8 if N >= 3 else 0)) * C + 440 * N + 64
+    if cfg.energy != "none":  # the batteries, status and timers, and a step's ~12 [B, N] temporaries of energy
+        per_world += 120 * N
     pair_tables = (2 * C) ** 2 * 200 if N == 2 and layouts == 1 and (2 * C) ** 2 <= 1 << 16 else 0
     return 500 * C + 520 * C * layouts + B * per_world + pair_tables
 
@@ -425,8 +427,9 @@ def world_bytes(cfg, batch_size: int) -> int:
 def frame_bytes(cfg) -> int:
     """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key."""
     N = cfg.num_uavs
-    observation = 4 * N * (13 + 3 * (N - 1))
-    per_step = observation + 4 * (5 * N + 12) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, positions, ...
+    per_uav = 3 if cfg.energy == "none" else 5  # (x, y, task), and the battery and service flag of an energy model
+    observation = 4 * N * (10 + per_uav * N)
+    per_step = observation + 4 * ((per_uav + 2) * N + 12) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, ...
     return 2 * per_step
 
 

@@ -200,10 +200,16 @@ class World:
         self._pairs = self.num_uavs == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16 and self.energy is None
         self._pair_obs = self._pair_state = self._pair_rates = None
         N, long = self.num_uavs, torch.long
-        energy_state = ENERGY_STATE if self.energy is not None else ()
+        energy_state = dict.fromkeys(ENERGY_STATE)  # None without an energy model
+        if self.energy is not None:
+            energy_state.update(
+                battery=torch.zeros(B, N, dtype=f64, device=dev),
+                status=torch.zeros(B, N, dtype=long, device=dev),
+                timer=torch.zeros(B, N, dtype=long, device=dev),
+            )
         self._s = _WorldsState(
-            **{name: torch.zeros(B, N, dtype=long, device=dev) for name in (*UAV_STATE, *energy_state)},
-            **{name: None for name in ENERGY_STATE if name not in energy_state},
+            **{name: torch.zeros(B, N, dtype=long, device=dev) for name in UAV_STATE},
+            **energy_state,
             r=torch.zeros(B, 2, dtype=f64, device=dev),
             best=torch.zeros(B, dtype=f64, device=dev),
             steps=torch.zeros(B, dtype=long, device=dev),
@@ -213,8 +219,6 @@ class World:
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
-        if self.energy is not None:
-            self._s.battery = torch.zeros(B, N, dtype=f64, device=dev)
         if fixed is not None:
             self._set_layout(torch.zeros(1, dtype=long, device=dev))
         self.set_seed(seed)
