@@ -21,7 +21,8 @@ take it; its DQN takes ``Discrete`` spaces only.
 The observation is, per UAV, its observation followed by the four nodes' positions
 (:func:`~uavrl.envs.world.observation_with_nodes`, what the project's DQN reads): ``Box`` ``[N, F + 12]``
 float32, whose bounds hold every layout the config allows.  The reward is the team reward (float32, as
-``UAVSpectrumEnv``'s); nothing terminates an episode, it is truncated after ``max_steps``.  The info holds
+``UAVSpectrumEnv``'s); an episode is truncated after ``max_steps``, and terminated only under an energy model, when
+no UAV serves any more (docs/model.md, Energy and lifetime).  The info holds
 ``action_mask`` ``[N, 6]`` int8 (1 where the move stays on the grid) and the step's ``r_pu``, ``r_se``,
 ``utility``, ``moves``, ``task_switches``; :meth:`UAVSpectrumGymEnv.action_masks` is the mask flat, as
 MaskablePPO asks for it.
@@ -118,24 +119,44 @@ def _node_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     return low, high
 
 
+def _uav_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a UAV's (x, y, task) as others see it, in [0, 1]; under an energy model the base's position too (a
+    UAV out of service is shown there), then the battery fraction and the service flag in [0, 1]."""
+    if cfg.energy == "none":
+        return np.zeros(3), np.ones(3)
+    (L1, L2), (bx, by) = cfg.grid, cfg.base
+    base = np.float32([bx / max(L1 - 1, 1), by / max(L2 - 1, 1)])
+    return np.concatenate([np.minimum(base, 0), np.zeros(3)]), np.concatenate([np.maximum(base, 1), np.ones(3)])
+
+
 def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
-    and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid, then the nodes."""
-    others = 3 * (cfg.num_uavs - 1)
+    and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid (or for a UAV out of
+    service), the battery and service flag of an energy model in [0, 1], then the nodes."""
+    uav_low, uav_high = _uav_bounds(cfg)
+    others = cfg.num_uavs - 1
     node_low, node_high = _node_bounds(cfg)
-    low = np.concatenate([np.zeros(3), np.full(10, -1.0), np.zeros(others), node_low]).astype(np.float32)
-    high = np.concatenate([np.ones(3), np.ones(10), np.ones(others), node_high]).astype(np.float32)
+    low = [uav_low[:3], np.full(10, -1.0), uav_low[3:], np.tile(uav_low, others), node_low]
+    high = [uav_high[:3], np.ones(10), uav_high[3:], np.tile(uav_high, others), node_high]
+    low, high = np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
     return np.tile(low, (cfg.num_uavs, 1)), np.tile(high, (cfg.num_uavs, 1))
 
 
 def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
-    then the nodes."""
+    then the nodes; under an energy model ``[7 N + 12]``, a UAV out of service at the base with contributions -1,
+    and each UAV's battery and service flag in [0, 1]."""
     node_low, node_high = _node_bounds(cfg)
-    per_uav = 5 * cfg.num_uavs
-    return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
-        [np.ones(per_uav, np.float32), node_high]
-    )
+    if cfg.energy == "none":
+        per_uav = 5 * cfg.num_uavs
+        return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
+            [np.ones(per_uav, np.float32), node_high]
+        )
+    uav_low, uav_high = _uav_bounds(cfg)
+    low = np.concatenate([uav_low[:3], np.full(2, -1.0), uav_low[3:]])
+    high = np.concatenate([uav_high[:3], np.ones(2), uav_high[3:]])
+    tiled = [np.tile(low, cfg.num_uavs), node_low], [np.tile(high, cfg.num_uavs), node_high]
+    return tuple(np.concatenate(bounds).astype(np.float32) for bounds in tiled)
 
 
 def team_observation_space(cfg: ModelConfig) -> spaces.Box:
@@ -178,11 +199,17 @@ class NumpyWorlds:
         arrays["state"] = out["state"].numpy(force=True)
         return arrays
 
-    def reset(self, seed: int | None) -> dict[str, np.ndarray]:
+    def reset(self, seed: int | None, worlds: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Every world's outputs after a reset of all worlds, or of ``worlds`` (indices; the others are left as they
+        are)."""
         if seed is not None:
             self.world.set_seed(check_seed(seed))
         self.was_reset = True
-        return self._numpy(self.world.reset())
+        return self._numpy(self.world.reset(None if worlds is None else torch.from_numpy(worlds)))
+
+    def terminated(self) -> np.ndarray:
+        """``[B]`` bool: which worlds' episodes the last step ended (only an energy model's can end)."""
+        return self.world.terminated.numpy(force=True).copy()
 
     def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """Every world takes ``actions`` ``[B, N]`` (checked); the outputs, the team reward ``[B]`` (float32 values,
@@ -247,7 +274,8 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         actions = check_actions(action, (self.cfg.num_uavs,), "action")
         out, reward, truncated = self._worlds.step(actions[None])
         self._mask = out["action_mask"][0]
-        return out["observation"][0], reward[0].item(), False, bool(truncated[0]), world_info(out, 0)
+        terminated = bool(self._worlds.terminated()[0])
+        return out["observation"][0], reward[0].item(), terminated, bool(truncated[0]), world_info(out, 0)
 
     def action_masks(self) -> np.ndarray:
         """``[6 N]`` bool: each UAV's action mask, side by side (what sb3-contrib's MaskablePPO reads)."""
@@ -297,7 +325,7 @@ class UAVSpectrumVectorEnv(VectorEnv):
         self.single_action_space = spaces.MultiDiscrete([NUM_ACTIONS] * self.cfg.num_uavs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self._autoreset = False
+        self._autoreset = np.zeros(num_envs, dtype=bool)  # the worlds whose episode ended with the last step
         self._mask = None
 
     @property
@@ -314,20 +342,26 @@ class UAVSpectrumVectorEnv(VectorEnv):
                 f"options={options!r} is invalid: this env takes no reset options (give None or {{}}); "
                 "every reset starts all worlds, so there is no reset_mask"
             )
-        self._autoreset = False
+        self._autoreset[:] = False
         out = self._worlds.reset(seed)
         return out["observation"], self._infos(out)
 
     def step(self, actions):
         B = self.num_envs
-        if self._autoreset:  # next-step autoreset: the actions of worlds whose episode ended are ignored
+        ended = self._autoreset  # next-step autoreset: the actions of worlds whose episode ended are ignored
+        if ended.all():  # episodes of one length that nothing terminates end together
             out = self._worlds.reset(None)
-            reward, truncated = np.zeros(B), np.zeros(B, dtype=bool)
+            reward, terminated, truncated = np.zeros(B), np.zeros(B, dtype=bool), np.zeros(B, dtype=bool)
         else:
             out, reward, truncated = self._worlds.step(check_actions(actions, (B, self.cfg.num_uavs), "actions"))
-        # every reset starts all worlds and episodes have one length, so the worlds end their episodes together
-        self._autoreset = bool(truncated[0])
-        return out["observation"], reward, np.zeros(B, dtype=bool), truncated, self._infos(out)
+            terminated = self._worlds.terminated()
+            if ended.any():  # an energy model's episodes terminate apart: those worlds restart, the others step
+                first = self._worlds.reset(None, np.flatnonzero(ended))
+                for key, values in out.items():
+                    values[ended] = first[key][ended]
+                reward[ended], terminated[ended], truncated[ended] = 0.0, False, False
+        self._autoreset = terminated | truncated
+        return out["observation"], reward, terminated, truncated, self._infos(out)
 
     def _infos(self, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self._mask = out["action_mask"]

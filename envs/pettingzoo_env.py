@@ -4,9 +4,10 @@ Agents ``uav_0 .. uav_{N-1}`` act at once, as in the model.  Each agent observes
 environments with action masks do: ``"observation"``, its row of the team observation of
 :mod:`uavrl.envs.gym_env` (its observation followed by the four nodes' positions, ``[F + 12]`` float32), and
 ``"action_mask"`` ``[6]`` int8 (1 where the move stays on the grid).  Every agent receives the team reward;
-nothing terminates an episode, every agent is truncated after ``max_steps``, and then ``agents`` is empty
-until the next reset.  ``state()`` is the world's state ``[5 N + 12]`` (``state_space``).  The infos hold the
-step's ``r_pu``, ``r_se``, ``utility``, ``moves``, ``task_switches`` (the team's, in every agent's info).
+every agent is truncated after ``max_steps`` (or, under an energy model, terminated when no UAV serves any more),
+and then ``agents`` is empty until the next reset.  ``state()`` is the world's state ``[5 N + 12]``, ``[7 N + 12]``
+under an energy model (``state_space``).  The infos hold the step's ``r_pu``, ``r_se``, ``utility``, ``moves``,
+``task_switches`` (the team's, in every agent's info).
 
 The physics is a :class:`~uavrl.envs.world.World` of one world: the same observations, masks, rewards and
 seeds as :class:`~uavrl.envs.env.UAVSpectrumEnv` and :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`
@@ -125,9 +126,10 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         out, reward, truncated = self._worlds.step(joint[None])
         observations, infos = self._observations(out), self._infos(out)
         rewards = dict.fromkeys(self.agents, reward[0].item())
-        terminations = dict.fromkeys(self.agents, False)
+        terminated = bool(self._worlds.terminated()[0])
+        terminations = dict.fromkeys(self.agents, terminated)
         truncations = dict.fromkeys(self.agents, bool(truncated[0]))
-        if truncated[0]:
+        if truncated[0] or terminated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
 

@@ -320,3 +320,49 @@ def test_the_dqns_joint_head_is_refused_under_an_energy_model(tmp_path):
     )
     assert result.returncode != 0 and result.stderr.strip().count("\n") == 0, result.stderr
     assert "agent.head='joint' is invalid with env.energy='rotary_wing'" in result.stderr
+
+
+def test_the_gymnasium_and_pettingzoo_adapters_terminate_and_autoreset_apart():
+    pytest.importorskip("gymnasium")
+    pytest.importorskip("pettingzoo")
+    import numpy as np
+
+    from uavrl.envs.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
+    from uavrl.envs.pettingzoo_env import UAVSpectrumParallelEnv
+
+    options = _energy(3) | dict(battery_wh=0.6, battery_init="uniform", max_steps=30)
+    rng = np.random.default_rng(0)
+
+    def allowed(mask):  # one allowed action per UAV of masks [..., N, 6]
+        return np.apply_along_axis(lambda m: rng.choice(np.flatnonzero(m)), -1, mask)
+
+    single = UAVSpectrumGymEnv(**options)
+    obs, info = single.reset(seed=1)
+    for _ in range(30):
+        obs, _, terminated, truncated, info = single.step(allowed(info["action_mask"]))
+        assert single.observation_space.contains(obs)
+        if terminated or truncated:
+            break
+    assert terminated and not truncated and single.world._s.status.ne(0).all()
+
+    vector = UAVSpectrumVectorEnv(num_envs=5, **options)
+    obs, infos = vector.reset(seed=3)
+    first_ends = None
+    for _ in range(30):
+        ended = vector._autoreset.copy()
+        obs, reward, terminated, truncated, infos = vector.step(allowed(infos["action_mask"]))
+        assert vector.observation_space.contains(obs)
+        if ended.any() and not ended.all():  # those restart (reward 0, first observation), the others step on
+            assert (reward[ended] == 0).all() and (vector.world._s.steps.numpy()[ended] == 0).all()
+            assert (vector.world._s.steps.numpy()[~ended] > 0).all() and (obs[ended, :, 14] == 1).all()
+            first_ends = ended
+    assert first_ends is not None
+
+    parallel = UAVSpectrumParallelEnv(**options)
+    observations, _ = parallel.reset(seed=1)
+    for _ in range(30):
+        actions = {agent: int(allowed(seen["action_mask"])) for agent, seen in observations.items()}
+        observations, _, terminations, truncations, _ = parallel.step(actions)
+        if not parallel.agents:
+            break
+    assert all(terminations.values()) and not any(truncations.values())
