@@ -203,6 +203,8 @@ class WorldRenderer:
             self._fitted = nodes.tobytes()
         cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()
         xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
+        away = cells >= cfg.num_cells  # out of service under an energy model: at the base, linked to no one
+        xy[away] = cfg.base if away.any() else xy[away]
         relaying = tasks == RELAYING
         colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255
         self._uavs.set_offsets(xy)
@@ -221,7 +223,7 @@ class WorldRenderer:
         segments, link_colours, styles = [], [], []
         for i in range(cfg.num_uavs):
             src, dst = (nodes[PT], nodes[PR]) if relaying[i] else (nodes[S], nodes[E])
-            segments += [(src, xy[i]), (xy[i], dst)]
+            segments += [(src, xy[i]), (xy[i], dst)] if not away[i] else [(xy[i], xy[i])] * 2
             colour, style = ((*colours[i], 0.45), "solid") if paid else (IDLE_LINK, "dashed")
             link_colours += [colour, colour]
             styles += [style, style]
@@ -237,6 +239,7 @@ class WorldRenderer:
         self._rates.set_text(f"world {index}   R_PU {r_pu:.3f}   R_SE {r_se:.3f}{note}")
         # per UAV: its share of its network's sum inside the log
         contributions = world.cell_contributions[index].cpu().numpy()  # [C, 2]
+        contributions = np.concatenate([contributions, np.zeros((1, 2))])  # row C: a UAV out of service adds nothing
         own = np.where(relaying, contributions[cells, 0], contributions[cells, 1])
         totals = np.where(relaying, own[relaying].sum(), own[~relaying].sum())
         shares = np.divide(own, totals, out=np.zeros_like(own), where=totals > 0)

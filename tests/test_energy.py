@@ -366,3 +366,15 @@ def test_the_gymnasium_and_pettingzoo_adapters_terminate_and_autoreset_apart():
         if not parallel.agents:
             break
     assert all(terminations.values()) and not any(truncations.values())
+
+
+def test_a_world_with_uavs_out_of_service_renders():
+    from uavrl.envs.render import render
+
+    world = World(rotary(battery_wh=0.4), 1)
+    world.reset()
+    for _ in range(6):
+        world.step(torch.full((1, 2), SENSE))
+    assert world._s.status.ne(0).all()
+    frame = render(world, "rgb_array", 0)
+    assert frame.shape[-1] == 3 and frame.std() > 0
