@@ -104,7 +104,7 @@ class Energy:
     def features(self, state) -> torch.Tensor:
         """``[B, N, 2]`` float32 what the UAVs' observation and the state show: the battery as a fraction of the
         capacity, and 1 for a UAV in service (0 out)."""
-        return torch.stack([state.battery / self.capacity, (state.status == SERVING).double()], -1).float()
+        return torch.stack([(state.battery / self.capacity).float(), (state.status == SERVING).float()], -1)
 
     def terminated(self, state) -> torch.Tensor:
         """``[B]`` whether no UAV of a world serves any more."""

@@ -119,44 +119,43 @@ def _node_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     return low, high
 
 
-def _uav_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of a UAV's (x, y, task) as others see it, in [0, 1]; under an energy model the base's position too (a
-    UAV out of service is shown there), then the battery fraction and the service flag in [0, 1]."""
+def _position_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a UAV's (x, y, task): [0, 1]; under an energy model the base's scaled position too (a UAV out of
+    service is shown there)."""
     if cfg.energy == "none":
         return np.zeros(3), np.ones(3)
     (L1, L2), (bx, by) = cfg.grid, cfg.base
-    base = np.float32([bx / max(L1 - 1, 1), by / max(L2 - 1, 1)])
-    return np.concatenate([np.minimum(base, 0), np.zeros(3)]), np.concatenate([np.maximum(base, 1), np.ones(3)])
+    base = np.float32([bx / max(L1 - 1, 1), by / max(L2 - 1, 1), 0.0])
+    return np.minimum(base, 0), np.maximum(base, 1)
 
 
 def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
     and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid (or for a UAV out of
-    service), the battery and service flag of an energy model in [0, 1], then the nodes."""
-    uav_low, uav_high = _uav_bounds(cfg)
-    others = cfg.num_uavs - 1
+    service), the batteries and service flags of an energy model in [0, 1], then the nodes."""
+    N, (position_low, position_high) = cfg.num_uavs, _position_bounds(cfg)
+    energy = 0 if cfg.energy == "none" else 2 * N
     node_low, node_high = _node_bounds(cfg)
-    low = [uav_low[:3], np.full(10, -1.0), uav_low[3:], np.tile(uav_low, others), node_low]
-    high = [uav_high[:3], np.ones(10), uav_high[3:], np.tile(uav_high, others), node_high]
+    low = [position_low, np.full(10, -1.0), np.tile(position_low, N - 1), np.zeros(energy), node_low]
+    high = [position_high, np.ones(10), np.tile(position_high, N - 1), np.ones(energy), node_high]
     low, high = np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
-    return np.tile(low, (cfg.num_uavs, 1)), np.tile(high, (cfg.num_uavs, 1))
+    return np.tile(low, (N, 1)), np.tile(high, (N, 1))
 
 
 def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
-    then the nodes; under an energy model ``[7 N + 12]``, a UAV out of service at the base with contributions -1,
-    and each UAV's battery and service flag in [0, 1]."""
+    then the nodes; under an energy model ``[7 N + 12]``: a UAV out of service at the base with contributions -1,
+    then each UAV's battery and service flag in [0, 1], then the nodes."""
     node_low, node_high = _node_bounds(cfg)
     if cfg.energy == "none":
         per_uav = 5 * cfg.num_uavs
         return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
             [np.ones(per_uav, np.float32), node_high]
         )
-    uav_low, uav_high = _uav_bounds(cfg)
-    low = np.concatenate([uav_low[:3], np.full(2, -1.0), uav_low[3:]])
-    high = np.concatenate([uav_high[:3], np.ones(2), uav_high[3:]])
-    tiled = [np.tile(low, cfg.num_uavs), node_low], [np.tile(high, cfg.num_uavs), node_high]
-    return tuple(np.concatenate(bounds).astype(np.float32) for bounds in tiled)
+    N, (position_low, position_high) = cfg.num_uavs, _position_bounds(cfg)
+    low = [np.tile(np.concatenate([position_low, [-1.0, -1.0]]), N), np.zeros(2 * N), node_low]
+    high = [np.tile(np.concatenate([position_high, [1.0, 1.0]]), N), np.ones(2 * N), node_high]
+    return np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
 
 
 def team_observation_space(cfg: ModelConfig) -> spaces.Box:

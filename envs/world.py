@@ -273,20 +273,20 @@ class World:
     # ---------------------------------------------------------- sizes
     @property
     def observation_size(self) -> int:
-        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task).
-        Under an energy model, own battery (a fraction of the capacity) and service flag after the contributions,
-        and each other's after its (x, y, task).
+        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task);
+        under an energy model then its battery (a fraction of the capacity) and service flag, and the others', in
+        the same order as their (x, y, task).
 
         The 4 nodes' positions are the same for every UAV of a world: they are the last
         :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
-        per_uav = 3 if self.energy is None else 5
-        return per_uav + 10 + per_uav * (self.num_uavs - 1)
+        N = self.num_uavs
+        return 13 + 3 * (N - 1) + (0 if self.energy is None else 2 * N)
 
     @property
     def state_size(self) -> int:
-        """Per UAV (x, y, task), its contributions at its cell (and its battery and service flag under an energy
-        model), then the 4 nodes' (x, y, z)."""
-        return (5 if self.energy is None else 7) * self.num_uavs + NODE_FEATURES
+        """Per UAV (x, y, task) and its contributions at its cell (under an energy model then per UAV its battery and
+        service flag), then the 4 nodes' (x, y, z)."""
+        return (5 if self.energy is None else 7) * self.num_uavs + NODE_FEATURES  # (x, y, task, 2 contributions)
 
     def set_seed(self, seed: int | None):
         """World ``i`` draws from the stream of seed ``seed + i``; the episode counters restart."""
@@ -379,11 +379,9 @@ class World:
 
     def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
-        layout)."""
+        layout; every world's under an energy model, whose features are the worlds' batteries now)."""
         W, N = code.shape
         own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
-        if self.energy is not None:
-            return self._assemble_with_energy(code, own)
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
             parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
@@ -391,20 +389,18 @@ class World:
             # the others' (x, y, task), for UAV i in the order i+1, ..., i+N-1 (mod N): a window over the codes twice
             xyt = self._code_xyt.index_select(0, torch.cat([code, code], 1).view(-1))  # [2 W N, 3]
             parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
+        per_uav = [own[..., :5].reshape(W, 5 * N)]
+        if self.energy is not None:  # then each UAV's battery and service flag: its own, the others' in that order
+            energy = self.energy.features(self._s)  # [W, N, 2]
+            parts.append(energy)
+            if N == 2:
+                parts.append(energy.flip(1))
+            elif N > 2:
+                parts.append(torch.cat([energy, energy], 1).as_strided((W, N, 2 * (N - 1)), (4 * N, 2, 1), 2))
+            per_uav.append(energy.view(W, 2 * N))
         observation = torch.cat(parts, -1) if len(parts) > 1 else own
-        state = torch.cat([own[..., :5].reshape(W, 5 * N), self._node_obs.expand(W, NODE_FEATURES)], -1)
+        state = torch.cat([*per_uav, self._node_obs.expand(W, NODE_FEATURES)], -1)
         return observation, state
-
-    def _assemble_with_energy(self, code: torch.Tensor, own: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """:meth:`_assemble` of every world under an energy model: each UAV's battery and service flag after its
-        contributions, and after each other's (x, y, task)."""
-        W, N = code.shape
-        energy = self.energy.features(self._s)  # [W, N, 2]
-        seen = torch.cat([self._code_xyt.index_select(0, code.view(-1)).view(W, N, 3), energy], -1)  # [W, N, 5]
-        others = (torch.arange(N, device=code.device)[:, None] + torch.arange(1, N, device=code.device)) % N
-        observation = torch.cat([own, energy, seen[:, others].view(W, N, 5 * (N - 1))], -1)
-        per_uav = torch.cat([own[..., :5], energy], -1).view(W, 7 * N)
-        return observation, torch.cat([per_uav, self._node_obs.expand(W, NODE_FEATURES)], -1)
 
     def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate

@@ -126,13 +126,13 @@ def test_leaving_service_flight_to_base_and_termination_by_hand():
     # the rates exclude UAV 1: those of UAV 0 relaying alone, not those of the two
     assert out["utility"].item() == relaying_alone["utility"].item() != together["utility"].item()
     assert out["r_se"].item() == 0.0 and not world.terminated.item()
+    # after the observation of energy=none (13 + 3 features), each UAV's own battery and flag, then the other's
     observation, state = out["observation"][0], out["state"][0]
-    assert observation[1, 13:15].tolist() == pytest.approx([(reserve_22 - 0.5 * stay) / cap, 0.0], rel=1e-6)
-    assert observation[0, 15 + 3 :].tolist() == observation[1, 13:15].tolist()  # UAV 0 sees UAV 1's battery, flag
-    assert (
-        state[5:7].tolist() == observation[0, 13:15].tolist()
-        and state[12:14].tolist() == observation[1, 13:15].tolist()
-    )
+    assert observation[1, 16:18].tolist() == pytest.approx([(reserve_22 - 0.5 * stay) / cap, 0.0], rel=1e-6)
+    assert observation[0, 16:18].tolist() == pytest.approx([(b0 - stay) / cap, 1.0], rel=1e-6)
+    assert observation[0, 18:].tolist() == observation[1, 16:18].tolist()  # UAV 0 sees UAV 1's battery and flag
+    assert observation[1, 18:].tolist() == observation[0, 16:18].tolist()
+    assert state[10:14].tolist() == observation[0, 16:20].tolist()  # after the per-UAV (x, y, task, contributions)
 
     out = step(world, RIGHT, SENSE)  # the freed cell (2, 2) can be entered
     assert out["positions"][0, 0].tolist() == [2, 2]
@@ -226,10 +226,17 @@ def test_the_observation_and_specs_follow_the_energy_model(tiny_env):
 
     for N in (1, 2, 3):
         plain = World(make_config("paper", grid=(3, 3), num_uavs=N), 2)
-        powered = World(make_config("paper", **_energy(N)), 2)
+        powered = World(make_config("paper", **_energy(N), battery_init="uniform"), 2)
         assert plain.observation_size == 13 + 3 * (N - 1) and plain.state_size == 5 * N + 12
         assert powered.observation_size == 15 + 5 * (N - 1) and powered.state_size == 7 * N + 12
-        assert powered.reset()["observation"].shape == (2, N, powered.observation_size)
+        first = powered.reset()
+        assert first["observation"].shape == (2, N, powered.observation_size)
+        assert first["observation"][..., : plain.observation_size].equal(plain.reset()["observation"])
+        # the others' batteries and flags in the order of their (x, y, task): UAV i sees i + 1, ..., i + N - 1
+        others = torch.tensor([[(i + k) % N for k in range(1, N)] for i in range(N)], dtype=torch.long)
+        features = first["observation"][:, :, 13 + 3 * (N - 1) :].view(2, N, N, 2)
+        assert features[:, :, 1:].equal(features[:, :, 0][:, others])
+        assert first["state"][:, 5 * N : 7 * N].equal(features[:, :, 0].reshape(2, 2 * N))
         assert "energy" not in plain.parts and plain._s.battery is None
     env = tiny_env(energy="rotary_wing", base=BASE)
     check_env_specs(env)
@@ -354,7 +361,7 @@ def test_the_gymnasium_and_pettingzoo_adapters_terminate_and_autoreset_apart():
         assert vector.observation_space.contains(obs)
         if ended.any() and not ended.all():  # those restart (reward 0, first observation), the others step on
             assert (reward[ended] == 0).all() and (vector.world._s.steps.numpy()[ended] == 0).all()
-            assert (vector.world._s.steps.numpy()[~ended] > 0).all() and (obs[ended, :, 14] == 1).all()
+            assert (vector.world._s.steps.numpy()[~ended] > 0).all() and (obs[ended, :, 20] == 1).all()
             first_ends = ended
     assert first_ends is not None
 
