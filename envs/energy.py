@@ -10,8 +10,12 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
   and who leaves service: a serving UAV whose battery is at or below the reserve of its cell (one more step, then
   the flight to the base) flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
   left), then is ``OUT``.  A UAV out of service sits on :attr:`Energy.away`, a cell index past the grid's whose
-  per-code rows add nothing to the rates, clash with nothing and allow only :data:`NO_OP`;
+  per-code rows add nothing to the rates, clash with no UAV on the grid and allow only :data:`NO_OP`;
+- ``features(state)``: ``[B, N, 2]`` what the observation and the state show of each UAV, its battery (a fraction
+  of the capacity) and its service flag;
 - ``terminated(state)``: ``[B]`` no UAV serves any more.
+
+The statuses leave room for recharging: a UAV back at the base is ``OUT`` with its ``timer`` free to count again.
 
 Example:
     >>> import torch
