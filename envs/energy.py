@@ -15,8 +15,6 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
   of the capacity) and its service flag;
 - ``terminated(state)``: ``[B]`` no UAV serves any more.
 
-The statuses leave room for recharging: a UAV back at the base is ``OUT`` with its ``timer`` free to count again.
-
 Example:
     >>> import torch
     >>> from uavrl.envs import make_config, streams
