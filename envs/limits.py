@@ -450,6 +450,25 @@ def default_horizon(grid) -> int:
     return max(20, 2 * sum(grid))
 
 
+def mission_steps(cfg) -> int:
+    """The steps by which every UAV of ``cfg`` (an energy model) is home from a full battery (docs/model.md, What the
+    numbers mean): a UAV serves at most ``floor((capacity - least reserve) / cheapest step)`` steps, leaves on the
+    next, then flies home over at most the farthest cell's steps.  The least reserve is taken as the cheapest step
+    plus the flight from the nearest cell, at most the reserve of any cell, so the count never falls short."""
+    energies, (L1, L2), (bx, by) = cfg.step_energies, cfg.grid, cfg.base
+    nearest = max(0, -bx, bx - (L1 - 1)) + max(0, -by, by - (L2 - 1))
+    farthest = max(abs(bx), abs(bx - (L1 - 1))) + max(abs(by), abs(by - (L2 - 1)))
+    cheapest = min(energies.move, energies.stay)
+    serving = math.floor((energies.capacity - cheapest - energies.flight(nearest)) / cheapest)
+    return serving + 1 + farthest
+
+
+def evaluation_horizon(cfg) -> int:
+    """The evaluation's default length (``eval.horizon`` null): :func:`default_horizon` of the grid, or under an
+    energy model the whole mission (:func:`mission_steps`)."""
+    return default_horizon(cfg.grid) if cfg.energy == "none" else mission_steps(cfg)
+
+
 def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:
     """Peak bytes of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
     > 0: the tabular agent's ``tables x num_starts`` worlds stepped together, keeping each step's outputs; else a

@@ -38,11 +38,11 @@ import torch
 
 from . import streams
 from .channel import direct_terms, link_gains, rates, rates_from_sums, relay_contributions
-from .config import RELAYING, SENSING, InvalidOption, ModelConfig
+from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
 from .dynamics import UAV_STATE, Dynamics
 from .energy import ENERGY_STATE, energy_part
 from .fading import fading_part
-from .grid import cells_of, joint_action_valid
+from .grid import cells_of, decode_joint_actions, joint_action_valid, targets_valid
 from .layouts import Layouts
 from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .optimum import optimum as exact_optimum
@@ -621,9 +621,28 @@ class World:
         return u.clone(), torch.stack([cells % L1, cells // L1], -1), tasks.clone()
 
     def joint_action_mask(self, positions: torch.Tensor | None = None) -> torch.Tensor:
-        """``[B, 6^N]`` valid joint actions (all cells on the grid and distinct) at ``positions`` (default: now)."""
-        cells = self._s.cell if positions is None else self.cells_of(positions.to(self.device))
-        return joint_action_valid(cells, self.dynamics.neighbours, self.num_uavs)
+        """``[B, 6^N]`` valid joint actions (all cells on the grid and distinct) at ``positions`` (default: now).
+
+        Under an energy model a UAV out of service (at the base) has one valid action, the no-op, and blocks no one.
+        """
+        if positions is None:
+            cells = self._s.cell
+        else:
+            positions = positions.to(self.device)
+            cells = self.cells_of(positions)
+            if self.energy is not None:
+                away = (positions == torch.tensor(self.cfg.base, device=self.device)).all(-1)
+                cells = cells.masked_fill(away, self.energy.away)
+        if self.energy is None:
+            return joint_action_valid(cells, self.dynamics.neighbours, self.num_uavs)
+        N = self.num_uavs
+        actions = decode_joint_actions(N, self.device)  # [A, N]
+        row = cells.unsqueeze(-2) * NUM_ACTIONS + actions  # [..., A, N]: each UAV's (cell, action) row
+        allowed = self.dynamics.cell_mask.view(-1).index_select(0, row.view(-1)).view_as(row)
+        target = self.dynamics.move_to.index_select(0, row.view(-1)).view_as(row)
+        # the UAVs away all sit on one cell: give each its own, past the grid's, so they clash with no one
+        target = torch.where(target == self.energy.away, self.energy.away + torch.arange(N, device=self.device), target)
+        return allowed.all(-1) & targets_valid(target)
 
     def _require_layout(self):
         if self.cfg.layout == "random" and not bool(self._s.started.all()):
@@ -648,3 +667,8 @@ class World:
     def neighbours(self) -> torch.Tensor:
         """``[C, 4]`` target cell of each move, -1 off the grid."""
         return self.dynamics.neighbours
+
+    @property
+    def battery(self) -> torch.Tensor | None:
+        """``[B, N]`` float64 every UAV's battery now, in the energy model's units; ``None`` without one."""
+        return None if self._s.battery is None else self._s.battery.clone()

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import time
 
 import torch
@@ -42,7 +43,9 @@ import torch
 from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, evaluation_horizon, gib
+from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
+from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
 from uavrl.envs.world import World
 from uavrl.rules import refuse, rule_of
 from uavrl.schema import EvalSchema
@@ -136,13 +139,30 @@ def _space(grid: tuple[int, int], num_uavs: int, device: str) -> exact.Configura
 
 
 def start_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float) -> dict:
-    """Per start ``[B]``: the exact best return ``V*_H`` (or ``None``) and the fewest steps to each level.
+    """Per start ``[B]``: the exact best return ``V*_H`` (or ``None``) and the fewest steps to each level; under an
+    energy model no return (it ignores energy) but :func:`mission_references` (``world`` at its starts).
 
     Exact where the configuration space fits (:func:`uavrl.envs.exact.fits`),
     else lower bounds (:mod:`uavrl.envs.bounds`): the relaxation for every
     level, and for the optimum also the bottleneck assignment to every
     optimal configuration.
     """
+    if world.energy is not None:  # the exact return ignores energy: a mission is measured by its delivered data
+        return {**_level_references(world, start, u_star, horizon, gamma, False), **mission_references(world, horizon)}
+    return _level_references(world, start, u_star, horizon, gamma, True)
+
+
+def mission_references(world: World, horizon: int) -> dict:
+    """Per start ``[B]`` under an energy model, from the batteries ``world`` starts with: the most data (bit/Hz) a
+    mission of ``horizon`` steps can deliver (:func:`uavrl.envs.mission.delivered_bound`), and ``U* H slot_s``."""
+    cfg = world.cfg
+    u_star_by_count = optimum_by_count(world.cell_contributions, world.direct, cfg)
+    bound = delivered_bound(service_steps_bound(world.energy, world.battery), u_star_by_count, horizon, cfg.slot_s)
+    return {"delivered_bound": bound, "horizon_bound": u_star_by_count[:, -1] * horizon * cfg.slot_s}
+
+
+def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float, returns: bool) -> dict:
+    """:func:`start_references`' fewest steps to each level, and the exact best return where ``returns``."""
     cfg, B = world.cfg, world.num_worlds
     cells, tasks = cells_of(start["positions"], cfg.grid[0]), start["tasks"]
     contributions, direct = world.cell_contributions, world.direct
@@ -156,7 +176,7 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
             torch.arange(B, device=world.device) if per_world else torch.zeros(B, dtype=torch.long, device=world.device)
         )
         start_index = space.index(cells, tasks)
-        best_return = exact.optimal_values(space, potential, gamma, horizon)[which, start_index]
+        best_return = exact.optimal_values(space, potential, gamma, horizon)[which, start_index] if returns else None
         fewest = [
             exact.min_steps(space, potential >= thresholds[tables, level, None])[which, start_index].long()
             for level in range(len(LEVELS))
@@ -175,12 +195,25 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
     return {"best_return": None, "min_steps": fewest, "exact": False}
 
 
-def yardstick_metrics(utility: torch.Tensor, u_star: torch.Tensor, references: dict, gamma: float) -> dict[str, float]:
-    """The yardstick from mean-channel utilities ``[B, H + 1]`` (start first) and :func:`start_references`."""
+def yardstick_metrics(
+    utility: torch.Tensor, u_star: torch.Tensor, references: dict, gamma: float, full_team: torch.Tensor | None = None
+) -> dict[str, float]:
+    """The yardstick from mean-channel utilities ``[B, H + 1]`` (start first) and :func:`start_references`.
+
+    ``full_team`` ``[B]`` (an energy model): the last column at which every UAV served.  The levels count only up to
+    it, the end is read there, and the return is left out (its exact best ignores energy).
+    """
     H = utility.shape[1] - 1
-    discount = gamma ** torch.arange(H, dtype=torch.float64, device=utility.device)
-    returns = (utility.diff(dim=1) * discount).sum(-1)
-    out = {"eval/return": returns.mean().item(), "eval/min_steps_exact": float(references["exact"])}
+    if full_team is None:
+        discount = gamma ** torch.arange(H, dtype=torch.float64, device=utility.device)
+        returns = (utility.diff(dim=1) * discount).sum(-1)
+        out = {"eval/return": returns.mean().item(), "eval/min_steps_exact": float(references["exact"])}
+        end = utility[:, -1]
+    else:
+        out = {"eval/min_steps_exact": float(references["exact"])}
+        end = utility.gather(1, full_team.unsqueeze(-1)).squeeze(-1)
+        later = torch.arange(H + 1, device=utility.device) > full_team.unsqueeze(-1)
+        utility = utility.masked_fill(later, -math.inf)
     if references["best_return"] is not None:
         out["eval/return_ratio"] = (returns.sum() / references["best_return"].sum()).item()
     for level, (name, q) in enumerate(LEVELS.items()):
@@ -195,7 +228,7 @@ def yardstick_metrics(utility: torch.Tensor, u_star: torch.Tensor, references: d
         moving = fewest >= 1
         if moving.any():
             out[f"eval/step_ratio_{name}"] = (steps[moving] / fewest[moving]).mean().item()
-    out["eval/end_at_optimum"] = (utility[:, -1] >= LEVELS["optimum"] * u_star).double().mean().item()
+    out["eval/end_at_optimum"] = (end >= LEVELS["optimum"] * u_star).double().mean().item()
     return out
 
 
@@ -221,7 +254,7 @@ def evaluate(
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg.grid)
+    horizon = horizon or evaluation_horizon(cfg)
     check_memory(cfg, num_starts, horizon, 0, memory_budget)
     env = UAVSpectrumEnv(
         batch_size=num_starts,
@@ -235,10 +268,29 @@ def evaluate(
     references = _references(env.world, start, u_star, horizon, gamma)
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
-    rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
+    if cfg.energy == "none":
+        rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
+        batteries = None
+    else:
+        batteries = [env.world.battery]
+        rollout = _mission_rollout(env, policy, start, horizon)
+        batteries.append(env.world.battery)
     steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
     steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
-    return greedy_metrics(env.world, start, steps, u_star, references, gamma)
+    return greedy_metrics(env.world, start, steps, u_star, references, gamma, batteries)
+
+
+def _mission_rollout(env, policy, start, horizon: int):
+    """``horizon`` steps of ``policy`` in ``env`` from ``start`` (a TorchRL rollout ``[B, H]``) with no reset: TorchRL's
+    rollout resets a world whose episode ended, and a mission is played once."""
+    from torchrl.envs.utils import step_mdp
+
+    frames, tensordict = [], start
+    for _ in range(horizon):
+        tensordict.update(policy(tensordict))
+        frames.append(env.step(tensordict))
+        tensordict = step_mdp(frames[-1], keep_other=True, exclude_action=False)
+    return torch.stack(frames, 1)
 
 
 def evaluation_starts(
@@ -256,7 +308,7 @@ def evaluation_starts(
     start, ``U*`` ``[B]``, the start references and the horizon.
     """
     check_settings(gamma, horizon, num_starts)
-    horizon = horizon or default_horizon(cfg.grid)
+    horizon = horizon or evaluation_horizon(cfg)
     world = World(cfg.replace(max_steps=horizon), num_starts, device, seed, memory_budget=memory_budget)
     start = world.reset()
     u_star = world.optimum()[0]
@@ -264,13 +316,16 @@ def evaluation_starts(
 
 
 def greedy_metrics(
-    world: World, start, steps, u_star: torch.Tensor, references: dict, gamma: float
+    world: World, start, steps, u_star: torch.Tensor, references: dict, gamma: float, batteries=None
 ) -> dict[str, float]:
     """The ``eval/...`` scalars of greedy episodes from the starts of ``world``.
 
     ``start`` holds the start's ``positions`` and ``tasks``, ``steps`` each
     step's ``positions``, ``tasks``, ``r_pu``, ``r_se``, ``task_switches`` and
-    ``moves``, ``[B, H, ...]`` (the per-world scalars ``[B, H]``).
+    ``moves``, ``[B, H, ...]`` (the per-world scalars ``[B, H]``).  Under an
+    energy model, also :func:`mission_metrics` (``batteries``: the UAVs'
+    ``[B, N]`` at the start and at the end, or ``None``), and the end of the
+    episode is the last step at which every UAV served.
     """
     positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
@@ -278,15 +333,60 @@ def greedy_metrics(
     per_episode = episode_metrics(
         steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], u_star, utility[:, 1:]
     )
-    optimality = utility[:, -1] / u_star
+    away = None if world.energy is None else _away(world, steps["positions"])
+    full_team = None if away is None else first_step(away.any(-1)) - 1
+    end = utility[:, -1] if full_team is None else utility.gather(1, full_team.unsqueeze(-1)).squeeze(-1)
+    optimality = end / u_star
     out = {f"eval/{k}": v.mean().item() for k, v in per_episode.items()}
     out["eval/optimality"] = optimality.mean().item()
     out["eval/optimality_min"] = optimality.min().item()
     out["eval/optimal_fraction"] = (optimality >= 0.99).double().mean().item()
     if world.cfg.bandwidth_hz is not None:  # a physical channel: bit/s/Hz times the bandwidth (docs/model.md)
         out["eval/u_star_bit_per_s"] = u_star.double().mean().item() * world.cfg.bandwidth_hz
-        out["eval/utility_bit_per_s"] = utility[:, -1].mean().item() * world.cfg.bandwidth_hz
-    out.update(yardstick_metrics(utility, u_star, references, gamma))
+        out["eval/utility_bit_per_s"] = end.mean().item() * world.cfg.bandwidth_hz
+    out.update(yardstick_metrics(utility, u_star, references, gamma, full_team))
+    if away is not None:
+        out.update(mission_metrics(world.cfg, steps, away, utility, references, batteries))
+    return out
+
+
+def _away(world: World, positions: torch.Tensor) -> torch.Tensor:
+    """``[B, H, N]`` whether each UAV is out of service after each step (shown at the base)."""
+    return (positions == torch.tensor(world.cfg.base, device=positions.device)).all(-1)
+
+
+def first_step(flags: torch.Tensor) -> torch.Tensor:
+    """``[B]`` the first step (from 1) whose flag ``[B, H]`` is set, ``H + 1`` where none is."""
+    H = flags.shape[-1]
+    return torch.where(flags.any(-1), flags.long().argmax(-1) + 1, H + 1)
+
+
+def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batteries) -> dict[str, float]:
+    """The mission's ``eval/...`` scalars under an energy model (docs/model.md, What the numbers mean), means over
+    the starts: delivered data, lifetimes (``H`` where the event falls outside the horizon), steps in service per
+    UAV, the energy per delivered bit (``batteries``: start and end ``[B, N]``) and the upper bounds of
+    :func:`mission_references`.  ``away`` ``[B, H, N]``: who is out of service after each step; ``utility``
+    ``[B, H + 1]`` the mean-channel utility, which the ratio to the bound (proved for mean channels) reads."""
+    H = away.shape[1]
+    delivered = (steps["r_pu"].double() + steps["r_se"].double()).sum(-1) * cfg.slot_s  # [B] bit/Hz
+    bound = references["delivered_bound"]
+    out = {
+        "eval/horizon": float(H),
+        "eval/delivered_bit_per_hz": delivered.mean().item(),
+        "eval/delivered_bound": bound.mean().item(),
+        "eval/delivered_horizon_bound": references["horizon_bound"].mean().item(),
+        "eval/first_leave_steps": first_step(away.any(-1)).clamp(max=H).double().mean().item(),
+        "eval/service_lost_steps": first_step(away.all(-1)).clamp(max=H).double().mean().item(),
+        "eval/service_steps_per_uav": (~away).sum(1).double().mean().item(),
+    }
+    if bound.sum() > 0:
+        out["eval/delivered_ratio"] = (utility[:, 1:].sum() * cfg.slot_s / bound.sum()).item()
+    delivered_units = delivered.sum()  # bit/Hz, or bits with a bandwidth
+    if cfg.bandwidth_hz is not None:
+        out["eval/delivered_bits"] = delivered.mean().item() * cfg.bandwidth_hz
+        delivered_units = delivered_units * cfg.bandwidth_hz
+    if batteries is not None and delivered_units > 0:
+        out["eval/energy_per_bit"] = ((batteries[0] - batteries[1]).sum() / delivered_units).item()
     return out
 
 
@@ -329,6 +429,7 @@ def _references(world, start, u_star, horizon, gamma) -> dict:
         str(world.device),
         start["positions"].cpu().numpy().tobytes(),
         start["tasks"].cpu().numpy().tobytes(),
+        None if world.battery is None else world.battery.cpu().numpy().tobytes(),
     )
     if key not in _REFERENCE_CACHE:
         if len(_REFERENCE_CACHE) >= 4:

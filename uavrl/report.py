@@ -55,6 +55,12 @@ METRICS = {
     "eval/steps_to_999": "steps to 0.999 U*",
     "eval/step_ratio_999": "steps / fewest (0.999 U*)",
     "eval/optimality": "final U/U*",
+    # a mission under an energy model (docs/model.md, What the numbers mean); missing for env.energy=none
+    "eval/delivered_bit_per_hz": "delivered bit/Hz",
+    "eval/delivered_ratio": "delivered / bound",
+    "eval/first_leave_steps": "first leaves (step)",
+    "eval/service_lost_steps": "service lost (step)",
+    "eval/energy_per_bit": "energy per bit",
     "train_seconds": "training s",
 }
 BASELINES = ("random", "oracle")
@@ -255,7 +261,7 @@ def read_metrics(path: Path) -> tuple[dict, object]:
     if not any(name in data for name in METRICS):
         raise DamagedRun(f"metrics.json holds none of the report's metrics ({', '.join(METRICS)})")
     metrics = {}
-    for name in (*METRICS, "eval/sum_utility"):
+    for name in (*METRICS, "eval/sum_utility", "eval/horizon"):
         value = data.get(name)
         if value is None:
             continue
@@ -467,8 +473,9 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
 
 
 def eval_horizon(run: Run) -> int:
-    """The evaluation's steps per rollout: ``eval.horizon``, or :func:`uavrl.envs.limits.default_horizon`."""
-    return run.config.get("eval.horizon") or default_horizon(run.config["env.grid"])
+    """The evaluation's steps per rollout: ``eval.horizon``, the mission's (``eval/horizon``, an energy model), or
+    :func:`uavrl.envs.limits.default_horizon`."""
+    return run.config.get("eval.horizon") or run.metrics.get("eval/horizon") or default_horizon(run.config["env.grid"])
 
 
 def evaluated_utility_per_step(run: Run) -> float | None:

@@ -73,7 +73,10 @@ class EvalSchema:
 
     num_starts: int = setting(64, whole(1), "fixed, seeded starts of the greedy evaluation")
     horizon: Optional[int] = setting(
-        None, optional(whole(1), "max(20, 2 (L1 + L2)) steps"), "steps per greedy rollout; null: max(20, 2 (L1 + L2))"
+        None,
+        optional(whole(1), "max(20, 2 (L1 + L2)) steps, or the mission's under an energy model"),
+        "steps per greedy rollout; null: max(20, 2 (L1 + L2)), or under an energy model the steps by which every UAV "
+        "is home (docs/model.md, What the numbers mean)",
     )
     gamma: REAL = setting(
         0.9,

@@ -27,6 +27,7 @@ from uavrl.envs.limits import (
     MAX_EXACT_UAVS,
     default_horizon,
     evaluation_bytes,
+    evaluation_horizon,
     frame_bytes,
     gib,
     table_bytes,
@@ -133,7 +134,7 @@ def check_run_costs(cfg: DictConfig, model) -> None:
     a = cfg.agent
     memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)
     step_budget = OmegaConf.select(cfg, "train.step_budget", default=TrainSchema.step_budget)
-    horizon = cfg.eval.horizon or default_horizon(model.grid)
+    horizon = cfg.eval.horizon or evaluation_horizon(model)
     starts = int(cfg.eval.num_starts)
     T, steps, memory, tables = model.max_steps, [], [], 0
     if a.name == "tabular" and a.get("method", TabularSchema.method) == "q_learning":
@@ -158,7 +159,7 @@ def check_run_costs(cfg: DictConfig, model) -> None:
     steps.append(Cost(evaluations, eval_factors, "the evaluation"))
     memory.append(evaluation_costs(model, starts, horizon, tables, ("eval.num_starts", "eval.horizon", "agent.runs")))
     if cfg.eval.get("video", False):
-        memory.append(video_cost(int(cfg.eval.video_starts), horizon))
+        memory.append(video_cost(int(cfg.eval.video_starts), cfg.eval.horizon or default_horizon(model.grid)))
     refuse_over(memory, memory_budget, "agent.memory_budget", "bytes")
     refuse_over([total_steps(steps)], step_budget, "train.step_budget", "steps")
 
