@@ -22,6 +22,11 @@ decide whether a level is reached):
 - ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
   ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
 
+Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
+:func:`mission_metrics` adds its delivered data, lifetimes, energy per bit and the ratio to an upper bound on what
+any policy delivers (:mod:`uavrl.envs.mission`); the return, whose exact best ignores energy, is left out, and the
+levels and the end are read while the full team serves.
+
 Example:
     >>> from uavrl.agents.baselines import RandomPolicy
     >>> from uavrl.envs import make_config

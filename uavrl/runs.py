@@ -72,6 +72,11 @@ def yardstick_line(cfg: DictConfig, result: dict) -> str:
         parts.append(
             f"return ratio {result['eval/return_ratio']:.4f} (discounted gain / the exact best, gamma {cfg.eval.gamma})"
         )
+    if "eval/delivered_ratio" in result:  # an energy model's mission (docs/model.md, What the numbers mean)
+        parts.append(
+            f"the mission delivered {result['eval/delivered_ratio']:.1%} of its upper bound, the first UAV left "
+            f"service at step {result['eval/first_leave_steps']:.1f} on average"
+        )
     reach = f"0.999 U* reached from {result['eval/reach_999']:.0%} of starts"
     if "eval/step_ratio_999" in result:
         fewest = "fewest" if result["eval/min_steps_exact"] == 1.0 else "a lower bound on the fewest"
