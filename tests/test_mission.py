@@ -313,3 +313,17 @@ def test_the_joint_action_mask_of_uavs_out_of_service():
         allowed = valid[w].transpose(0, 1) if away == 0 else valid[w]  # [action of the one away, of the other]
         assert allowed[SENSE].equal(masks[w, serving]) and not allowed[[0, 1, 2, 3, 5]].any()
     assert masks[0, 1].tolist() == [True] * 6  # (1, 1), the centre: UAV 0 away blocks none of its moves
+
+
+def test_the_environments_joint_action_mask_once_every_uav_is_out():
+    from tensordict import TensorDict
+
+    from uavrl.envs import UAVSpectrumEnv
+
+    env = UAVSpectrumEnv(batch_size=2, config=rotary(battery_wh=0.3))
+    env.reset()
+    for _ in range(8):
+        env.step(TensorDict({("agents", "action"): torch.full((2, 2), SENSE)}, batch_size=[2]))
+    assert (env.world._s.status != 0).all()
+    valid = env.joint_action_mask()
+    assert valid.shape == (2, 36) and valid.sum(-1).tolist() == [1, 1] and valid[:, SENSE + 6 * SENSE].all()
