@@ -47,10 +47,10 @@ POWER_LAW_OPTIONS = ("alpha", "g0", "p_pt", "p_s", "p_u", "noise")
 PHYSICAL_OPTIONS = ("environment", "carrier_ghz", "bandwidth_mhz", "noise_figure_db", "p_pt_dbm", "p_s_dbm", "p_u_dbm")
 
 
-def action_names(cfg: ModelConfig) -> str:
-    """The actions of ``cfg`` in words for a one-line error: ``0..5 (up, down, left, right, sense, relay)``, and
-    ``return`` (6) with recharging."""
-    names = ACTION_NAMES + ("return",) * (cfg.num_actions - NUM_ACTIONS)
+def action_names(num_actions: int) -> str:
+    """A UAV's ``num_actions`` actions in words for a one-line error: ``0..5 (up, down, left, right, sense, relay)``,
+    and ``return`` (6) with recharging."""
+    names = ACTION_NAMES + ("return",) * (num_actions - NUM_ACTIONS)
     return f"0..{len(names) - 1} ({', '.join(names)})"
 
 

@@ -9,11 +9,14 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
 - ``step(state, cell_before, action)``: after the dynamics part moved the UAVs, what the step cost each battery,
   and who leaves service: a serving UAV whose battery is at or below the reserve of its cell (one more step, then
   the flight to the base) flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
-  left), then is ``OUT``.  A UAV out of service sits on :attr:`Energy.away`, a cell index past the grid's whose
-  per-code rows add nothing to the rates, clash with no UAV on the grid and allow only :data:`NO_OP`;
+  left), then is ``OUT``; with ``recharge_steps`` it also leaves on ``return`` (:data:`~.config.RETURN`), is
+  ``CHARGING`` at the base for that many steps, then ``WAITING`` charged, and the first waiting UAV enters at
+  :attr:`Energy.entry` while fewer than ``num_uavs`` serve (spares start waiting).  A UAV out of service sits on
+  :attr:`Energy.away`, a cell index past the grid's whose per-code rows add nothing to the rates, clash with no
+  UAV on the grid and allow only :data:`NO_OP`;
 - ``features(state)``: ``[B, N, 2]`` what the observation and the state show of each UAV, its battery (a fraction
   of the capacity) and its service flag;
-- ``terminated(state)``: ``[B]`` no UAV serves any more.
+- ``terminated(state)``: ``[B]`` no UAV serves any more (``None`` with recharging: missions are truncated).
 
 Example:
     >>> import torch

@@ -272,6 +272,8 @@ class UAVSpectrumEnv(EnvBase):
             out["nodes"] = self.world.nodes
         if self.agent_rewards and "reward" in out:
             group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
+        if self.num_actions > NUM_ACTIONS:  # "return" is refused where not valid: random actions (rollout) keep off it
+            self.input_spec["full_action_spec"]["agents", "action"].update_mask(group["action_mask"])
         out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)
         return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=dev)
 
@@ -284,17 +286,6 @@ class UAVSpectrumEnv(EnvBase):
         out.update({"done": done, "terminated": done.clone(), "truncated": done.clone()})
         return self._outputs(out)
 
-    def rand_action(self, tensordict: TensorDictBase | None = None) -> TensorDictBase:
-        """TorchRL's random action (``rollout`` without a policy); with recharging one among the valid actions of
-        each UAV (its ``action_mask``), as ``return`` is refused where it is not valid."""
-        if self.num_actions == NUM_ACTIONS:
-            return super().rand_action(tensordict)
-        mask = self.world.dynamics.masks(self.world._s.cell)
-        action = MaskedCategorical(self.num_actions, mask.shape[:-1], device=self.device, mask=mask).rand()
-        if tensordict is None:
-            tensordict = TensorDict(batch_size=self.batch_size, device=self.device)
-        return tensordict.set(("agents", "action"), action)
-
     def _check_action(self, action: torch.Tensor):
         shape = (self.num_worlds, self.num_uavs)
         if tuple(action.shape) != shape:
@@ -306,7 +297,7 @@ class UAVSpectrumEnv(EnvBase):
         lo, hi = torch.aminmax(action)
         if lo < 0 or hi >= self.num_actions:
             bad = (lo if lo < 0 else hi).item()
-            raise ValueError(f"('agents', 'action') holds {bad}: actions are {action_names(self.cfg)}")
+            raise ValueError(f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}")
         if hi == RETURN:  # "return" is a serving UAV's only: on the grid
             away = (action == RETURN) & (self.world._s.cell >= self.cfg.num_cells)
             if away.any():
@@ -325,7 +316,7 @@ class UAVSpectrumEnv(EnvBase):
         if tensordict.get(("agents", "action"), None) is None:
             raise ValueError(
                 f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
-                f"{self.num_uavs}] integers {action_names(self.cfg)}"
+                f"{self.num_uavs}] integers {action_names(self.num_actions)}"
             )
         return super().step(tensordict)
 

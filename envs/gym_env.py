@@ -163,17 +163,18 @@ def team_observation_space(cfg: ModelConfig) -> spaces.Box:
     return spaces.Box(low, high, dtype=np.float32)
 
 
-def check_actions(actions, shape: tuple[int, ...], name: str, cfg: ModelConfig) -> np.ndarray:
-    """``actions`` as an int64 array of ``shape``; a one-line error naming ``name`` otherwise."""
+def check_actions(actions, shape: tuple[int, ...], name: str, num_actions: int) -> np.ndarray:
+    """``actions`` as an int64 array of ``shape``, each below ``num_actions``; a one-line error naming ``name``
+    otherwise."""
     array = np.asarray(actions)
     if array.shape != shape:
         raise ValueError(f"{name} has shape {array.shape}: expected {shape} (one action per UAV)")
     if not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{name} has dtype {array.dtype}: expected integers {action_names(cfg)}")
+        raise TypeError(f"{name} has dtype {array.dtype}: expected integers {action_names(num_actions)}")
     lo, hi = array.min(), array.max()
-    if lo < 0 or hi >= cfg.num_actions:
+    if lo < 0 or hi >= num_actions:
         bad = lo if lo < 0 else hi
-        raise ValueError(f"{name} holds {bad}: actions are {action_names(cfg)}")
+        raise ValueError(f"{name} holds {bad}: actions are {action_names(num_actions)}")
     return array.astype(np.int64, copy=False)
 
 
@@ -270,7 +271,7 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         return out["observation"][0], world_info(out, 0)
 
     def step(self, action):
-        actions = check_actions(action, (self.cfg.fleet_size,), "action", self.cfg)
+        actions = check_actions(action, (self.cfg.fleet_size,), "action", self.cfg.num_actions)
         out, reward, truncated = self._worlds.step(actions[None])
         self._mask = out["action_mask"][0]
         terminated = bool(self._worlds.terminated()[0])
@@ -353,7 +354,7 @@ class UAVSpectrumVectorEnv(VectorEnv):
             reward, terminated, truncated = np.zeros(B), np.zeros(B, dtype=bool), np.zeros(B, dtype=bool)
         else:
             out, reward, truncated = self._worlds.step(
-                check_actions(actions, (B, self.cfg.fleet_size), "actions", self.cfg)
+                check_actions(actions, (B, self.cfg.fleet_size), "actions", self.cfg.num_actions)
             )
             terminated = self._worlds.terminated()
             if ended.any():  # an energy model's episodes terminate apart: those worlds restart, the others step
@@ -413,7 +414,7 @@ class TeamActionPolicy(TensorDictModuleBase):
         observation = observation_with_nodes(td.get(("agents", "observation")), td.get("state"))
         mask = td.get(("agents", "action_mask"))
         actions = self.act(observation.numpy(force=True), mask.to(torch.int8).numpy(force=True))
-        actions = check_actions(actions, tuple(mask.shape[:-1]), "the policy's actions")
+        actions = check_actions(actions, tuple(mask.shape[:-1]), "the policy's actions", mask.shape[-1])
         td.set(("agents", "action"), torch.from_numpy(actions).to(mask.device))
         return td
 

@@ -123,7 +123,7 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         if missing:
             raise ValueError(f"actions has no action for {missing[0]!r}: every live agent acts each step")
         joint = check_actions(
-            [actions[agent] for agent in self.possible_agents], (self.cfg.fleet_size,), "actions", self.cfg
+            [actions[agent] for agent in self.possible_agents], (self.cfg.fleet_size,), "actions", self.cfg.num_actions
         )
         out, reward, truncated = self._worlds.step(joint[None])
         observations, infos = self._observations(out), self._infos(out)
