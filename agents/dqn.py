@@ -105,7 +105,7 @@ class TeamQNet(nn.Module):
     ``factored``: a shared per-UAV head (a ``MultiAgentMLP`` with one hidden
     layer) reads that embedding, the UAV's own observation, its one-hot id and
     which of its 4 neighbouring cells another UAV holds, and returns
-    ``[*, N, 6]``.  The embedding is the same for every UAV of a world, so the
+    ``[*, N, A]`` (A = 6, 7 with recharging).  The embedding is the same for every UAV of a world, so the
     head's first layer is applied in two parts: to the embedding once per
     world, to the rest once per UAV: the same function and parameters as the
     layer on the whole input, and with 6 UAVs 43% fewer multiplications for
@@ -173,7 +173,7 @@ class TeamQNet(nn.Module):
 
 
 class ValidGreedy(nn.Module):
-    """A valid joint action from per-UAV values ``[*, N, 6]``, masks ``[*, N, 6]``, positions and tasks.
+    """A valid joint action from per-UAV values ``[*, N, A]``, masks ``[*, N, A]``, positions and tasks.
 
     UAV by UAV in id order, each takes its best allowed action.  Allowed: a
     move whose target cell differs from the cells of the UAVs still to choose

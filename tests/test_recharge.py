@@ -286,3 +286,15 @@ def test_waiting_and_charging_uavs_render_at_the_base():
     charging = renderer.frame(0)
     assert waiting.shape == charging.shape and waiting.dtype == charging.dtype and (waiting != charging).any()
     assert renderer._uavs.get_offsets().tolist()[0] == list(BASE)
+
+
+def test_the_greedy_rule_keeps_a_returning_uavs_cell_for_the_step():
+    from uavrl.agents.dqn import ValidGreedy
+
+    greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3, num_actions=7)
+    allowed = torch.ones(1, 2, 7, dtype=torch.bool)
+    allowed[0, 0, :3] = allowed[0, 1, 3] = False  # the moves that leave the 3x1 grid, and UAV 0's down
+    values = torch.tensor([[[0, 0, 0, 1.0, 0, 0, 9.0], [0, 0, 9.0, 0, 0, 1.0, 0]]])  # 0 returns, 1 wants its cell
+    assert greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]])).tolist() == [[6, 5]]
+    allowed[0, :, 6] = False  # without return, UAV 0 moves right only if UAV 1 leaves first: it does not
+    assert greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]])).tolist() == [[4, 5]]
