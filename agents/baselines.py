@@ -39,7 +39,7 @@ from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
 from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
 from uavrl.envs.exact import fixed_layout_tables
-from uavrl.envs.grid import cells_of, grid_neighbours
+from uavrl.envs.grid import grid_neighbours
 from uavrl.envs.optimum import optimum
 
 UP, DOWN, LEFT, RIGHT, SENSE = range(5)
@@ -135,16 +135,25 @@ class OraclePolicy(TensorDictModuleBase):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
-        N = self.cfg.num_uavs
-        cells = cells_of(positions, self.cfg.grid[0]).cpu().reshape(-1, N)
-        tasks_of = tasks.cpu().reshape(-1, N)
+        (L1, L2), fleet = self.cfg.grid, self.cfg.fleet_size
+        x, y = positions[..., 0].cpu().reshape(-1, fleet), positions[..., 1].cpu().reshape(-1, fleet)
+        serving = (x >= 0) & (x < L1) & (y >= 0) & (y < L2)  # under an energy model the others are at the base
+        cells, tasks_of = y * L1 + x, tasks.cpu().reshape(-1, fleet)
         nodes = self._nodes(td)
-        actions = torch.stack([self._plan(w, cells[w], tasks_of[w], nodes) for w in range(len(cells))])
+        # a UAV out of service has only the no-op; the oracle plans for those in service and never sends one home
+        actions = torch.full(cells.shape, SENSE, dtype=torch.long)
+        for w in range(len(cells)):
+            uavs = serving[w].nonzero().squeeze(-1)
+            if len(uavs) == len(cells[w]):
+                actions[w] = self._plan(w, cells[w], tasks_of[w], nodes)
+            elif len(uavs):
+                actions[w, uavs] = self._plan(w, cells[w, uavs], tasks_of[w, uavs], nodes)
         td.set(("agents", "action"), actions.view(tasks.shape).to(positions.device))
         return td
 
     def _plan(self, world: int, cells: torch.Tensor, tasks: torch.Tensor, nodes) -> torch.Tensor:
-        """One valid joint action of one world, ``[N]``."""
+        """One valid joint action ``[n]`` of the ``n <= N`` UAVs of one world in service (an assignment of them to
+        pairs of an optimal configuration)."""
         target_cells, target_tasks = self._optimal_sets(world, nodes)
         costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
         _, s, pair = best_assignment(costs)

@@ -61,7 +61,7 @@ class UAVTask(TaskClass):
         return False
 
     def group_map(self, env) -> dict[str, list[str]]:
-        return {GROUP: [f"uav_{i}" for i in range(self.model_config.num_uavs)]}
+        return {GROUP: [f"uav_{i}" for i in range(self.model_config.fleet_size)]}  # spares are agents too
 
     def _group_entry(self, env, key: str) -> Composite:
         group = env.full_observation_spec_unbatched[GROUP]

@@ -105,7 +105,7 @@ class TeamQNet(nn.Module):
     ``factored``: a shared per-UAV head (a ``MultiAgentMLP`` with one hidden
     layer) reads that embedding, the UAV's own observation, its one-hot id and
     which of its 4 neighbouring cells another UAV holds, and returns
-    ``[*, N, 6]``.  The embedding is the same for every UAV of a world, so the
+    ``[*, N, A]`` (A = 6, 7 with recharging).  The embedding is the same for every UAV of a world, so the
     head's first layer is applied in two parts: to the embedding once per
     world, to the rest once per UAV: the same function and parameters as the
     layer on the whole input, and with 6 UAVs 43% fewer multiplications for
@@ -142,7 +142,7 @@ class TeamQNet(nn.Module):
         else:
             self.head = MultiAgentMLP(
                 hidden + F + N + 4,
-                NUM_ACTIONS,
+                env.num_actions,  # 6, and "return" with recharging
                 N,
                 centralized=False,
                 share_params=True,
@@ -173,7 +173,7 @@ class TeamQNet(nn.Module):
 
 
 class ValidGreedy(nn.Module):
-    """A valid joint action from per-UAV values ``[*, N, 6]``, masks ``[*, N, 6]``, positions and tasks.
+    """A valid joint action from per-UAV values ``[*, N, A]``, masks ``[*, N, A]``, positions and tasks.
 
     UAV by UAV in id order, each takes its best allowed action.  Allowed: a
     move whose target cell differs from the cells of the UAVs still to choose
@@ -201,19 +201,20 @@ class ValidGreedy(nn.Module):
         tensor([[4, 5]])
     """
 
-    def __init__(self, neighbours: torch.Tensor, width: int):
+    def __init__(self, neighbours: torch.Tensor, width: int, num_actions: int = NUM_ACTIONS):
         super().__init__()
-        self.width = width
+        self.width, self.num_actions = width, num_actions
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
     def _target_table(self) -> torch.Tensor:
-        """``[C + 1, 6]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
-        out, but two UAVs given it would still collide there), where a UAV out of service stays."""
+        """``[C + 1, A]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
+        out, but two UAVs given it would still collide there), where a UAV out of service stays.  "return" keeps the
+        cell for the step, as the environment's dynamics do (its flight home is the energy part's)."""
         cells = len(self.neighbours)
-        stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, 2)
+        stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, self.num_actions - 4)
         moves = torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
-        return torch.cat([moves, moves.new_full((1, NUM_ACTIONS), cells)])
+        return torch.cat([moves, moves.new_full((1, self.num_actions), cells)])
 
     def forward(
         self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
@@ -222,7 +223,7 @@ class ValidGreedy(nn.Module):
         batch = cells.shape[:-1]
         # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
         table = self._target_table()
-        targets = table.index_select(0, cells.reshape(-1)).view(*cells.shape, 6).movedim(-2, 0).contiguous()
+        targets = table.index_select(0, cells.reshape(-1)).view(*cells.shape, -1).movedim(-2, 0).contiguous()
         values, allowed = action_value.movedim(-2, 0).contiguous(), action_mask.movedim(-2, 0).contiguous()
         switches = (tasks.unsqueeze(-1) != self.task_ids).movedim(-2, 0)  # [N, *, 2]: actions 4, 5 change the task
         # occupied[..., c]: cell c is held or claimed by a UAV (while a UAV chooses, its own cell is left out)
@@ -234,7 +235,7 @@ class ValidGreedy(nn.Module):
         for i in range(len(values)):
             occupied.scatter_(-1, claimed[i], False)
             blocked = occupied.gather(-1, targets[i]) | ~allowed[i]
-            blocked[..., 4:] |= switches[i] & switched_to
+            blocked[..., 4:6] |= switches[i] & switched_to
             action = values[i].masked_fill(blocked, -math.inf).argmax(-1, keepdim=True)
             claimed[i] = targets[i].gather(-1, action)
             occupied.scatter_(-1, claimed[i], True)
@@ -372,14 +373,14 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
     # TorchRL's own Categorical: the exploration draws as they were before the env's cheaper MaskedCategorical
     spec = Composite(
         agents=Composite(
-            action=Categorical(NUM_ACTIONS, (env.num_uavs,), dtype=torch.long, device=env.device),
+            action=Categorical(env.num_actions, (env.num_uavs,), dtype=torch.long, device=env.device),
             shape=(env.num_uavs,),
             device=env.device,
         ),
         device=env.device,
     )
     greedy_action = TensorDictModule(
-        ValidGreedy(env.neighbours, env.cfg.grid[0]),
+        ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions),
         in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],
         out_keys=[("agents", "action")],
     )

@@ -53,7 +53,7 @@ class RunEnvironment:
     """The grid, number of UAVs and layout of a run, and the checks that an environment or tensordict has them."""
 
     def __init__(self, cfg: ModelConfig):
-        self.grid, self.num_uavs, self.layout = tuple(cfg.grid), int(cfg.num_uavs), cfg.layout
+        self.grid, self.num_uavs, self.layout = tuple(cfg.grid), int(cfg.fleet_size), cfg.layout  # spares act too
         L1, L2 = self.grid
         self.neighbours = grid_neighbours(self.grid)
         self.xy_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=torch.float64)
@@ -88,8 +88,8 @@ class RunEnvironment:
         differ = []
         if tuple(cfg.grid) != self.grid:
             differ.append(f"a {cfg.grid[0]}x{cfg.grid[1]} grid")
-        if cfg.num_uavs != self.num_uavs:
-            differ.append(f"{cfg.num_uavs} UAVs")
+        if cfg.fleet_size != self.num_uavs:
+            differ.append(f"{cfg.fleet_size} UAVs")
         nodes = fixed_layout(cfg)
         if cfg.layout != self.layout:
             differ.append(f"layout {cfg.layout!r}")

@@ -9,7 +9,8 @@ line (on CPU, same torch, same machine)::
 
 Each line is ``<case> <digest>``: the World's outputs over a seeded random walk (every preset, channel, fading,
 reward, layout and episode rule), the TorchRL environment's rollout, the exact optimum, and each agent's training
-metrics, checkpoint and greedy evaluation after a few iterations; then the same for the energy models.
+metrics, checkpoint and greedy evaluation after a few iterations; then the same for the energy models, then for
+recharging and spares.
 """
 
 from __future__ import annotations
@@ -80,6 +81,17 @@ ENERGY_WORLD_CASES = {
         dict(grid=(5, 5), num_uavs=3, energy="rotary_wing", base=(-1, 0), battery_wh=5.0, fading="los_nlos"),
     ),
 }
+# recharging and spares, recorded after every line above
+RECHARGE_WORLD_CASES = {
+    "paper-n2-rotary-recharge-spare": (
+        "paper",
+        dict(energy="rotary_wing", base=(-1, 0), battery_wh=0.6, recharge_steps=3, num_spares=1),
+    ),
+    "paper-n3-follow_up-recharge-2spares-random": (
+        "paper",
+        dict(num_uavs=3, energy="follow_up", base=(6, 2), recharge_steps=2, num_spares=2, layout="random"),
+    ),
+}
 STEPS, WORLDS = 25, 6
 
 AGENT_CASES = {
@@ -132,6 +144,14 @@ ENERGY_AGENT_CASES = {
         *("env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=0.5"),
     ],
 }
+RECHARGE_AGENT_CASES = {
+    "dqn-rotary-recharge": [
+        *("agent=dqn", "agent.iterations=3", "env.max_steps=8", "agent.worlds=8", "agent.hidden=16"),
+        *("agent.batch_size=32", "agent.buffer_size=100", "agent.updates=2", "agent.learning_starts=16"),
+        *("env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=0.5", "env.recharge_steps=2"),
+    ],
+    "oracle-follow_up-recharge": ["agent=oracle", "env.energy=follow_up", "env.base=[-1,0]", "env.recharge_steps=2"],
+}
 COMMON = ["env.grid=[4,4]", "eval.num_starts=4", "progress=false"]
 
 
@@ -166,7 +186,7 @@ def world_case(preset: str, options: dict) -> dict[str, str]:
     g = torch.Generator().manual_seed(1)
     seen = [world.reset()]
     for _ in range(STEPS):
-        action = torch.randint(0, 6, (WORLDS, cfg.num_uavs), generator=g)
+        action = torch.randint(0, cfg.num_actions, (WORLDS, cfg.fleet_size), generator=g)
         step, reward, done = world.step(action)
         seen.append((step, reward, done))
         if done.any():
@@ -212,6 +232,14 @@ def main() -> None:
             for part, value in world_case(preset, options).items():
                 print(f"world:{name}:{part} {value}", flush=True)
     for name, overrides in ENERGY_AGENT_CASES.items():
+        if not only or name in only:
+            for part, value in agent_case(overrides).items():
+                print(f"agent:{name}:{part} {value}", flush=True)
+    for name, (preset, options) in RECHARGE_WORLD_CASES.items():
+        if not only or name in only:
+            for part, value in world_case(preset, options).items():
+                print(f"world:{name}:{part} {value}", flush=True)
+    for name, overrides in RECHARGE_AGENT_CASES.items():
         if not only or name in only:
             for part, value in agent_case(overrides).items():
                 print(f"agent:{name}:{part} {value}", flush=True)

@@ -23,7 +23,8 @@ from . import power, radio
 from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
-NUM_ACTIONS = len(ACTION_NAMES)
+NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; an energy model with recharging adds RETURN
+RETURN = NUM_ACTIONS  # "return": fly home to recharge (docs/model.md, Energy and lifetime)
 SENSING, RELAYING = 0, 1
 NODE_NAMES = ("PT", "PR", "S", "E")
 
@@ -36,7 +37,7 @@ RESET_POSITIONS = ("random", "keep")
 ENERGIES = power.ENERGIES
 BATTERY_INITS = power.BATTERY_INITS
 # the options only an energy model reads, and those only rotary_wing reads (docs/model.md, Energy and lifetime)
-ENERGY_OPTIONS = ("base", "battery_init")
+ENERGY_OPTIONS = ("base", "battery_init", "recharge_steps", "num_spares")
 ROTARY_WING_OPTIONS = ("battery_wh", "slot_s", "circuit_power_w")
 CHANNELS = radio.CHANNELS
 ENVIRONMENTS = radio.ENVIRONMENTS
@@ -44,6 +45,13 @@ PRESETS = ("paper", "reference_code", "a2g_urban")
 # the options only the power laws read, and those only the physical channels read (docs/model.md, Channel models)
 POWER_LAW_OPTIONS = ("alpha", "g0", "p_pt", "p_s", "p_u", "noise")
 PHYSICAL_OPTIONS = ("environment", "carrier_ghz", "bandwidth_mhz", "noise_figure_db", "p_pt_dbm", "p_s_dbm", "p_u_dbm")
+
+
+def action_names(num_actions: int) -> str:
+    """A UAV's ``num_actions`` actions in words for a one-line error: ``0..5 (up, down, left, right, sense, relay)``,
+    and ``return`` (6) with recharging."""
+    names = ACTION_NAMES + ("return",) * (num_actions - NUM_ACTIONS)
+    return f"0..{len(names) - 1} ({', '.join(names)})"
 
 
 class InvalidOption(ValueError):
@@ -72,7 +80,9 @@ class ModelConfig:
     where ``reference_gain`` replaces the power products.  ``fading`` draws every link's power gain anew each step
     (:mod:`uavrl.envs.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.  ``energy`` gives the
     UAVs batteries (:mod:`uavrl.envs.energy`): a UAV leaves service for the ``base`` when its battery reaches the
-    reserve the flight there needs; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
+    reserve the flight there needs (or, given ``recharge_steps``, when the controller sends it home), and either
+    stays out or recharges there for ``recharge_steps`` steps; ``num_spares`` more UAVs wait charged at the base to
+    keep ``num_uavs`` in service; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
     """
 
     grid: tuple[int, int] = (6, 6)
@@ -113,6 +123,8 @@ class ModelConfig:
     base: tuple[int, int] | None = None  # the base's cell (x, y), on the grid or off it; an energy model needs one
     battery_wh: float = power.BATTERY_WH
     battery_init: str = "full"
+    recharge_steps: int | None = None  # steps a UAV at the base recharges; None: a UAV that left stays out
+    num_spares: int = 0  # UAVs beyond num_uavs waiting charged at the base (recharge_steps needed)
     slot_s: float = power.SLOT_S
     circuit_power_w: float = power.CIRCUIT_POWER_W
     preset: str = field(default="paper", compare=False)
@@ -251,6 +263,14 @@ class ModelConfig:
                 raise InvalidOption(name, getattr(self, name), f"only {reads} reads it, not energy={self.energy!r}")
         if self.energy == "none":
             return
+        if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
+            reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
+            raise InvalidOption("recharge_steps", self.recharge_steps, reason)
+        if not _is_int(self.num_spares) or self.num_spares < 0:
+            raise InvalidOption("num_spares", self.num_spares, "give the whole number >= 0 of UAVs waiting at the base")
+        if self.num_spares > 0 and self.recharge_steps is None:
+            reason = "a spare enters when a UAV leaves for the base and recharges there: give recharge_steps too"
+            raise InvalidOption("num_spares", self.num_spares, reason)
         if self.base is None:
             reason = "a UAV leaves service for its base: give base=[x, y], a cell off the grid"
             raise InvalidOption("energy", self.energy, reason)
@@ -325,6 +345,16 @@ class ModelConfig:
         """The bandwidth in Hz of the physical channels (a rate in bit/s/Hz times it is in bit/s); ``None`` for the
         power laws, whose rates are per Hz."""
         return self.bandwidth_mhz * 1e6 if self.is_physical else None
+
+    @property
+    def fleet_size(self) -> int:
+        """The UAVs of a world, every one an agent: ``num_uavs`` serve at most at once, ``num_spares`` more wait."""
+        return self.num_uavs + self.num_spares
+
+    @property
+    def num_actions(self) -> int:
+        """A UAV's actions: the paper's 6, and ``return`` (:data:`RETURN`) under an energy model that recharges."""
+        return NUM_ACTIONS + (self.recharge_steps is not None)
 
     @property
     def num_joint_actions(self) -> int:

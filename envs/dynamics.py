@@ -5,9 +5,9 @@ The state is one ``[B, N]`` tensor per name of :data:`UAV_STATE`: ``cell`` (``y 
 1 relaying).  :class:`Dynamics` gives
 
 - ``start(keys, counters)``: the first values of ``k`` worlds at a reset, by name, from their random streams;
-- ``step(state, action)``: the values after the joint actions ``[B, N]`` (0..5), by name: a move off the grid stays,
-  and clashing moves are cancelled (:meth:`Dynamics.resolve_moves`);
-- ``masks(cell)``: ``[B, N, 6]`` the actions that keep each UAV on the grid;
+- ``step(state, action)``: the values after the joint actions ``[B, N]`` (0..5; 6, ``return``, with recharging),
+  by name: a move off the grid stays, and clashing moves are cancelled (:meth:`Dynamics.resolve_moves`);
+- ``masks(cell)``: ``[B, N, A]`` the actions that keep each UAV on the grid (``A = cfg.num_actions``);
 - ``terminated(state)``: ``[B]`` whether a world's episode ends, or ``None`` when none can (the model's episodes
   are truncated after ``max_steps``).
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 import torch
 
 from . import streams
-from .config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig
+from .config import RELAYING, SENSING, ModelConfig
 from .grid import grid_neighbours
 
 UAV_STATE = ("cell", "task")  # the per-UAV variables, each a [B, N] tensor of the World's state
@@ -50,48 +50,55 @@ class Dynamics:
 
     def __init__(self, cfg: ModelConfig, num_worlds: int, device="cpu"):
         self.cfg = cfg
-        C = cfg.num_cells
+        C, A = cfg.num_cells, cfg.num_actions
+        self.num_actions = A
         cell = torch.arange(C, device=device)
         self.neighbours = grid_neighbours(cfg.grid, device)  # [C, 4] target cell of each move, -1 off the grid
-        # move_to[6 c + a]: the cell after action a alone from cell c (a move off the grid, sensing, relaying stay)
-        stays = cell[:, None].expand(C, 2)
+        # move_to[A c + a]: the cell after action a alone from cell c (a move off the grid, sensing, relaying stay,
+        # and "return", whose flight home is the energy part's)
+        stays = cell[:, None].expand(C, A - 4)
         self.move_to = torch.cat([self.neighbours.where(self.neighbours >= 0, cell[:, None]), stays], -1).flatten()
         # task_after[2 a + task]: the task after action a (4 senses, 5 relays, a move keeps it)
-        self.task_after = torch.tensor([0, 1] * 4 + [SENSING] * 2 + [RELAYING] * 2, device=device)
-        self.cell_mask = torch.cat([self.neighbours >= 0, torch.ones(C, 2, dtype=torch.bool, device=device)], -1)
+        self.task_after = torch.tensor([0, 1] * 4 + [SENSING] * 2 + [RELAYING] * 2 + [0, 1] * (A - 6), device=device)
+        self.cell_mask = torch.cat([self.neighbours >= 0, torch.ones(C, A - 4, dtype=torch.bool, device=device)], -1)
         # under an energy model a UAV out of service sits on one more cell, C, off the grid: it stays there, and
         # "sense" is its only action (uavrl.envs.energy)
         self.slots = C + (cfg.energy != "none")
         if self.slots > C:
-            self.move_to = torch.cat([self.move_to, self.move_to.new_full((NUM_ACTIONS,), C)])
-            away_mask = torch.arange(NUM_ACTIONS, device=device) == NO_OP
+            self.move_to = torch.cat([self.move_to, self.move_to.new_full((A,), C)])
+            away_mask = torch.arange(A, device=device) == NO_OP
             self.cell_mask = torch.cat([self.cell_mask, away_mask[None]])
         self.cell_offset = torch.arange(num_worlds, device=device).unsqueeze(-1) * self.slots  # world w's cells
 
     def start(self, keys: torch.Tensor, counters: torch.Tensor) -> dict[str, torch.Tensor]:
         """The state of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams): distinct random
-        cells (the N smallest of C random keys) and tasks per ``init_tasks``."""
+        cells (the N smallest of C random keys) and tasks per ``init_tasks``; spares (``num_spares``) at the base."""
         cfg, N = self.cfg, self.cfg.num_uavs
         smallest = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells).topk(N, dim=-1, largest=False)
         if cfg.init_tasks == "random":
             task = streams.random_bits(keys, counters, streams.TASKS, N) & 1
         else:
             task = torch.full((len(keys), N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=keys.device)
-        return {"cell": smallest.indices, "task": task}
+        cell = smallest.indices
+        if cfg.num_spares:  # the spares wait at the base, sensing nothing, on the cell off the grid
+            cell = torch.cat([cell, cell.new_full((len(keys), cfg.num_spares), cfg.num_cells)], -1)
+            task = torch.cat([task, task.new_full((len(keys), cfg.num_spares), SENSING)], -1)
+        return {"cell": cell, "task": task}
 
     def step(self, state, action: torch.Tensor) -> dict[str, torch.Tensor]:
         """The state after every world's joint action ``[B, N]`` (0..5, checked by the caller) from ``state`` (its
         ``[B, N]`` variables as attributes)."""
         action = action.long()
-        target = _lookup(self.move_to, torch.add(action, state.cell, alpha=NUM_ACTIONS))  # [B, N], moves unchecked
+        target = _lookup(self.move_to, torch.add(action, state.cell, alpha=self.num_actions))  # [B, N], unchecked
         return {
             "cell": self.resolve_moves(state.cell, target),
             "task": _lookup(self.task_after, torch.add(state.task, action, alpha=2)),
         }
 
     def masks(self, cell: torch.Tensor) -> torch.Tensor:
-        """``[..., N, 6]`` the actions that keep each UAV of ``cell`` ``[..., N]`` on the grid."""
-        return self.cell_mask.index_select(0, cell.view(-1)).view(*cell.shape, NUM_ACTIONS)
+        """``[..., N, A]`` the actions that keep each UAV of ``cell`` ``[..., N]`` on the grid; on the cell off the grid
+        only :data:`NO_OP`."""
+        return self.cell_mask.index_select(0, cell.view(-1)).view(*cell.shape, self.num_actions)
 
     def terminated(self, state) -> torch.Tensor | None:
         """``[B]`` whether each world's episode ended with its last step, ``None`` when none can end (no tensor a
@@ -107,7 +114,7 @@ class Dynamics:
         round k > 1 was blocked by one cancelled in round k - 1, which began with
         two UAVs (a stayer or a second mover): N - 1 rounds always suffice.
         """
-        N = self.cfg.num_uavs
+        N = self.cfg.fleet_size
         if N == 1:
             return target
         if N == 2:  # one round, no sync

@@ -9,11 +9,14 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
 - ``step(state, cell_before, action)``: after the dynamics part moved the UAVs, what the step cost each battery,
   and who leaves service: a serving UAV whose battery is at or below the reserve of its cell (one more step, then
   the flight to the base) flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
-  left), then is ``OUT``.  A UAV out of service sits on :attr:`Energy.away`, a cell index past the grid's whose
-  per-code rows add nothing to the rates, clash with no UAV on the grid and allow only :data:`NO_OP`;
+  left), then is ``OUT``; with ``recharge_steps`` it also leaves on ``return`` (:data:`~.config.RETURN`), is
+  ``CHARGING`` at the base for that many steps, then ``WAITING`` charged, and the first waiting UAV enters at
+  :attr:`Energy.entry` while fewer than ``num_uavs`` serve (spares start waiting).  A UAV out of service sits on
+  :attr:`Energy.away`, a cell index past the grid's whose per-code rows add nothing to the rates, clash with no
+  UAV on the grid and allow only :data:`NO_OP`;
 - ``features(state)``: ``[B, N, 2]`` what the observation and the state show of each UAV, its battery (a fraction
   of the capacity) and its service flag;
-- ``terminated(state)``: ``[B]`` no UAV serves any more.
+- ``terminated(state)``: ``[B]`` no UAV serves any more (``None`` with recharging: missions are truncated).
 
 Example:
     >>> import torch
@@ -31,13 +34,13 @@ from __future__ import annotations
 import torch
 
 from . import streams
-from .config import SENSING, ModelConfig
+from .config import RETURN, SENSING, ModelConfig
 from .dynamics import NO_OP
 from .grid import grid_neighbours
 from .power import UNIFORM_LOW
 
 ENERGY_STATE = ("battery", "status", "timer")  # per-UAV variables the part adds to the World's state, [B, N] each
-SERVING, RETURNING, OUT = 0, 1, 2  # a UAV's status
+SERVING, RETURNING, OUT, CHARGING, WAITING = 0, 1, 2, 3, 4  # a UAV's status; the last two with recharge_steps
 
 
 class Energy:
@@ -50,8 +53,10 @@ class Energy:
         self.capacity = energies.capacity
         C, (L1, _), (bx, by) = cfg.num_cells, cfg.grid, cfg.base
         self.away = C  # the cell of a UAV out of service
+        self.num_serving, self.recharge_steps = cfg.num_uavs, cfg.recharge_steps
         cell = torch.arange(C, device=device)
         steps = (cell % L1 - bx).abs() + (cell // L1 - by).abs()
+        self.entry = int(steps.argmin())  # where a charged UAV enters: the cell nearest the base, the first of ties
         flight = steps.double() * energies.fly + (steps > 0).double() * energies.arrive  # [C]
         # the reserve of a cell: enough for its worst next step (stay, or move to a neighbour), then the flight home
         neighbours = grid_neighbours(cfg.grid, device)
@@ -68,13 +73,16 @@ class Energy:
 
     def start(self, keys: torch.Tensor, counters: torch.Tensor) -> dict[str, torch.Tensor]:
         """The batteries and status of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams)."""
-        shape = (len(keys), self.cfg.num_uavs)
+        shape, spares = (len(keys), self.cfg.num_uavs), self.cfg.num_spares
         if self.cfg.battery_init == "uniform":
             low = UNIFORM_LOW
             battery = (low + (1 - low) * streams.uniform(keys, counters, streams.BATTERY, shape[1])) * self.capacity
         else:
             battery = torch.full(shape, self.capacity, dtype=torch.float64, device=keys.device)
         status = torch.full(shape, SERVING, dtype=torch.long, device=keys.device)
+        if spares:  # the spares wait charged at the base
+            battery = torch.cat([battery, battery.new_full((len(keys), spares), self.capacity)], -1)
+            status = torch.cat([status, status.new_full((len(keys), spares), WAITING)], -1)
         return {"battery": battery, "status": status, "timer": torch.zeros_like(status)}
 
     def step(self, state, cell_before: torch.Tensor, action: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -91,6 +99,8 @@ class Energy:
             torch.where(returning, torch.where(arriving, self.fly_and_arrive, self.fly), self.nothing),
         )
         battery = state.battery - cost
+        if self.recharge_steps is not None:
+            return self._step_recharging(state, battery, arriving, action)
         timer = timer - returning.long()
         status = torch.where(arriving, OUT, status)
         leaving = serving & (battery <= self.reserve.index_select(0, state.cell.view(-1)).view_as(battery))
@@ -103,14 +113,42 @@ class Energy:
             "task": torch.where(leaving, SENSING, state.task),
         }
 
+    def _step_recharging(self, state, battery, arriving, action) -> dict[str, torch.Tensor]:
+        """:meth:`step` with ``recharge_steps``: an arriving UAV charges for ``recharge_steps`` steps, then waits
+        charged; a serving UAV also leaves on ``return``; then, while fewer than ``num_uavs`` serve and no UAV holds
+        the entry cell, the first waiting UAV enters there (one a step)."""
+        status, cell = state.status, state.cell
+        serving, charging = status == SERVING, status == CHARGING
+        timer = state.timer - ((status == RETURNING) | charging).long()
+        charged = charging & (timer == 0)
+        battery = torch.where(charged, self.capacity, battery)
+        status = torch.where(arriving, CHARGING, torch.where(charged, WAITING, status))
+        timer = torch.where(arriving, self.recharge_steps, timer)
+        reserve = self.reserve.index_select(0, cell.view(-1)).view_as(battery)
+        leaving = serving & ((battery <= reserve) | (action == RETURN))  # the base is off the grid: >= 1 step home
+        status = torch.where(leaving, RETURNING, status)
+        timer = torch.where(leaving, self.steps_home.index_select(0, cell.view(-1)).view_as(timer), timer)
+        cell = torch.where(leaving, self.away, cell)
+        waiting = status == WAITING
+        room = ((status == SERVING).sum(-1) < self.num_serving) & (cell != self.entry).all(-1)
+        entering = waiting & (waiting.cumsum(-1) == 1) & room.unsqueeze(-1)
+        return {
+            "battery": battery,
+            "status": torch.where(entering, SERVING, status),
+            "timer": timer,
+            "cell": torch.where(entering, self.entry, cell),
+            "task": torch.where(leaving | entering, SENSING, state.task),  # a UAV enters sensing
+        }
+
     def features(self, state) -> torch.Tensor:
         """``[B, N, 2]`` float32 what the UAVs' observation and the state show: the battery as a fraction of the
         capacity, and 1 for a UAV in service (0 out)."""
         return torch.stack([(state.battery / self.capacity).float(), (state.status == SERVING).float()], -1)
 
-    def terminated(self, state) -> torch.Tensor:
-        """``[B]`` whether no UAV of a world serves any more."""
-        return (state.status != SERVING).all(-1)
+    def terminated(self, state) -> torch.Tensor | None:
+        """``[B]`` whether no UAV of a world serves any more; ``None`` with ``recharge_steps``, where every UAV serves
+        again once charged (the mission is truncated after ``max_steps``)."""
+        return None if self.recharge_steps is not None else (state.status != SERVING).all(-1)
 
 
 def energy_part(cfg: ModelConfig, device="cpu") -> Energy | None:

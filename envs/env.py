@@ -16,7 +16,7 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
-from .config import NUM_ACTIONS, ModelConfig, make_config
+from .config import NUM_ACTIONS, RETURN, ModelConfig, action_names, make_config
 from .limits import DEFAULT_MEMORY_BUDGET
 from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
 
@@ -163,7 +163,8 @@ class UAVSpectrumEnv(EnvBase):
         check_memory(cfg, B, memory_budget)
         super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
-        self.num_worlds, self.num_uavs = B, cfg.num_uavs
+        self.num_worlds, self.num_uavs = B, cfg.fleet_size  # spares are agents too
+        self.num_actions = cfg.num_actions
         self.agent_rewards = agent_rewards
         self.world = World(cfg, B, self.device, seed, diagnostics=diagnostics, memory_budget=memory_budget)
         self._make_specs()
@@ -206,10 +207,10 @@ class UAVSpectrumEnv(EnvBase):
         return self.world.state_size
 
     def _make_specs(self):
-        N = self.num_uavs
+        N, A = self.num_uavs, self.num_actions
         agents = Composite(
             observation=Unbounded((N, self.observation_size), dtype=torch.float32, device=self.device),
-            action_mask=Binary(n=NUM_ACTIONS, shape=(N, NUM_ACTIONS), dtype=torch.bool, device=self.device),
+            action_mask=Binary(n=A, shape=(N, A), dtype=torch.bool, device=self.device),
             shape=(N,),
             device=self.device,
         )
@@ -233,7 +234,7 @@ class UAVSpectrumEnv(EnvBase):
         self.full_observation_spec_unbatched = obs
         self.full_action_spec_unbatched = Composite(
             agents=Composite(
-                action=MaskedCategorical(NUM_ACTIONS, (N,), dtype=torch.long, device=self.device),
+                action=MaskedCategorical(A, (N,), dtype=torch.long, device=self.device),
                 shape=(N,),
                 device=self.device,
             ),
@@ -271,6 +272,8 @@ class UAVSpectrumEnv(EnvBase):
             out["nodes"] = self.world.nodes
         if self.agent_rewards and "reward" in out:
             group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
+        if self.num_actions > NUM_ACTIONS:  # "return" is refused where not valid: random actions (rollout) keep off it
+            self.input_spec["full_action_spec"]["agents", "action"].update_mask(group["action_mask"])
         out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)
         return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=dev)
 
@@ -292,11 +295,17 @@ class UAVSpectrumEnv(EnvBase):
                 f"('agents', 'action') has dtype {action.dtype}: expected an integer dtype with values 0..5"
             )
         lo, hi = torch.aminmax(action)
-        if lo < 0 or hi >= NUM_ACTIONS:
+        if lo < 0 or hi >= self.num_actions:
             bad = (lo if lo < 0 else hi).item()
-            raise ValueError(
-                f"('agents', 'action') holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)"
-            )
+            raise ValueError(f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}")
+        if hi == RETURN:  # "return" is a serving UAV's only: on the grid
+            away = (action == RETURN) & (self.world._s.cell >= self.cfg.num_cells)
+            if away.any():
+                world, uav = (int(i) for i in away.nonzero()[0])
+                raise ValueError(
+                    f"('agents', 'action') sends UAV {uav} of world {world} home (6, return), but it does not serve: "
+                    "return is valid only for a UAV in service (its action_mask)"
+                )
 
     def step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if tensordict.batch_size != self.batch_size:
@@ -307,7 +316,7 @@ class UAVSpectrumEnv(EnvBase):
         if tensordict.get(("agents", "action"), None) is None:
             raise ValueError(
                 f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
-                f"{self.num_uavs}] integers 0..5 (up, down, left, right, sense, relay)"
+                f"{self.num_uavs}] integers {action_names(self.num_actions)}"
             )
         return super().step(tensordict)
 

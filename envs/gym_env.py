@@ -22,8 +22,8 @@ The observation is, per UAV, its observation followed by the four nodes' positio
 (:func:`~uavrl.envs.world.observation_with_nodes`, what the project's DQN reads): ``Box`` ``[N, F + 12]``
 float32, whose bounds hold every layout the config allows.  The reward is the team reward (float32, as
 ``UAVSpectrumEnv``'s); an episode is truncated after ``max_steps``, and terminated only under an energy model, when
-no UAV serves any more (docs/model.md, Energy and lifetime).  The info holds
-``action_mask`` ``[N, 6]`` int8 (1 where the move stays on the grid) and the step's ``r_pu``, ``r_se``,
+no UAV serves any more (docs/model.md, Energy and lifetime).  The info holds ``action_mask`` ``[N, A]`` int8
+(A = 6, 7 with recharging; 1 where the move stays on the grid) and the step's ``r_pu``, ``r_se``,
 ``utility``, ``moves``, ``task_switches``; :meth:`UAVSpectrumGymEnv.action_masks` is the mask flat, as
 MaskablePPO asks for it.
 
@@ -61,7 +61,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from .channel import fixed_layout
-from .config import NUM_ACTIONS, ModelConfig, make_config
+from .config import ModelConfig, action_names, make_config
 from .render import RENDER_MODES as DRAWN_MODES
 from .render import render as render_world
 from .world import NODE_FEATURES, World, check_seed, observation_with_nodes, resolve_device
@@ -133,7 +133,7 @@ def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
     and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid (or for a UAV out of
     service), the batteries and service flags of an energy model in [0, 1], then the nodes."""
-    N, (position_low, position_high) = cfg.num_uavs, _position_bounds(cfg)
+    N, (position_low, position_high) = cfg.fleet_size, _position_bounds(cfg)
     energy = 0 if cfg.energy == "none" else 2 * N
     node_low, node_high = _node_bounds(cfg)
     low = [position_low, np.full(10, -1.0), np.tile(position_low, N - 1), np.zeros(energy), node_low]
@@ -148,11 +148,11 @@ def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     then each UAV's battery and service flag in [0, 1], then the nodes."""
     node_low, node_high = _node_bounds(cfg)
     if cfg.energy == "none":
-        per_uav = 5 * cfg.num_uavs
+        per_uav = 5 * cfg.fleet_size
         return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
             [np.ones(per_uav, np.float32), node_high]
         )
-    N, (position_low, position_high) = cfg.num_uavs, _position_bounds(cfg)
+    N, (position_low, position_high) = cfg.fleet_size, _position_bounds(cfg)
     low = [np.tile(np.concatenate([position_low, [-1.0, -1.0]]), N), np.zeros(2 * N), node_low]
     high = [np.tile(np.concatenate([position_high, [1.0, 1.0]]), N), np.ones(2 * N), node_high]
     return np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
@@ -163,17 +163,18 @@ def team_observation_space(cfg: ModelConfig) -> spaces.Box:
     return spaces.Box(low, high, dtype=np.float32)
 
 
-def check_actions(actions, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """``actions`` as an int64 array of ``shape``; a one-line error naming ``name`` otherwise."""
+def check_actions(actions, shape: tuple[int, ...], name: str, num_actions: int) -> np.ndarray:
+    """``actions`` as an int64 array of ``shape``, each below ``num_actions``; a one-line error naming ``name``
+    otherwise."""
     array = np.asarray(actions)
     if array.shape != shape:
-        raise ValueError(f"{name} has shape {array.shape}: expected {shape} (one action 0..5 per UAV)")
+        raise ValueError(f"{name} has shape {array.shape}: expected {shape} (one action per UAV)")
     if not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{name} has dtype {array.dtype}: expected integers 0..5")
+        raise TypeError(f"{name} has dtype {array.dtype}: expected integers {action_names(num_actions)}")
     lo, hi = array.min(), array.max()
-    if lo < 0 or hi >= NUM_ACTIONS:
+    if lo < 0 or hi >= num_actions:
         bad = lo if lo < 0 else hi
-        raise ValueError(f"{name} holds {bad}: actions are 0..5 (up, down, left, right, sense, relay)")
+        raise ValueError(f"{name} holds {bad}: actions are {action_names(num_actions)}")
     return array.astype(np.int64, copy=False)
 
 
@@ -182,7 +183,7 @@ class NumpyWorlds:
     the Gymnasium and PettingZoo adapters share.
 
     :meth:`reset` and :meth:`step` return ``observation`` ``[B, N, F + 12]`` float32 (the team observation),
-    ``action_mask`` ``[B, N, 6]`` int8, ``state`` ``[B, 5 N + 12]`` float32 and the :data:`INFO_KEYS` ``[B]``,
+    ``action_mask`` ``[B, N, A]`` int8, ``state`` ``[B, 5 N + 12]`` float32 and the :data:`INFO_KEYS` ``[B]``,
     every array new (Gymnasium's checker asks that no two calls share data).
     """
 
@@ -253,7 +254,7 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
         self._worlds = NumpyWorlds(self.cfg, 1, device)
         self.observation_space = team_observation_space(self.cfg)
-        self.action_space = spaces.MultiDiscrete([NUM_ACTIONS] * self.cfg.num_uavs)
+        self.action_space = spaces.MultiDiscrete([self.cfg.num_actions] * self.cfg.fleet_size)
         self._mask = None
 
     @property
@@ -270,7 +271,7 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         return out["observation"][0], world_info(out, 0)
 
     def step(self, action):
-        actions = check_actions(action, (self.cfg.num_uavs,), "action")
+        actions = check_actions(action, (self.cfg.fleet_size,), "action", self.cfg.num_actions)
         out, reward, truncated = self._worlds.step(actions[None])
         self._mask = out["action_mask"][0]
         terminated = bool(self._worlds.terminated()[0])
@@ -321,7 +322,7 @@ class UAVSpectrumVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self._worlds = NumpyWorlds(self.cfg, num_envs, device)
         self.single_observation_space = team_observation_space(self.cfg)
-        self.single_action_space = spaces.MultiDiscrete([NUM_ACTIONS] * self.cfg.num_uavs)
+        self.single_action_space = spaces.MultiDiscrete([self.cfg.num_actions] * self.cfg.fleet_size)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._autoreset = np.zeros(num_envs, dtype=bool)  # the worlds whose episode ended with the last step
@@ -352,7 +353,9 @@ class UAVSpectrumVectorEnv(VectorEnv):
             out = self._worlds.reset(None)
             reward, terminated, truncated = np.zeros(B), np.zeros(B, dtype=bool), np.zeros(B, dtype=bool)
         else:
-            out, reward, truncated = self._worlds.step(check_actions(actions, (B, self.cfg.num_uavs), "actions"))
+            out, reward, truncated = self._worlds.step(
+                check_actions(actions, (B, self.cfg.fleet_size), "actions", self.cfg.num_actions)
+            )
             terminated = self._worlds.terminated()
             if ended.any():  # an energy model's episodes terminate apart: those worlds restart, the others step
                 first = self._worlds.reset(None, np.flatnonzero(ended))
@@ -388,7 +391,7 @@ class TeamActionPolicy(TensorDictModuleBase):
     """A function of the Gymnasium team observation as a TorchRL policy of :class:`~uavrl.envs.env.UAVSpectrumEnv`.
 
     ``act(observation, action_mask)`` gets, for the env's worlds, the team observations ``[*, N, F + 12]``
-    float32 and action masks ``[*, N, 6]`` int8 exactly as :class:`UAVSpectrumVectorEnv` returns them, and
+    float32 and action masks ``[*, N, A]`` int8 exactly as :class:`UAVSpectrumVectorEnv` returns them, and
     returns ``[*, N]`` integer actions.  :func:`uavrl.evaluation.evaluate` then measures it as it measures every
     agent (the same starts and yardstick).
 
@@ -411,7 +414,7 @@ class TeamActionPolicy(TensorDictModuleBase):
         observation = observation_with_nodes(td.get(("agents", "observation")), td.get("state"))
         mask = td.get(("agents", "action_mask"))
         actions = self.act(observation.numpy(force=True), mask.to(torch.int8).numpy(force=True))
-        actions = check_actions(actions, tuple(mask.shape[:-1]), "the policy's actions")
+        actions = check_actions(actions, tuple(mask.shape[:-1]), "the policy's actions", mask.shape[-1])
         td.set(("agents", "action"), torch.from_numpy(actions).to(mask.device))
         return td
 

@@ -415,7 +415,7 @@ def world_bytes(cfg, batch_size: int) -> int:
     each world ~440 bytes a UAV, and a reset draws 16 bytes of random keys per cell and world (a step of 3 or more
     UAVs counts targets per cell and world: 8 more).
     """
-    C, N, B = cfg.num_cells, cfg.num_uavs, batch_size
+    C, N, B = cfg.num_cells, cfg.fleet_size, batch_size
     layouts = B if cfg.layout == "random" else 1
     per_world = (16 + (8 if N >= 3 else 0)) * C + 440 * N + 64
     if cfg.energy != "none":  # the batteries, status and timers, and a step's ~12 [B, N] temporaries of energy

@@ -33,7 +33,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .config import NUM_ACTIONS, ModelConfig
+from .config import ModelConfig
 from .gym_env import (
     RENDER_FPS,
     RENDER_MODES,
@@ -80,7 +80,7 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
         self._worlds = NumpyWorlds(self.cfg, 1, device)
-        self.possible_agents = [f"uav_{i}" for i in range(self.cfg.num_uavs)]
+        self.possible_agents = [f"uav_{i}" for i in range(self.cfg.fleet_size)]
         self.agents: list[str] = []
         low, high = observation_bounds(self.cfg)
         # one space object per agent, so seeding one agent's space leaves the others' alone
@@ -88,12 +88,12 @@ class UAVSpectrumParallelEnv(ParallelEnv):
             agent: spaces.Dict(
                 {
                     "observation": spaces.Box(low[i], high[i], dtype=np.float32),
-                    "action_mask": spaces.Box(0, 1, (NUM_ACTIONS,), dtype=np.int8),
+                    "action_mask": spaces.Box(0, 1, (self.cfg.num_actions,), dtype=np.int8),
                 }
             )
             for i, agent in enumerate(self.possible_agents)
         }
-        self.action_spaces = {agent: spaces.Discrete(NUM_ACTIONS) for agent in self.possible_agents}
+        self.action_spaces = {agent: spaces.Discrete(self.cfg.num_actions) for agent in self.possible_agents}
         self.state_space = spaces.Box(*state_bounds(self.cfg), dtype=np.float32)
         self._state = None
 
@@ -122,7 +122,9 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         missing = [agent for agent in self.agents if agent not in actions]
         if missing:
             raise ValueError(f"actions has no action for {missing[0]!r}: every live agent acts each step")
-        joint = check_actions([actions[agent] for agent in self.possible_agents], (self.cfg.num_uavs,), "actions")
+        joint = check_actions(
+            [actions[agent] for agent in self.possible_agents], (self.cfg.fleet_size,), "actions", self.cfg.num_actions
+        )
         out, reward, truncated = self._worlds.step(joint[None])
         observations, infos = self._observations(out), self._infos(out)
         rewards = dict.fromkeys(self.agents, reward[0].item())

@@ -203,7 +203,9 @@ class WorldRenderer:
             self._fitted = nodes.tobytes()
         cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()
         xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
-        away = cells >= cfg.num_cells  # out of service under an energy model: at the base, linked to no one
+        away = (
+            cells >= cfg.num_cells
+        )  # out of service (returning, out, charging, waiting): at the base, linked to no one
         xy[away] = cfg.base if away.any() else xy[away]
         relaying = tasks == RELAYING
         colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255
@@ -221,7 +223,7 @@ class WorldRenderer:
         else:
             paid, unpaid_note = bool(relaying.any()) or not cfg.lease_rule, "   no relay: no lease"
         segments, link_colours, styles = [], [], []
-        for i in range(cfg.num_uavs):
+        for i in range(len(cells)):
             src, dst = (nodes[PT], nodes[PR]) if relaying[i] else (nodes[S], nodes[E])
             segments += [(src, xy[i]), (xy[i], dst)] if not away[i] else [(xy[i], xy[i])] * 2
             colour, style = ((*colours[i], 0.45), "solid") if paid else (IDLE_LINK, "dashed")

@@ -171,7 +171,7 @@ class World:
         self.diagnostics = diagnostics  # the outputs of DIAGNOSTICS too
         self.device = dev = resolve_device(device)
         self.cfg: ModelConfig = cfg
-        self.num_worlds, self.num_uavs = B, cfg.num_uavs
+        self.num_worlds, self.num_uavs = B, cfg.fleet_size  # every UAV of the fleet (spares too) is an agent
         # the parts (docs/architecture.md, The World's parts)
         self.layouts = Layouts(cfg, dev)
         self.fading = fading_part(cfg)

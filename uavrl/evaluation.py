@@ -162,14 +162,18 @@ def mission_references(world: World, horizon: int) -> dict:
     mission of ``horizon`` steps can deliver (:func:`uavrl.envs.mission.delivered_bound`), and ``U* H slot_s``."""
     cfg = world.cfg
     u_star_by_count = optimum_by_count(world.cell_contributions, world.direct, cfg)
+    horizon_bound = u_star_by_count[:, -1] * horizon * cfg.slot_s
+    if cfg.recharge_steps is not None:  # a recharged UAV serves again: only U* H slot_s is proved
+        return {"delivered_bound": horizon_bound, "horizon_bound": horizon_bound}
     bound = delivered_bound(service_steps_bound(world.energy, world.battery), u_star_by_count, horizon, cfg.slot_s)
-    return {"delivered_bound": bound, "horizon_bound": u_star_by_count[:, -1] * horizon * cfg.slot_s}
+    return {"delivered_bound": bound, "horizon_bound": horizon_bound}
 
 
 def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float, returns: bool) -> dict:
     """:func:`start_references`' fewest steps to each level, and the exact best return where ``returns``."""
-    cfg, B = world.cfg, world.num_worlds
-    cells, tasks = cells_of(start["positions"], cfg.grid[0]), start["tasks"]
+    cfg, B, N = world.cfg, world.num_worlds, world.cfg.num_uavs
+    # the N serving UAVs: spares (env.num_spares) are the last agents and wait at the base at a start
+    cells, tasks = cells_of(start["positions"][..., :N, :], cfg.grid[0]), start["tasks"][..., :N]
     contributions, direct = world.cell_contributions, world.direct
     thresholds = torch.stack([q * u_star for q in LEVELS.values()], -1)  # [B, L]
     if exact.fits(cfg):
@@ -330,7 +334,7 @@ def greedy_metrics(
     ``moves``, ``[B, H, ...]`` (the per-world scalars ``[B, H]``).  Under an
     energy model, also :func:`mission_metrics` (``batteries``: the UAVs'
     ``[B, N]`` at the start and at the end, or ``None``), and the end of the
-    episode is the last step at which every UAV served.
+    episode is the last step before the first UAV left service.
     """
     positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
@@ -338,8 +342,9 @@ def greedy_metrics(
     per_episode = episode_metrics(
         steps["r_pu"], steps["r_se"], steps["task_switches"], steps["moves"], u_star, utility[:, 1:]
     )
-    away = None if world.energy is None else _away(world, steps["positions"])
-    full_team = None if away is None else first_step(away.any(-1)) - 1
+    away = None if world.energy is None else _away(world, positions)  # [B, H + 1, N + spares]
+    # the full team: num_uavs serving (spares wait at the base); its last column before the first UAV leaves
+    full_team = None if away is None else first_step(_leaves(away)) - 1
     end = utility[:, -1] if full_team is None else utility.gather(1, full_team.unsqueeze(-1)).squeeze(-1)
     optimality = end / u_star
     out = {f"eval/{k}": v.mean().item() for k, v in per_episode.items()}
@@ -356,8 +361,14 @@ def greedy_metrics(
 
 
 def _away(world: World, positions: torch.Tensor) -> torch.Tensor:
-    """``[B, H, N]`` whether each UAV is out of service after each step (shown at the base)."""
+    """``[B, T, N]`` whether each UAV is out of service (shown at the base: flying home, charging or a spare)."""
     return (positions == torch.tensor(world.cfg.base, device=positions.device)).all(-1)
+
+
+def _leaves(away: torch.Tensor) -> torch.Tensor:
+    """``[B, H]`` whether a UAV serving before each step is out of service after it (``away`` ``[B, H + 1, N]`` from
+    the start on)."""
+    return (~away[:, :-1] & away[:, 1:]).any(-1)
 
 
 def first_step(flags: torch.Tensor) -> torch.Tensor:
@@ -370,9 +381,10 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     """The mission's ``eval/...`` scalars under an energy model (docs/model.md, What the numbers mean), means over
     the starts: delivered data, lifetimes (``H`` where the event falls outside the horizon), steps in service per
     UAV, the energy per delivered bit (``batteries``: start and end ``[B, N]``) and the upper bounds of
-    :func:`mission_references`.  ``away`` ``[B, H, N]``: who is out of service after each step; ``utility``
+    :func:`mission_references`.  ``away`` ``[B, H + 1, N]``: who is out of service at the start and after each
+    step; ``utility``
     ``[B, H + 1]`` the mean-channel utility, which the ratio to the bound (proved for mean channels) reads."""
-    H = away.shape[1]
+    H = away.shape[1] - 1
     delivered = (steps["r_pu"].double() + steps["r_se"].double()).sum(-1) * cfg.slot_s  # [B] bit/Hz
     bound = references["delivered_bound"]
     out = {
@@ -380,9 +392,9 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
         "eval/delivered_bit_per_hz": delivered.mean().item(),
         "eval/delivered_bound": bound.mean().item(),
         "eval/delivered_horizon_bound": references["horizon_bound"].mean().item(),
-        "eval/first_leave_steps": first_step(away.any(-1)).clamp(max=H).double().mean().item(),
-        "eval/service_lost_steps": first_step(away.all(-1)).clamp(max=H).double().mean().item(),
-        "eval/service_steps_per_uav": (~away).sum(1).double().mean().item(),
+        "eval/first_leave_steps": first_step(_leaves(away)).clamp(max=H).double().mean().item(),
+        "eval/service_lost_steps": first_step(away[:, 1:].all(-1)).clamp(max=H).double().mean().item(),
+        "eval/service_steps_per_uav": (~away[:, 1:]).sum(1).double().mean().item(),
     }
     if bound.sum() > 0:
         out["eval/delivered_ratio"] = (utility[:, 1:].sum() * cfg.slot_s / bound.sum()).item()
