@@ -370,7 +370,6 @@ def _rounded(value: float, direction) -> str:
 # ---------------------------------------------------------------------------------------------------------- sizes
 DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest allocations) may take unless raised
 EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
-MAX_EXACT_UAVS = 20  # uavrl.envs.optimum.MAX_EXCHANGE_UAVS: U* enumerates 2^N subsets of the best cells
 
 
 def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:

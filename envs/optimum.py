@@ -161,7 +161,7 @@ def _search(cell_contrib, direct, cfg):
     contrib, sums = cell_contrib.detach().cpu().double().numpy(), direct.detach().cpu().double().numpy()
     cells, tasks, upper = [], [], []
     for w in range(B):
-        search = _SplitSearch(contrib[w, :, 0], contrib[w, :, 1], sums[w], N, cfg)
+        search = SplitSearch(contrib[w, :, 0], contrib[w, :, 1], sums[w], N, cfg)
         (relays, sensors), bound = search.best()
         cells.append(relays + sensors)
         tasks.append([RELAYING] * len(relays) + [SENSING] * len(sensors))
@@ -175,7 +175,7 @@ def _search(cell_contrib, direct, cfg):
     return u, cells, tasks, torch.where(upper.isnan(), u, torch.maximum(upper, u))
 
 
-class _SplitSearch:
+class SplitSearch:
     """The branch and bound of one world (module doc): its candidate cell sets and the search over each set's split.
 
     ``a``, ``b``: ``[C]`` relay and sensing contributions; ``direct``: ``[2]``.  Sums ``X = 1 + direct + A`` and
@@ -185,8 +185,7 @@ class _SplitSearch:
     def __init__(self, a: np.ndarray, b: np.ndarray, direct: np.ndarray, num_uavs: int, cfg: ModelConfig):
         self.a, self.b, self.N, self.cfg = a, b, num_uavs, cfg
         self.nodes = 0
-        # c of U = c (log2 X + log2 Y) with both tasks staffed, read from the rate model itself
-        self.scale = float(rates_from_sums(torch.ones(1, 2, dtype=torch.float64), torch.ones(1), 2, cfg)[0, 0])
+        self.scale = staffed_scale(cfg)
         N = num_uavs
         top_a = np.argsort(-a, kind="stable")[:N]
         top_b = np.argsort(-b, kind="stable")[:N]
@@ -205,7 +204,7 @@ class _SplitSearch:
             in_b = rank_b[top_a[:p_full]] < q
             relays, split = top_a[:p_full][~in_b], top_a[:p_full][in_b]
             sensors = top_b[:q][rank_a[top_b[:q]] >= p_full]
-            split = split[np.argsort(-np.arctan2(a[split], b[split]), kind="stable")]  # by a / b, largest first
+            split = split[ratio_order(torch.from_numpy(a[split]), torch.from_numpy(b[split])).numpy()]
             x = 1 + direct[0] + a[relays].sum()
             y = 1 + direct[1] + b[sensors].sum() + b[split].sum()
             self.sets.append((relays.tolist(), sensors.tolist(), split, x, y))
@@ -215,24 +214,34 @@ class _SplitSearch:
         return float(rates_from_sums(sums, torch.tensor([num_relaying]), self.N, self.cfg).sum())
 
     def relaxation(self, split: np.ndarray, free: np.ndarray, x: float, y: float) -> tuple[float, int, float]:
-        """``(bound, j, theta)``: the best utility when the free cells (in ``a / b`` order) may split, reached with
-        the first ``j`` relaying and a share ``theta`` of cell ``j``."""
-        if not len(free):
-            return self.scale * (math.log2(x) + math.log2(y)), 0, 0.0
-        fa, fb = self.a[split[free]], self.b[split[free]]
-        xs = x + np.concatenate(([0.0], np.cumsum(fa)[:-1]))
-        ys = y - np.concatenate(([0.0], np.cumsum(fb)[:-1]))
-        # d/dtheta [log(x + theta a) + log(y - theta b)] = 0 where theta = (a y - b x) / (2 a b)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            theta = np.where(fb > 0, np.where(fa > 0, (fa * ys - fb * xs) / (2 * fa * fb), 0.0), 1.0)
-        theta = np.clip(theta, 0.0, 1.0)
-        values = self.scale * (np.log2(xs + theta * fa) + np.log2(ys - theta * fb))
-        j = int(values.argmax())
-        return float(values[j]), j, float(theta[j])
+        """:func:`split_relaxation` of the free cells of ``split`` (kept in ``a / b`` order) from sums ``x, y``."""
+        items = split[free]
+        bound, j, theta = split_relaxation(
+            torch.from_numpy(self.a[items]),
+            torch.from_numpy(self.b[items]),
+            torch.tensor(x),
+            torch.tensor(y),
+            self.scale,
+        )
+        return float(bound), int(j), float(theta)
 
-    def best(self, limit: int = SEARCH_NODE_LIMIT) -> tuple[tuple[list[int], list[int]], float]:
+    def best(self, limit: int = SEARCH_NODE_LIMIT) -> tuple[tuple[list[int], list[int]], float | None]:
         """``((relay cells, sensing cells), upper bound)`` of the best configuration (module doc); the bound is None
         where the search ended within ``limit`` nodes (the configuration is optimal)."""
+        best, _, open_bounds = self._branch(None, limit)
+        return best, max(open_bounds) if open_bounds else None
+
+    def at_least(self, threshold: float, limit: int = SEARCH_NODE_LIMIT) -> list[tuple[list[int], list[int]]]:
+        """Every configuration of the candidate sets (module doc) with ``U >= threshold``: ``(relays, sensors)``."""
+        _, found, open_bounds = self._branch(threshold, limit)
+        if open_bounds:
+            raise ValueError(f"listing the configurations with U >= {threshold} took over {limit:,} search nodes")
+        return found
+
+    def _branch(self, threshold: float | None, limit: int):
+        """Depth-first branch and bound over every candidate set's split: the best configuration (``threshold``
+        None; a node ends where a configuration beside its relaxation's optimum reaches its bound) or every one at
+        ``threshold`` or above (to the leaves).  Returns the best, those found and the bounds left open."""
         roots = sorted(
             (
                 (self.relaxation(split, np.arange(len(split)), x, y)[0], index)
@@ -240,10 +249,16 @@ class _SplitSearch:
             ),
             reverse=True,
         )
-        best_u, best = -math.inf, None
-        open_bounds = []
+        best_u, best, found, open_bounds = -math.inf, None, [], []
+
+        def configuration(relays, sensors, split, chosen):
+            picked = np.zeros(len(split), dtype=bool)
+            picked[list(chosen)] = True
+            return relays + split[picked].tolist(), sensors + split[~picked].tolist()
+
         for root_bound, index in roots:
-            if root_bound < best_u * (1 - _ROUNDING):
+            cut = (best_u if threshold is None else threshold) * (1 - _ROUNDING)
+            if root_bound < cut:
                 continue
             if self.nodes >= limit:
                 open_bounds.append(root_bound)
@@ -257,24 +272,59 @@ class _SplitSearch:
                 free, x, y, k, chosen = stack.pop()
                 self.nodes += 1
                 bound, j, theta = self.relaxation(split, free, x, y)
-                if bound < best_u * (1 - _ROUNDING):
+                if bound < (best_u if threshold is None else threshold) * (1 - _ROUNDING):
                     continue
                 fa, fb = self.a[split[free]], self.b[split[free]]
-                for m in {j, min(j + 1, len(free))}:  # the integral points beside the relaxation's optimum
-                    u = self.utility(x + fa[:m].sum(), y - fb[:m].sum(), k + m)
-                    if u > best_u:
-                        best_u, best = u, (relays, sensors, split, chosen + tuple(free[:m].tolist()))
-                    if u >= bound * (1 - _ROUNDING):  # nothing below this node beats it
-                        free = free[:0]
-                if not len(free):
-                    continue
+                if threshold is not None:
+                    if not len(free):
+                        if self.utility(x, y, k) >= threshold:
+                            found.append(configuration(relays, sensors, split, chosen))
+                        continue
+                else:
+                    for m in {j, min(j + 1, len(free))}:  # the integral points beside the relaxation's optimum
+                        u = self.utility(x + fa[:m].sum(), y - fb[:m].sum(), k + m)
+                        if u > best_u:
+                            best_u, best = u, (relays, sensors, split, chosen + tuple(free[:m].tolist()))
+                        if u >= bound * (1 - _ROUNDING):  # nothing below this node beats it
+                            free = free[:0]
+                    if not len(free):
+                        continue
                 i = min(j, len(free) - 1)
                 rest = np.delete(free, i)
                 relay = (rest, x + fa[i], y - fb[i], k + 1, chosen + (int(free[i]),))
                 sense = (rest, x, y, k, chosen)
                 stack.extend([sense, relay] if theta >= 0.5 else [relay, sense])
-        relays, sensors, split, chosen = best
-        picked = np.zeros(len(split), dtype=bool)
-        picked[list(chosen)] = True
-        configuration = (relays + split[picked].tolist(), sensors + split[~picked].tolist())
-        return configuration, max([best_u, *open_bounds]) if open_bounds else None
+        return (None if best is None else configuration(*best)), found, open_bounds
+
+
+def staffed_scale(cfg: ModelConfig) -> float:
+    """``c`` of ``U = c (log2(1 + sum_PU) + log2(1 + sum_SE))`` with both tasks staffed, read from the rate model
+    itself (:func:`~uavrl.envs.channel.rates_from_sums`); the lease and both-tasks rules only lower ``U``."""
+    return float(rates_from_sums(torch.ones(1, 2, dtype=torch.float64), torch.ones(1), 2, cfg)[0, 0])
+
+
+def ratio_order(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Indices that sort items ``[..., n]`` by ``a / b``, largest first (``b = 0`` first, ties in index order)."""
+    return torch.atan2(a, b).argsort(dim=-1, descending=True, stable=True)
+
+
+def split_relaxation(a: torch.Tensor, b: torch.Tensor, x: torch.Tensor, y: torch.Tensor, scale: float):
+    """The most ``U = scale (log2 X + log2 Y)`` when items ``[..., n]`` in :func:`ratio_order` each add ``a`` to
+    ``X`` (relaying) or keep ``b`` in ``Y`` (sensing; ``y`` counts every item as sensing), and may split: ``(bound,
+    j, theta)`` ``[...]``, reached with the first ``j`` items relaying and a share ``theta`` of item ``j``.
+
+    The split relaxation is concave; where it is best, items with the larger ``a / b`` relay, so its maximum lies
+    on the path that moves the items in that order, at most one of them in part.  On each item's segment
+    ``d/dtheta [log(X + theta a) + log(Y - theta b)] = 0`` at ``theta = (a Y - b X) / (2 a b)``.  No split of the
+    items, with ``X, Y >= 1``, has a larger ``U``: an upper bound for every integral split.
+    """
+    if a.shape[-1] == 0:
+        zero = torch.zeros(a.shape[:-1], dtype=torch.long)
+        return scale * (torch.log2(x) + torch.log2(y)), zero, zero.to(a.dtype)
+    xs = x.unsqueeze(-1) + a.cumsum(-1) - a
+    ys = y.unsqueeze(-1) - (b.cumsum(-1) - b)
+    ratio = (a * ys - b * xs) / (2 * a * b)
+    theta = torch.where(b > 0, torch.where(a > 0, ratio, 0.0), 1.0).clamp(0.0, 1.0)
+    values = scale * (torch.log2(xs + theta * a) + torch.log2(ys - theta * b))
+    bound, j = values.max(-1)
+    return bound, j, theta.gather(-1, j.unsqueeze(-1)).squeeze(-1)
