@@ -21,6 +21,8 @@ decide whether a level is reached):
   ``eval/step_ratio_<level>`` (mean of steps / fewest over starts needing >= 1).
 - ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
   ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
+- ``eval/u_star_gap``, only where U* is not proven exact (:func:`u_star_gap`): every metric above then uses the
+  best configuration found, within this relative gap of the optimum.
 
 Example:
     >>> from uavrl.agents.baselines import RandomPolicy
@@ -43,6 +45,7 @@ from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, default_horizon, evaluation_bytes, gib
+from uavrl.envs.optimum import MAX_EXCHANGE_UAVS, optimum_bound
 from uavrl.envs.world import World
 from uavrl.rules import refuse, rule_of
 from uavrl.schema import EvalSchema
@@ -287,7 +290,21 @@ def greedy_metrics(
         out["eval/u_star_bit_per_s"] = u_star.double().mean().item() * world.cfg.bandwidth_hz
         out["eval/utility_bit_per_s"] = utility[:, -1].mean().item() * world.cfg.bandwidth_hz
     out.update(yardstick_metrics(utility, u_star, references, gamma))
+    gap = u_star_gap(world, u_star)
+    if gap > 0:
+        out["eval/u_star_gap"] = gap
     return out
+
+
+def u_star_gap(world: World, u_star: torch.Tensor) -> float:
+    """The largest relative gap ``(bound - U*) / U*`` over the worlds between a certified upper bound and the
+    ``U*`` every metric divides by: 0 wherever ``U*`` is exact (always but where the search of
+    :mod:`uavrl.envs.optimum` stopped at its node limit), and then the evaluation reports it as
+    ``eval/u_star_gap``."""
+    if world.cfg.num_uavs <= MAX_EXCHANGE_UAVS:  # the exchange method or brute force: exact
+        return 0.0
+    upper = optimum_bound(world.cell_contributions, world.direct, world.cfg).expand_as(u_star)
+    return ((upper - u_star) / u_star).max().item()
 
 
 class TrainingClock:
