@@ -225,10 +225,11 @@ class SplitSearch:
         )
         return float(bound), int(j), float(theta)
 
-    def best(self, limit: int = SEARCH_NODE_LIMIT) -> tuple[tuple[list[int], list[int]], float | None]:
+    def best(self, limit: int | None = None) -> tuple[tuple[list[int], list[int]], float | None]:
         """``((relay cells, sensing cells), upper bound)`` of the best configuration (module doc); the bound is None
-        where the search ended within ``limit`` nodes (the configuration is optimal)."""
-        best, _, open_bounds = self._branch(None, limit)
+        where the search ended within ``limit`` nodes (default ``SEARCH_NODE_LIMIT``: the configuration is
+        optimal)."""
+        best, _, open_bounds = self._branch(None, SEARCH_NODE_LIMIT if limit is None else limit)
         return best, max(open_bounds) if open_bounds else None
 
     def at_least(self, threshold: float, limit: int = SEARCH_NODE_LIMIT) -> list[tuple[list[int], list[int]]]:

@@ -184,3 +184,18 @@ def test_oracle_evaluation_at_fifty_uavs():
     metrics = evaluate(OraclePolicy(cfg), cfg, num_starts=2, horizon=120)
     assert metrics["eval/reach_optimum"] == 1.0 and metrics["eval/min_steps_exact"] == 0.0
     assert 1.0 <= metrics["eval/step_ratio_optimum"] < 1.2 and "eval/u_star_gap" not in metrics
+
+
+def test_the_evaluation_reports_the_gap_where_the_search_stopped(monkeypatch):
+    import uavrl.envs.optimum as optimum_module
+    from uavrl.evaluation import u_star_gap
+
+    w = world("paper", (5, 5), 22, {"layout": "random"}, 8, 1)  # crowded: the best cells of both networks overlap
+    exact = w.optimum()[0]
+    assert u_star_gap(w, exact) == 0.0
+    monkeypatch.setattr(optimum_module, "SEARCH_NODE_LIMIT", 1)
+    found, _, _, upper = solve(w.cell_contributions, w.direct, w.cfg)
+    assert (found <= exact * (1 + 1e-12)).all() and (upper >= exact * (1 - 1e-12)).all()
+    assert (upper > found).any()
+    torch.testing.assert_close(u_star_gap(w, found), ((upper - found) / found).max().item())
+    assert u_star_gap(w, found) > 0
