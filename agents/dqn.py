@@ -73,6 +73,7 @@ from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.envs.fading import fading_part
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.rewards import log_gap_reward
 from uavrl.evaluation import episode_metrics
 from uavrl.rules import check
@@ -545,7 +546,8 @@ class DQNAgent(Agent):
             group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(
                 1.0, self.iteration / self.num_iterations
             )
-        u_star = self.env.optimum(method="exchange")[0]  # this episode's layouts
+        # this episode's layouts; the exchange method where it runs (its results recorded), the search beyond
+        u_star = self.env.optimum(method="exchange" if self.env_cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search")[0]
         # kept: the collector's closing reset draws new random layouts before the batch is read
         layout = (self.env.cell_contributions.clone(), self.env.direct.clone())
         batch = next(self._batches)  # [worlds, steps]

@@ -370,7 +370,6 @@ def _rounded(value: float, direction) -> str:
 # ---------------------------------------------------------------------------------------------------------- sizes
 DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest allocations) may take unless raised
 EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
-MAX_EXACT_UAVS = 20  # uavrl.envs.optimum.MAX_EXCHANGE_UAVS: U* enumerates 2^N subsets of the best cells
 
 
 def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
@@ -435,13 +434,18 @@ def frame_bytes(cfg) -> int:
 
 def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.bounds`) where the exact solver does not fit:
-    each world's best reachable terms ``[K + 1, N]``, then the relaxation of chunks of (world, step) rows over
-    every split of the UAVs, and the optimal sets (at most ``MAX_CANDIDATES`` candidates)."""
+    each world's best reachable terms ``[K + 1, N]``, then the relaxation (chunks of (world, step) rows over every
+    split of up to ``MAX_SPLIT_UAVS`` UAVs, or a few ``[rows, N]`` tensors beyond), and the optimal sets (at most
+    ``MAX_CANDIDATES`` candidates, or ``[N, C]`` moves per listed set where they are searched)."""
     N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
     chunk = 1 << 22  # uavrl.envs.bounds._CHUNK_ELEMENTS
     reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
-    relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
-    candidates = 2_000_000 * N * 8 * 4
+    if N <= 10:  # uavrl.envs.bounds.MAX_SPLIT_UAVS
+        relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
+        candidates = 2_000_000 * N * 8 * 4
+    else:
+        relaxation = rows * N * 8 * 12
+        candidates = N * C * 8 * 8
     return reachable + max(relaxation, candidates)
 
 

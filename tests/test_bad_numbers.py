@@ -48,7 +48,6 @@ CLI_CASES = [
     ("train agent=dqn eval.num_starts=1000000000", "eval.num_starts=1000000000 is invalid: the evaluation"),
     ("train agent=random eval.horizon=1000000000000", "eval.horizon=1000000000000 is invalid"),
     ("train agent.runs=100000000", "agent.runs=100000000 is invalid"),
-    ("train agent=dqn env.grid=[10,10] env.num_uavs=60", "env.num_uavs=60 is invalid: the evaluation's exact"),
     # the evaluation's bound tables on 1000x1000 are estimated up front (they fit the default budget)
     ("train agent=dqn env.grid=[1000,1000] agent.memory_budget=1000000000", "over agent.memory_budget=1000000000"),
     ("train eval.video=true eval.video_starts=1000", "eval.video_starts=1000 is invalid: the video's frames"),

@@ -220,15 +220,15 @@ def test_a_failure_after_start_up_removes_only_a_run_directory_it_made(compose_c
 
 def test_a_refused_late_setting_leaves_no_run_directory(tmp_path):
     result = subprocess.run(
-        # refused once the agent is built: the DQN's exact optimum of each episode's layouts
-        [sys.executable, "-m", "uavrl.train", "agent=dqn", "env.grid=[20,20]", "env.num_uavs=60", "progress=false"],
+        # refused once the agent is built: the DQN's joint head for 5 UAVs
+        [sys.executable, "-m", "uavrl.train", "agent=dqn", "agent.head=joint", "env.num_uavs=5", "progress=false"],
         capture_output=True,
         text=True,
         cwd=tmp_path,
     )
     assert result.returncode == 1 and result.stderr.startswith("error: "), result.stderr
     assert result.stderr.strip().count("\n") == 0, result.stderr
-    assert "num_uavs=60" in result.stderr and list(tmp_path.iterdir()) == []
+    assert "num_uavs=5" in result.stderr and list(tmp_path.iterdir()) == []
 
 
 def start(run_dir, *overrides, cwd=None) -> subprocess.Popen:

@@ -21,6 +21,8 @@ decide whether a level is reached):
   ``eval/step_ratio_<level>`` (mean of steps / fewest over starts needing >= 1).
 - ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
   ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
+- ``eval/u_star_gap``, only where U* is not proven exact (:func:`u_star_gap`): every metric above then uses the
+  best configuration found, within this relative gap of the optimum.
 
 Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
 :func:`mission_metrics` adds its delivered data, lifetimes, energy per bit and the ratio to an upper bound on what
@@ -51,6 +53,7 @@ from uavrl.envs.grid import cells_of
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
+from uavrl.envs.optimum import MAX_EXCHANGE_UAVS, optimum_bound
 from uavrl.envs.world import World
 from uavrl.rules import refuse, rule_of
 from uavrl.schema import EvalSchema
@@ -357,6 +360,9 @@ def greedy_metrics(
     out.update(yardstick_metrics(utility, u_star, references, gamma, full_team))
     if away is not None:
         out.update(mission_metrics(world.cfg, steps, away, utility, references, batteries))
+    gap = u_star_gap(world, u_star)
+    if gap > 0:
+        out["eval/u_star_gap"] = gap
     return out
 
 
@@ -405,6 +411,17 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     if batteries is not None and delivered_units > 0:
         out["eval/energy_per_bit"] = ((batteries[0] - batteries[1]).sum() / delivered_units).item()
     return out
+
+
+def u_star_gap(world: World, u_star: torch.Tensor) -> float:
+    """The largest relative gap ``(bound - U*) / U*`` over the worlds between a certified upper bound and the
+    ``U*`` every metric divides by: 0 wherever ``U*`` is exact (always but where the search of
+    :mod:`uavrl.envs.optimum` stopped at its node limit), and then the evaluation reports it as
+    ``eval/u_star_gap``."""
+    if world.cfg.num_uavs <= MAX_EXCHANGE_UAVS:  # the exchange method or brute force: exact
+        return 0.0
+    upper = optimum_bound(world.cell_contributions, world.direct, world.cfg).expand_as(u_star)
+    return ((upper - u_star) / u_star).max().item()
 
 
 class TrainingClock:
