@@ -115,6 +115,23 @@ def command_exit(monkeypatch):
     return run
 
 
+@pytest.fixture
+def hand_built():
+    """``hand_built(cfg, codes, battery)``: a :class:`~uavrl.envs.world.World` of one world of ``cfg`` (an energy
+    model) started at the configuration ``codes`` (``2 cell + task`` per UAV) with its batteries set by hand."""
+    import torch
+
+    from uavrl.envs.world import World
+
+    def build(cfg, codes, battery):
+        world = World(cfg, 1)
+        world.start_at(torch.tensor([codes]))
+        world._s.battery = torch.tensor([battery], dtype=torch.float64)
+        return world
+
+    return build
+
+
 @pytest.fixture(scope="session")
 def run_sweep():
     """``run_sweep(directory, *overrides)``: ``python -m uavrl.train -m progress=false <overrides>`` run in

@@ -71,13 +71,6 @@ def test_rotary_wing_step_energies_and_capacity():
     assert physical.step_energies.stay - zeng_power(0.0) == pytest.approx(6.8 + 0.1, rel=1e-3)  # 20 dBm = 0.1 W
 
 
-def hand_built(cfg, codes, battery):
-    world = World(cfg, 1)
-    world.start_at(torch.tensor([codes]))
-    world._s.battery = torch.tensor([battery], dtype=torch.float64)  # the hand-built levels
-    return world
-
-
 def step(world, *actions):
     out, _, _ = world.step(torch.tensor([actions]))
     return out
@@ -106,7 +99,7 @@ def test_follow_up_accounting_on_hand_worked_steps():
     assert world._s.battery.tolist() == [[1.5, 11.5]] and world._s.status.tolist() == [[2, 1]]
 
 
-def test_leaving_service_flight_to_base_and_termination_by_hand():
+def test_leaving_service_flight_to_base_and_termination_by_hand(hand_built):
     cfg = rotary()
     stay, move, fly = per_step(cfg)
     cap = cfg.battery_wh * 3600

@@ -32,13 +32,6 @@ def fleet(**options):
     )
 
 
-def hand_built(cfg, codes, battery):
-    world = World(cfg, 1)
-    world.start_at(torch.tensor([codes]))
-    world._s.battery = torch.tensor([battery], dtype=torch.float64)  # the hand-built levels
-    return world
-
-
 def step(world, *actions):
     out, _, truncated = world.step(torch.tensor([actions]))
     assert not truncated.item() and not world.terminated.item()  # with recharging a mission never terminates
@@ -50,7 +43,7 @@ def state(world):
     return s.status[0].tolist(), s.timer[0].tolist(), s.cell[0].tolist()
 
 
-def test_leave_fly_home_charge_wait_and_reenter_while_a_spare_serves():
+def test_leave_fly_home_charge_wait_and_reenter_while_a_spare_serves(hand_built):
     cfg = fleet(num_spares=1)
     # UAV 0 sensing at (1, 0), 2 steps from the base, one stay above its reserve; UAV 1 relaying at (1, 1); the spare
     world = hand_built(cfg, [2 * 1, 2 * 4 + 1, AWAY], [RESERVE + STAY, 5000.0, 5000.0])
@@ -84,7 +77,7 @@ def test_leave_fly_home_charge_wait_and_reenter_while_a_spare_serves():
     assert world._s.battery[0, 2].item() == 5000.0 - 5 * STAY - ARRIVE
 
 
-def test_a_held_entry_cell_makes_the_charged_uav_wait_a_step():
+def test_a_held_entry_cell_makes_the_charged_uav_wait_a_step(hand_built):
     cfg = fleet(num_spares=1)
     world = hand_built(cfg, [2 * 4, 0, AWAY], [5000.0, 5000.0, 5000.0])  # UAV 1 holds the entry cell (0, 0)
     step(world, RETURN, SENSE, SENSE)
@@ -93,7 +86,7 @@ def test_a_held_entry_cell_makes_the_charged_uav_wait_a_step():
     assert state(world) == ([RETURNING, SERVING, SERVING], [2, 0, 0], [9, 1, 0])
 
 
-def test_without_spares_a_charged_uav_reenters_and_no_more_than_n_serve():
+def test_without_spares_a_charged_uav_reenters_and_no_more_than_n_serve(hand_built):
     cfg = fleet(recharge_steps=1)
     world = hand_built(cfg, [0, 2 * 8], [5000.0, 5000.0])
     step(world, RETURN, SENSE)
@@ -280,7 +273,7 @@ def test_the_adapters_have_the_fleet_and_seven_actions():
     assert parallel.observation_space("uav_0")["action_mask"].shape == (7,)
 
 
-def test_waiting_and_charging_uavs_render_at_the_base():
+def test_waiting_and_charging_uavs_render_at_the_base(hand_built):
     from uavrl.envs.render import WorldRenderer
 
     world = hand_built(fleet(num_spares=1), [2 * 1, 2 * 4 + 1, AWAY], [RESERVE + STAY, 5000.0, 5000.0])
