@@ -534,7 +534,7 @@ class World:
         return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
     def step(self, action: torch.Tensor) -> tuple[dict, torch.Tensor, torch.Tensor]:
-        """Every world takes the UAVs' actions ``[B, N]`` (0..5, checked by the caller).
+        """Every world takes the UAVs' actions ``[B, N]`` (0..5, 6 to return under recharging; checked by the caller).
 
         Returns the outputs (as :meth:`reset`'s), the team reward ``[B]``
         (float64) and whether the episode is over ``[B]`` (truncation after
