@@ -16,7 +16,6 @@ recharging and spares.
 from __future__ import annotations
 
 import hashlib
-import io
 import logging
 import platform
 import sys
@@ -205,12 +204,9 @@ def agent_case(overrides: list[str]) -> dict[str, str]:
     env_cfg = model_config(cfg)
     agent = agent_class(cfg.agent.name)(env_cfg, cfg, torch.device("cpu"), 5)
     metrics = [agent.train_iteration() for _ in range(agent.num_iterations)]
-    saved = io.BytesIO()
-    torch.save(agent.state_dict(), saved)
-    saved.seek(0)
-    state = torch.load(saved, weights_only=False)
+    checkpoint = digest(agent.state_dict())  # before the evaluation, as a checkpoint is written
     evaluation = agent.evaluate(env_cfg, num_starts=4, horizon=12, seed=11, device="cpu", gamma=0.9)
-    return {"train": digest(metrics), "checkpoint": digest(state), "evaluate": digest(evaluation)}
+    return {"train": digest(metrics), "checkpoint": checkpoint, "evaluate": digest(evaluation)}
 
 
 def main() -> None:
@@ -218,31 +214,20 @@ def main() -> None:
     logging.getLogger("torchrl").setLevel(logging.WARNING)  # its storage messages would land among the digests
     print(f"# torch {torch.__version__} on {platform.machine()}")
     only = sys.argv[1:]
-    for name, (preset, options) in WORLD_CASES.items():
-        if not only or name in only:
-            for part, value in world_case(preset, options).items():
-                print(f"world:{name}:{part} {value}", flush=True)
-    for name, overrides in AGENT_CASES.items():
-        if not only or name in only:
-            for part, value in agent_case(overrides).items():
-                print(f"agent:{name}:{part} {value}", flush=True)
-    # recorded after the settings above, so their lines keep their places in the recorded file
-    for name, (preset, options) in ENERGY_WORLD_CASES.items():
-        if not only or name in only:
-            for part, value in world_case(preset, options).items():
-                print(f"world:{name}:{part} {value}", flush=True)
-    for name, overrides in ENERGY_AGENT_CASES.items():
-        if not only or name in only:
-            for part, value in agent_case(overrides).items():
-                print(f"agent:{name}:{part} {value}", flush=True)
-    for name, (preset, options) in RECHARGE_WORLD_CASES.items():
-        if not only or name in only:
-            for part, value in world_case(preset, options).items():
-                print(f"world:{name}:{part} {value}", flush=True)
-    for name, overrides in RECHARGE_AGENT_CASES.items():
-        if not only or name in only:
-            for part, value in agent_case(overrides).items():
-                print(f"agent:{name}:{part} {value}", flush=True)
+    # the energy cases come after the others, so the earlier lines keep their places in the recorded file
+    groups = [
+        ("world", WORLD_CASES, world_case),
+        ("agent", AGENT_CASES, agent_case),
+        ("world", ENERGY_WORLD_CASES, world_case),
+        ("agent", ENERGY_AGENT_CASES, agent_case),
+        ("world", RECHARGE_WORLD_CASES, world_case),
+        ("agent", RECHARGE_AGENT_CASES, agent_case),
+    ]
+    for kind, cases, run in groups:
+        for name, case in cases.items():
+            if not only or name in only:
+                for part, value in (run(*case) if kind == "world" else run(case)).items():
+                    print(f"{kind}:{name}:{part} {value}", flush=True)
 
 
 if __name__ == "__main__":
