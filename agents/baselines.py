@@ -39,7 +39,7 @@ from uavrl.envs import ModelConfig
 from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
 from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
 from uavrl.envs.exact import fixed_layout_tables
-from uavrl.envs.grid import grid_neighbours
+from uavrl.envs.grid import cells_or_away, grid_neighbours
 from uavrl.envs.optimum import optimum
 
 UP, DOWN, LEFT, RIGHT, SENSE = range(5)
@@ -135,10 +135,9 @@ class OraclePolicy(TensorDictModuleBase):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
-        (L1, L2), fleet = self.cfg.grid, self.cfg.fleet_size
-        x, y = positions[..., 0].cpu().reshape(-1, fleet), positions[..., 1].cpu().reshape(-1, fleet)
-        serving = (x >= 0) & (x < L1) & (y >= 0) & (y < L2)  # under an energy model the others are at the base
-        cells, tasks_of = y * L1 + x, tasks.cpu().reshape(-1, fleet)
+        fleet = self.cfg.fleet_size
+        cells = cells_or_away(positions.cpu(), self.cfg.grid).reshape(-1, fleet)  # L1 L2: out of service
+        serving, tasks_of = cells < self.cfg.num_cells, tasks.cpu().reshape(-1, fleet)
         nodes = self._nodes(td)
         # a UAV out of service has only the no-op; the oracle plans for those in service and never sends one home
         actions = torch.full(cells.shape, SENSE, dtype=torch.long)

@@ -72,6 +72,7 @@ from uavrl.envs import (
 from uavrl.envs.channel import rates
 from uavrl.envs.config import RELAYING, SENSING
 from uavrl.envs.fading import fading_part
+from uavrl.envs.grid import cells_or_away
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.rewards import log_gap_reward
@@ -87,14 +88,6 @@ Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet re
 # ----------------------------------------------------------------------------- networks
 def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
     return positions[..., 1] * width + positions[..., 0]
-
-
-def _cells_or_away(positions: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
-    """The cells of ``positions``, and ``L1 L2`` (one past the grid's) for a UAV out of service: an energy model
-    shows it at its base, off the grid."""
-    x, y = positions[..., 0], positions[..., 1]
-    on_grid = (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
-    return torch.where(on_grid, y * grid[0] + x, grid[0] * grid[1])
 
 
 class TeamQNet(nn.Module):
@@ -161,7 +154,7 @@ class TeamQNet(nn.Module):
         if self.joint:
             return self.head(embedding[..., 0, :])
         C = len(self.neighbours)
-        cells = _cells_or_away(positions, (self.width, C // self.width))
+        cells = cells_or_away(positions, (self.width, C // self.width))
         # [*, N, 4]: which of its neighbouring cells another UAV holds (none, for a UAV out of service)
         held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
         held &= (cells < C).unsqueeze(-1)
@@ -220,7 +213,7 @@ class ValidGreedy(nn.Module):
     def forward(
         self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
     ) -> torch.Tensor:
-        cells = _cells_or_away(positions, (self.width, len(self.neighbours) // self.width))
+        cells = cells_or_away(positions, (self.width, len(self.neighbours) // self.width))
         batch = cells.shape[:-1]
         # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
         table = self._target_table()
@@ -555,7 +548,7 @@ class DQNAgent(Agent):
         def mean_utility(td: TensorDictBase) -> torch.Tensor:
             """``[W, T]`` mean-channel utility of the batch's configurations in the layouts they were played in."""
             C = self.env_cfg.num_cells
-            cells = _cells_or_away(td.get("positions"), self.env_cfg.grid)  # C: out of service, adds nothing
+            cells = cells_or_away(td.get("positions"), self.env_cfg.grid)  # C: out of service, adds nothing
             on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
             contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
             r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], self.env_cfg)

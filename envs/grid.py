@@ -25,6 +25,19 @@ MOVES = ((0, -1), (0, 1), (-1, 0), (1, 0))
 MAX_JOINT_ACTIONS = 6**7
 
 
+def on_grid(positions: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """``[...]`` whether each ``[..., 2]`` (x, y) position lies on the grid: under an energy model a UAV out of
+    service is shown at its base, off the grid."""
+    x, y = positions[..., 0], positions[..., 1]
+    return (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
+
+
+def cells_or_away(positions: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """The cells ``y L1 + x`` of ``[..., 2]`` positions, and ``L1 L2`` (one past the grid's) for a UAV off the grid
+    (out of service)."""
+    return torch.where(on_grid(positions, grid), cells_of(positions, grid[0]), grid[0] * grid[1])
+
+
 def grid_neighbours(grid: tuple[int, int], device=None) -> torch.Tensor:
     """``[C, 4]`` target cell of each move (up, down, left, right) from every cell, ``-1`` off the grid."""
     L1, L2 = grid

@@ -49,7 +49,7 @@ import torch
 
 from uavrl.envs import ModelConfig, exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
-from uavrl.envs.grid import cells_of
+from uavrl.envs.grid import cells_of, on_grid
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
@@ -368,7 +368,7 @@ def greedy_metrics(
 
 def _away(world: World, positions: torch.Tensor) -> torch.Tensor:
     """``[B, T, N]`` whether each UAV is out of service (shown at the base: flying home, charging or a spare)."""
-    return (positions == torch.tensor(world.cfg.base, device=positions.device)).all(-1)
+    return ~on_grid(positions, world.cfg.grid)
 
 
 def _leaves(away: torch.Tensor) -> torch.Tensor:
