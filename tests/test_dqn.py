@@ -9,7 +9,8 @@ import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from uavrl.agents.baselines import RandomPolicy
-from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy, _stored_entry
+from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy
+from uavrl.agents.dqn.migration import _stored_entry
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
 from uavrl.evaluation import evaluate

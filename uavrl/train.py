@@ -154,143 +154,206 @@ def train(cfg: DictConfig, overrides=()) -> Path:
 
 def run(cfg: DictConfig, overrides, run_dir: Path, interrupts: Interrupts) -> tuple[DictConfig, object, dict]:
     """Train in the held ``run_dir``: the resumed or new run's config, its model config and ``metrics.json``."""
-    import torch  # the heavy modules, once the settings are known to be good
-    from tqdm import tqdm
+    training = Training(run_dir, interrupts)
+    training.configure(cfg, overrides)
+    training.build_agent()
+    training.restore()
+    training.open_run_files()
+    result = training.train_and_evaluate()
+    return training.cfg, training.env_cfg, result
 
-    from uavrl.agents import agent_class
-    from uavrl.envs.world import resolve_device
-    from uavrl.evaluation import TrainingClock, evaluate_agent
-    from uavrl.logger import RunLogger
-    from uavrl.video import comparison_frames, video_settings
 
-    checkpoint, newest_is_readable = None, True
-    if cfg.resume:
-        cfg, checkpoint, checkpoint_file, newest_is_readable = resumed_config(cfg, overrides)
-    torch.set_num_threads(int(cfg.num_threads))
-    device = resolve_device(cfg.device)
-    env_cfg = model_config(cfg)
-    seed_everything(int(cfg.seed))
-    if checkpoint is None:
-        agent = agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
-    else:
-        agent = saved_agent(cfg, env_cfg, device, checkpoint_file)
-    start = saved = 0
-    if checkpoint is not None:
-        restore_agent(agent, checkpoint, checkpoint_file, cfg.agent.name)
-        torch.set_rng_state(checkpoint["torch_rng"])
-        start = saved = int(checkpoint["iteration"])
-    resolved = OmegaConf.to_container(cfg, resolve=True)
-    save_text(OmegaConf.to_yaml(resolved), run_dir / "config.yaml")
-    # points after the checkpoint's step (any, for a new run) are replaced; those up to it stay
-    with interrupts.shielded():
-        logger = RunLogger(run_dir, resume_step=agent.env_steps if checkpoint is not None else 0)
-    checkpoints = CheckpointWriter(run_dir, newest_is_readable)
+class Training:
+    """One run in its held directory, step by step (:func:`run` takes the steps in order).
 
-    def save_checkpoint(iteration: int, final: dict | None = None, torch_rng=None) -> None:
-        nonlocal saved
-        state = {
-            "agent": agent.state_dict(),
-            "iteration": iteration,
-            "config": resolved,
-            "torch_rng": torch.get_rng_state() if torch_rng is None else torch_rng,
-        }
-        checkpoints.save(state if final is None else {**state, "final": final})
-        saved = iteration
+    The heavy modules are imported by the steps, once the settings are known to be good.
+    """
 
-    every = int(cfg.train.checkpoint_every)
-    eval_kwargs = eval_settings(cfg, device)
+    def __init__(self, run_dir: Path, interrupts: Interrupts):
+        self.run_dir, self.interrupts = run_dir, interrupts
 
-    def video_frames():
-        """The greedy policy beside the oracle, where ``eval.video`` asks (a run saved before has no setting)."""
-        if not cfg.eval.get("video", False):
-            return None
-        return comparison_frames(agent.policies()[0], env_cfg, label=cfg.agent.name, **video_settings(cfg, device))
+    def configure(self, cfg: DictConfig, overrides) -> None:
+        """The resumed run's saved config and checkpoint (or the new run's config), threads, device and seeds."""
+        import torch
 
-    def log_evaluation(metrics: dict, frames) -> None:
+        from uavrl.envs.world import resolve_device
+
+        self.checkpoint, self.checkpoint_file, self.newest_is_readable = None, None, True
+        if cfg.resume:
+            cfg, self.checkpoint, self.checkpoint_file, self.newest_is_readable = resumed_config(cfg, overrides)
+        torch.set_num_threads(int(cfg.num_threads))
+        self.cfg, self.device = cfg, resolve_device(cfg.device)
+        self.env_cfg = model_config(cfg)
+        seed_everything(int(cfg.seed))
+
+    def build_agent(self) -> None:
+        """A new agent, or one built as the checkpoint's run built it."""
+        from uavrl.agents import agent_class
+
+        cfg = self.cfg
+        if self.checkpoint is None:
+            self.agent = agent_class(cfg.agent.name)(self.env_cfg, cfg, self.device, int(cfg.seed))
+        else:
+            self.agent = saved_agent(cfg, self.env_cfg, self.device, self.checkpoint_file)
+
+    def restore(self) -> None:
+        """The checkpoint's agent state, RNG and iteration (a new run starts at 0)."""
+        import torch
+
+        self.start = self.saved = 0
+        if self.checkpoint is not None:
+            restore_agent(self.agent, self.checkpoint, self.checkpoint_file, self.cfg.agent.name)
+            torch.set_rng_state(self.checkpoint["torch_rng"])
+            self.start = self.saved = int(self.checkpoint["iteration"])
+
+    def open_run_files(self) -> None:
+        """``config.yaml``, the logger and the checkpoint writer."""
+        from uavrl.logger import RunLogger
+
+        self.resolved = OmegaConf.to_container(self.cfg, resolve=True)
+        save_text(OmegaConf.to_yaml(self.resolved), self.run_dir / "config.yaml")
+        # points after the checkpoint's step (any, for a new run) are replaced; those up to it stay
+        with self.interrupts.shielded():
+            resume_step = self.agent.env_steps if self.checkpoint is not None else 0
+            self.logger = RunLogger(self.run_dir, resume_step=resume_step)
+        self.checkpoints = CheckpointWriter(self.run_dir, self.newest_is_readable)
+        self.eval_kwargs = eval_settings(self.cfg, self.device)
+
+    def train_and_evaluate(self) -> dict:
+        """The iterations, then the final evaluation; writes ``metrics.json`` and returns it.
+
+        An interrupt or a full disk leaves the newest checkpoint and the command that continues the run.
+        """
+        from tqdm import tqdm
+
+        from uavrl.evaluation import TrainingClock
+
+        cfg, agent, interrupts = self.cfg, self.agent, self.interrupts
+        started = time.perf_counter()
+        clock = TrainingClock()
         with interrupts.shielded():
-            logger.log(metrics, agent.env_steps)
-            if frames is not None:
-                logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
+            bar = tqdm(
+                initial=self.start,
+                total=agent.num_iterations,
+                disable=not cfg.progress,
+                desc=f"{cfg.agent.name} {cfg.env.name}",
+                unit="it",
+                dynamic_ncols=True,
+            )
+        try:
+            self.train_loop(bar, clock)
+            trained = clock.read()
+            final = self.evaluate_and_save(trained)
+            with interrupts.shielded():
+                self.logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
+        except Interrupted as err:
+            resumed = self.checkpoint is not None
+            err.add_note(interrupted_note(self.run_dir, self.saved, agent.num_iterations, resumed))
+            raise
+        except WriteError as err:
+            if self.saved == 0:  # nothing to continue from
+                raise
+            raise OSError(
+                f"{err}; the checkpoints already there are unchanged: make room, then continue the run with: "
+                f"{resume_command(self.run_dir)}"
+            ) from None
+        finally:
+            with interrupts.shielded(act_after=False):
+                bar.close()
+                self.logger.close()
+        result = {
+            "agent": cfg.agent.name,
+            "env": cfg.env.name,
+            "env_steps": agent.env_steps,
+            "iterations": agent.num_iterations,
+            "train_seconds": trained["time/train_seconds"],  # the periodic evaluations left out, as for BenchMARL's
+            "train_cpu_seconds": trained["time/train_cpu_seconds"],
+            "total_seconds": time.perf_counter() - started,
+            **final,
+        }
+        save_json(result, self.run_dir / "metrics.json")
+        return result
 
-    started = time.perf_counter()
-    clock = TrainingClock()
-    with interrupts.shielded():
-        bar = tqdm(
-            initial=start,
-            total=agent.num_iterations,
-            disable=not cfg.progress,
-            desc=f"{cfg.agent.name} {cfg.env.name}",
-            unit="it",
-            dynamic_ncols=True,
-        )
-    try:
+    def train_loop(self, bar, clock) -> None:
+        """The iterations left, each logged, evaluated and checkpointed as the run's settings ask."""
+        from uavrl.evaluation import evaluate_agent
+
+        cfg, agent, interrupts, env_cfg = self.cfg, self.agent, self.interrupts, self.env_cfg
+        every = int(cfg.train.checkpoint_every)
         # a first signal waits for the iteration's end, where a checkpoint resumes exactly
         with interrupts.deferred():
-            for done in range(start + 1, agent.num_iterations + 1):
+            for done in range(self.start + 1, agent.num_iterations + 1):
                 interrupts.working_on = f"iteration {done} of {agent.num_iterations}"
                 metrics = agent.train_iteration()
                 if done % int(cfg.train.log_every) == 0 or done == agent.num_iterations:
                     with interrupts.shielded():
-                        logger.log(metrics, agent.env_steps)
+                        self.logger.log(metrics, agent.env_steps)
                         if "train/sum_utility" in metrics:  # the episode's mean utility U = R_PU + R_SE per step
                             per_step = metrics["train/sum_utility"] / env_cfg.max_steps
                             bar.set_postfix({"utility/step": f"{per_step:.4g}"}, refresh=False)
                 if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
                     trained = clock.read()  # before the evaluation, which the clock leaves out
                     with clock.paused():
-                        evaluation = evaluate_agent(agent, env_cfg, **eval_kwargs)
-                    log_evaluation({**evaluation, **trained}, video_frames())
+                        evaluation = evaluate_agent(agent, env_cfg, **self.eval_kwargs)
+                    self.log_evaluation({**evaluation, **trained}, self.video_frames())
                 if done % every == 0 and done < agent.num_iterations:
-                    save_checkpoint(done)
+                    self.save_checkpoint(done)
                 with interrupts.shielded():
                     bar.update()
                 if interrupts.received:
-                    if saved != done:
-                        save_checkpoint(done)
+                    if self.saved != done:
+                        self.save_checkpoint(done)
                     raise Interrupted(interrupts.received)
-        trained = clock.read()
-        if checkpoint is not None and "final" in checkpoint:  # resumed after the final checkpoint: evaluated and logged
-            final = checkpoint["final"]
-        else:
-            trained_rng = torch.get_rng_state()
-            try:
-                final = evaluate_agent(agent, env_cfg, **eval_kwargs)
-                frames = video_frames()
-            except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
-                if saved != agent.num_iterations:
-                    save_checkpoint(agent.num_iterations, torch_rng=trained_rng)
-                raise
-            with interrupts.shielded():  # logged and saved as one: a resumed run neither logs it again nor loses it
-                log_evaluation({**final, **trained}, frames)
-                save_checkpoint(agent.num_iterations, final)
-        with interrupts.shielded():
-            logger.hparams(flat_hparams(cfg), ("eval/optimality", "eval/optimal_fraction"))
-    except Interrupted as err:
-        err.add_note(interrupted_note(run_dir, saved, agent.num_iterations, checkpoint is not None))
-        raise
-    except WriteError as err:
-        if saved == 0:  # nothing to continue from
+
+    def evaluate_and_save(self, trained: dict) -> dict:
+        """The final evaluation, logged and saved with the final checkpoint (a run resumed after it: the saved one)."""
+        import torch
+
+        from uavrl.evaluation import evaluate_agent
+
+        if self.checkpoint is not None and "final" in self.checkpoint:  # resumed after the final checkpoint
+            return self.checkpoint["final"]
+        iterations = self.agent.num_iterations
+        trained_rng = torch.get_rng_state()
+        try:
+            final = evaluate_agent(self.agent, self.env_cfg, **self.eval_kwargs)
+            frames = self.video_frames()
+        except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
+            if self.saved != iterations:
+                self.save_checkpoint(iterations, torch_rng=trained_rng)
             raise
-        raise OSError(
-            f"{err}; the checkpoints already there are unchanged: make room, then continue the run with: "
-            f"{resume_command(run_dir)}"
-        ) from None
-    finally:
-        with interrupts.shielded(act_after=False):
-            bar.close()
-            logger.close()
-    result = {
-        "agent": cfg.agent.name,
-        "env": cfg.env.name,
-        "env_steps": agent.env_steps,
-        "iterations": agent.num_iterations,
-        "train_seconds": trained["time/train_seconds"],  # the periodic evaluations left out, as for BenchMARL's runs
-        "train_cpu_seconds": trained["time/train_cpu_seconds"],
-        "total_seconds": time.perf_counter() - started,
-        **final,
-    }
-    save_json(result, run_dir / "metrics.json")
-    return cfg, env_cfg, result
+        with self.interrupts.shielded():  # logged and saved as one: a resumed run neither logs it again nor loses it
+            self.log_evaluation({**final, **trained}, frames)
+            self.save_checkpoint(iterations, final)
+        return final
+
+    def save_checkpoint(self, iteration: int, final: dict | None = None, torch_rng=None) -> None:
+        import torch
+
+        state = {
+            "agent": self.agent.state_dict(),
+            "iteration": iteration,
+            "config": self.resolved,
+            "torch_rng": torch.get_rng_state() if torch_rng is None else torch_rng,
+        }
+        self.checkpoints.save(state if final is None else {**state, "final": final})
+        self.saved = iteration
+
+    def video_frames(self):
+        """The greedy policy beside the oracle, where ``eval.video`` asks (a run saved before has no setting)."""
+        from uavrl.video import comparison_frames, video_settings
+
+        cfg = self.cfg
+        if not cfg.eval.get("video", False):
+            return None
+        policy = self.agent.policies()[0]
+        return comparison_frames(policy, self.env_cfg, label=cfg.agent.name, **video_settings(cfg, self.device))
+
+    def log_evaluation(self, metrics: dict, frames) -> None:
+        with self.interrupts.shielded():
+            self.logger.log(metrics, self.agent.env_steps)
+            if frames is not None:
+                self.logger.video("eval/video", frames, self.agent.env_steps, int(self.cfg.eval.video_fps))
 
 
 def interrupted_note(run_dir: Path, saved: int, iterations: int, resumed: bool) -> str:

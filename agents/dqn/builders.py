@@ -1,0 +1,150 @@
+"""The DQN's parts built from its settings: the Q network, the greedy and exploring policies, the mixer, the loss,
+the replay buffer and the collector (TorchRL modules around :mod:`.networks` and :mod:`.loss`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torchrl.collectors import Collector
+from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.modules import EGreedyModule, QMixer, QValueModule, VDNMixer
+from torchrl.objectives import DQNLoss, LossModule
+
+from uavrl.compat import make_collector
+from uavrl.envs import UAVSpectrumEnv
+
+from .loss import DoubleQMixerLoss
+from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
+
+
+@dataclass
+class Policies:
+    """The modules that act: ``greedy`` (the greedy valid joint action), ``explore`` (greedy, then
+    ``exploration``'s epsilon-greedy), ``value_network`` (what the loss evaluates), ``action_spec`` and
+    ``action_keys`` (the action entries a transition stores)."""
+
+    greedy: TensorDictSequential
+    explore: TensorDictSequential
+    exploration: EGreedyModule
+    value_network: TensorDictSequential
+    action_spec: object
+    action_keys: list
+
+
+def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
+    """:class:`TeamQNet` as a module writing ``("agents", "action_value")`` (factored) or ``"joint_action_value"``."""
+    net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
+    return TensorDictModule(net, in_keys=list(Q_INPUTS), out_keys=[_values_key(a)])
+
+
+def _values_key(a):
+    return ("agents", "action_value") if a.head == "factored" else "joint_action_value"
+
+
+def exploration_schedule(a, frames: int, device) -> dict:
+    """``EGreedyModule`` keywords: epsilon from ``agent.eps_start`` to ``agent.eps_end`` over ``agent.eps_fraction``
+    of the run's ``frames``."""
+    steps = max(1, int(float(a.eps_fraction) * frames))
+    return dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=steps, device=device)
+
+
+def build_policies(env: UAVSpectrumEnv, a, q: TensorDictModule, eps: dict) -> Policies:
+    """The greedy and the exploring policy of ``agent.head`` around the Q network ``q``."""
+    return (_factored_policies if a.head == "factored" else _joint_policies)(env, q, eps)
+
+
+def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
+    # TorchRL's own Categorical: the exploration draws as they were before the env's cheaper MaskedCategorical
+    spec = Composite(
+        agents=Composite(
+            action=Categorical(env.num_actions, (env.num_uavs,), dtype=torch.long, device=env.device),
+            shape=(env.num_uavs,),
+            device=env.device,
+        ),
+        device=env.device,
+    )
+    greedy_action = TensorDictModule(
+        ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions),
+        in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],
+        out_keys=[("agents", "action")],
+    )
+    greedy = TensorDictSequential(q, greedy_action)
+    exploration = EGreedyModule(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
+    explore = TensorDictSequential(greedy, exploration)
+    return Policies(greedy, explore, exploration, greedy, spec, [("agents", "action")])
+
+
+def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
+    N, values = env.num_uavs, "joint_action_value"
+    spec = Categorical(env.cfg.num_joint_actions, device=env.device)
+    mask = TensorDictModule(
+        JointActionMask(env.neighbours, env.cfg.grid[0], N),
+        in_keys=["positions"],
+        out_keys=["joint_action_mask"],
+    )
+    argmax = QValueModule(
+        spec=spec,
+        action_value_key=values,
+        action_mask_key="joint_action_mask",
+        out_keys=["joint_action", values, "joint_chosen_action_value"],
+    )
+    decode = TensorDictModule(
+        DecodeJointAction(N, env.device), in_keys=["joint_action"], out_keys=[("agents", "action")]
+    )
+    exploration = EGreedyModule(spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps)
+    greedy = TensorDictSequential(mask, q, argmax, decode)
+    explore = TensorDictSequential(mask, q, argmax, exploration, decode)
+    value_network = TensorDictSequential(mask, q, argmax)
+    return Policies(greedy, explore, exploration, value_network, spec, ["joint_action", ("agents", "action")])
+
+
+def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
+    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``)."""
+    if a.mixer == "vdn":
+        return TensorDictModule(
+            VDNMixer(env.num_uavs, env.device),
+            in_keys=[("agents", "chosen_action_value")],
+            out_keys=["chosen_action_value"],
+        )
+    return TensorDictModule(
+        QMixer((env.state_size,), int(a.mixing_embed_dim), env.num_uavs, env.device),
+        in_keys=[("agents", "chosen_action_value"), "state"],
+        out_keys=["chosen_action_value"],
+    )
+
+
+def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
+    """Double-DQN loss with target networks: mixed per-UAV values (factored) or the joint head's (joint)."""
+    if a.head == "factored":
+        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), policies.action_spec, float(a.gamma))
+    loss = DQNLoss(
+        policies.value_network,
+        double_dqn=True,
+        delay_value=True,
+        action_space=policies.action_spec,
+        loss_function="smooth_l1",
+    )
+    loss.set_keys(action="joint_action", action_value=_values_key(a), value="joint_chosen_action_value")
+    loss.make_value_estimator(gamma=float(a.gamma))
+    return loss
+
+
+def build_replay_buffer(a, device) -> TensorDictReplayBuffer:
+    """``agent.buffer_size`` transitions, uniform samples of ``agent.batch_size``."""
+    storage = LazyTensorStorage(int(a.buffer_size), device=device)
+    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size))
+
+
+def transition_keys(a, action_keys: list) -> list:
+    """The entries of a transition the replay buffer keeps (the loss reads no others)."""
+    inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
+    return inputs + action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
+
+
+def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:
+    """One episode of every world of ``env`` per batch."""
+    return make_collector(
+        env, policy, frames_per_batch=env.num_worlds * env.cfg.max_steps, total_frames=-1, device=env.device
+    )

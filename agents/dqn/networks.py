@@ -1,0 +1,212 @@
+"""The DQN's networks: the Q network over the joint observation and the modules that turn its values into valid actions.
+
+- :class:`TeamQNet`: action values, per UAV (``factored``) or per joint action (``joint``);
+- :class:`ValidGreedy`: the factored head's greedy valid joint action, UAV by UAV;
+- :class:`JointActionMask`, :class:`DecodeJointAction`: the joint head's mask and its per-UAV actions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+from torchrl.modules import MultiAgentMLP
+
+from uavrl.envs import (
+    NODE_FEATURES,
+    NUM_ACTIONS,
+    UAVSpectrumEnv,
+    decode_joint_actions,
+    joint_action_valid,
+    observation_with_nodes,
+)
+from uavrl.envs.config import RELAYING, SENSING
+from uavrl.envs.grid import cells_or_away
+
+Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
+
+
+def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
+    return positions[..., 1] * width + positions[..., 0]
+
+
+class TeamQNet(nn.Module):
+    """Action values from the joint observation ``[*, N, F]``, the positions ``[*, N, 2]`` and the state.
+
+    Each UAV's input is its observation followed by the node positions (the
+    last 12 entries of ``state``, :func:`~uavrl.envs.world.observation_with_nodes`).
+    The torso (a centralised ``MultiAgentMLP``) embeds all N inputs at once.
+    ``factored``: a shared per-UAV head (a ``MultiAgentMLP`` with one hidden
+    layer) reads that embedding, the UAV's own observation, its one-hot id and
+    which of its 4 neighbouring cells another UAV holds, and returns
+    ``[*, N, A]`` (A = 6, 7 with recharging).  The embedding is the same for every UAV of a world, so the
+    head's first layer is applied in two parts: to the embedding once per
+    world, to the rest once per UAV: the same function and parameters as the
+    layer on the whole input, and with 6 UAVs 43% fewer multiplications for
+    the whole network.
+    ``joint``: a linear head returns ``[*, 6^N]``.
+
+    Example:
+        >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
+        >>> td = env.reset()
+        >>> TeamQNet(env, "factored", hidden=16, depth=1)(*(td[k] for k in Q_INPUTS)).shape
+        torch.Size([3, 2, 6])
+        >>> TeamQNet(env, "joint", hidden=16, depth=1)(*(td[k] for k in Q_INPUTS)).shape
+        torch.Size([3, 36])
+    """
+
+    def __init__(self, env: UAVSpectrumEnv, head: str, hidden: int, depth: int):
+        super().__init__()
+        N, F, dev = env.num_uavs, env.observation_size + NODE_FEATURES, env.device
+        self.joint, self.width = head == "joint", env.cfg.grid[0]
+        self.torso = MultiAgentMLP(
+            F,
+            hidden,
+            N,
+            centralized=True,
+            share_params=True,
+            depth=depth,
+            num_cells=hidden,
+            activation_class=nn.ReLU,
+            activate_last_layer=True,
+            device=dev,
+        )
+        if self.joint:
+            self.head = nn.Linear(hidden, NUM_ACTIONS**N, device=dev)
+        else:
+            self.head = MultiAgentMLP(
+                hidden + F + N + 4,
+                env.num_actions,  # 6, and "return" with recharging
+                N,
+                centralized=False,
+                share_params=True,
+                depth=1,
+                num_cells=hidden,
+                activation_class=nn.ReLU,
+                device=dev,
+            )
+        self.register_buffer("ids", torch.eye(N, device=dev))
+        self.register_buffer("neighbours", env.neighbours.clone())
+
+    def forward(self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        observation = observation_with_nodes(observation, state)
+        embedding = self.torso(observation)  # [*, N, hidden], the same row for every UAV
+        if self.joint:
+            return self.head(embedding[..., 0, :])
+        C = len(self.neighbours)
+        cells = cells_or_away(positions, (self.width, C // self.width))
+        # [*, N, 4]: which of its neighbouring cells another UAV holds (none, for a UAV out of service)
+        held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
+        held &= (cells < C).unsqueeze(-1)
+        own = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1), held.to(observation.dtype)], -1)
+        first, last = self.head.params["0"], self.head.params["2"]  # the head's layers (Linear, ReLU, Linear)
+        split = embedding.shape[-1]
+        hidden = nn.functional.linear(embedding[..., :1, :], first["weight"][:, :split], first["bias"])
+        hidden = torch.relu(hidden + nn.functional.linear(own, first["weight"][:, split:]))
+        return nn.functional.linear(hidden, last["weight"], last["bias"])
+
+
+class ValidGreedy(nn.Module):
+    """A valid joint action from per-UAV values ``[*, N, A]``, masks ``[*, N, A]``, positions and tasks.
+
+    UAV by UAV in id order, each takes its best allowed action.  Allowed: a
+    move whose target cell differs from the cells of the UAVs still to choose
+    and from the targets of those that chose (staying always qualifies, so all
+    targets differ: a valid joint action, docs/model.md), and a switch to a
+    task that no UAV before it switches to in this step.  Then, in a second
+    pass, a UAV that kept its cell takes its best move into a cell that no
+    other UAV now targets, if it values that move more (a UAV held back by a
+    later one that moved away follows it in the same step).  Per-UAV values rate
+    each switch as if it were the only one; two UAVs that both switch (say, the
+    two relays of N = 2 both turning to sensing) can land in a worse
+    configuration than either alone, and flip back and forth forever.
+
+    Example:
+        >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
+        >>> allowed = torch.ones(1, 2, 6, dtype=torch.bool)
+        >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 9.0, 0, 0, 1]]])  # both want cell 1
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[0, 0]]))
+        tensor([[3, 5]])
+        >>> values = torch.tensor([[[0, 0, 0, 9.0, 0, 1], [0, 0, 0, 9.0, 0, 1]]])  # a train: both move right together
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]]))
+        tensor([[3, 3]])
+        >>> values = torch.tensor([[[0, 0, 0, 0, 9.0, 1], [0, 0, 0, 0, 9.0, 1]]])  # both relays want to sense
+        >>> greedy(values, allowed, torch.tensor([[[0, 0], [2, 0]]]), torch.tensor([[1, 1]]))
+        tensor([[4, 5]])
+    """
+
+    def __init__(self, neighbours: torch.Tensor, width: int, num_actions: int = NUM_ACTIONS):
+        super().__init__()
+        self.width, self.num_actions = width, num_actions
+        self.register_buffer("neighbours", neighbours.clone())
+        self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
+
+    def _target_table(self) -> torch.Tensor:
+        """``[C + 1, A]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
+        out, but two UAVs given it would still collide there), where a UAV out of service stays.  "return" keeps the
+        cell for the step, as the environment's dynamics do (its flight home is the energy part's)."""
+        cells = len(self.neighbours)
+        stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, self.num_actions - 4)
+        moves = torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
+        return torch.cat([moves, moves.new_full((1, self.num_actions), cells)])
+
+    def forward(
+        self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
+    ) -> torch.Tensor:
+        cells = cells_or_away(positions, (self.width, len(self.neighbours) // self.width))
+        batch = cells.shape[:-1]
+        # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
+        table = self._target_table()
+        targets = table.index_select(0, cells.reshape(-1)).view(*cells.shape, -1).movedim(-2, 0).contiguous()
+        values, allowed = action_value.movedim(-2, 0).contiguous(), action_mask.movedim(-2, 0).contiguous()
+        switches = (tasks.unsqueeze(-1) != self.task_ids).movedim(-2, 0)  # [N, *, 2]: actions 4, 5 change the task
+        # occupied[..., c]: cell c is held or claimed by a UAV (while a UAV chooses, its own cell is left out)
+        occupied = torch.zeros(*batch, len(table) + 1, dtype=torch.bool, device=cells.device)
+        occupied.scatter_(-1, cells, True)
+        switched_to = torch.zeros(*batch, 2, dtype=torch.bool, device=cells.device)  # a task switched to this step
+        claimed = list(cells.movedim(-1, 0).unsqueeze(-1))  # [*, 1] per UAV
+        actions = []
+        for i in range(len(values)):
+            occupied.scatter_(-1, claimed[i], False)
+            blocked = occupied.gather(-1, targets[i]) | ~allowed[i]
+            blocked[..., 4:6] |= switches[i] & switched_to
+            action = values[i].masked_fill(blocked, -math.inf).argmax(-1, keepdim=True)
+            claimed[i] = targets[i].gather(-1, action)
+            occupied.scatter_(-1, claimed[i], True)
+            switched_to |= switches[i] & (action == self.task_ids + 4)
+            actions.append(action)
+        # second pass: a UAV that kept its cell because a later UAV still held the cell it wanted takes that move
+        # now if the holder has left it (UAVs following one another move together)
+        for i in range(len(values)):
+            occupied.scatter_(-1, claimed[i], False)
+            blocked = occupied.gather(-1, targets[i][..., :4]) | ~allowed[i][..., :4]
+            value, move = values[i][..., :4].masked_fill(blocked, -math.inf).max(-1, keepdim=True)
+            better = (actions[i] >= 4) & (value > values[i].gather(-1, actions[i]))
+            actions[i] = torch.where(better, move, actions[i])
+            claimed[i] = torch.where(better, targets[i].gather(-1, move), claimed[i])
+            occupied.scatter_(-1, claimed[i], True)
+        return torch.cat(actions, -1)
+
+
+class JointActionMask(nn.Module):
+    """``[*, 6^N]`` valid joint actions at positions ``[*, N, 2]`` (the environment's rule)."""
+
+    def __init__(self, neighbours: torch.Tensor, width: int, num_uavs: int):
+        super().__init__()
+        self.width, self.num_uavs = width, num_uavs
+        self.register_buffer("neighbours", neighbours.clone())
+
+    def forward(self, positions: torch.Tensor) -> torch.Tensor:
+        return joint_action_valid(_cells(positions, self.width), self.neighbours, self.num_uavs)
+
+
+class DecodeJointAction(nn.Module):
+    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i 6^i``."""
+
+    def __init__(self, num_uavs: int, device):
+        super().__init__()
+        self.register_buffer("table", decode_joint_actions(num_uavs, device))
+
+    def forward(self, joint_action: torch.Tensor) -> torch.Tensor:
+        return self.table[joint_action]
