@@ -24,7 +24,7 @@ and the energy spent per episode in the follow-up's units; writes a PNG (mean ov
 
 Usage::
 
-    python benchmarks/follow_up_curves.py                  # 20 runs x 40 episodes, about 10 s
+    python benchmarks/follow_up_curves.py                  # 20 runs x 40 episodes, about 5 s
     python benchmarks/follow_up_curves.py --png docs/figures/follow_up_curves.png
 """
 
@@ -65,9 +65,11 @@ def learn(cfg, runs: int, episodes: int, seed: int) -> dict[str, torch.Tensor]:
         metrics = learner.run_episode()
         utility.append(metrics["sum_utility"] / (learner.model.u_star * cfg.max_steps))
         moves.append(metrics["moves"])
-    moves = torch.stack(moves)
+    utility, moves = torch.stack(utility), torch.stack(moves)
     energy = FOLLOW_UP_TRANSMISSION * cfg.max_steps + FOLLOW_UP_MOVE * moves
-    return {"utility": torch.stack(utility), "moves": moves, "energy": energy}
+    # the follow-up's figure starts every UAV at 0: as if each run's curve were scaled to its own min and max
+    low, high = utility.amin(0), utility.amax(0)
+    return {"utility": utility, "min_max": (utility - low) / (high - low), "moves": moves, "energy": energy}
 
 
 def summary(name: str, curves: dict[str, torch.Tensor]) -> str:
@@ -75,9 +77,7 @@ def summary(name: str, curves: dict[str, torch.Tensor]) -> str:
     mean = utility.mean(-1)
     reached = (mean >= TARGET).nonzero()
     first = int(reached[0]) if len(reached) else None
-    # the follow-up's figure starts every UAV at 0: as if each run's curve were scaled to its own min and max
-    low, high = utility.amin(0), utility.amax(0)
-    min_max = ((utility - low) / (high - low)).mean(-1)
+    min_max = curves["min_max"].mean(-1)
     return (
         f"{name}: utility / U* episode 1 {mean[0]:.3f}, 5 {mean[4]:.3f}, 10 {mean[9]:.3f}, last 10 "
         f"{mean[-10:].mean():.3f}; first episode with mean >= {TARGET}: {first if first is None else first + 1}; "
@@ -90,15 +90,17 @@ def summary(name: str, curves: dict[str, torch.Tensor]) -> str:
     )
 
 
-def plot(results: dict, path: str) -> None:
+def plot(results: dict, path: str, runs: int) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8))
+    axes = axes.ravel()
     panels = (
         ("utility", "utility per episode / (U* T)"),
+        ("min_max", "utility scaled to each run's min and max (theirs)"),
         ("moves", "moves per episode"),
         ("energy", "energy spent per episode (follow-up units)"),
     )
@@ -112,12 +114,12 @@ def plot(results: dict, path: str) -> None:
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[0].axhline(TARGET, color="grey", ls=":", lw=1)
-    axes[2].axhspan(4000, 5000, color="grey", alpha=0.15, label="their battery U[4000, 5000]")
+    axes[3].axhspan(4000, 5000, color="grey", alpha=0.15, label="their battery U[4000, 5000]")
     axes[0].legend(loc="lower right")
-    axes[2].legend(loc="upper right", fontsize=8)
+    axes[3].legend(loc="upper right", fontsize=8)
     fig.suptitle(
-        "The follow-up's learner on one 27x27 region (1 UAV, location state, best_so_far, alpha 0.1, gamma 0.3, "
-        "epsilon 0.1): mean and min-max over runs"
+        "The follow-up's learner on one 27x27 region (1 UAV, location state, best_so_far, alpha 0.1, gamma 0.3,\n"
+        f"epsilon 0.1): mean and min-max band over {runs} runs"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -136,7 +138,7 @@ def main() -> None:
         results[name] = learn(cfg, args.runs, args.episodes, args.seed)
         print(summary(name, results[name]), f"\n  ({time.perf_counter() - started:.1f} s)")
     if args.png:
-        plot(results, args.png)
+        plot(results, args.png, args.runs)
         print(f"wrote {args.png}")
 
 
