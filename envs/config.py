@@ -288,10 +288,7 @@ class ModelConfig:
         if self.reset_positions == "keep":
             reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
             raise InvalidOption("energy", self.energy, reason)
-        energies = self.step_energies
-        farthest = max(abs(x - base[0]) for x in (0, L1 - 1)) + max(abs(y - base[1]) for y in (0, L2 - 1))
-        need = energies.reserve(farthest)
-        lowest = energies.capacity * (power.UNIFORM_LOW if self.battery_init == "uniform" else 1.0)
+        lowest, need, farthest = self._lowest_start_and_largest_reserve()
         if lowest <= need:
             name = "battery_wh" if self.energy == "rotary_wing" else "base"
             unit = "Wh" if self.energy == "rotary_wing" else "units"
@@ -302,6 +299,32 @@ class ModelConfig:
                 f"{need / scale:.4g} {unit}: give a larger battery or a nearer base"
             )
             raise InvalidOption(name, getattr(self, name), reason)
+
+    def _lowest_start_and_largest_reserve(self) -> tuple[float, float, int]:
+        """The lowest battery a UAV may start with, the largest reserve of a cell (the farthest from the base's), and
+        that cell's steps from the base, under an energy model."""
+        (L1, L2), (bx, by) = self.grid, self.base
+        farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
+        energies = self.step_energies
+        lowest = energies.capacity * (power.UNIFORM_LOW if self.battery_init == "uniform" else 1.0)
+        return lowest, energies.reserve(farthest), farthest
+
+    @property
+    def steps_before_reserve(self) -> int | None:
+        """Under an energy model, the most steps after which no battery can have reached its cell's reserve, however
+        the UAVs act (every step at the dearer of a move and a stay from the lowest start): within an episode of at
+        most that many steps no UAV leaves service, and the batteries change nothing else.  ``None`` under
+        ``energy=none``.
+
+        Example:
+            >>> make_config("paper", grid=(3, 3), energy="follow_up", base=(-1, 0)).steps_before_reserve
+            3325
+        """
+        if self.energy == "none":
+            return None
+        lowest, need, _ = self._lowest_start_and_largest_reserve()
+        energies = self.step_energies
+        return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
 
     @property
     def step_energies(self) -> power.StepEnergies:

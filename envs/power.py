@@ -62,7 +62,9 @@ UNIFORM_LOW = 0.8
 # the follow-up's Config_Power (units of its own): MaxEnergy, mob_consump_intra, mob_consump_inter, trans_consump
 FOLLOW_UP_CAPACITY = 5000.0
 FOLLOW_UP_MOVE = 1.0  # per move inside a region (charged per move action, as its update_energy_movement does)
-FOLLOW_UP_REGION_FLIGHT = 10.0  # per region of inter-region flight: the flight to the base crosses one region
+# mob_consump_inter: their code pays it per cell of inter-region flight (basestation.py); here once, on reaching
+# the base (docs/model.md, The authors' follow-up)
+FOLLOW_UP_REGION_FLIGHT = 10.0
 FOLLOW_UP_TRANSMISSION = 0.5  # per step of transmission, whatever the task
 
 

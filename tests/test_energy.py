@@ -279,11 +279,56 @@ def test_a_battery_just_above_the_largest_reserve_is_accepted():
         rotary(battery_wh=need_wh * 1.1, battery_init="uniform")  # U[0.8, 1] of it may start too low
 
 
-def test_the_tabular_agent_refuses_a_battery_with_its_size():
+def test_steps_before_reserve_is_the_last_step_a_battery_cannot_reach_its_reserve_on(hand_built):
+    cfg = rotary(battery_wh=0.6)
+    stay, move, fly = per_step(cfg)
+    cap = cfg.battery_wh * 3600
+    reserve_22 = max(stay, move) + steps_home(2, 2) * fly  # the farthest cell: no neighbour lies farther
+    limit = 0
+    while cap - (limit + 1) * max(stay, move) > reserve_22:
+        limit += 1
+    assert cfg.steps_before_reserve == limit and stay > move  # hovering is the dearer step
+    world = hand_built(cfg, [2 * 8, 2 * 5], [cap, cap])  # at (2, 2) and (2, 1), hovering all along
+    for _ in range(limit):
+        step(world, SENSE, SENSE)
+    assert world._s.status.tolist() == [[0, 0]]
+    step(world, SENSE, SENSE)
+    assert world._s.status[0, 0].item() == 1  # one step more, and the UAV at (2, 2) leaves for the base
+    assert make_config("paper", energy="none").steps_before_reserve is None
+
+
+def test_the_tabular_table_refuses_a_battery_that_may_reach_its_reserve():
     from uavrl.agents.tabular.tables import TabularModel
 
-    with pytest.raises(ValueError, match=r"energy='rotary_wing' is invalid for agent=tabular: .* 81 x .* rows"):
-        TabularModel(rotary())
+    limit = rotary().steps_before_reserve
+    TabularModel(rotary(max_steps=limit))  # no battery reaches its reserve: the table without batteries is exact
+    too_long = rf"energy='rotary_wing' is invalid for agent=tabular with max_steps={limit + 1}: .* 81 x .* rows"
+    with pytest.raises(ValueError, match=too_long + rf".* max_steps <= {limit} "):
+        TabularModel(rotary(max_steps=limit + 1))
+    with pytest.raises(ValueError, match="with max_steps=100 and recharge_steps: "):
+        TabularModel(rotary(recharge_steps=5))
+
+
+def test_the_tabular_learner_under_follow_up_learns_as_without_energy_while_no_battery_can_leave():
+    from uavrl.agents.tabular import TeamQLearner
+
+    plain = make_config("paper", grid=(3, 3), num_uavs=2, max_steps=60, reward="best_so_far")
+    follow_up = plain.replace(energy="follow_up", base=BASE, battery_init="uniform")
+    learners = [TeamQLearner(cfg, runs=2, seed=3) for cfg in (plain, follow_up)]
+    for _ in range(3):
+        without, under = (learner.run_episode() for learner in learners)
+        assert all(torch.equal(without[name], under[name]) for name in without)
+    assert torch.equal(learners[0].q, learners[1].q) and learners[0].q.abs().sum() > 0
+
+
+def test_the_tabular_agent_refuses_an_energy_model():
+    from omegaconf import OmegaConf
+
+    from uavrl.agents.tabular import TabularAgent
+
+    cfg = make_config("paper", grid=(3, 3), num_uavs=2, max_steps=20, energy="follow_up", base=BASE)
+    with pytest.raises(ValueError, match="env.energy='follow_up' is invalid for agent=tabular: its evaluation"):
+        TabularAgent(cfg, OmegaConf.create({"agent": {"method": "q_learning"}}), "cpu", 0)
 
 
 def test_the_command_line_trains_and_evaluates_a_dqn_under_rotary_wing(tmp_path):

@@ -27,6 +27,12 @@ class TabularAgent(Agent):
         a = cfg.agent
         self.method = a.get("method", TabularSchema.method)  # run directories saved before it existed
         refuse("agent.method", self.method, rule_of(TabularSchema, "method"))
+        if env_cfg.energy != "none":  # the learner alone takes batteries that outlast its episodes
+            raise ValueError(
+                f"env.energy={env_cfg.energy!r} is invalid for agent=tabular: its evaluation plays missions until the "
+                "batteries run out, which a table without them cannot; use agent=dqn (TeamQLearner itself learns "
+                "while no battery reaches its reserve: benchmarks/follow_up_curves.py)"
+            )
         self.env_cfg, self.device = env_cfg, torch.device(device)
         if self.method == "value_iteration":
             if not 0 < float(a.gamma) <= 1:

@@ -65,12 +65,16 @@ class TabularModel:
                 f"fading={cfg.fading!r} is invalid for agent=tabular: its tables need deterministic channels; use "
                 "fading='none'"
             )
-        if cfg.energy != "none":
+        # a battery that cannot reach its reserve within an episode changes nothing the table sees: without it, the
+        # table is exact (the follow-up's state has no energy either: docs/model.md, Energy and lifetime)
+        if cfg.energy != "none" and (cfg.recharge_steps is not None or cfg.max_steps > cfg.steps_before_reserve):
             levels = 100  # a battery in 1% steps, the coarsest that still tells a reserve from a full battery
             raise ValueError(
-                f"energy={cfg.energy!r} is invalid for agent=tabular: its state would need each UAV's battery and "
-                f"service, {cfg.num_states:,} x ({levels} levels x 3 states)^{cfg.num_uavs} = "
-                f"{cfg.num_states * (3 * levels) ** cfg.num_uavs:.3g} rows; use agent=dqn"
+                f"energy={cfg.energy!r} is invalid for agent=tabular with max_steps={cfg.max_steps}"
+                f"{'' if cfg.recharge_steps is None else ' and recharge_steps'}: its state would need each UAV's "
+                f"battery and service, {cfg.num_states:,} x ({levels} levels x 3 states)^{cfg.num_uavs} = "
+                f"{cfg.num_states * (3 * levels) ** cfg.num_uavs:.3g} rows; use agent=dqn, or without recharging "
+                f"max_steps <= {cfg.steps_before_reserve} (no battery reaches its reserve)"
             )
         self.cfg, self.device = cfg, torch.device(device)
         N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
