@@ -22,6 +22,16 @@ A frame shows, for one world:
   sum (the term it adds inside that network's log), room for more per-UAV
   quantities.
 
+Under an energy model (``env.energy`` other than ``none``) a frame also shows
+the base (``env.base``, off the grid) as a pad with one slot per UAV, UAV ``i``
+``i`` cells from the base along the grid's side (towards the grid's middle); a
+UAV out of service sits in its slot, coloured by its status (returning,
+charging, waiting, out: :data:`STATUS_COLOURS`); under every UAV a gauge whose
+length is its battery's fraction of the capacity, green, amber or red by level
+(:data:`GAUGE_LEVELS`); in the header how many serve; and in each panel row the
+battery and, out of service, the status (with its steps left).  Frames of
+``env.energy=none`` draw none of this.
+
 Every artist is made once per renderer; the parts that stay while a layout
 stays are drawn once per layout and kept, so a frame draws only what a step
 changes: about 15 ms of CPU for 2 UAVs on 6x6 and 25 ms for 6 UAVs on 10x10
@@ -49,6 +59,7 @@ import torch
 
 from .channel import PR, PT, E, S
 from .config import NODE_NAMES, RELAYING
+from .energy import CHARGING, OUT, RETURNING, WAITING
 from .optimum import optimum as exact_optimum
 
 RENDER_MODES = ("rgb_array",)
@@ -57,6 +68,12 @@ SENSE_COLOUR = (0xFF, 0x7F, 0x0E)  # tab:orange
 NODE_COLOURS = {PT: "#0b3c5d", PR: "#0b3c5d", S: "#a34700", E: "#a34700"}
 IDLE_LINK = "#9a9a9a"  # links that earn nothing: sensing ones while no UAV relays (the lease rule: R_SE = 0)
 TASK_NAMES = {0: "sense", 1: "relay"}
+# under an energy model: a UAV out of service in its status' colour, and its battery gauge's colour by level
+STATUS_COLOURS = {RETURNING: "#9467bd", OUT: "#3b3b3b", CHARGING: "#17becf", WAITING: "#8c8c8c"}  # purple .. grey
+STATUS_NAMES = {RETURNING: "return", OUT: "out", CHARGING: "charge", WAITING: "wait"}
+GAUGE_LEVELS = ((0.5, "#2ca02c"), (0.2, "#e8a202"), (0.0, "#d62728"))  # from this fraction up: green, amber, red
+GAUGE_WIDTH, GAUGE_TOP, GAUGE_HEIGHT = 0.8, 0.36, 0.16  # in cells, below the UAV's centre (y grows downwards)
+BASE_COLOUR = "#2f6b3a"
 # the panel's layout in figure fractions: header on top, the map on the left, the per-UAV rows on the right
 HEADER, MAP_RIGHT, MARGIN = 0.16, 0.7, 0.02
 DPI = 100
@@ -83,6 +100,7 @@ class WorldRenderer:
         self.figure = Figure(figsize=(width / DPI, height / DPI), dpi=DPI, facecolor="white")
         self.canvas = FigureCanvasAgg(self.figure)
         self._font = max(7.0, min(11.0, height / 36))
+        self.energy = world.energy  # None for env.energy=none: nothing of the energy model is made or drawn
         self._make_map()
         self._make_header()
         self._make_panel()
@@ -90,6 +108,9 @@ class WorldRenderer:
             self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
             self._row_dots, *self._rows,
         ]  # fmt: skip
+        if self.energy is not None:
+            self._make_base()
+            self._dynamic[3:3] = [self._gauge_frames, self._gauges]  # over the UAVs, under their numbers
         for artist in self._dynamic:  # animated: the figure's own draw (the background) leaves them out
             artist.set_animated(True)
         self._u_star: dict[bytes, float] = {}  # each layout's exact U*, keyed by its node positions
@@ -123,6 +144,43 @@ class WorldRenderer:
             ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
         ]
 
+    def _make_base(self) -> None:
+        """The base's pad of one slot per UAV (static), its label, and the battery gauges (one per UAV)."""
+        from matplotlib.collections import PolyCollection
+        from matplotlib.colors import to_rgb
+        from matplotlib.patches import FancyBboxPatch
+
+        N, (L1, L2), (bx, by) = self.world.num_uavs, self.world.cfg.grid, self.world.cfg.base
+        # along the grid's side the base lies by, towards the grid's middle: the slots stay off the grid
+        along_y = not 0 <= bx < L1
+        middle = (L2 - 1) / 2 if along_y else (L1 - 1) / 2
+        sign = 1 if (by if along_y else bx) <= middle else -1
+        offsets = sign * np.arange(N, dtype=float)
+        self.slots = np.stack(
+            [np.full(N, bx, float), by + offsets] if along_y else [bx + offsets, np.full(N, by, float)], -1
+        )
+        lo, hi = self.slots.min(0) - 0.5, self.slots.max(0) + 0.5
+        # the label along the pad, on its side away from the grid
+        across = 0 if along_y else 1
+        label_at = self.slots.mean(0)
+        label_at[across] += -0.9 if (bx if along_y else by) < 0 else 0.9
+        self.base_box = (np.minimum(lo, label_at - 0.4), np.maximum(hi, label_at + 0.4))  # what the map must hold
+        self.ax.add_patch(
+            FancyBboxPatch(
+                lo + 0.06, *(hi - lo - 0.12), boxstyle="round,pad=0.06", facecolor="#e3efe5", edgecolor=BASE_COLOUR,
+                lw=1.2, zorder=0,
+            )
+        )  # fmt: skip
+        self.ax.text(
+            *label_at, "base", fontsize=self._font * 0.85, color=BASE_COLOUR, weight="bold", ha="center", va="center",
+            rotation=90 if along_y else 0, zorder=4,
+        )  # fmt: skip
+        self._gauge_frames = self.ax.add_collection(
+            PolyCollection([], facecolors="white", edgecolors="#505050", linewidths=0.6, zorder=4)
+        )
+        self._gauges = self.ax.add_collection(PolyCollection([], linewidths=0, zorder=4))
+        self._status_rgb = {status: to_rgb(colour) for status, colour in STATUS_COLOURS.items()}
+
     def _make_header(self) -> None:
         """Two lines: the label, the step and U against U*; the world and both rates."""
         top, font = 1 - MARGIN, self._font
@@ -139,7 +197,10 @@ class WorldRenderer:
         font = min(self._font * 0.85, 0.7 * row_points)
         panel.set_xlim(0, 1)
         panel.set_ylim(rows + 0.5, -0.5)
-        panel.text(0.12, 0, "UAV task  share", fontsize=font, va="center", family="monospace", color="#404040")
+        if self.energy is not None:  # a fourth column, the battery
+            font *= 0.85
+        head = "UAV task  share" if self.energy is None else "UAV task  share batt"
+        panel.text(0.12, 0, head, fontsize=font, va="center", family="monospace", color="#404040")
         self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
         self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
 
@@ -151,6 +212,9 @@ class WorldRenderer:
         pad = 0.7  # cells around the outermost node
         x_lo, x_hi = min(-0.5, nodes[:, 0].min() - pad), max(L1 - 0.5, nodes[:, 0].max() + pad)
         y_lo, y_hi = min(-0.5, nodes[:, 1].min() - pad), max(L2 - 0.5, nodes[:, 1].max() + pad)
+        if self.energy is not None:  # and the base's pad
+            (bx_lo, by_lo), (bx_hi, by_hi) = self.base_box
+            x_lo, x_hi, y_lo, y_hi = min(x_lo, bx_lo), max(x_hi, bx_hi), min(y_lo, by_lo), max(y_hi, by_hi)
         box, (H, W) = self.ax.get_position(), self.size
         label_px = 1.6 * self._font * DPI / 72  # room below the lowest node for its label
         box_w, box_h = box.width * W, box.height * H
@@ -160,7 +224,7 @@ class WorldRenderer:
         self.ax.set_xlim(cx - half_x, cx + half_x)
         self.ax.set_ylim(cy + half_y, cy - half_y)  # y down: "up" (action 0) moves a UAV up the picture
         cell = scale * 72 / DPI  # one cell in points
-        self._uavs.set_sizes([(0.72 * cell) ** 2])
+        self._uavs.set_sizes([((0.72 if self.energy is None else 0.62) * cell) ** 2])  # room for the gauge below
         self._focus.set_sizes([(0.98 * cell) ** 2])
         label_offset = (min(0.6 * cell, 14.0) / 2 + 1) * DPI / 72 / scale  # just below the marker, in cells
         for n in range(4):
@@ -177,6 +241,20 @@ class WorldRenderer:
             self.canvas.draw()
             self._backgrounds[key] = self.canvas.copy_from_bbox(self.figure.bbox)
         self._background = self._backgrounds[key]
+
+    def _draw_gauges(self, xy: np.ndarray, battery: np.ndarray) -> None:
+        """Each UAV's battery gauge under it: a frame of :data:`GAUGE_WIDTH` cells filled to its fraction ``battery``
+        ``[N]`` in the colour of its level."""
+        left, top = xy[:, 0] - GAUGE_WIDTH / 2, xy[:, 1] + GAUGE_TOP
+        bottom = top + GAUGE_HEIGHT
+
+        def boxes(right):
+            return np.stack([np.stack([left, top], -1), np.stack([right, top], -1),
+                             np.stack([right, bottom], -1), np.stack([left, bottom], -1)], 1)  # fmt: skip
+
+        self._gauge_frames.set_verts(boxes(left + GAUGE_WIDTH))
+        self._gauges.set_verts(boxes(left + GAUGE_WIDTH * battery))
+        self._gauges.set_facecolors([next(c for level, c in GAUGE_LEVELS if b >= level) for b in battery])
 
     def pixel_of(self, x: float, y: float) -> tuple[int, int]:
         """``(row, column)`` of the frame's pixel at the point ``(x, y)`` of the grid (cell units), as last drawn."""
@@ -203,12 +281,15 @@ class WorldRenderer:
             self._fitted = nodes.tobytes()
         cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()
         xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
-        away = (
-            cells >= cfg.num_cells
-        )  # out of service (returning, out, charging, waiting): at the base, linked to no one
-        xy[away] = cfg.base if away.any() else xy[away]
+        away = cells >= cfg.num_cells  # out of service (returning, out, charging, waiting): at the base, linked to none
         relaying = tasks == RELAYING
         colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255
+        if self.energy is not None:
+            status = state.status[index].cpu().numpy()
+            battery = (state.battery[index] / self.energy.capacity).clamp(0, 1).cpu().numpy()
+            xy[away] = self.slots[away]
+            colours[away] = np.reshape([self._status_rgb[int(s)] for s in status[away]], (-1, 3))
+            self._draw_gauges(xy, battery)
         self._uavs.set_offsets(xy)
         self._uavs.set_facecolors(colours)
         for i, text in enumerate(self._uav_labels):
@@ -238,7 +319,8 @@ class WorldRenderer:
         head = f"{self.label}  " if self.label else ""
         self._title.set_text(f"{head}step {int(state.steps[index])}   U {u:.3f} / U* {u_star:.3f} ({u / u_star:.1%})")
         note = "" if paid else unpaid_note
-        self._rates.set_text(f"world {index}   R_PU {r_pu:.3f}   R_SE {r_se:.3f}{note}")
+        serving = "" if self.energy is None else f"   serving {int((~away).sum())}/{cfg.num_uavs}"
+        self._rates.set_text(f"world {index}   R_PU {r_pu:.3f}   R_SE {r_se:.3f}{serving}{note}")
         # per UAV: its share of its network's sum inside the log
         contributions = world.cell_contributions[index].cpu().numpy()  # [C, 2]
         contributions = np.concatenate([contributions, np.zeros((1, 2))])  # row C: a UAV out of service adds nothing
@@ -246,7 +328,13 @@ class WorldRenderer:
         totals = np.where(relaying, own[relaying].sum(), own[~relaying].sum())
         shares = np.divide(own, totals, out=np.zeros_like(own), where=totals > 0)
         for i, row in enumerate(self._rows):
-            row.set_text(f"{i:>3} {TASK_NAMES[int(tasks[i])]} {shares[i]:4.0%}")
+            text = f"{i:>3} {TASK_NAMES[int(tasks[i])]} {shares[i]:4.0%}"
+            if self.energy is not None:  # the battery; out of service, the status and its steps left instead
+                if away[i]:
+                    steps_left = f" {int(state.timer[index, i])}" if status[i] in (RETURNING, CHARGING) else ""
+                    text = f"{i:>3} {STATUS_NAMES[int(status[i])] + steps_left:<10}"
+                text += f" {battery[i]:4.0%}"
+            row.set_text(text)
         self._row_dots.set_facecolors(colours)
         self.canvas.restore_region(self._background)
         for artist in self._dynamic:

@@ -672,3 +672,9 @@ class World:
     def battery(self) -> torch.Tensor | None:
         """``[B, N]`` float64 every UAV's battery now, in the energy model's units; ``None`` without one."""
         return None if self._s.battery is None else self._s.battery.clone()
+
+    @property
+    def status(self) -> torch.Tensor | None:
+        """``[B, N]`` every UAV's status now (:data:`~uavrl.envs.energy.SERVING` ... ``WAITING``); ``None`` without an
+        energy model."""
+        return None if self._s.status is None else self._s.status.clone()

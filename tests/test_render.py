@@ -14,7 +14,20 @@ from torchrl.record.loggers import CSVLogger
 
 from uavrl.cli import compose_config
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.envs.render import IDLE_LINK, RELAY_COLOUR, SENSE_COLOUR, WorldRenderer, render, tile
+from uavrl.envs.energy import CHARGING, WAITING
+from uavrl.envs.render import (
+    GAUGE_HEIGHT,
+    GAUGE_LEVELS,
+    GAUGE_TOP,
+    GAUGE_WIDTH,
+    IDLE_LINK,
+    RELAY_COLOUR,
+    SENSE_COLOUR,
+    STATUS_COLOURS,
+    WorldRenderer,
+    render,
+    tile,
+)
 from uavrl.envs.world import World
 from uavrl.logger import RunLogger
 from uavrl.render import as_overrides, render_checkpoint
@@ -63,6 +76,72 @@ def test_uavs_show_in_their_task_colour_where_they_are():
                 frame, row, col, SENSE_COLOUR, 2
             )
         world.step(torch.randint(0, 6, (2, 3)))
+
+
+def rgb(hex_colour: str) -> np.ndarray:
+    return np.array([int(hex_colour[i : i + 2], 16) for i in (1, 3, 5)], dtype=np.uint8)
+
+
+def gauge_pixels(frame, renderer, x, y) -> dict[str, int]:
+    """The pixels of each gauge colour on the row through the middle of the gauge under the UAV at cell ``(x, y)``."""
+    row, _ = renderer.pixel_of(x, y + GAUGE_TOP + GAUGE_HEIGHT / 2)
+    _, left = renderer.pixel_of(x - 0.5, y)
+    _, right = renderer.pixel_of(x + 0.5, y)
+    line = frame[row, left:right]
+    return {colour: int((line == rgb(colour)).all(-1).sum()) for _, colour in GAUGE_LEVELS}
+
+
+def test_the_battery_gauge_is_as_long_as_the_battery_is_full_in_the_colour_of_its_level(hand_built):
+    cfg = make_config("paper", grid=(6, 6), num_uavs=3, energy="follow_up", base=(-1, 0))
+    capacity = cfg.step_energies.capacity
+    cells = (7, 22, 27)
+    world = hand_built(cfg, [2 * cell for cell in cells], [capacity, 0.45 * capacity, 0.1 * capacity])
+    renderer = WorldRenderer(world, width=960, height=720)  # a gauge of about 37 pixels
+    green, amber, red = (colour for _, colour in GAUGE_LEVELS)
+    for battery in ((1.0, 0.45, 0.1), (0.75, 0.3, 0.05), (0.5, 0.2, 0.0)):
+        world._s.battery = torch.tensor([battery], dtype=torch.float64) * capacity
+        frame = renderer.frame(0)
+        full = renderer.pixel_of(GAUGE_WIDTH, 0)[1] - renderer.pixel_of(0, 0)[1]  # the gauge's length in pixels
+        for cell, fraction in zip(cells, battery, strict=True):
+            drawn = gauge_pixels(frame, renderer, cell % 6, cell // 6)
+            level = green if fraction >= 0.5 else amber if fraction >= 0.2 else red
+            assert full > 30 and abs(drawn[level] - fraction * full) <= 1, (battery, cell, drawn, full)
+            assert sum(drawn.values()) == drawn[level]  # one colour
+    # the paper's model (no energy) draws no gauge
+    plain = World(make_config("paper", grid=(6, 6), num_uavs=3), 1)
+    plain.start_at(torch.tensor([[2 * cell for cell in cells]]))
+    plain_renderer = WorldRenderer(plain)
+    frame = plain_renderer.frame(0)
+    assert all(sum(gauge_pixels(frame, plain_renderer, c % 6, c // 6).values()) == 0 for c in cells)
+
+
+def test_a_uav_out_of_service_sits_at_the_base_in_its_status_colour():
+    """UAV i waits i cells from the base along the grid's side: a spare from the start, a UAV sent home later."""
+    cfg = make_config(
+        "paper", grid=(6, 6), num_uavs=2, energy="follow_up", base=(-1, 0), recharge_steps=3, num_spares=1
+    )
+    world = World(cfg, 1, seed=0)
+    world.reset()
+    renderer = WorldRenderer(world)
+    frame = renderer.frame(0)
+    waiting, charging = rgb(STATUS_COLOURS[WAITING]), rgb(STATUS_COLOURS[CHARGING])
+    row, col = renderer.pixel_of(-1, 2)  # the spare, UAV 2
+    assert colour_near(frame, row - 5, col, waiting)
+    assert renderer.pixel_of(-0.5, 0)[1] > col  # left of the grid
+    uav_0 = int(world.code[0, 0]) >> 1
+    x, y = uav_0 % 6, uav_0 // 6
+    assert colour_near(frame, renderer.pixel_of(x, y)[0] - 5, renderer.pixel_of(x, y)[1], SENSE_COLOUR) or (
+        colour_near(frame, renderer.pixel_of(x, y)[0] - 5, renderer.pixel_of(x, y)[1], RELAY_COLOUR)
+    )
+    # UAV 0 charging at the base: drawn at the base itself, gone from its cell
+    world._s.cell[0, 0], world._s.status[0, 0] = cfg.num_cells, CHARGING
+    frame = renderer.frame(0)
+    row, col = renderer.pixel_of(-1, 0)
+    assert colour_near(frame, row - 5, col, charging)
+    row, col = renderer.pixel_of(x, y)
+    assert not colour_near(frame, row - 5, col, SENSE_COLOUR, 2) and not colour_near(
+        frame, row - 5, col, RELAY_COLOUR, 2
+    )
 
 
 @pytest.mark.parametrize("preset", ["paper", "reference_code"])

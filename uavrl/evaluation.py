@@ -285,22 +285,25 @@ def evaluate(
         batteries = None
     else:
         batteries = [env.world.battery]
-        rollout = _mission_rollout(env, policy, start, horizon)
+        rollout = mission_rollout(env, policy, start, horizon)
         batteries.append(env.world.battery)
     steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
     steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
     return greedy_metrics(env.world, start, steps, u_star, references, gamma, batteries)
 
 
-def _mission_rollout(env, policy, start, horizon: int):
+def mission_rollout(env, policy, start, horizon: int, after_step=None):
     """``horizon`` steps of ``policy`` in ``env`` from ``start`` (a TorchRL rollout ``[B, H]``) with no reset: TorchRL's
-    rollout resets a world whose episode ended, and a mission is played once."""
+    rollout resets a world whose episode ended, and a mission is played once.  ``after_step(env)``, if given, is
+    called after every step (e.g. to read ``env.world``'s batteries)."""
     from torchrl.envs.utils import step_mdp
 
     frames, tensordict = [], start
     for _ in range(horizon):
         tensordict.update(policy(tensordict))
         frames.append(env.step(tensordict))
+        if after_step is not None:
+            after_step(env)
         tensordict = step_mdp(frames[-1], keep_other=True, exclude_action=False)
     return torch.stack(frames, 1)
 

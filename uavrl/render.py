@@ -7,6 +7,10 @@ start: the policy left, the oracle right), and writes ``video.gif`` (and
 ``video.mp4`` where PyAV is installed: ``pip install -e ".[video]"``) beside the
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
 checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
+
+Under an energy model it also writes ``battery.png`` (:func:`uavrl.plots.mission_figure`): the batteries of the
+mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
+the whole mission), one strip per UAV with its returns, arrivals, recharges and entries marked.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ def render_checkpoint(cfg: DictConfig) -> list[Path]:
     import torch
 
     from uavrl.envs.world import resolve_device
+    from uavrl.plots import mission_figure
     from uavrl.video import comparison_frames, save_videos, video_settings
 
     torch.set_num_threads(int(cfg.num_threads))
@@ -37,8 +42,18 @@ def render_checkpoint(cfg: DictConfig) -> list[Path]:
         print(f"warning: {fallback}", file=sys.stderr)
     env_cfg = model_config(saved)
     check_video_cost(cfg, env_cfg)
-    frames = comparison_frames(agent.policies()[0], env_cfg, **video_settings(cfg, device))
-    return save_videos(frames, output_dir(cfg.checkpoint), int(cfg.eval.video_fps))
+    policy, out_dir = agent.policies()[0], output_dir(cfg.checkpoint)
+    frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
+    written = save_videos(frames, out_dir, int(cfg.eval.video_fps))
+    if env_cfg.energy != "none":  # the mission's batteries
+        horizon, seed = cfg.eval.horizon, int(cfg.eval.seed)
+        label = f"{saved.agent.name} (greedy)"
+        written.append(
+            mission_figure(
+                policy, env_cfg, out_dir / "battery.png", horizon=horizon, seed=seed, device=device, label=label
+            )
+        )
+    return written
 
 
 def print_videos(cfg: DictConfig, _overrides) -> None:

@@ -44,6 +44,7 @@ import yaml
 
 from uavrl.envs.limits import default_horizon
 from uavrl.io import quoted, save_text
+from uavrl.plots import pyplot, save_figure
 from uavrl.rules import Rule, rules_of, shown, whole
 from uavrl.runs import flat_settings
 from uavrl.schema import RunSchema
@@ -413,30 +414,6 @@ def curves(cell: Cell) -> tuple[np.ndarray, np.ndarray] | None:
 
 def file_stem(label: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in label)
-
-
-def pyplot():
-    """matplotlib's pyplot without a display."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save_figure(figure, path: Path) -> Path:
-    """The figure as a PNG written atomically (a temporary file renamed over it), then closed."""
-    import io
-
-    from uavrl.io import save_bytes
-
-    figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
-    save_bytes(buffer.getvalue(), path)
-    pyplot().close(figure)
-    return path
 
 
 def baseline_lines(ax, cells: list[Cell], value) -> None:

@@ -318,12 +318,11 @@ def read_history(path: Path, size: int) -> dict:
 
 
 def figures(cfg: DictConfig) -> list[Path]:
-    import matplotlib
     import torch
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from uavrl.plots import pyplot
 
+    plt = pyplot()
     size = int(cfg.figure_grid)
     out_dir = output_dir(cfg)
     path = out_dir / f"history_{size}x{size}.pt"
