@@ -36,7 +36,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs.channel import fixed_layout
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.grid import cells_of, grid_neighbours
+from uavrl.envs.grid import cells_of, grid_neighbours, on_grid
 from uavrl.envs.world import NODE_FEATURES
 
 ADVICE = (
@@ -61,7 +61,12 @@ class RunEnvironment:
         scale = torch.tensor([L1, L2, cfg.height], dtype=torch.float64)
         # as the env's state holds them
         self.nodes = None if self.layout_nodes is None else (self.layout_nodes / scale).flatten().float()
-        self.observation_size = _OWN_FEATURES + 3 * (self.num_uavs - 1)
+        # under an energy model a UAV out of service is shown at the base, off the grid, and every observation ends
+        # with the UAVs' batteries and service flags
+        self.base = None if cfg.energy == "none" else torch.tensor(cfg.base)
+        self.observation_size = (
+            _OWN_FEATURES + 3 * (self.num_uavs - 1) + (0 if self.base is None else 2 * self.num_uavs)
+        )
         self._checked_shape = None  # the batch shape whose tensordicts were checked in full
         self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
 
@@ -118,8 +123,12 @@ class RunEnvironment:
         first row and column (a UAV off each, where the grid has more than one)."""
         L1, L2 = self.grid
         x, y = positions[..., 0], positions[..., 1]
-        if bool((x < 0).any() | (x >= L1).any() | (y < 0).any() | (y >= L2).any()):
-            raise self._refuse("the tensordict's positions leave that grid")
+        serving = on_grid(positions, self.grid)
+        at_base = torch.zeros_like(serving) if self.base is None else (positions == self.base).all(-1)
+        if not bool((serving | at_base).all()):
+            raise self._refuse(
+                "the tensordict's positions leave that grid" + ("" if self.base is None else " and base")
+            )
         observation = td.get(("agents", "observation"), None)
         if observation is not None:
             observation = observation.cpu()
@@ -131,7 +140,8 @@ class RunEnvironment:
             if not torch.allclose(observation[..., :2], expected, atol=1e-5):
                 raise self._refuse("the tensordict's observed positions are scaled for another grid")
             leaves = observation[..., 5:_OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
-            if not torch.equal(leaves, self.neighbours[cells_of(positions, L1)] < 0):
+            edges = self.neighbours[cells_of(positions, L1).where(serving, 0)] < 0
+            if not torch.equal(leaves[serving], edges[serving]):
                 raise self._refuse("the tensordict's observations mark the grid's edges elsewhere")
         state = td.get("state", None)
         if state is not None and self.nodes is not None:

@@ -297,3 +297,18 @@ def test_the_greedy_rule_keeps_a_returning_uavs_cell_for_the_step():
     assert greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]])).tolist() == [[6, 5]]
     allowed[0, :, 6] = False  # without return, UAV 0 moves right only if UAV 1 leaves first: it does not
     assert greedy(values, allowed, torch.tensor([[[0, 0], [1, 0]]]), torch.tensor([[0, 0]])).tolist() == [[4, 5]]
+
+
+def test_a_policy_without_an_environment_acts_for_uavs_at_the_base_and_refuses_other_off_grid_positions():
+    from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+    from uavrl.agents.env_check import CheckedPolicy
+
+    options = dict(grid=(6, 6), num_uavs=2, energy="rotary_wing", base=(-1, 0), recharge_steps=5, num_spares=1)
+    env = UAVSpectrumEnv(batch_size=2, battery_wh=1, **options)
+    td = env.rollout(80, OraclePolicy(env.cfg))  # no env bound: every tensordict checked in full, spares at the base
+    assert bool((td["positions"] == torch.tensor([-1, 0])).all(-1).any())
+    policy = CheckedPolicy(RandomPolicy(0), env.cfg)
+    first = env.reset()
+    first["positions"][0, 0] = torch.tensor([-1, 1])  # off the grid, and not the base
+    with pytest.raises(ValueError, match="positions leave that grid and base"):
+        policy(first)
