@@ -61,7 +61,10 @@ class RunEnvironment:
         scale = torch.tensor([L1, L2, cfg.height], dtype=torch.float64)
         # as the env's state holds them
         self.nodes = None if self.layout_nodes is None else (self.layout_nodes / scale).flatten().float()
-        self.observation_size = _OWN_FEATURES + 3 * (self.num_uavs - 1)
+        # an energy model adds every UAV's battery and service flag; a UAV out of service is shown at the base
+        energy = cfg.energy != "none"
+        self.observation_size = _OWN_FEATURES + 3 * (self.num_uavs - 1) + 2 * self.num_uavs * energy
+        self.base = torch.tensor(cfg.base) if energy else None
         self._checked_shape = None  # the batch shape whose tensordicts were checked in full
         self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
 
@@ -118,7 +121,9 @@ class RunEnvironment:
         first row and column (a UAV off each, where the grid has more than one)."""
         L1, L2 = self.grid
         x, y = positions[..., 0], positions[..., 1]
-        if bool((x < 0).any() | (x >= L1).any() | (y < 0).any() | (y >= L2).any()):
+        on_grid = (x >= 0) & (x < L1) & (y >= 0) & (y < L2)
+        at_base = torch.zeros_like(on_grid) if self.base is None else (positions == self.base).all(-1)
+        if not bool((on_grid | at_base).all()):
             raise self._refuse("the tensordict's positions leave that grid")
         observation = td.get(("agents", "observation"), None)
         if observation is not None:
@@ -131,7 +136,8 @@ class RunEnvironment:
             if not torch.allclose(observation[..., :2], expected, atol=1e-5):
                 raise self._refuse("the tensordict's observed positions are scaled for another grid")
             leaves = observation[..., 5:_OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
-            if not torch.equal(leaves, self.neighbours[cells_of(positions, L1)] < 0):
+            edges = self.neighbours[cells_of(positions.where(on_grid[..., None], 0), L1)] < 0
+            if not torch.equal(leaves[on_grid], edges[on_grid]):
                 raise self._refuse("the tensordict's observations mark the grid's edges elsewhere")
         state = td.get("state", None)
         if state is not None and self.nodes is not None:

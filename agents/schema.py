@@ -96,14 +96,21 @@ class DQNSchema:
 
 @dataclass
 class BaselineSchema:
-    """``agent=random`` and ``agent=oracle`` (:mod:`uavrl.agents.baselines`): nothing to train."""
+    """``agent=random``, ``agent=oracle`` (:mod:`uavrl.agents.baselines`) and ``agent=planner``
+    (:mod:`uavrl.agents.planner`): nothing to train."""
 
     name: str = setting("random")
     memory_budget: REAL = setting(DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the evaluation; more is refused")
 
 
 # the schema of each agent of uavrl.agents.AGENTS, by name
-AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}
+AGENT_SCHEMAS = {
+    "tabular": TabularSchema,
+    "dqn": DQNSchema,
+    "random": BaselineSchema,
+    "oracle": BaselineSchema,
+    "planner": BaselineSchema,
+}
 
 
 def agent_rules(name: str) -> dict[str, Rule]:
