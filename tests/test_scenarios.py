@@ -162,5 +162,7 @@ def test_the_energy_scenarios_missions(name, mission, compose_cfg):
 
 def test_the_tabular_agent_refuses_energy_in_one_line_with_its_size(compose_cfg):
     cfg = compose_cfg("agent=tabular", "env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=5")
-    with pytest.raises(ValueError, match=r"^energy='rotary_wing' is invalid for agent=tabular: .* rows; use agent=dqn$"):
+    with pytest.raises(
+        ValueError, match=r"^energy='rotary_wing' is invalid for agent=tabular: .* rows; use agent=dqn$"
+    ):
         check_settings(cfg)
