@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -40,17 +41,19 @@ COLUMNS = {  # metric: header
 }
 
 
-def run(agent: str, scenario: str, seed: int, workdir: Path, extra: list[str]) -> tuple[dict, float]:
-    """One whole command's metrics and its wall seconds."""
+def run(agent: str, scenario: str, seed: int, workdir: Path, extra: list[str]) -> tuple[dict, float, float]:
+    """One whole command's metrics, its wall seconds and its CPU seconds (user + system: on a shared machine the
+    wall time grows with the load, the CPU time much less)."""
     run_dir = workdir / f"{scenario}-{agent}-{seed}"
     argv = [sys.executable, "-m", "uavrl.train", f"agent={agent}", f"scenario={scenario}", f"seed={seed}"]
     argv += ["progress=false", f"run_dir={run_dir}", *extra]
-    started = time.perf_counter()
+    started, before = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
     result = subprocess.run(argv, capture_output=True, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
-    seconds = time.perf_counter() - started
+    seconds, after = time.perf_counter() - started, resource.getrusage(resource.RUSAGE_CHILDREN)
     if result.returncode:
         raise SystemExit(f"{' '.join(argv[1:])} failed:\n{result.stderr[-2000:]}")
-    return json.loads((run_dir / "metrics.json").read_text()), seconds
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return json.loads((run_dir / "metrics.json").read_text()), seconds, cpu
 
 
 def cell(values: list[float]) -> str:
@@ -65,16 +68,16 @@ def cell(values: list[float]) -> str:
 
 def table(scenario: str, agents, seeds, workdir: Path, extra: list[str]) -> None:
     print(f"\n### {scenario}\n")
-    print("| agent | runs | " + " | ".join(COLUMNS.values()) + " | wall per run (s) |")
-    print("|---|---|" + "---|" * (len(COLUMNS) + 1))
+    print("| agent | runs | " + " | ".join(COLUMNS.values()) + " | wall per run (s) | CPU per run (s) |")
+    print("|---|---|" + "---|" * (len(COLUMNS) + 2))
     for agent in agents:
         results = [
             run(agent, scenario, seed, workdir, extra) for seed in (seeds[:1] if agent in DETERMINISTIC else seeds)
         ]
-        metrics = [m for m, _ in results]
+        metrics = [m for m, _, _ in results]
         row = [cell([m[key] for m in metrics if key in m]) for key in COLUMNS]
-        walls = cell([seconds for _, seconds in results])
-        print(f"| {agent} | {len(results)} | " + " | ".join(row) + f" | {walls} |", flush=True)
+        row += [cell([wall for _, wall, _ in results]), cell([cpu for _, _, cpu in results])]
+        print(f"| {agent} | {len(results)} | " + " | ".join(row) + " |", flush=True)
 
 
 def rule_ablation(scenario: str) -> None:

@@ -158,14 +158,3 @@ def test_the_energy_scenarios_missions(name, mission, compose_cfg):
     energies = model.step_energies
     hover_lifetime = energies.capacity / energies.stay
     assert 100 <= mission <= 250 if name == "energy_6x6" else mission > 4 * hover_lifetime
-
-
-def test_the_tabular_agent_refuses_energy_in_one_line_with_its_size(compose_cfg):
-    """Where its table cannot hold the batteries: the tabular agent's own refusal, with the table's size."""
-    from uavrl.agents import agent_class
-
-    cfg = compose_cfg("agent=tabular", "scenario=paper_6x6", "env.energy=rotary_wing", "env.base=[-1,0]")
-    with pytest.raises(
-        ValueError, match=r"^energy='rotary_wing' is invalid for agent=tabular: .* = 1.17e\+08 rows; use"
-    ):
-        agent_class("tabular")(model_config(cfg), cfg, "cpu", 0)
