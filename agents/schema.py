@@ -71,7 +71,8 @@ class DQNSchema:
     objective: str = setting(
         "log_gap",
         one_of("delta", "log_gap", what="objectives"),
-        "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward",
+        "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward "
+        "(env.reward: delta by default, delivered for a mission's data)",
     )
     gap_floor: REAL = setting(0.0001, positive(), "log_gap only: gaps below this fraction of U* count as closed")
     gamma: REAL = setting(0.7, UNIT, "the discount; 0.9 left greedy policies oscillating near U* (BENCHMARKS.md)")
