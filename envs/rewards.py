@@ -3,7 +3,8 @@
 ``delta`` and ``best_so_far`` (and :func:`team_reward`, which picks one of them and tracks the episode's best) use
 arithmetic only, so the environment and the tabular learner's torch loop (batched tensors) and its compiled loops
 (numba compiles these same functions for scalars) compute them from the same source; ``log_gap`` is the DQN's
-objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.  :class:`TeamReward` is the
+objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility; ``delivered``
+(:func:`delivered_reward`) is a mission's data, step by step.  :class:`TeamReward` is the
 World's reward part: ``env.reward`` dispatched to these functions, with ``log_gap``'s mean-channel rule.
 
 Example:
@@ -92,8 +93,8 @@ class TeamReward:
 
     def __call__(self, rates, prev_rates, best, u_star, mean_rates) -> tuple[torch.Tensor, torch.Tensor]:
         """``(reward [B], best [B])`` of a step from ``prev_rates`` to ``rates``: ``best`` is the episode's best
-        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``, ``delivered``),
-        ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
+        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``,
+        ``delivered``), ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
         if self.kind == "log_gap":
             if self.reads_mean_channel:
                 rates, prev_rates = mean_rates()
