@@ -1,4 +1,5 @@
-"""Team agents (tabular team Q-learning, a factored deep Q-network) and the baselines (random, oracle).
+"""Team agents (tabular team Q-learning, a factored deep Q-network) and the baselines (random, oracle, the
+energy-aware planner).
 
 Every agent subclasses :class:`~uavrl.agents.base.Agent` (the contract that
 ``uavrl.train`` and ``uavrl.evaluate`` drive) and has a name in :data:`AGENTS`.
@@ -44,7 +45,19 @@ def _oracle() -> type[Agent]:
     return OracleAgent
 
 
-AGENTS: dict[str, Callable[[], type[Agent]]] = {"tabular": _tabular, "dqn": _dqn, "random": _random, "oracle": _oracle}
+def _planner() -> type[Agent]:
+    from .planner import PlannerAgent
+
+    return PlannerAgent
+
+
+AGENTS: dict[str, Callable[[], type[Agent]]] = {
+    "tabular": _tabular,
+    "dqn": _dqn,
+    "random": _random,
+    "oracle": _oracle,
+    "planner": _planner,
+}
 
 
 def agent_class(name: str) -> type[Agent]:

@@ -89,7 +89,7 @@ class OraclePolicy(TensorDictModuleBase):
         self.in_keys = ["positions", "tasks"] + (["nodes"] if cfg.layout == "random" else [])
         self.bind_env(env)
         self.neighbours = grid_neighbours(cfg.grid).tolist()
-        self._targets: dict[int, tuple] = {}  # world -> (its nodes, optimal cells, optimal tasks)
+        self._targets: dict[int, tuple] = {}  # world -> (its nodes, contributions, direct, optimal cells, tasks)
         self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
 
     def bind_env(self, env) -> OraclePolicy:
@@ -110,13 +110,15 @@ class OraclePolicy(TensorDictModuleBase):
             )
         return nodes.reshape(-1, 4, 3)
 
-    def _optimal_sets(self, world: int, nodes) -> tuple[torch.Tensor, torch.Tensor]:
+    def _world_tables(self, world: int, nodes) -> tuple[torch.Tensor, ...]:
+        """One world's ``(contributions [C, 2], direct [2], optimal cells, optimal tasks)``, kept per layout."""
         if nodes is None:
             cached = self._targets.get(0)
             if cached is None:
                 contributions, direct = self._fixed[0][0], self._fixed[1][0]
-                cached = self._targets[0] = (None, *self._optimal_configurations(contributions, direct))
-            return cached[1], cached[2]
+                optimal = self._optimal_configurations(contributions, direct)
+                cached = self._targets[0] = (None, contributions, direct, *optimal)
+            return cached[1:]
         at = nodes[world]
         cached = self._targets.get(world)
         if cached is None or not torch.equal(cached[0], at):
@@ -124,8 +126,12 @@ class OraclePolicy(TensorDictModuleBase):
             xyz = cell_xyz(self.cfg, torch.float64, at.device)
             contributions = relay_contributions(link_gains(xyz, at[None], self.cfg), self.cfg)[0]
             direct = direct_terms(at[None], self.cfg)[0]
-            cached = self._targets[world] = (at.clone(), *self._optimal_configurations(contributions, direct))
-        return cached[1], cached[2]
+            optimal = self._optimal_configurations(contributions, direct)
+            cached = self._targets[world] = (at.clone(), contributions, direct, *optimal)
+        return cached[1:]
+
+    def _optimal_sets(self, world: int, nodes) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._world_tables(world, nodes)[2:]
 
     def _optimal_configurations(self, contributions: torch.Tensor, direct: torch.Tensor):
         """Every optimal configuration ``(cells, tasks)`` of one world's tables ``[C, 2]``, ``[2]``."""

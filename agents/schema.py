@@ -71,7 +71,8 @@ class DQNSchema:
     objective: str = setting(
         "log_gap",
         one_of("delta", "log_gap", what="objectives"),
-        "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward",
+        "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward "
+        "(env.reward: delta by default, delivered for a mission's data)",
     )
     gap_floor: REAL = setting(0.0001, positive(), "log_gap only: gaps below this fraction of U* count as closed")
     gamma: REAL = setting(0.7, UNIT, "the discount; 0.9 left greedy policies oscillating near U* (BENCHMARKS.md)")
@@ -96,14 +97,21 @@ class DQNSchema:
 
 @dataclass
 class BaselineSchema:
-    """``agent=random`` and ``agent=oracle`` (:mod:`uavrl.agents.baselines`): nothing to train."""
+    """``agent=random``, ``agent=oracle`` (:mod:`uavrl.agents.baselines`) and ``agent=planner``
+    (:mod:`uavrl.agents.planner`): nothing to train."""
 
     name: str = setting("random")
     memory_budget: REAL = setting(DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the evaluation; more is refused")
 
 
 # the schema of each agent of uavrl.agents.AGENTS, by name
-AGENT_SCHEMAS = {"tabular": TabularSchema, "dqn": DQNSchema, "random": BaselineSchema, "oracle": BaselineSchema}
+AGENT_SCHEMAS = {
+    "tabular": TabularSchema,
+    "dqn": DQNSchema,
+    "random": BaselineSchema,
+    "oracle": BaselineSchema,
+    "planner": BaselineSchema,
+}
 
 
 def agent_rules(name: str) -> dict[str, Rule]:

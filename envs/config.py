@@ -30,7 +30,7 @@ NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
 FADINGS = ("none", "rayleigh", "los_nlos", "rician")  # uavrl.envs.fading: one part each
-REWARDS = ("delta", "best_so_far", "log_gap")
+REWARDS = ("delta", "best_so_far", "log_gap", "delivered")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
 RESET_POSITIONS = ("random", "keep")

@@ -3,7 +3,8 @@
 ``delta`` and ``best_so_far`` (and :func:`team_reward`, which picks one of them and tracks the episode's best) use
 arithmetic only, so the environment and the tabular learner's torch loop (batched tensors) and its compiled loops
 (numba compiles these same functions for scalars) compute them from the same source; ``log_gap`` is the DQN's
-objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility.  :class:`TeamReward` is the
+objective and ``env.reward="log_gap"`` for any algorithm, on the mean-channel utility; ``delivered``
+(:func:`delivered_reward`) is a mission's data, step by step.  :class:`TeamReward` is the
 World's reward part: ``env.reward`` dispatched to these functions, with ``log_gap``'s mean-channel rule.
 
 Example:
@@ -54,6 +55,7 @@ def team_reward(r_pu, r_se, prev_r_pu, prev_r_se, best, use_best_so_far, beta1, 
     return delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2), best
 
 
+U_STAR_REWARDS = ("log_gap", "delivered")  # the rewards that read each layout's U* (the World computes it for them)
 LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count as closed
 
 
@@ -70,6 +72,13 @@ def log_gap_reward(
     return log_gap_potential(utility, u_star, floor) - log_gap_potential(prev_utility, u_star, floor)
 
 
+def delivered_reward(rates: torch.Tensor, u_star: torch.Tensor) -> torch.Tensor:
+    """``reward="delivered"``: the data ``(R_PU + R_SE) slot_s`` the step delivered (``rates`` ``[B, 2]``) in units
+    of ``U* slot_s``, the most one step can deliver: a mission's rewards add up to its delivered data
+    (``eval/delivered_bit_per_hz``) over ``U* slot_s``."""
+    return rates.sum(-1) / u_star
+
+
 class TeamReward:
     """The reward part: ``env.reward`` for a step of ``B`` worlds, from their rates ``[B, 2]`` (R_PU, R_SE).
 
@@ -84,11 +93,13 @@ class TeamReward:
 
     def __call__(self, rates, prev_rates, best, u_star, mean_rates) -> tuple[torch.Tensor, torch.Tensor]:
         """``(reward [B], best [B])`` of a step from ``prev_rates`` to ``rates``: ``best`` is the episode's best
-        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``),
-        ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
+        ``R_PU + R_SE`` (``best_so_far``'s memory), ``u_star`` ``[B]`` or ``[1]`` each layout's ``U*`` (``log_gap``,
+        ``delivered``), ``mean_rates()`` the mean-channel ``(rates, prev_rates)``."""
         if self.kind == "log_gap":
             if self.reads_mean_channel:
                 rates, prev_rates = mean_rates()
             return log_gap_reward(rates.sum(-1), prev_rates.sum(-1), u_star), best
+        if self.kind == "delivered":
+            return delivered_reward(rates, u_star), best
         r_pu, r_se, use_best = rates[:, 0], rates[:, 1], self.kind == "best_so_far"
         return team_reward(r_pu, r_se, prev_rates[:, 0], prev_rates[:, 1], best, use_best, *self.betas)

@@ -46,7 +46,7 @@ from .grid import cells_of, decode_joint_actions, joint_action_valid, targets_va
 from .layouts import Layouts
 from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .optimum import optimum as exact_optimum
-from .rewards import TeamReward
+from .rewards import U_STAR_REWARDS, TeamReward
 
 SEED_LIMIT = 2**63  # world seeds are int64
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
@@ -193,7 +193,7 @@ class World:
         self._code_rate = torch.zeros(Bt, K, 3, dtype=f64, device=dev)  # adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, NODE_FEATURES, dtype=torch.float32, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
-        self._u_star = torch.zeros(Bt, dtype=f64, device=dev)  # reward="log_gap" only: each layout's exact U*
+        self._u_star = torch.zeros(Bt, dtype=f64, device=dev)  # U_STAR_REWARDS only: each layout's exact U*
         self._fading_table = None  # the fading part's table, its shape the part's: made by the first layout
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
         # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
@@ -338,7 +338,7 @@ class World:
             if self._slots > C:  # zero gains at the cell of a UAV out of service: it adds nothing
                 fading_table = torch.cat([fading_table, fading_table.new_zeros(k, 1, *fading_table.shape[2:])], 1)
             tables["_fading_table"] = fading_table
-        if cfg.reward == "log_gap":
+        if cfg.reward in U_STAR_REWARDS:
             tables["_u_star"] = exact_optimum(contrib, tables["_direct"], cfg)[0]
         for name, rows in tables.items():
             if k == len(self._nodes):  # every world: a new table (no scatter)

@@ -27,6 +27,7 @@ TINY = {
     ],
     "random": [],
     "oracle": [],
+    "planner": [],
 }
 
 

@@ -327,3 +327,42 @@ def test_the_environments_joint_action_mask_once_every_uav_is_out():
     assert (env.world._s.status != 0).all()
     valid = env.joint_action_mask()
     assert valid.shape == (2, 36) and valid.sum(-1).tolist() == [1, 1] and valid[:, SENSE + 6 * SENSE].all()
+
+
+def test_the_delivered_reward_is_each_steps_data_over_the_best_step():
+    """reward=delivered: ``(R_PU + R_SE) / U*`` of each step, U* by brute force over every configuration here."""
+    from uavrl.envs import UAVSpectrumEnv
+
+    cfg = make_config(
+        "paper", grid=(3, 3), num_uavs=2, energy="rotary_wing", base=(-1, 0), battery_wh=0.5, reward="delivered"
+    )
+    env = UAVSpectrumEnv(batch_size=3, config=cfg.replace(max_steps=12), seed=5)
+    td = env.rollout(12, break_when_any_done=False)
+    cells = [(x, y) for y in range(3) for x in range(3)]
+    pairs = [(a, b) for a, b in itertools.product(cells, cells) if a != b]
+    tasks = list(itertools.product((0, 1), repeat=2))
+    positions = torch.tensor([[p for p in pairs for _ in tasks]] * 3)
+    all_tasks = torch.tensor([[t for _ in pairs for t in tasks]] * 3)
+    u_star = env.world.utility(positions, all_tasks)[2].max(-1).values  # [3]
+    delivered = (td["next", "r_pu"] + td["next", "r_se"]).squeeze(-1).double() / u_star[:, None]
+    assert torch.allclose(td["next", "reward"].squeeze(-1).double(), delivered, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "energy", ["energy=follow_up", "energy=rotary_wing", "energy=rotary_wing recharge_steps=3 num_spares=1"]
+)
+def test_the_dqn_trains_on_the_delivered_reward_under_every_energy_model(energy, compose_cfg):
+    from uavrl.agents import agent_class
+    from uavrl.config import model_config
+
+    cfg = compose_cfg(
+        *("agent=dqn", "agent.iterations=2", "env.max_steps=20", "agent.worlds=4", "agent.hidden=16"),
+        *("agent.batch_size=16", "agent.buffer_size=64", "agent.updates=2", "agent.learning_starts=8"),
+        *("env.grid=[3,3]", "env.base=[-1,0]", "env.reward=delivered", "agent.objective=delta", "agent.gamma=0.99"),
+        *(f"env.{option}" for option in energy.split()),
+        *(["env.battery_wh=0.5"] if "rotary_wing" in energy else []),
+    )
+    agent = agent_class("dqn")(model_config(cfg), cfg, torch.device("cpu"), 0)
+    metrics = [agent.train_iteration() for _ in range(agent.num_iterations)]
+    assert all(math.isfinite(value) for m in metrics for value in m.values())
+    assert metrics[-1]["train/sum_utility"] > 0

@@ -24,6 +24,20 @@ SCENARIOS = {  # name: (grid, UAVs, preset, option values, agents)
         {"channel": "al_hourani", "environment": "urban"},
         {"dqn", "random", "oracle"},
     ),
+    "energy_6x6": (
+        (6, 6),
+        2,
+        "paper",
+        {"energy": "rotary_wing", "base": (-1, 0), "battery_wh": 5.0, "recharge_steps": None, "num_spares": 0},
+        {"dqn", "random", "oracle", "planner"},
+    ),
+    "persistent_10x10": (
+        (10, 10),
+        6,
+        "paper",
+        {"energy": "rotary_wing", "base": (-1, 0), "battery_wh": 6.0, "recharge_steps": 60, "num_spares": 2},
+        {"dqn", "random", "oracle", "planner"},
+    ),
 }
 
 
@@ -35,6 +49,7 @@ def test_the_scenarios_are_the_configs_shipped():
 
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_each_scenario_sets_its_model_and_agents(name, compose_cfg):
+    """Every agent of the registry composes with every scenario; those the scenario names pass the checks."""
     grid, uavs, preset, options, agents = SCENARIOS[name]
     for agent in sorted(AGENTS):
         cfg = compose_cfg(f"agent={agent}", f"scenario={name}")
@@ -57,6 +72,12 @@ def test_each_scenario_sets_its_model_and_agents(name, compose_cfg):
         (["agent=dqn", "scenario=large_20x20"], {"agent.iterations": 500, "env.max_steps": 40}),
         (["agent=dqn", "scenario=large_20x20", "agent.iterations=7", "env.max_steps=9"], {"agent.iterations": 7}),
         (["agent=oracle", "scenario=large_20x20"], {"env.max_steps": 100}),  # nothing to train: the env's default
+        (
+            ["agent=dqn", "scenario=energy_6x6"],
+            {"env.reward": "delivered", "agent.objective": "delta", "agent.gamma": 0.99, "env.max_steps": 145},
+        ),
+        (["agent=planner", "scenario=energy_6x6"], {"env.reward": None, "env.max_steps": 100}),
+        (["agent=dqn", "scenario=persistent_10x10"], {"env.reward": "delivered", "eval.horizon": 500}),
     ],
     ids=str,
 )
@@ -123,3 +144,17 @@ def test_each_benchmarl_task_of_a_scenario_points_at_it(tmp_path):
                 name,
                 name,
             )
+
+
+@pytest.mark.parametrize("name, mission", [("energy_6x6", 145), ("persistent_10x10", 500)])
+def test_the_energy_scenarios_missions(name, mission, compose_cfg):
+    """energy_6x6's mission ends with the batteries (the evaluation's default horizon: every UAV home from a full
+    battery); persistent_10x10's is eval.horizon, over four lifetimes of a battery that hovers."""
+    from uavrl.envs.limits import evaluation_horizon
+
+    cfg = compose_cfg("agent=planner", f"scenario={name}")
+    model = model_config(cfg)
+    assert (cfg.eval.horizon or evaluation_horizon(model)) == mission
+    energies = model.step_energies
+    hover_lifetime = energies.capacity / energies.stay
+    assert 100 <= mission <= 250 if name == "energy_6x6" else mission > 4 * hover_lifetime

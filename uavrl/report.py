@@ -64,7 +64,7 @@ METRICS = {
     "eval/energy_per_bit": "energy per bit",
     "train_seconds": "training s",
 }
-BASELINES = ("random", "oracle")
+BASELINES = ("random", "oracle", "planner")
 CONFIDENCE = 0.95
 FEW_SEEDS = 3  # cells with fewer seeds are flagged
 IQM_SEEDS = 5  # the interquartile mean is shown from this many seeds on

@@ -54,10 +54,10 @@ class TeamQLearner:
             refuse(name, value, rule_of(TabularSchema, name))
         if backend == "numba" and torch.device(device).type != "cpu":
             raise ValueError(f"backend='numba' runs on the CPU, not device={device!r}: use backend='torch' there")
-        if cfg.reward == "log_gap":
+        if cfg.reward in ("log_gap", "delivered"):
             raise ValueError(
-                "env.reward='log_gap' is invalid for agent=tabular: its table learns the paper's reward 'delta' or the "
-                "authors' 'best_so_far'; log_gap is for agent=dqn and BenchMARL's algorithms"
+                f"env.reward={cfg.reward!r} is invalid for agent=tabular: its table learns the paper's reward 'delta' "
+                f"or the authors' 'best_so_far'; {cfg.reward} is for agent=dqn and BenchMARL's algorithms"
             )
         num_tables = 1 if shared_table else int(runs)
         if not cfg.has_state_index:
