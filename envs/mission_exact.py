@@ -63,6 +63,11 @@ class MissionTooLarge(ValueError):
     """The solver would need more than its memory budget (the message says how much, and why)."""
 
 
+class NotCovered(ValueError):
+    """A model or a state the solver does not cover (the message says which): an energy-free or random channel,
+    recharging, more than 2 UAVs, or a leaving test decided within float64 rounding."""
+
+
 @dataclass
 class MissionOptimum:
     """The exact optimum of the missions of a World's starts (:func:`optimal_mission`).
@@ -98,16 +103,16 @@ def check_world(world) -> None:
     """One-line refusals of what the solver does not cover, before any work."""
     cfg = world.cfg
     if world.energy is None:
-        raise ValueError("the exact mission solver needs an energy model: env.energy is 'none' (use envs.exact)")
+        raise NotCovered("the exact mission solver needs an energy model: env.energy is 'none' (use envs.exact)")
     if world.fading.random:
-        raise ValueError(f"the exact mission solver reads deterministic channels: fading={cfg.fading!r} is random")
+        raise NotCovered(f"the exact mission solver reads deterministic channels: fading={cfg.fading!r} is random")
     if cfg.recharge_steps is not None:
-        raise ValueError(
+        raise NotCovered(
             f"the exact mission solver has no recharging: recharge_steps={cfg.recharge_steps} (a UAV out of service "
             "never serves again is what keeps its states few)"
         )
     if world.num_uavs > MAX_UAVS:
-        raise ValueError(f"num_uavs={world.num_uavs} is invalid for the exact mission solver: it takes 1 or 2 UAVs")
+        raise NotCovered(f"num_uavs={world.num_uavs} is invalid for the exact mission solver: it takes 1 or 2 UAVs")
     if not bool(world._s.started.all()):
         raise RuntimeError("the exact mission solver starts from the World's state: call world.reset() first")
 
@@ -242,7 +247,7 @@ def _check_margin(world, battery: torch.Tensor, tolerance: float) -> None:
     after = torch.stack([values - e.move, values - e.stay], -1)  # what the energy part computes
     gap = (after[..., None] - e.reserve[None, None, : world.cfg.num_cells]).abs().min()
     if gap <= tolerance:
-        raise ValueError(
+        raise NotCovered(
             f"a battery the mission reaches lies {gap.item():.3g} J from a reserve, within the float64 rounding "
             f"({tolerance:.3g}) the exact mission solver allows: change battery_wh slightly"
         )
