@@ -11,7 +11,7 @@ beside the exact optimum and the proved bound (the same starts for all).
 
 Usage::
 
-    python benchmarks/mission_exact.py --time                      # 3x3 and 4x4, N = 1, 2, 1 Wh and 1.5 Wh
+    python benchmarks/mission_exact.py --time                      # 3x3 and 4x4, N = 1, 2; 1, 1.5 and 2 Wh
     python benchmarks/mission_exact.py --compare --grid 4 4 --battery-wh 1.0
 """
 
@@ -34,7 +34,7 @@ from uavrl.envs.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
 from uavrl.evaluation import EVAL_SEED, evaluate
 
-CASES = [(grid, n, wh) for grid in ((3, 3), (4, 4)) for n in (1, 2) for wh in (1.0, 1.5)]
+CASES = [(grid, n, wh) for grid in ((3, 3), (4, 4)) for n in (1, 2) for wh in (1.0, 1.5, 2.0)]
 NUM_STARTS = 64
 
 

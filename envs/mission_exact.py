@@ -53,7 +53,7 @@ from .limits import gib
 MAX_UAVS = 2
 MEMORY_BUDGET = 2**31  # bytes of the solver's tables (every step's next-state table) unless raised
 QUANTUM_BITS = 30  # a battery's bucket: 2^-30 of the largest battery (rounded to a power of two)
-_CHUNK = 1 << 20  # (state, joint action) rows stepped at once
+_CHUNK = 1 << 18  # (state, joint action) rows stepped at once: ~100 MB of temporaries
 _TABLE_BYTES = 4  # a next-state index (int32) per state and joint action
 _STATE_BYTES = 48  # per state: its cells, best action, next state, value, and the step's working tensors
 _CANDIDATE_BYTES = 48  # per (state, joint action) of the largest step while it is deduplicated
@@ -253,24 +253,31 @@ def _check_margin(world, battery: torch.Tensor, tolerance: float) -> None:
         )
 
 
-def _step_layer(world, state, rows, per_world, joint, quantum, away):
-    """Every valid (state, joint action) of a step: their indices, the canonical successors' keys and rates."""
+def _step_layer(world, state, rows, per_world, joint, quantum, away, codes):
+    """Every valid (state, joint action) of a step ``[P, 2]``, and their canonical successors: packed as one number
+    each (:func:`_pack`, with the step's battery levels, also returned) and their rates ``[P]`` (bit/Hz)."""
     S, N = state["cell"].shape
     masks = world.dynamics.masks(state["cell"])  # [S, N, 6]: the environment's per-UAV masks
     valid = masks[:, 0, joint[:, 0]]
     for i in range(1, N):
         valid = valid & masks[:, i, joint[:, i]]
-    pairs = valid.nonzero()  # [P, 2]
+    pairs = valid.nonzero().int()  # [P, 2]
     keys, rates = [], []
     for begin in range(0, len(pairs), _CHUNK):
-        s, a = pairs[begin : begin + _CHUNK].unbind(-1)
+        s, a = pairs[begin : begin + _CHUNK].long().unbind(-1)
         before = {name: value[s] for name, value in state.items()}
         before["timer"] = torch.zeros_like(before["status"])
         after, r = world.successors(before, joint[a], rows[s] if per_world else None)
-        _, key = _canonical(after, quantum, away)
-        keys.append(key)
+        keys.append(_canonical(after, quantum, away)[1])
         rates.append((r[:, 0] + r[:, 1]) * world.cfg.slot_s)
-    return pairs, torch.cat(keys), torch.cat(rates)
+    buckets = [key[key >= 0].div(codes, rounding_mode="floor").unique() for key in keys]
+    levels = torch.cat(buckets).unique() if buckets else rows.new_zeros(0)
+    packed = torch.empty(len(pairs), dtype=torch.long, device=rows.device)
+    for i, key in enumerate(keys):  # chunk by chunk: a chunk's temporaries, not the step's
+        begin = i * _CHUNK
+        packed[begin : begin + len(key)] = _pack(key, rows[pairs[begin : begin + len(key), 0].long()], levels, codes)
+        keys[i] = None
+    return pairs, packed, torch.cat(rates), levels
 
 
 @torch.no_grad()
@@ -313,12 +320,12 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
         num_states += len(rows)
         if not exact_arithmetic:
             _check_margin(world, state["battery"], (t + 1) * (quantum / 2 + rounding) + rounding)
-        pairs, key, rate = _step_layer(world, state, rows, per_world, joint, quantum, away)
+        pairs, packed, rate, levels = _step_layer(world, state, rows, per_world, joint, quantum, away, codes)
         transitions += len(pairs)
-        levels = key[key >= 0].div(codes, rounding_mode="floor").unique()
-        packed, successor = _pack(key, rows[pairs[:, 0]], levels, codes).unique(return_inverse=True)
+        packed, successor = packed.unique(return_inverse=True)
         table = torch.full((len(rows), len(joint)), -1, dtype=torch.int32, device=dev)
-        table[pairs[:, 0], pairs[:, 1]] = successor.int()
+        table[pairs[:, 0].long(), pairs[:, 1].long()] = successor.int()
+        del pairs
         step_rate = torch.empty(len(packed), dtype=torch.float64, device=dev)
         step_rate[successor] = rate  # every pair reaching a state has its rates (the same codes)
         tables.append(table)
@@ -328,10 +335,13 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
     values = torch.zeros(len(rows), dtype=torch.float64, device=dev)
     best, following = [None] * horizon, [None] * horizon
     for t in range(horizon - 1, -1, -1):  # V_t(s) = max over valid a of rate(s') + V_{t+1}(s')
-        worth = rates[t] + values
-        table = tables[t]
-        q = worth[table.clamp(min=0).long()].masked_fill(table < 0, -math.inf)
-        values, choice = q.max(-1)
+        worth, table = rates[t] + values, tables[t]
+        values = torch.empty(len(table), dtype=torch.float64, device=dev)
+        choice = torch.empty(len(table), dtype=torch.long, device=dev)
+        for begin in range(0, len(table), _CHUNK // len(joint)):  # chunks of rows: [rows, 6^N] temporaries
+            rows_table = table[begin : begin + _CHUNK // len(joint)]
+            q = worth[rows_table.clamp(min=0).long()].masked_fill(rows_table < 0, -math.inf)
+            values[begin : begin + len(q)], choice[begin : begin + len(q)] = q.max(-1)
         best[t], following[t] = choice.to(torch.int16), table.gather(1, choice[:, None]).squeeze(1)
         tables[t] = None  # freed as the induction goes back
     optimum = MissionOptimum(
