@@ -291,7 +291,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
     check_world(world)
     if not isinstance(horizon, int) or isinstance(horizon, bool) or horizon < 1:
         raise ValueError(f"horizon={horizon!r} is invalid: give the mission's steps, a whole number >= 1")
-    states_guess, transitions_guess, need = mission_size(world, horizon)
+    states_guess, _, need = mission_size(world, horizon)
     if need > memory_budget:
         cfg = world.cfg
         raise MissionTooLarge(
@@ -300,7 +300,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
             f"its budget of {int(memory_budget):,} bytes: the evaluation uses the bound there"
         )
     began = time.perf_counter()
-    cfg, dev, N = world.cfg, world.device, world.num_uavs
+    dev, N = world.device, world.num_uavs
     away, codes = world.energy.away, 2 * (world.energy.away + 1)
     quantum = _quantum(world)
     exact_arithmetic = _exact_arithmetic(world, quantum)
@@ -308,9 +308,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
     per_world = world.layouts.fixed is None
     joint = decode_joint_actions(N, dev)
     s = world._s
-    start, start_key = _canonical(
-        {"cell": s.cell, "task": s.task, "battery": s.battery, "status": s.status}, quantum, away
-    )
+    _, start_key = _canonical({"cell": s.cell, "task": s.task, "battery": s.battery, "status": s.status}, quantum, away)
     levels = start_key[start_key >= 0].div(codes, rounding_mode="floor").unique()
     packed, start_index = _pack(start_key, _layout_rows(world), levels, codes).unique(return_inverse=True)
     state, rows = _unpack(packed, N, levels, codes, quantum, away)
