@@ -181,7 +181,7 @@ def mission_references(world: World, horizon: int) -> dict:
 def mission_optimum(world: World, horizon: int) -> torch.Tensor | None:
     """``[B]`` the exact most data (bit/Hz) of each start's mission (:func:`uavrl.envs.mission_exact.optimal_mission`)
     where it fits: 1 or 2 UAVs, deterministic channels, no recharging, and the solver's estimate within
-    :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (seconds at most: 4x4 with 2 UAVs and ~30-step missions);
+    :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (at most ~20 s of CPU: 4x4 with 2 UAVs and missions up to ~38 steps);
     ``None`` elsewhere."""
     try:
         mission_exact.check_world(world)
