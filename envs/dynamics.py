@@ -134,5 +134,8 @@ class Dynamics:
 
     def clashes(self, target: torch.Tensor) -> torch.Tensor:
         """``[W, N]``: does another UAV of the same world target the same cell?  By counting targets per cell."""
-        flat = (target + self.cell_offset[: len(target)]).view(-1)
+        offset = self.cell_offset[: len(target)]
+        if len(offset) < len(target):  # more rows than worlds (World.successors): each row its own cells
+            offset = torch.arange(len(target), device=target.device).unsqueeze(-1) * self.slots
+        flat = (target + offset).view(-1)
         return (torch.bincount(flat, minlength=len(target) * self.slots).index_select(0, flat) > 1).view_as(target)

@@ -542,12 +542,7 @@ class World:
         """
         s = self._s
         cell, task = s.cell, s.task
-        for name, value in self.dynamics.step(s, action).items():
-            setattr(s, name, value)
-        if self.energy is not None:
-            for name, value in self.energy.step(s, cell, action).items():
-                setattr(s, name, value)
-        code = torch.add(s.task, s.cell, alpha=2)
+        code = self._advance(s, action)
         s.counters += 1
         prev = s.r
         s.r = self._rates(s.cell, s.task, code)
@@ -561,6 +556,39 @@ class World:
             code, new_cell, new_task, lambda: (new_cell != cell).sum(-1), lambda: (new_task != task).sum(-1)
         )
         return out, reward, s.steps >= self.cfg.max_steps
+
+    def _advance(self, state, action: torch.Tensor) -> torch.Tensor:
+        """Set ``state``'s per-UAV variables (:data:`~.dynamics.UAV_STATE`, :data:`~.energy.ENERGY_STATE`) to those
+        after the joint actions ``[W, N]``: the dynamics part's step, then the energy part's; returns the codes
+        ``2 cell + task`` after it."""
+        cell = state.cell
+        for name, value in self.dynamics.step(state, action).items():
+            setattr(state, name, value)
+        if self.energy is not None:
+            for name, value in self.energy.step(state, cell, action).items():
+                setattr(state, name, value)
+        return torch.add(state.task, state.cell, alpha=2)
+
+    def successors(
+        self, state: dict[str, torch.Tensor], action: torch.Tensor, worlds: torch.Tensor | None = None
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """Any ``W`` states after joint actions, for the solvers: what :meth:`step` does to the per-UAV variables
+        and the rates, without the worlds' own state, clock or streams.
+
+        ``state``: ``[W, N]`` tensors by the names of :data:`~.dynamics.UAV_STATE` (and
+        :data:`~.energy.ENERGY_STATE` under an energy model); ``action`` ``[W, N]``; ``worlds`` ``[W]``: whose layout
+        each row is in (``None``: a fixed layout's).  Returns the variables after the step and the deterministic
+        ``(R_PU, R_SE)`` ``[W, 2]`` float64 of the configurations they reach (the mean channel: a random channel is
+        refused).
+        """
+        if self.fading.random:
+            raise ValueError(f"World.successors reads deterministic channels: fading={self.cfg.fading!r} is random")
+        if worlds is None and self.layouts.fixed is None:
+            raise ValueError("World.successors needs worlds=[W] under layout='random': each world has its own layout")
+        after = _WorldsState(**state)
+        code = self._advance(after, action)
+        names = UAV_STATE + (ENERGY_STATE if self.energy is not None else ())
+        return {name: getattr(after, name) for name in names}, self._rates(after.cell, after.task, code, worlds)
 
     # ------------------------------------------------------ shared helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:

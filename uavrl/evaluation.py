@@ -26,8 +26,9 @@ decide whether a level is reached):
 
 Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
 :func:`mission_metrics` adds its delivered data, lifetimes, energy per bit and the ratio to an upper bound on what
-any policy delivers (:mod:`uavrl.envs.mission`); the return, whose exact best ignores energy, is left out, and the
-levels and the end are read while the full team serves.
+any policy delivers (:mod:`uavrl.envs.mission`), and where the exact mission solver fits
+(:mod:`uavrl.envs.mission_exact`) the exact optimum and the share of it delivered; the return, whose exact best
+ignores energy, is left out, and the levels and the end are read while the full team serves.
 
 Example:
     >>> from uavrl.agents.baselines import RandomPolicy
@@ -47,10 +48,10 @@ import time
 
 import torch
 
-from uavrl.envs import ModelConfig, exact
+from uavrl.envs import ModelConfig, exact, mission_exact
 from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.grid import cells_of, on_grid
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, evaluation_horizon, gib
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, EXACT_SOLVER_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
 from uavrl.envs.optimum import MAX_EXCHANGE_UAVS, optimum_bound
@@ -162,14 +163,31 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
 
 def mission_references(world: World, horizon: int) -> dict:
     """Per start ``[B]`` under an energy model, from the batteries ``world`` starts with: the most data (bit/Hz) a
-    mission of ``horizon`` steps can deliver (:func:`uavrl.envs.mission.delivered_bound`), and ``U* H slot_s``."""
+    mission of ``horizon`` steps can deliver (:func:`uavrl.envs.mission.delivered_bound`), ``U* H slot_s``, and
+    where the exact mission solver fits (:func:`mission_optimum`) the exact most data, else ``None``."""
     cfg = world.cfg
     u_star_by_count = optimum_by_count(world.cell_contributions, world.direct, cfg)
     horizon_bound = u_star_by_count[:, -1] * horizon * cfg.slot_s
     if cfg.recharge_steps is not None:  # a recharged UAV serves again: only U* H slot_s is proved
-        return {"delivered_bound": horizon_bound, "horizon_bound": horizon_bound}
+        return {"delivered_bound": horizon_bound, "horizon_bound": horizon_bound, "delivered_optimum": None}
     bound = delivered_bound(service_steps_bound(world.energy, world.battery), u_star_by_count, horizon, cfg.slot_s)
-    return {"delivered_bound": bound, "horizon_bound": horizon_bound}
+    return {
+        "delivered_bound": bound,
+        "horizon_bound": horizon_bound,
+        "delivered_optimum": mission_optimum(world, horizon),
+    }
+
+
+def mission_optimum(world: World, horizon: int) -> torch.Tensor | None:
+    """``[B]`` the exact most data (bit/Hz) of each start's mission (:func:`uavrl.envs.mission_exact.optimal_mission`)
+    where it fits: 1 or 2 UAVs, deterministic channels, no recharging, and the solver's estimate within
+    :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (at most ~20 s of CPU: 4x4 with 2 UAVs and missions up to ~38 steps);
+    ``None`` elsewhere."""
+    try:
+        mission_exact.check_world(world)
+        return mission_exact.optimal_mission(world, horizon, memory_budget=EXACT_SOLVER_BUDGET).value
+    except (mission_exact.MissionTooLarge, mission_exact.NotCovered):
+        return None
 
 
 def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float, returns: bool) -> dict:
@@ -390,9 +408,11 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     """The mission's ``eval/...`` scalars under an energy model (docs/model.md, What the numbers mean), means over
     the starts: delivered data, lifetimes (``H`` where the event falls outside the horizon), steps in service per
     UAV, the energy per delivered bit (``batteries``: start and end ``[B, N]``) and the upper bounds of
-    :func:`mission_references`.  ``away`` ``[B, H + 1, N]``: who is out of service at the start and after each
-    step; ``utility``
-    ``[B, H + 1]`` the mean-channel utility, which the ratio to the bound (proved for mean channels) reads."""
+    :func:`mission_references`, and where the exact mission solver fits the mean exact optimum
+    (``eval/delivered_optimum``) and the data delivered over it (``eval/delivered_optimality``, sums over the starts
+    as ``eval/delivered_ratio``, read from the mean-channel utility).  ``away`` ``[B, H + 1, N]``: who is out of
+    service at the start and after each step; ``utility`` ``[B, H + 1]`` the mean-channel utility, which the ratio
+    to the bound (proved for mean channels) reads."""
     H = away.shape[1] - 1
     delivered = (steps["r_pu"].double() + steps["r_se"].double()).sum(-1) * cfg.slot_s  # [B] bit/Hz
     bound = references["delivered_bound"]
@@ -407,6 +427,11 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     }
     if bound.sum() > 0:
         out["eval/delivered_ratio"] = (utility[:, 1:].sum() * cfg.slot_s / bound.sum()).item()
+    optimum = references.get("delivered_optimum")
+    if optimum is not None:  # the exact mission solver fitted: the optimum, and the share of it delivered
+        out["eval/delivered_optimum"] = optimum.mean().item()
+        if optimum.sum() > 0:
+            out["eval/delivered_optimality"] = (utility[:, 1:].sum() * cfg.slot_s / optimum.sum()).item()
     delivered_units = delivered.sum()  # bit/Hz, or bits with a bandwidth
     if cfg.bandwidth_hz is not None:
         out["eval/delivered_bits"] = delivered.mean().item() * cfg.bandwidth_hz
