@@ -31,6 +31,13 @@ SCENARIOS = {  # name: (grid, UAVs, preset, option values, agents)
         {"energy": "rotary_wing", "base": (-1, 0), "battery_wh": 5.0, "recharge_steps": None, "num_spares": 0},
         {"dqn", "random", "oracle", "planner"},
     ),
+    "energy_4x4": (
+        (4, 4),
+        2,
+        "paper",
+        {"energy": "rotary_wing", "base": (-1, 0), "battery_wh": 1.2, "recharge_steps": None, "num_spares": 0},
+        {"dqn", "random", "oracle", "planner"},
+    ),
     "persistent_10x10": (
         (10, 10),
         6,
