@@ -1,6 +1,6 @@
 """Missions under an energy model (issue 26): random, the energy-unaware oracle, the energy-aware planner and the DQN
-on the scenarios ``energy_6x6`` and ``persistent_10x10``, as the user types them, and what each of the planner's
-rules buys.
+on the scenarios ``energy_4x4`` (where the exact optimum fits), ``energy_6x6`` and ``persistent_10x10``, as the user
+types them, and what each of the planner's rules buys.
 
 Each row is whole commands ``python -m uavrl.train agent=<a> scenario=<s> seed=<k> progress=false`` (one torch
 thread), timed from outside; the figures are each run's ``metrics.json``, measured by the shared evaluation from
@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-SCENARIOS = ("energy_6x6", "persistent_10x10")
+SCENARIOS = ("energy_4x4", "energy_6x6", "persistent_10x10")
 AGENTS = ("random", "oracle", "planner", "dqn")
 DETERMINISTIC = ("oracle", "planner")  # no seed changes what they do: one run
 COLUMNS = {  # metric: header

@@ -331,9 +331,22 @@ def test_the_tabular_agent_refuses_an_energy_model():
         TabularAgent(cfg, OmegaConf.create({"agent": {"method": "q_learning"}}), "cpu", 0)
 
 
-def test_the_command_line_trains_and_evaluates_a_dqn_under_rotary_wing(tmp_path):
+@pytest.mark.parametrize(
+    "energy",
+    [
+        pytest.param("env.energy=rotary_wing env.battery_wh=0.5", id="rotary_wing"),
+        pytest.param("env.energy=follow_up", id="follow_up", marks=pytest.mark.slow),
+        pytest.param(
+            "env.energy=rotary_wing env.battery_wh=0.5 env.recharge_steps=3 env.num_spares=1 env.reward=delivered "
+            "agent.objective=delta agent.mixer=qmix",
+            id="rotary_wing-recharge-spare-delivered",
+            marks=pytest.mark.slow,
+        ),
+    ],
+)
+def test_the_command_line_trains_and_evaluates_a_dqn_under_every_energy_model(energy, tmp_path):
     settings = (
-        "agent=dqn env.energy=rotary_wing env.base=[-1,0] env.grid=[3,3] env.battery_wh=0.5 agent.iterations=3 "
+        f"agent=dqn {energy} env.base=[-1,0] env.grid=[3,3] agent.iterations=3 "
         "env.max_steps=8 agent.worlds=8 agent.hidden=16 agent.depth=1 agent.batch_size=32 agent.buffer_size=100 "
         "agent.updates=2 agent.learning_starts=16 eval.num_starts=4"
     )
