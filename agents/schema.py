@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from uavrl.envs.config import LAYOUTS
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
 
@@ -86,6 +87,11 @@ class DQNSchema:
     sizes: list[Any] = setting(
         rule=team_sizes(),
         doc="agent.network=set: the teams [num_uavs, L1, L2] one run trains on ([]: env.num_uavs on env.grid)",
+        factory=list,
+    )
+    layouts: list[str] = setting(
+        rule=Rule(lambda v: isinstance(v, list) and set(v) <= set(LAYOUTS), f"give a list among {', '.join(LAYOUTS)}"),
+        doc="agent.network=set: the layouts each team trains on ([]: env.layout)",
         factory=list,
     )
     heads: int = setting(4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)")

@@ -6,8 +6,8 @@ readable checkpoint, or the file given), runs the shared greedy evaluation
 the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
 
 A size-free network (``agent=dqn agent.network=set``) is evaluated zero-shot on another team size or grid with
-``env.num_uavs=<N>`` and ``env.grid=[L1,L2]`` (``eval-<N>uav-<L1>x<L2>.json``); any other policy is refused there
-in one line, as is any other ``env.*`` that differs from the saved run's.
+``env.num_uavs=<N>``, ``env.grid=[L1,L2]`` and ``env.layout`` (``eval-<N>uav-<L1>x<L2>.json``); any other policy is
+refused there in one line, as is any other ``env.*`` that differs from the saved run's.
 """
 
 from __future__ import annotations
@@ -89,11 +89,12 @@ def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str)
 
 
 def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
-    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>.json`` for another size."""
+    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>].json`` for another."""
     run, other = model_config(saved), model_config(evaluated)
-    if (other.num_uavs, other.grid) == (run.num_uavs, run.grid):
+    if (other.num_uavs, other.grid, other.layout) == (run.num_uavs, run.grid, run.layout):
         return "eval.json"
-    return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}.json"
+    layout = "" if other.layout == run.layout else f"-{other.layout}"
+    return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}.json"
 
 
 def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:

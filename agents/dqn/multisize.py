@@ -1,7 +1,8 @@
 """The DQN with a size-free network (``agent.network=set``), trained over several team sizes and grids at once.
 
 ``agent.sizes`` lists the teams ``[N, L1, L2]`` one run trains on (``[]``: the run's ``env.num_uavs`` and
-``env.grid`` only); every other model option is the run's (layout, channel, energy model, ...).  Each size is a group
+``env.grid`` only), each in every layout of ``agent.layouts`` (``[]``: ``env.layout``); every other model option is
+the run's (channel, energy model, ...).  Each team and layout is a group
 with its own ``agent.worlds`` worlds, collector, exploration and replay buffer; one core
 (:class:`~.setnet.SetQCore`) acts in all of them.  One iteration: an episode in every world of every group, then
 ``agent.updates`` gradient steps, each the sum of one batch's loss per group (``agent.batch_size`` split evenly).
@@ -50,6 +51,17 @@ def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
     return [(int(n), (int(l1), int(l2))) for n, l1, l2 in sizes] or [(env_cfg.num_uavs, tuple(env_cfg.grid))]
 
 
+def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
+    """The models one run trains on: every team of :func:`team_sizes` in every layout of ``agent.layouts`` (or
+    ``env.layout``), the run's model otherwise."""
+    layouts = list(a.get("layouts") or []) or [env_cfg.layout]
+    return [
+        env_cfg.replace(num_uavs=n, grid=grid, layout=layout)
+        for n, grid in team_sizes(env_cfg, a)
+        for layout in layouts
+    ]
+
+
 def check_set_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for a size-free network the agent cannot build (after the schema's rules)."""
     if a.head != "factored":
@@ -70,18 +82,19 @@ def check_set_settings(env_cfg: ModelConfig, a) -> None:
 
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
     """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
-    when it can: a per-size network only in its run's grid and number of UAVs, a size-free one on any size of the
-    same model otherwise."""
+    when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
+    number of UAVs and layout of the same model otherwise."""
     size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
-    resized = env_cfg.replace(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs)
-    if resized != run_cfg.replace(max_steps=env_cfg.max_steps):
-        return "only env.grid and env.num_uavs may differ from the saved run's"
-    if size_free or (tuple(env_cfg.grid), env_cfg.fleet_size) == (tuple(run_cfg.grid), run_cfg.fleet_size):
+    same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
+    if size_free and env_cfg.replace(**same) != run_cfg:
+        return "only env.grid, env.num_uavs and env.layout may differ from the saved run's"
+    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
     return (
-        f"its {saved_cfg.agent.name} policy ({network}) acts only on its run's {run_cfg.grid[0]}x{run_cfg.grid[1]} "
-        f"grid with {run_cfg.num_uavs} UAVs; only a size-free network (agent=dqn agent.network=set) acts on any size"
+        f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
+        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
+        "(agent=dqn agent.network=set) acts on any size"
     )
 
 
@@ -137,12 +150,9 @@ class SetDQNAgent(DQNAgent):
         self.loss = SetDoubleQLoss(self.core, a.mixer, float(a.gamma), env_cfg.num_actions)
         self.optimizer = torch.optim.Adam(self.core.parameters(), lr=float(a.lr))
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
-        self.sizes = team_sizes(env_cfg, a)
-        self.batch_size = max(1, int(a.batch_size) // len(self.sizes))
-        self.groups = [
-            _Group(self, env_cfg.replace(num_uavs=n, grid=grid), self._group_seed(0, g), frames)
-            for g, (n, grid) in enumerate(self.sizes)
-        ]
+        models = training_models(env_cfg, a)
+        self.batch_size = max(1, int(a.batch_size) // len(models))
+        self.groups = [_Group(self, model, self._group_seed(0, g), frames) for g, model in enumerate(models)]
 
     @staticmethod
     def _check(env_cfg: ModelConfig, a) -> None:
