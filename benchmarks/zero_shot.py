@@ -6,7 +6,10 @@ policy and the oracle, from the same seeded starts (``eval.seed``'s default), as
 Default teams: 2:6x6, 6:10x10, 10:20x20, 20:30x30, 50:50x50 and 6:10x10:random (the run's other model options).
 Per row: return ratio (the discounted gain over the exact best, where the exact solver fits), the share of starts
 reaching 0.999 U* and their steps over the fewest (exact or a lower bound, ``min exact``), the final U / U*, and the
-seconds the row took (the first row of a team also computes its starts' references).
+seconds the row took (the first row of a team also computes its starts' references).  Then, per team, how the
+checkpoint's starts that miss 0.999 U* fail: still moving or switching in the last 10 steps (wandering near U*: action
+gaps the values do not resolve, or the greedy rule's back and forth) or stuck (a configuration the values rate best),
+and the best U / U* they reached.
 """
 
 from __future__ import annotations
@@ -18,8 +21,10 @@ import torch
 
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.config import model_config
+from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs.limits import evaluation_horizon
 from uavrl.evaluate import load_agent
-from uavrl.evaluation import evaluate
+from uavrl.evaluation import EVAL_SEED, evaluate
 
 DEFAULT_TEAMS = ["2:6x6", "6:10x10", "10:20x20", "20:30x30", "50:50x50", "6:10x10:random"]
 COLUMNS = ("eval/return_ratio", "eval/reach_999", "eval/step_ratio_999", "eval/optimality")
@@ -42,6 +47,7 @@ def main(run_dir: str, num_starts: int = 64, teams=DEFAULT_TEAMS) -> None:
     run_cfg = model_config(saved)
     print("| N | grid | layout | policy | return ratio | reach 0.999 U* | steps / fewest | U / U* | min exact | s |")
     print("|---|---|---|---|---|---|---|---|---|---|")
+    reasons = []
     for text in teams:
         n, grid, layout = parse_team(text)
         cfg = run_cfg.replace(num_uavs=n, grid=grid, layout=layout or run_cfg.layout)
@@ -56,6 +62,30 @@ def main(run_dir: str, num_starts: int = 64, teams=DEFAULT_TEAMS) -> None:
             seconds = time.perf_counter() - began
             row = [str(n), f"{grid[0]}x{grid[1]}", cfg.layout, name, *cells(metrics), f"{seconds:.0f}"]
             print("| " + " | ".join(row) + " |", flush=True)
+        reasons.append(failures(agent, cfg, num_starts))
+    print("\n" + "\n".join(f"- {line}" for line in reasons))
+
+
+@torch.no_grad()
+def failures(agent, cfg, num_starts: int) -> str:
+    """How the starts that miss 0.999 U* fail (module doc), from the evaluation's starts."""
+    horizon = evaluation_horizon(cfg)
+    env = UAVSpectrumEnv(batch_size=num_starts, config=cfg.replace(max_steps=horizon), seed=EVAL_SEED)
+    start = env.reset()
+    u_star = env.optimum()[0]
+    policy = agent.policy_for(cfg).bind_env(env)
+    rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
+    ratio = env.world.utility(rollout["next", "positions"], rollout["next", "tasks"])[2] / u_star[:, None]
+    missed = ~(ratio >= 0.999).any(-1)
+    acts = rollout["next", "moves"].squeeze(-1) + rollout["next", "task_switches"].squeeze(-1)
+    acting = acts[:, -10:].sum(-1) > 0
+    best = ratio.max(-1).values[missed]
+    worst = f", best U / U* {best.mean():.4f} (min {best.min():.4f})" if missed.any() else ""
+    return (
+        f"{cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} ({cfg.layout}): {int(missed.sum())} of {num_starts} "
+        f"starts miss 0.999 U*: {int((missed & acting).sum())} still acting in the last 10 of {horizon} steps, "
+        f"{int((missed & ~acting).sum())} stuck{worst}; {int((~missed & acting).sum())} that reached it still act"
+    )
 
 
 if __name__ == "__main__":
