@@ -16,12 +16,25 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+from uavrl.envs.config import LAYOUTS
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
 
 METHODS = ("q_learning", "value_iteration")
 MEMORY_BUDGET = positive()
+
+
+def team_sizes() -> Rule:
+    """A list of teams ``[N, L1, L2]`` (whole numbers >= 1), or ``[]``."""
+
+    def accepts(v):
+        return isinstance(v, list) and all(
+            isinstance(t, list) and len(t) == 3 and all(whole(1).accepts(x) for x in t) for t in v
+        )
+
+    return Rule(accepts, "give a list of teams [num_uavs, L1, L2], e.g. [[2,6,6],[6,10,10]], or [] (the run's own)")
 
 
 @dataclass
@@ -61,12 +74,32 @@ class DQNSchema:
     )
     mixer: str = setting(
         "vdn",
-        one_of("vdn", "qmix", what="mixers"),
-        "vdn (the sum of the UAVs' values) or qmix (monotonic, state-conditioned); factored head only",
+        one_of("vdn", "qmix", "mean", what="mixers"),
+        "vdn (the sum of the UAVs' values), qmix (monotonic, state-conditioned) or mean (agent.network=set only); "
+        "factored head only",
     )
+    network: str = setting(
+        "team",
+        one_of("team", "set", what="networks"),
+        "team: a torso over the joint observation, sized by N and the grid; set: size-free (attention over the "
+        "other UAVs, any N and grid: agents/dqn/setnet.py)",
+    )
+    sizes: list[Any] = setting(
+        rule=team_sizes(),
+        doc="agent.network=set: the teams [num_uavs, L1, L2] one run trains on ([]: env.num_uavs on env.grid)",
+        factory=list,
+    )
+    layouts: list[str] = setting(
+        rule=Rule(lambda v: isinstance(v, list) and set(v) <= set(LAYOUTS), f"give a list among {', '.join(LAYOUTS)}"),
+        doc="agent.network=set: the layouts each team trains on ([]: env.layout)",
+        factory=list,
+    )
+    heads: int = setting(4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)")
     worlds: int = setting(64, whole(1), "parallel worlds, each plays one episode per iteration")
     hidden: int = setting(128, whole(1), "units per hidden layer")
-    depth: int = setting(2, whole(1), "hidden layers of the torso over the joint observation")
+    depth: int = setting(
+        2, whole(1), "hidden layers of the torso over the joint observation (agent.network=set: attention layers)"
+    )
     mixing_embed_dim: int = setting(32, whole(1), "qmix only")
     objective: str = setting(
         "log_gap",

@@ -3,7 +3,7 @@
 __version__ = "0.1.0"
 
 
-def load_policy(run_dir, device="cpu", run: int = 0):
+def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
     """``(policy, env_config)`` of a run directory written by ``python -m uavrl.train``, for any agent or baseline.
 
     ``policy`` is the agent's greedy TorchRL policy (of independent run ``run``
@@ -17,6 +17,10 @@ def load_policy(run_dir, device="cpu", run: int = 0):
     The policy acts only in environments of its run's grid, number of UAVs
     and layout: ``policy.bind_env(env)`` checks an environment up front, and
     every tensordict the policy gets is checked too (a ValueError in one line).
+    ``env_config`` (a :class:`~uavrl.envs.ModelConfig`) asks for the policy in
+    another team size or grid of the run's model: a size-free network
+    (``agent=dqn agent.network=set``) acts there, any other policy is refused
+    in one line.
 
     Reading the run executes nothing its files hold (``weights_only`` loads): a
     file holding objects uavrl does not write is refused.  When ``checkpoint.pt``
@@ -30,6 +34,14 @@ def load_policy(run_dir, device="cpu", run: int = 0):
     agent, cfg, fallback = load_agent(run_dir, device, setting="run_dir")
     if fallback:
         warnings.warn(fallback, stacklevel=2)
+    if env_config is not None:
+        from uavrl.agents.dqn.multisize import network_refusal
+
+        refusal = network_refusal(cfg, env_config, model_config(cfg))
+        if refusal:
+            raise ValueError(f"env_config={env_config.num_uavs} UAVs on {env_config.grid} is invalid: {refusal}")
+        if hasattr(agent, "policy_for"):
+            return agent.policy_for(env_config), env_config
     policies = agent.policies()
     if not 0 <= run < len(policies):
         raise ValueError(

@@ -4,6 +4,10 @@ Rebuilds the agent from the checkpoint's own config (a run directory's newest
 readable checkpoint, or the file given), runs the shared greedy evaluation
 (``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), prints
 the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
+
+A size-free network (``agent=dqn agent.network=set``) is evaluated zero-shot on another team size or grid with
+``env.num_uavs=<N>``, ``env.grid=[L1,L2]`` and ``env.layout`` (``eval-<N>uav-<L1>x<L2>.json``); any other policy is
+refused there in one line, as is any other ``env.*`` that differs from the saved run's.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ import json
 import sys
 from pathlib import Path
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from uavrl.checkpoints import (
     CheckpointError,
@@ -67,7 +71,33 @@ def output_dir(checkpoint) -> Path:
     return Path(checkpoint) if Path(checkpoint).is_dir() else Path(checkpoint).parent
 
 
-def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
+def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str) -> DictConfig:
+    """The saved run's config with the command line's ``env.*`` overrides (``overrides``, as typed; ``cfg`` their
+    values); a one-line ValueError beginning with ``source`` when the saved policy cannot act in that model."""
+    from uavrl.agents.dqn.multisize import network_refusal
+
+    changed = [key for key in (o.split("=", 1)[0].lstrip("+~") for o in overrides) if key.startswith("env.")]
+    if not changed:
+        return saved
+    evaluated = saved.copy()
+    for key in changed:
+        OmegaConf.update(evaluated, key, OmegaConf.select(cfg, key), force_add=True)
+    refusal = network_refusal(saved, model_config(evaluated), model_config(saved))
+    if refusal:
+        raise ValueError(f"{source}: {', '.join(changed)} given: {refusal}")
+    return evaluated
+
+
+def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
+    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>].json`` for another."""
+    run, other = model_config(saved), model_config(evaluated)
+    if (other.num_uavs, other.grid, other.layout) == (run.num_uavs, run.grid, run.layout):
+        return "eval.json"
+    layout = "" if other.layout == run.layout else f"-{other.layout}"
+    return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}.json"
+
+
+def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
 
@@ -79,13 +109,14 @@ def evaluate_checkpoint(cfg: DictConfig) -> dict[str, float]:
     agent, saved, fallback = load_agent(cfg.checkpoint, device)
     if fallback:
         print(f"warning: {fallback}", file=sys.stderr)
+    evaluated = evaluated_config(saved, cfg, overrides, f"checkpoint={quoted(cfg.checkpoint)}")
     if cfg.eval.video:  # refused before the evaluation's work, not after it
-        check_video_cost(cfg, model_config(saved))
-    metrics = evaluate_agent(agent, model_config(saved), **eval_settings(cfg, device))
+        check_video_cost(cfg, model_config(evaluated))
+    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
     out_dir = output_dir(cfg.checkpoint)
-    save_json(metrics, out_dir / "eval.json")
+    save_json(metrics, out_dir / evaluation_file(saved, evaluated))
     if cfg.eval.video:
-        save_video(agent, saved, cfg, device, out_dir)
+        save_video(agent, evaluated, cfg, device, out_dir)
     return metrics
 
 
@@ -95,8 +126,9 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     from uavrl.logger import RunLogger
     from uavrl.video import comparison_frames, save_videos, video_settings
 
-    policy, label = agent.policies()[0], saved.agent.name
-    frames = comparison_frames(policy, model_config(saved), label=label, **video_settings(cfg, device))
+    env_cfg, label = model_config(saved), saved.agent.name
+    policy = agent.policy_for(env_cfg) if hasattr(agent, "policy_for") else agent.policies()[0]
+    frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))
     for path in save_videos(frames, out_dir, int(cfg.eval.video_fps)):
         print(f"wrote {path}", file=sys.stderr)
     logger = RunLogger(out_dir)
@@ -104,9 +136,9 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     logger.close()
 
 
-def print_evaluation(cfg: DictConfig, _overrides) -> None:
+def print_evaluation(cfg: DictConfig, overrides) -> None:
     """``python -m uavrl.evaluate``: the metrics as JSON on stdout."""
-    print(json.dumps(evaluate_checkpoint(cfg), indent=2, sort_keys=True))
+    print(json.dumps(evaluate_checkpoint(cfg, overrides), indent=2, sort_keys=True))
 
 
 if __name__ == "__main__":

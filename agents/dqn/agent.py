@@ -37,8 +37,16 @@ _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length;
+    ``agent.network=set`` builds the size-free :class:`~.multisize.SetDQNAgent` instead.
     """
+
+    def __new__(cls, env_cfg: ModelConfig, cfg, device, seed: int):
+        if cls is DQNAgent and cfg.agent.get("network", "team") == "set":  # run configs saved before: no setting
+            from .multisize import SetDQNAgent
+
+            cls = SetDQNAgent
+        return super().__new__(cls)
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent

@@ -13,6 +13,16 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for settings the agent cannot run: the rules of its schema (:mod:`uavrl.agents.schema`), then
     the head's size."""
     check(a, agent_rules("dqn"), section="agent")
+    if a.get("network", "team") == "team":  # run configs saved before: no setting
+        if a.mixer == "mean":
+            raise ValueError(
+                "agent.mixer='mean' is invalid with agent.network='team': use vdn or qmix, or agent.network=set"
+            )
+        if a.get("sizes"):
+            raise ValueError(
+                f"agent.sizes={list(a.sizes)} is invalid with agent.network='team', which is sized by the run's env: "
+                "use agent.network=set"
+            )
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "

@@ -1,0 +1,277 @@
+"""The DQN with a size-free network (``agent.network=set``), trained over several team sizes and grids at once.
+
+``agent.sizes`` lists the teams ``[N, L1, L2]`` one run trains on (``[]``: the run's ``env.num_uavs`` and
+``env.grid`` only), each in every layout of ``agent.layouts`` (``[]``: ``env.layout``); every other model option is
+the run's (channel, energy model, ...).  Each team and layout is a group
+with its own ``agent.worlds`` worlds, collector, exploration and replay buffer; one core
+(:class:`~.setnet.SetQCore`) acts in all of them.  One iteration: an episode in every world of every group, then
+``agent.updates`` gradient steps, each the sum of one batch's loss per group (``agent.batch_size`` split evenly).
+The checkpoint holds one core: :meth:`SetDQNAgent.policy_for` acts with it in an environment of any size, so
+``python -m uavrl.evaluate checkpoint=<run> env.grid=[30,30] env.num_uavs=20`` evaluates it zero-shot.
+
+Example:
+    >>> from hydra import compose, initialize_config_dir
+    >>> from uavrl.config import config_dir, model_config
+    >>> with initialize_config_dir(config_dir=config_dir(), version_base=None):
+    ...     sizes = "agent.sizes=[[2,4,4],[3,5,5]]"
+    ...     cfg = compose("config", overrides=["agent=dqn", "agent.network=set", sizes, "agent.worlds=2"])
+    >>> agent = SetDQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    >>> agent.train_iteration()["train/epsilon"] < 1.0, agent.env_steps  # 2 sizes x 2 worlds x 30 steps
+    (True, 120)
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+from uavrl.agents.env_check import CheckedPolicy
+from uavrl.compat import load_buffer_state
+from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs.channel import rates
+from uavrl.envs.fading import fading_part
+from uavrl.envs.grid import cells_or_away
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
+from uavrl.envs.rewards import log_gap_reward
+from uavrl.evaluation import episode_metrics
+
+from .agent import _SEED_MODULUS, DQNAgent
+from .builders import build_collector, build_policies, exploration_schedule, transition_keys
+from .networks import Q_INPUTS
+from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
+
+
+def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
+    """``[(N, (L1, L2))]`` the teams of ``agent.sizes``, or the run's own."""
+    sizes = list(a.get("sizes") or [])
+    return [(int(n), (int(l1), int(l2))) for n, l1, l2 in sizes] or [(env_cfg.num_uavs, tuple(env_cfg.grid))]
+
+
+def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
+    """The models one run trains on: every team of :func:`team_sizes` in every layout of ``agent.layouts`` (or
+    ``env.layout``), the run's model otherwise."""
+    layouts = list(a.get("layouts") or []) or [env_cfg.layout]
+    return [
+        env_cfg.replace(num_uavs=n, grid=grid, layout=layout)
+        for n, grid in team_sizes(env_cfg, a)
+        for layout in layouts
+    ]
+
+
+def check_set_settings(env_cfg: ModelConfig, a) -> None:
+    """One-line errors for a size-free network the agent cannot build (after the schema's rules)."""
+    if a.head != "factored":
+        raise ValueError(f"agent.head={a.head!r} is invalid with agent.network='set': use agent.head=factored")
+    if a.mixer not in MIXERS:
+        raise ValueError(
+            f"agent.mixer={a.mixer!r} is invalid with agent.network='set': its mixing weights grow with N; use "
+            "vdn (the sum) or mean"
+        )
+    if int(a.hidden) % int(a.heads):
+        raise ValueError(f"agent.heads={a.heads} is invalid: it must divide agent.hidden={a.hidden}")
+    for n, grid in team_sizes(env_cfg, a):
+        if n > grid[0] * grid[1]:
+            raise ValueError(
+                f"agent.sizes holds [{n}, {grid[0]}, {grid[1]}]: {n} UAVs do not fit on the {grid[0] * grid[1]} cells"
+            )
+
+
+def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
+    """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
+    when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
+    number of UAVs and layout of the same model otherwise."""
+    size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
+    same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
+    if size_free and env_cfg.replace(**same) != run_cfg:
+        return "only env.grid, env.num_uavs and env.layout may differ from the saved run's"
+    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
+        return None
+    network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
+    return (
+        f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
+        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
+        "(agent=dqn agent.network=set) acts on any size"
+    )
+
+
+class _Group:
+    """One team size of the run: its worlds, policies, collector and replay buffer."""
+
+    def __init__(self, agent: SetDQNAgent, cfg: ModelConfig, seed: int, frames: int):
+        a = agent.settings
+        self.cfg, self.grid = cfg, tuple(cfg.grid)
+        self.env = UAVSpectrumEnv(
+            batch_size=int(a.worlds),
+            config=cfg,
+            seed=seed,
+            device=agent.device,
+            memory_budget=a.get("memory_budget", DEFAULT_MEMORY_BUDGET),
+        )
+        values = TensorDictModule(
+            SetQNet(agent.core, self.grid), in_keys=list(Q_INPUTS), out_keys=[("agents", "action_value")]
+        )
+        policies = build_policies(self.env, a, values, exploration_schedule(a, frames, agent.device))
+        self.greedy, self.exploration = policies.greedy, policies.exploration
+        self.keys = transition_keys(a, policies.action_keys)
+        # agent.buffer_size transitions of this size; samples of its share of agent.batch_size
+        storage = LazyTensorStorage(int(a.buffer_size), device=agent.device)
+        self.buffer = TensorDictReplayBuffer(storage=storage, batch_size=agent.batch_size)
+        self.collector = build_collector(self.env, policies.explore)
+        self.batches = iter(self.collector)
+        self.u_star = None  # a fixed layout's U*, solved once
+
+    def optimum(self) -> torch.Tensor:
+        if self.u_star is None or self.cfg.layout == "random":
+            method = "exchange" if self.cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search"
+            self.u_star = self.env.optimum(method=method)[0]
+        return self.u_star
+
+
+class SetDQNAgent(DQNAgent):
+    """:class:`DQNAgent` with a size-free network (``agent.network=set``, module doc); built by ``DQNAgent(...)``
+    when the settings ask for it.  The greedy rule (:class:`~.networks.ValidGreedy`), the double-DQN targets, the
+    objective and the ``train/...`` tags are the factored DQN's; the tags are means over the sizes' worlds."""
+
+    def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
+        a = cfg.agent
+        self._check(env_cfg, a)
+        check_set_settings(env_cfg, a)
+        self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
+        self.device = torch.device(device)
+        self.num_iterations = int(a.iterations)
+        self.iteration = 0
+        torch.manual_seed(self.seed)  # the core's initial weights
+        energy = env_cfg.energy != "none"
+        self.core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth)).to(self.device)
+        self.loss = SetDoubleQLoss(self.core, a.mixer, float(a.gamma), env_cfg.num_actions)
+        self.optimizer = torch.optim.Adam(self.core.parameters(), lr=float(a.lr))
+        frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
+        models = training_models(env_cfg, a)
+        self.batch_size = max(1, int(a.batch_size) // len(models))
+        self.groups = [_Group(self, model, self._group_seed(0, g), frames) for g, model in enumerate(models)]
+
+    @staticmethod
+    def _check(env_cfg: ModelConfig, a) -> None:
+        from .settings import check_settings
+
+        check_settings(env_cfg, a)
+
+    def _group_seed(self, iteration: int, group: int) -> int:
+        return (self._world_seed(iteration) + group * int(self.settings.worlds)) % _SEED_MODULUS
+
+    @property
+    def env_steps(self) -> int:
+        """Team steps collected so far (sizes times worlds times steps)."""
+        return self.iteration * len(self.groups) * int(self.settings.worlds) * self.env_cfg.max_steps
+
+    def train_iteration(self) -> dict[str, float]:
+        """One episode in every world of every size, then ``agent.updates`` gradient steps."""
+        a = self.settings
+        for group in self.optimizer.param_groups:  # annealed linearly from agent.lr to agent.lr_end over the run
+            group["lr"] = float(a.lr) + (float(a.lr_end) - float(a.lr)) * min(1.0, self.iteration / self.num_iterations)
+        per_world = [self._collect(g, group) for g, group in enumerate(self.groups)]
+        learning = all(len(group.buffer) >= int(a.learning_starts) for group in self.groups)
+        losses = [self._update() for _ in range(int(a.updates))] if learning else []
+        self.iteration += 1
+        out = {f"train/{k}": torch.cat([w[k] for w in per_world]).mean().item() for k in per_world[0]}
+        out["train/epsilon"] = self.groups[0].exploration.eps.item()
+        if losses:
+            out["train/loss"] = torch.stack(losses).mean().item()
+        return out
+
+    def _collect(self, g: int, group: _Group) -> dict[str, torch.Tensor]:
+        """One episode in every world of ``group`` into its buffer; the episodes' metrics ``[worlds]``."""
+        group.collector.set_seed(self._group_seed(self.iteration, g), static_seed=True)
+        group.collector.reset()
+        u_star = group.optimum()
+        env, cfg = group.env, group.cfg
+        # kept: the collector's closing reset draws new random layouts before the batch is read
+        layout = (env.cell_contributions.clone(), env.direct.clone())
+        batch = next(group.batches)  # [worlds, steps]
+
+        def mean_utility(td: TensorDictBase) -> torch.Tensor:
+            """``[W, T]`` mean-channel utility of the batch's configurations in the layouts they were played in."""
+            C = cfg.num_cells
+            cells = cells_or_away(td.get("positions"), cfg.grid)  # C: out of service, adds nothing
+            on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
+            contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
+            r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], cfg)
+            return r_pu + r_se
+
+        nxt = batch.get("next")
+        if self.settings.objective == "log_gap":
+            change = log_gap_reward(
+                mean_utility(nxt), mean_utility(batch), u_star.unsqueeze(-1), float(self.settings.gap_floor)
+            )
+            batch.set(("next", "reward"), change.unsqueeze(-1).to(nxt.get("reward").dtype))
+        group.buffer.extend(batch.reshape(-1).select(*group.keys))
+        group.exploration.step(batch.numel())
+        reach_utility = mean_utility(nxt) if fading_part(cfg).random else None
+        return episode_metrics(
+            *(nxt.get(key).squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")), u_star, reach_utility
+        )
+
+    def _update(self) -> torch.Tensor:
+        loss = sum(self.loss(group.buffer.sample(), group.grid)["loss"] for group in self.groups)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm))
+        self.optimizer.step()
+        self.loss.update_target(float(self.settings.tau))
+        return loss.detach()
+
+    def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
+        """The greedy policy in environments of ``env_cfg``: any grid and number of UAVs of the run's model (a
+        one-line ValueError for another model: other observations, or actions)."""
+        if (env_cfg.energy != "none") != self.core.energy or env_cfg.num_actions != self.env_cfg.num_actions:
+            raise ValueError(
+                f"env.energy={env_cfg.energy!r} is invalid for this network, trained with "
+                f"env.energy={self.env_cfg.energy!r}: its inputs and actions differ"
+            )
+        env = UAVSpectrumEnv(batch_size=1, config=env_cfg, device=self.device)
+        values = TensorDictModule(
+            SetQNet(self.core, env_cfg.grid), in_keys=list(Q_INPUTS), out_keys=[("agents", "action_value")]
+        )
+        frames = exploration_schedule(self.settings, 1, self.device)
+        return CheckedPolicy(build_policies(env, self.settings, values, frames).greedy, env_cfg)
+
+    def policies(self) -> list[CheckedPolicy]:
+        """The greedy policy in environments of the run's config (:meth:`policy_for` for any other size)."""
+        return [self.policy_for(self.env_cfg)]
+
+    def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
+        """:func:`uavrl.evaluation.evaluate` of the greedy policy in ``env_cfg``, of any size."""
+        from uavrl.evaluation import evaluate
+
+        return [evaluate(self.policy_for(env_cfg), env_cfg, **kwargs)]
+
+    def state_dict(self) -> dict:
+        """The core and its target, optimizer, every size's exploration and replay buffer, RNG and progress."""
+        state = {
+            "iteration": self.iteration,
+            "loss": self.loss.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "exploration": [group.exploration.state_dict() for group in self.groups],
+            "buffer": [group.buffer.state_dict() for group in self.groups],
+            "rng": torch.get_rng_state(),
+        }
+        if self.device.type == "cuda":
+            state["cuda_rng"] = torch.cuda.get_rng_state(self.device)
+        return state
+
+    def load_state_dict(self, state: dict):
+        self.loss.load_state_dict(state["loss"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        if len(state["buffer"]) != len(self.groups):
+            raise ValueError(f"the state holds {len(state['buffer'])} team sizes, the agent {len(self.groups)}")
+        for group, exploration, buffer in zip(self.groups, state["exploration"], state["buffer"], strict=True):
+            group.exploration.load_state_dict(exploration)
+            load_buffer_state(group.buffer, buffer)
+        self.iteration = int(state["iteration"])
+        torch.set_rng_state(state["rng"])
+        if "cuda_rng" in state:
+            torch.cuda.set_rng_state(state["cuda_rng"], self.device)
