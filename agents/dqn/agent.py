@@ -25,10 +25,10 @@ from .builders import (
     build_q_network,
     build_replay_buffer,
     exploration_schedule,
-    transition_keys,
 )
 from .migration import load_replay_buffer
 from .settings import check_settings
+from .transitions import transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
@@ -62,8 +62,8 @@ class DQNAgent(Agent):
         self.loss = build_loss(self.env, a, policies)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
         self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
-        self.buffer = build_replay_buffer(a, self.device)
-        self._keys = transition_keys(a, policies.action_keys)
+        self.buffer = build_replay_buffer(a, self.env, policies.action_keys)
+        self._keys = transition_keys(self.env.world, policies.action_keys)
         self.collector = build_collector(self.env, policies.explore)
         self._batches = iter(self.collector)
 

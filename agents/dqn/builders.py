@@ -1,5 +1,6 @@
 """The DQN's parts built from its settings: the Q network, the greedy and exploring policies, the mixer, the loss,
-the replay buffer and the collector (TorchRL modules around :mod:`.networks` and :mod:`.loss`)."""
+the replay buffer (its transitions kept compact, :mod:`.transitions`) and the collector (TorchRL modules around
+:mod:`.networks` and :mod:`.loss`)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from uavrl.envs import UAVSpectrumEnv
 
 from .loss import DoubleQMixerLoss
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
+from .transitions import CompactTransitions
 
 
 @dataclass
@@ -131,16 +133,12 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
     return loss
 
 
-def build_replay_buffer(a, device) -> TensorDictReplayBuffer:
-    """``agent.buffer_size`` transitions, uniform samples of ``agent.batch_size``."""
-    storage = LazyTensorStorage(int(a.buffer_size), device=device)
-    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size))
-
-
-def transition_keys(a, action_keys: list) -> list:
-    """The entries of a transition the replay buffer keeps (the loss reads no others)."""
-    inputs = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
-    return inputs + action_keys + [("next", k) for k in inputs + ["reward", "done", "terminated"]]
+def build_replay_buffer(a, env: UAVSpectrumEnv, action_keys: list) -> TensorDictReplayBuffer:
+    """``agent.buffer_size`` transitions kept compact (:class:`.transitions.CompactTransitions`, rebuilt with ``env``'s
+    World), uniform samples of ``agent.batch_size``."""
+    storage = LazyTensorStorage(int(a.buffer_size), device=env.device)
+    compact = CompactTransitions(env.world, action_keys)
+    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size), transform=compact)
 
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:

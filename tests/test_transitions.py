@@ -1,0 +1,79 @@
+"""The DQN's compact replay buffer: what it rebuilds is, bit for bit, what a buffer of full transitions holds."""
+
+import pytest
+import torch
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+from uavrl.agents.dqn import DQNAgent
+from uavrl.config import model_config
+
+TINY = [
+    "agent=dqn",
+    "env.max_steps=6",
+    "agent.worlds=8",
+    "agent.hidden=16",
+    "agent.depth=1",
+    "agent.batch_size=32",
+    "agent.buffer_size=100",  # 3 iterations of 48 transitions wrap around
+    "agent.updates=2",
+    "agent.learning_starts=16",
+]
+ENERGY = ["env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=0.3", "env.battery_init=uniform"]
+CASES = {
+    "n2-fixed-vdn": ["env.grid=[3,3]"],
+    "n6-fixed-qmix": ["env.grid=[4,4]", "env.num_uavs=6", "agent.mixer=qmix"],
+    "n2-joint": ["env.grid=[3,3]", "agent.head=joint"],
+    "n3-random-layouts": ["env.grid=[4,4]", "env.num_uavs=3", "env.layout=random", "agent.mixer=qmix"],
+    "n2-rayleigh": ["env.grid=[3,3]", "env.fading=rayleigh"],
+    "n3-energy-terminating": ["env.grid=[3,3]", "env.num_uavs=3", *ENERGY],
+    "n2-energy-recharge-spare-random": [
+        *("env.grid=[3,3]", *ENERGY, "env.recharge_steps=2", "env.num_spares=1", "env.layout=random"),
+    ],
+}
+
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
+
+
+def assert_identical(rebuilt, full):
+    """The same keys, dtypes, shapes and values, bit for bit."""
+    keys = set(full.keys(include_nested=True, leaves_only=True))
+    assert set(rebuilt.keys(include_nested=True, leaves_only=True)) == keys
+    for key in keys:
+        a, b = rebuilt.get(key), full.get(key)
+        assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b), key
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
+    cfg = compose_cfg(*TINY, *CASES[case])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=1)
+    # a buffer of the full transitions beside the agent's, extended with the same batches
+    full = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=32)
+    extend = agent.buffer.extend
+
+    def both(batch):
+        full.extend(batch.clone())
+        return extend(batch)
+
+    agent.buffer.extend = both
+    for _ in range(3):
+        agent.train_iteration()
+    assert full.write_count == agent.buffer.write_count == 3 * 48
+    # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
+    assert_identical(agent.buffer[:], full[:].exclude("index"))
+    rng = torch.get_rng_state()
+    sample = agent.buffer.sample()
+    torch.set_rng_state(rng)
+    assert_identical(sample, full.sample())
+    if "energy" in case:  # the stored batteries are the episodes' own, not one value
+        assert agent.buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
+
+
+def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
+    """Bytes per transition kept, N = 6 on 10x10: the full transitions' against the compact ones'."""
+    cfg = compose_cfg(*TINY, "env.grid=[10,10]", "env.num_uavs=6", "agent.mixer=qmix", "agent.learning_starts=1000")
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent.train_iteration()
+    stored, full = agent.buffer.storage._storage, agent.buffer[:]
+    per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
+    assert per_transition(stored) * 10 <= per_transition(full)
