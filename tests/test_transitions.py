@@ -1,5 +1,7 @@
 """The DQN's compact replay buffer: what it rebuilds is, bit for bit, what a buffer of full transitions holds."""
 
+import io
+
 import pytest
 import torch
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
@@ -77,3 +79,48 @@ def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
     stored, full = agent.buffer.storage._storage, agent.buffer[:]
     per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
     assert per_transition(stored) * 10 <= per_transition(full)
+
+
+def full_transitions_checkpoint(agent) -> dict:
+    """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index."""
+    state = agent.state_dict()
+    stored, filled = agent.buffer.storage._storage, len(agent.buffer)
+    full = agent.buffer.transform(stored[:filled].exclude("index"))
+    unfilled = full[:1].apply(
+        lambda x: x.new_zeros(len(stored) - filled, *x.shape[1:]), batch_size=[len(stored) - filled]
+    )
+    full = torch.cat([full, unfilled]).set("index", stored.get("index"))
+    storage = {**state["buffer"]["_storage"], "_storage": full.state_dict()}
+    saved = io.BytesIO()  # a checkpoint on disk holds copies, not the live tensors
+    torch.save({**state, "buffer": {**state["buffer"], "_storage": storage}}, saved)
+    saved.seek(0)
+    return torch.load(saved, weights_only=False)
+
+
+@pytest.mark.parametrize("case", ["n2-fixed-vdn", "n3-random-layouts", "n2-energy-recharge-spare-random"])
+def test_a_checkpoint_of_full_transitions_is_compacted_and_resumes_exactly(case, compose_cfg):
+    """Random layouts: the nodes of each stored transition are those its iteration's worlds were reset to."""
+    cfg = compose_cfg(*TINY, *CASES[case])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    for _ in range(3):
+        agent.train_iteration()
+    state = full_transitions_checkpoint(agent)
+    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    restored.load_state_dict(state)
+    assert (restored.buffer.storage._storage == agent.buffer.storage._storage).all()
+    torch.set_rng_state(state["rng"])
+    metrics = agent.train_iteration()
+    torch.set_rng_state(state["rng"])
+    assert restored.train_iteration() == metrics
+
+
+def test_full_transitions_of_unknown_layouts_are_refused_in_one_line(compose_cfg):
+    cfg = compose_cfg(*TINY, *CASES["n3-random-layouts"])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    agent.train_iteration()
+    state = full_transitions_checkpoint(agent)
+    state["buffer"]["_storage"]["_storage"]["agents.observation"][5, 0, 4] += 0.25  # no layout of its iteration's
+    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    with pytest.raises(ValueError, match="holds transitions of layouts that cannot be recovered") as refused:
+        restored.load_state_dict(state)
+    assert "\n" not in str(refused.value)

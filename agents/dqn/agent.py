@@ -16,6 +16,7 @@ from uavrl.envs.grid import cells_or_away
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.rewards import log_gap_reward
+from uavrl.envs.world import World
 from uavrl.evaluation import episode_metrics
 
 from .builders import (
@@ -142,6 +143,12 @@ class DQNAgent(Agent):
         self.target_update.step()
         return loss.detach()
 
+    def _layouts_of(self, iteration: int) -> torch.Tensor:
+        """``[W, 4, 3]`` the layouts iteration ``iteration``'s worlds were reset to (:meth:`train_iteration`)."""
+        world = World(self.env_cfg, int(self.settings.worlds), self.device, self._world_seed(iteration))
+        world.reset()
+        return world.nodes
+
     def policies(self) -> list[CheckedPolicy]:
         """The greedy policy: reads the env's keys, writes ``("agents", "action")``, in environments of the run's grid,
         number of UAVs and layout only."""
@@ -165,7 +172,10 @@ class DQNAgent(Agent):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.exploration.load_state_dict(state["exploration"])
-        load_replay_buffer(self.buffer, state, self.env.observation_size, self.device)  # also earlier versions' buffers
+        # also earlier versions' buffers; their random layouts are those each iteration's worlds were reset to
+        layouts = None if self.env_cfg.layout != "random" else self._layouts_of
+        frames = int(self.settings.worlds) * self.env_cfg.max_steps
+        load_replay_buffer(self.buffer, state, self.env.observation_size, self.device, layouts, frames)
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:
