@@ -32,7 +32,7 @@ def load_replay_buffer(
     as stored, and a buffer where one does not is refused in one line.
     """
     transitions = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
-    if transitions is not None:
+    if transitions is not None and _holds_observations(transitions):
         _nodes_out_of_observation(transitions, observation_size)
     if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
         data = state["buffer"]
@@ -41,7 +41,7 @@ def load_replay_buffer(
         _load_filled_slots(buffer, data, state["buffer_writes"], device)
         return
     stored = state["buffer"]["_storage"]
-    if stored["initialized"] and _holds_observations(stored["_storage"]):
+    if _holds_observations(stored["_storage"]):
         full = TensorDict().load_state_dict(stored["_storage"], strict=False)
         if layouts is not None:
             writes = _writes(len(full), state["buffer"]["_writer"]["_write_count"])
@@ -62,7 +62,7 @@ def _writes(size: int, count: int) -> torch.Tensor:
 def _holds_observations(storage) -> bool:
     """Whether a stored buffer holds full transitions (the observations) rather than configurations."""
     holder, key = _stored_entry(storage, ("agents", "observation"))
-    return key in holder.keys()
+    return holder.get(key, None) is not None
 
 
 def _with_layouts(buffer, full, writes: torch.Tensor, layouts, frames: int, filled: int | None = None):
