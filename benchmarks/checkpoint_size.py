@@ -1,10 +1,11 @@
 """Size of a DQN checkpoint with a full replay buffer (N = 6 on 10x10, N = 10 on 20x20) beside an earlier commit's.
 
 Each measurement is a whole process: the scenario's agent collects until its
-replay buffer (``agent.buffer_size`` transitions) is full, with no gradient
-step (``agent.learning_starts`` past the run: the networks are the same size
-either way), then its ``state_dict`` is saved as ``python -m uavrl.train``
-saves a checkpoint (``torch.save``); the bytes written are the figure.
+replay buffer (``agent.buffer_size`` transitions) is full, with one gradient
+step an iteration (``agent.updates=1``: the optimizer's state is there, and
+the networks are the same size as with the scenario's updates), then its
+``state_dict`` is saved as ``python -m uavrl.train`` saves a checkpoint
+(``torch.save``); the bytes written are the figure.
 ``--baseline REV`` measures REV the same way in a temporary git worktree.
 
 Usage::
@@ -29,7 +30,7 @@ from hydra import compose, initialize_config_dir
 from uavrl.config import config_dir, model_config
 from uavrl.agents.dqn import DQNAgent
 with initialize_config_dir(config_dir=config_dir(), version_base=None):
-    cfg = compose("config", overrides=["agent=dqn", "scenario=" + sys.argv[1], "agent.learning_starts=1000000000"])
+    cfg = compose("config", overrides=["agent=dqn", "scenario=" + sys.argv[1], "agent.updates=1"])
 agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
 frames = int(cfg.agent.worlds) * cfg.env.max_steps
 for _ in range(math.ceil(int(cfg.agent.buffer_size) / frames)):

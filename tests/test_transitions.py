@@ -8,6 +8,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
 from uavrl.agents.dqn import DQNAgent
 from uavrl.config import model_config
+from uavrl.envs.limits import stored_transition_bytes
 
 TINY = [
     "agent=dqn",
@@ -79,6 +80,8 @@ def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
     stored, full = agent.buffer.storage._storage, agent.buffer[:]
     per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
     assert per_transition(stored) * 10 <= per_transition(full)
+    # the memory check's estimate (uavrl.settings): the stored bytes, and 2 for a joint head's action
+    assert per_transition(stored) + 2 == stored_transition_bytes(agent.env_cfg)
 
 
 def full_transitions_checkpoint(agent) -> dict:
