@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 from torch import nn
-from torchrl.objectives import SoftUpdate
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
@@ -20,6 +19,7 @@ from uavrl.envs.world import World
 from uavrl.evaluation import episode_metrics
 
 from .builders import (
+    TargetUpdate,
     build_collector,
     build_loss,
     build_policies,
@@ -62,7 +62,7 @@ class DQNAgent(Agent):
         self.greedy, self.exploration = policies.greedy, policies.exploration
         self.loss = build_loss(self.env, a, policies)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
-        self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
+        self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
         self.buffer = build_replay_buffer(a, self.env, policies.action_keys)
         self._keys = transition_keys(self.env.world, policies.action_keys)
         self.collector = build_collector(self.env, policies.explore)
