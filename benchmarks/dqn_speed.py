@@ -6,7 +6,7 @@ scenario=n6_10x10 seed=<k> eval.num_starts=200`` and the variant's
 overrides); the baseline runs the code of ``--baseline REV`` (a temporary git
 worktree), the others this checkout.  All variants of a seed run at the same
 time, so they share the machine's load.  Printed per run: the training's wall
-and CPU seconds (the periodic evaluations left out: ``time/train_seconds``),
+and CPU seconds (the periodic evaluations left out: ``train_seconds``, ``train_cpu_seconds`` of metrics.json),
 the share of the 200 held-out starts that reach 0.999 U*, and the steps to
 reach it over the oracle planner's from the same starts (those both reach),
 as ``benchmarks/yardstick.py --paired`` computes them.
@@ -82,7 +82,7 @@ def main():
                         raise SystemExit(f"{name} seed {seed} failed")
                     m = json.loads((run_dir / "metrics.json").read_text())
                     print(
-                        f"| {name} | {seed} | {m['time/train_seconds']:.0f} | {m['time/train_cpu_seconds']:.0f} "
+                        f"| {name} | {seed} | {m['train_seconds']:.0f} | {m['train_cpu_seconds']:.0f} "
                         f"| {m['eval/reach_999']:.3f} | {oracle_ratio(run_dir):.3f} "
                         f"| {' '.join(variants[name][1]) or '(defaults)'} |",
                         flush=True,
