@@ -18,10 +18,9 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
-from dqn_iteration import ROOT, _installed_names
+from dqn_iteration import _installed_names, checkouts_beside
 
 MEASURE = """
 import io, math, torch
@@ -58,29 +57,20 @@ def main():
     parser.add_argument("--baseline", help="a git revision to measure beside this checkout")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        checkouts = {"this checkout": ROOT}
-        if args.baseline:
-            worktree = Path(tmp) / "baseline"
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(worktree), args.baseline])
-            checkouts = {f"baseline {args.baseline}": worktree, **checkouts}
-        try:
-            for scenario in args.scenarios:
-                sizes = {}
-                for name, checkout in checkouts.items():
-                    transitions, sizes[name] = measure(checkout, scenario)
-                    per = sizes[name] / transitions
-                    print(
-                        f"{SCENARIOS[scenario]:<16} {name:<22} {sizes[name] / 1e6:8.1f} MB ({transitions} transitions, "
-                        f"{per:.0f} bytes each)",
-                        flush=True,
-                    )
-                if args.baseline:
-                    ratio = sizes["this checkout"] / sizes[f"baseline {args.baseline}"]
-                    print(f"{SCENARIOS[scenario]:<16} this checkout / baseline: {ratio:.3f}", flush=True)
-        finally:
+    with checkouts_beside(args.baseline) as checkouts:
+        for scenario in args.scenarios:
+            sizes = {}
+            for name, checkout in checkouts.items():
+                transitions, sizes[name] = measure(checkout, scenario)
+                per = sizes[name] / transitions
+                print(
+                    f"{SCENARIOS[scenario]:<16} {name:<22} {sizes[name] / 1e6:8.1f} MB ({transitions} transitions, "
+                    f"{per:.0f} bytes each)",
+                    flush=True,
+                )
             if args.baseline:
-                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(worktree)])
+                ratio = sizes["this checkout"] / sizes[f"baseline {args.baseline}"]
+                print(f"{SCENARIOS[scenario]:<16} this checkout / baseline: {ratio:.3f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from dqn_iteration import ROOT, _installed_names
+from dqn_iteration import ROOT, _installed_names, checkouts_beside
 from yardstick import steps_to_level
 
 COMMAND = ["agent=dqn", "scenario=n6_10x10", "eval.num_starts=200", "progress=false"]
@@ -63,32 +63,27 @@ def main():
     )
     parser.add_argument("--out", type=Path, help="where the runs go (default: a temporary folder)")
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, checkouts_beside(args.baseline) as checkouts:
         out = args.out or Path(tmp)
-        worktree = Path(tmp) / "baseline"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(worktree), args.baseline])
-        variants = {f"baseline {args.baseline}": (worktree, [])}
+        variants = {f"baseline {args.baseline}": (checkouts[f"baseline {args.baseline}"], [])}
         variants |= {name: (ROOT, overrides) for name, *overrides in args.variant}
-        try:
-            print("| variant | seed | train s | train CPU s | reach 0.999 U* | / oracle | overrides |")
-            print("|---|---|---|---|---|---|---|")
-            for seed in args.seeds:
-                runs = {}
-                for name, (checkout, overrides) in variants.items():
-                    run_dir = out / f"{name.replace(' ', '_')}-seed{seed}"
-                    runs[name] = (run_dir, start(checkout, [*overrides, f"seed={seed}"], run_dir))
-                for name, (run_dir, process) in runs.items():
-                    if process.wait() != 0:
-                        raise SystemExit(f"{name} seed {seed} failed")
-                    m = json.loads((run_dir / "metrics.json").read_text())
-                    print(
-                        f"| {name} | {seed} | {m['train_seconds']:.0f} | {m['train_cpu_seconds']:.0f} "
-                        f"| {m['eval/reach_999']:.3f} | {oracle_ratio(run_dir):.3f} "
-                        f"| {' '.join(variants[name][1]) or '(defaults)'} |",
-                        flush=True,
-                    )
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(worktree)])
+        print("| variant | seed | train s | train CPU s | reach 0.999 U* | / oracle | overrides |")
+        print("|---|---|---|---|---|---|---|")
+        for seed in args.seeds:
+            runs = {}
+            for name, (checkout, overrides) in variants.items():
+                run_dir = out / f"{name.replace(' ', '_')}-seed{seed}"
+                runs[name] = (run_dir, start(checkout, [*overrides, f"seed={seed}"], run_dir))
+            for name, (run_dir, process) in runs.items():
+                if process.wait() != 0:
+                    raise SystemExit(f"{name} seed {seed} failed")
+                m = json.loads((run_dir / "metrics.json").read_text())
+                print(
+                    f"| {name} | {seed} | {m['train_seconds']:.0f} | {m['train_cpu_seconds']:.0f} "
+                    f"| {m['eval/reach_999']:.3f} | {oracle_ratio(run_dir):.3f} "
+                    f"| {' '.join(variants[name][1]) or '(defaults)'} |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":
