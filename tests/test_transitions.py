@@ -88,7 +88,7 @@ def full_transitions_checkpoint(agent) -> dict:
     """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index."""
     state = agent.state_dict()
     stored, filled = agent.buffer.storage._storage, len(agent.buffer)
-    full = agent.buffer.transform(stored[:filled].exclude("index"))
+    full = agent.transitions(stored[:filled].exclude("index"))
     unfilled = full[:1].apply(
         lambda x: x.new_zeros(len(stored) - filled, *x.shape[1:]), batch_size=[len(stored) - filled]
     )

@@ -29,7 +29,7 @@ from .builders import (
 )
 from .migration import load_replay_buffer
 from .settings import check_settings
-from .transitions import transition_keys
+from .transitions import CompactTransitions, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
@@ -63,7 +63,8 @@ class DQNAgent(Agent):
         self.loss = build_loss(self.env, a, policies)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
         self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
-        self.buffer = build_replay_buffer(a, self.env, policies.action_keys)
+        self.transitions = CompactTransitions(self.env.world, policies.action_keys)  # what the buffer keeps of each
+        self.buffer = build_replay_buffer(a, self.transitions)
         self._keys = transition_keys(self.env.world, policies.action_keys)
         self.collector = build_collector(self.env, policies.explore)
         self._batches = iter(self.collector)
@@ -175,7 +176,9 @@ class DQNAgent(Agent):
         # also earlier versions' buffers; their random layouts are those each iteration's worlds were reset to
         layouts = None if self.env_cfg.layout != "random" else self._layouts_of
         frames = int(self.settings.worlds) * self.env_cfg.max_steps
-        load_replay_buffer(self.buffer, state, self.env.observation_size, self.device, layouts, frames)
+        load_replay_buffer(
+            self.buffer, self.transitions, state, self.env.observation_size, self.device, layouts, frames
+        )
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:

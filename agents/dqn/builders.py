@@ -173,12 +173,11 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
     return loss
 
 
-def build_replay_buffer(a, env: UAVSpectrumEnv, action_keys: list) -> TensorDictReplayBuffer:
-    """``agent.buffer_size`` transitions kept compact (:class:`.transitions.CompactTransitions`, rebuilt with ``env``'s
-    World), uniform samples of ``agent.batch_size``."""
-    storage = LazyTensorStorage(int(a.buffer_size), device=env.device)
-    compact = CompactTransitions(env.world, action_keys)
-    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size), transform=compact)
+def build_replay_buffer(a, transitions: CompactTransitions) -> TensorDictReplayBuffer:
+    """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), uniform samples of
+    ``agent.batch_size``."""
+    storage = LazyTensorStorage(int(a.buffer_size), device=transitions.world.device)
+    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size), transform=transitions)
 
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:

@@ -14,9 +14,12 @@ from torchrl.data import TensorDictReplayBuffer
 from uavrl.compat import load_buffer_state
 from uavrl.envs import NODE_FEATURES
 
+from .transitions import CompactTransitions
+
 
 def load_replay_buffer(
     buffer: TensorDictReplayBuffer,
+    transitions: CompactTransitions,
     state: dict,
     observation_size: int,
     device,
@@ -26,18 +29,18 @@ def load_replay_buffer(
     """Fill ``buffer`` from the checkpoint ``state`` of any version (``state["buffer"]``, and
     ``state["buffer_writes"]`` in the oldest).
 
-    Full transitions are compacted by the buffer's own transform.  With random layouts they kept no nodes:
+    Full transitions are compacted by ``transitions``, the buffer's transform.  With random layouts they kept no nodes:
     ``layouts(k)`` gives iteration ``k``'s ``[W, 4, 3]`` (the layouts its worlds were reset to), ``frames`` the
     transitions an iteration writes; a layout is taken only where its observations and states come out bit for bit
     as stored, and a buffer where one does not is refused in one line.
     """
-    transitions = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
-    if transitions is not None and _holds_observations(transitions):
-        _nodes_out_of_observation(transitions, observation_size)
+    saved = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
+    if saved is not None and _holds_observations(saved):
+        _nodes_out_of_observation(saved, observation_size)
     if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
         data = state["buffer"]
         if data is not None and layouts is not None:
-            data = _with_layouts(buffer, data, _writes(len(data), state["buffer_writes"]), layouts, frames)
+            data = _with_layouts(transitions, data, _writes(len(data), state["buffer_writes"]), layouts, frames)
         _load_filled_slots(buffer, data, state["buffer_writes"], device)
         return
     stored = state["buffer"]["_storage"]
@@ -45,8 +48,8 @@ def load_replay_buffer(
         full = TensorDict().load_state_dict(stored["_storage"], strict=False)
         if layouts is not None:
             writes = _writes(len(full), state["buffer"]["_writer"]["_write_count"])
-            full = _with_layouts(buffer, full, writes, layouts, frames, filled=stored["_len"])
-        compact = buffer.transform.inv(full)
+            full = _with_layouts(transitions, full, writes, layouts, frames, filled=stored["_len"])
+        compact = transitions.inv(full)
         if "index" in full.keys():  # each slot's own index, written by TorchRL's writer beside the transition
             compact.set("index", full.get("index"))
         stored = {**stored, "_storage": compact.state_dict()}
@@ -65,7 +68,9 @@ def _holds_observations(storage) -> bool:
     return holder.get(key, None) is not None
 
 
-def _with_layouts(buffer, full, writes: torch.Tensor, layouts, frames: int, filled: int | None = None):
+def _with_layouts(
+    transitions: CompactTransitions, full, writes: torch.Tensor, layouts, frames: int, filled: int | None = None
+):
     """``full`` with each transition's ``nodes``: of the iteration and world its write index says, checked."""
     filled = len(full) if filled is None else filled
     iterations = writes // frames
@@ -78,7 +83,7 @@ def _with_layouts(buffer, full, writes: torch.Tensor, layouts, frames: int, fill
         nodes[here] = iteration_layouts[(writes[here] % frames) // steps]
     full = full.clone(False)
     full.set("nodes", nodes.to(full.device))
-    rebuilt = buffer.transform(buffer.transform.inv(full[:filled]))
+    rebuilt = transitions(transitions.inv(full[:filled]))
     for key in (("agents", "observation"), "state", ("next", "agents", "observation"), ("next", "state")):
         if not torch.equal(rebuilt.get(key), full.get(key)[:filled]):
             raise ValueError(
