@@ -112,7 +112,7 @@ class DQNSchema:
     lr: REAL = setting(0.0005, positive(), "Adam's learning rate, annealed linearly over the run to agent.lr_end")
     lr_end: REAL = setting(0.00005, positive(), "the learning rate at the end of the run")
     batch_size: int = setting(256, whole(1), "transitions per gradient step")
-    buffer_size: int = setting(50000, whole(1), "transitions (the checkpoint keeps them: ~120 MB for N = 6 on 10x10)")
+    buffer_size: int = setting(50000, whole(1), "transitions (the checkpoint keeps them: ~3 MB for N = 6 on 10x10)")
     updates: int = setting(32, whole(1), "gradient steps per iteration")
     learning_starts: int = setting(2000, whole(0), "transitions in the buffer before the first gradient step")
     tau: REAL = setting(0.01, UNIT, "soft target update per gradient step")

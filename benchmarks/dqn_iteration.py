@@ -15,6 +15,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import statistics
 import subprocess
@@ -73,36 +74,43 @@ def _installed_names(checkout: Path) -> str:
     )
 
 
+@contextlib.contextmanager
+def checkouts_beside(baseline: str | None):
+    """``{name: folder}``: ``baseline`` (a git revision, checked out in a temporary worktree, removed after) and this
+    checkout."""
+    with tempfile.TemporaryDirectory() as tmp:
+        if not baseline:
+            yield {"this checkout": ROOT}
+            return
+        worktree = Path(tmp) / "baseline"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(worktree), baseline])
+        try:
+            yield {f"baseline {baseline}": worktree, "this checkout": ROOT}
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(worktree)])
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--baseline", help="a git revision to measure beside this checkout")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--iterations", type=int, default=12)
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        checkouts = {"this checkout": ROOT}
+    with checkouts_beside(args.baseline) as checkouts:
+        print(f"load average at start: {os.getloadavg()[0]:.1f}")
+        results = {name: [] for name in checkouts}
+        for round_ in range(args.rounds):
+            for name, checkout in checkouts.items():
+                results[name].append(measure(checkout, args.iterations))
+                cpu, wall = results[name][-1]
+                print(f"round {round_ + 1}  {name:<22} CPU {cpu:.3f} s/iteration  wall {wall:.3f} s", flush=True)
+        medians = {name: statistics.median(c for c, _ in runs) for name, runs in results.items()}
+        for name, cpu in medians.items():
+            print(f"median  {name:<22} CPU {cpu:.3f} s/iteration")
         if args.baseline:
-            worktree = Path(tmp) / "baseline"
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-q", "--detach", str(worktree), args.baseline])
-            checkouts = {f"baseline {args.baseline}": worktree, **checkouts}
-        try:
-            print(f"load average at start: {os.getloadavg()[0]:.1f}")
-            results = {name: [] for name in checkouts}
-            for round_ in range(args.rounds):
-                for name, checkout in checkouts.items():
-                    results[name].append(measure(checkout, args.iterations))
-                    cpu, wall = results[name][-1]
-                    print(f"round {round_ + 1}  {name:<22} CPU {cpu:.3f} s/iteration  wall {wall:.3f} s", flush=True)
-            medians = {name: statistics.median(c for c, _ in runs) for name, runs in results.items()}
-            for name, cpu in medians.items():
-                print(f"median  {name:<22} CPU {cpu:.3f} s/iteration")
-            if args.baseline:
-                base, this = medians[f"baseline {args.baseline}"], medians["this checkout"]
-                print(f"this checkout / baseline: {this / base:.2f}x CPU per iteration")
-            print(f"load average at end: {os.getloadavg()[0]:.1f}")
-        finally:
-            if args.baseline:
-                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(worktree)])
+            base, this = medians[f"baseline {args.baseline}"], medians["this checkout"]
+            print(f"this checkout / baseline: {this / base:.2f}x CPU per iteration")
+        print(f"load average at end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

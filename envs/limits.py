@@ -432,6 +432,18 @@ def frame_bytes(cfg) -> int:
     return 2 * per_step
 
 
+def stored_transition_bytes(cfg) -> int:
+    """Bytes of one transition in the DQN's replay buffer, kept compact (``uavrl.agents.dqn.transitions``): each
+    UAV's code now and next (int16, int32 past 32767 codes), its action (int8), under an energy model its battery and
+    service flag now and next (float32), a random layout's nodes (float64), the joint action (the largest head's),
+    the reward, done flags and the slot's index."""
+    N = cfg.fleet_size
+    code = 2 if 2 * (cfg.num_cells + 1) <= 2**15 - 1 else 4
+    energy = 0 if cfg.energy == "none" else 2 * N * 2 * 4
+    nodes = 4 * 3 * 8 if cfg.layout == "random" else 0
+    return 2 * N * code + N + energy + nodes + 2 + 4 + 2 + 8  # joint action, reward, done flags, index
+
+
 def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.bounds`) where the exact solver does not fit:
     each world's best reachable terms ``[K + 1, N]``, then the relaxation (chunks of (world, step) rows over every

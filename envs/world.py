@@ -302,20 +302,10 @@ class World:
         nodes = self._nodes[worlds]
         gains = link_gains(self._cell_xyz, nodes, cfg)  # [k, C, 4]: the channel model's mean gains
         contrib = relay_contributions(gains, cfg)  # the rate model's per-cell terms
-        # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
-        # at c and at the cells its four moves reach, -1 where a move leaves the grid
-        scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
-        neighbours = self.dynamics.neighbours
-        around = torch.cat([torch.arange(C, device=self.device)[:, None], neighbours.where(neighbours >= 0, C)], -1)
-        K = 2 * self._slots
-        if self._slots > C:  # a UAV out of service (cell C) sees -1 everywhere, adds nothing and relays for no one
-            around = torch.cat([around, around.new_full((1, 5), C)])
-            on_grid = torch.cat([contrib, contrib.new_zeros(k, 1, 2)], 1)
-        else:
-            on_grid = contrib
-        cc, relay = self._code_cell, ((self._code_task == RELAYING) & (self._code_cell < C))[None, :]
-        local = scaled.index_select(1, around[cc].flatten()).view(k, K, 10).float()
-        code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)  # [k, 2C, 13]
+        code_obs, node_obs = self._observation_tables(contrib, nodes)
+        cc = self._code_cell
+        relay = ((self._code_task == RELAYING) & (cc < C))[None, :]
+        on_grid = torch.cat([contrib, contrib.new_zeros(k, 1, 2)], 1) if self._slots > C else contrib
         # per code: what the UAV adds to the sum inside the PU log, the SE log, and to the relaying count
         at_code, zero = on_grid.index_select(1, cc), contrib.new_zeros(())
         code_rate = torch.stack(
@@ -330,7 +320,7 @@ class World:
             "_cell_contrib": contrib,
             "_code_obs": code_obs,
             "_code_rate": code_rate,
-            "_node_obs": (nodes / self._node_scale).flatten(1).float(),  # [k, NODE_FEATURES]
+            "_node_obs": node_obs,
             "_direct": direct_terms(nodes, cfg),
         }
         fading_table = self.fading.table(self._cell_xyz, nodes, gains)
@@ -349,6 +339,21 @@ class World:
             getattr(self, name)[worlds] = rows
         if self._pairs:
             self._set_pair_tables()
+
+    def _observation_tables(self, contrib: torch.Tensor, nodes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(code_obs [k, 2C, 13], node_obs [k, 12])`` of ``k`` layouts: what a UAV at each code observes of its
+        layout, and the nodes as the state shows them, from the per-cell contributions ``[k, C, 2]`` and the nodes."""
+        C, k, K = self.cfg.num_cells, len(contrib), 2 * self._slots
+        # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
+        # at c and at the cells its four moves reach, -1 where a move leaves the grid
+        scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
+        neighbours = self.dynamics.neighbours
+        around = torch.cat([torch.arange(C, device=self.device)[:, None], neighbours.where(neighbours >= 0, C)], -1)
+        if self._slots > C:  # a UAV out of service (cell C) sees -1 everywhere, adds nothing and relays for no one
+            around = torch.cat([around, around.new_full((1, 5), C)])
+        local = scaled.index_select(1, around[self._code_cell].flatten()).view(k, K, 10).float()
+        code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)
+        return code_obs, (nodes / self._node_scale).flatten(1).float()
 
     def _per_cell(self, table: torch.Tensor, cells: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[W, ...]`` of all worlds (or of ``worlds``)."""
@@ -372,16 +377,26 @@ class World:
 
     def _code_rows(self, table: torch.Tensor, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """Rows ``[W, N, F]`` of a per-code table ``[Bt, 2C, F]`` at the codes ``[W, N]`` of all worlds (or of
-        ``worlds``)."""
-        if self._code_offset is not None:
-            code = code + (self._code_offset if worlds is None else worlds.unsqueeze(-1) * (2 * self._slots))
+        ``worlds``; a table of ``W`` rows other than the World's: row ``w`` for configuration ``w``)."""
+        if len(table) > 1:
+            if worlds is not None:
+                code = code + worlds.unsqueeze(-1) * (2 * self._slots)
+            elif self._code_offset is not None and len(code) == len(self._code_offset):
+                code = code + self._code_offset
+            else:
+                code = code + torch.arange(len(code), device=code.device).unsqueeze(-1) * (2 * self._slots)
         return table.view(-1, table.shape[-1]).index_select(0, code.view(-1)).view(*code.shape, table.shape[-1])
 
-    def _assemble(self, code: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _assemble(
+        self, code: torch.Tensor, energy: torch.Tensor | None = None, tables: tuple | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
-        layout; every world's under an energy model, whose features are the worlds' batteries now)."""
+        layout); under an energy model ``energy`` ``[W, N, 2]`` their features (default: the worlds' batteries now);
+        ``tables`` ``(code_obs, node_obs)`` of their own layouts (:meth:`_observation_tables`; default: the
+        worlds')."""
         W, N = code.shape
-        own = self._code_rows(self._code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
+        code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables
+        own = self._code_rows(code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
             parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
@@ -391,16 +406,64 @@ class World:
             parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
         per_uav = [own[..., :5].reshape(W, 5 * N)]
         if self.energy is not None:  # then each UAV's battery and service flag: its own, the others' in that order
-            energy = self.energy.features(self._s)  # [W, N, 2]
+            energy = self.energy.features(self._s) if energy is None else energy  # [W, N, 2]
             parts.append(energy)
             if N == 2:
                 parts.append(energy.flip(1))
             elif N > 2:
                 parts.append(torch.cat([energy, energy], 1).as_strided((W, N, 2 * (N - 1)), (4 * N, 2, 1), 2))
-            per_uav.append(energy.view(W, 2 * N))
+            per_uav.append(energy.reshape(W, 2 * N))
         observation = torch.cat(parts, -1) if len(parts) > 1 else own
-        state = torch.cat([*per_uav, self._node_obs.expand(W, NODE_FEATURES)], -1)
+        state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
         return observation, state
+
+    def energy_features(self, state: torch.Tensor) -> torch.Tensor | None:
+        """``[..., N, 2]`` each UAV's battery and service flag as the ``state`` ``[..., S]`` shows them (what
+        :meth:`configurations` takes); ``None`` without an energy model."""
+        N = self.num_uavs
+        return None if self.energy is None else state[..., 5 * N : 7 * N].unflatten(-1, (N, 2))
+
+    def configurations(
+        self, code: torch.Tensor, energy: torch.Tensor | None = None, nodes: torch.Tensor | None = None
+    ) -> dict:
+        """What an agent acts and learns from (``observation``, ``action_mask``, ``state``, ``positions``, ``tasks``)
+        of ``W`` configurations given by their codes ``[W, N]`` (``2 cell + task``), under an energy model their
+        features ``[W, N, 2]`` (:meth:`energy_features`), with ``layout=random`` their layouts' nodes ``[W, 4, 3]``:
+        what :meth:`reset` and :meth:`step` returned for them, bit for bit.  For a replay buffer that keeps
+        configurations rather than observations.
+
+        Example:
+            >>> from uavrl.envs import make_config
+            >>> world = World(make_config("paper", grid=(4, 4), num_uavs=3), batch_size=2)
+            >>> out = world.reset()
+            >>> again = world.configurations(world.code)
+            >>> all(torch.equal(out[key], again[key]) for key in again)
+            True
+        """
+        if (self.energy is None) != (energy is None) or (self.layouts.fixed is None) == (nodes is None):
+            raise ValueError(
+                "World.configurations takes energy features exactly under an energy model (env.energy other than "
+                "none) and nodes exactly with env.layout=random"
+            )
+        tables = None
+        if nodes is not None:
+            tables = self._observation_tables(
+                relay_contributions(link_gains(self._cell_xyz, nodes, self.cfg), self.cfg), nodes
+            )
+        observation, state = self._assemble(code, energy, tables)
+        return self._outputs(observation, state, code >> 1, code & 1)
+
+    def _outputs(self, observation, state, cell: torch.Tensor, task: torch.Tensor) -> dict:
+        """The outputs an agent acts from, of configurations ``cell``, ``task`` ``[W, N]`` (their observation and
+        state assembled)."""
+        W, N = cell.shape
+        return {
+            "observation": observation,
+            "action_mask": self.dynamics.masks(cell),
+            "state": state,
+            "positions": self._cell_xy.index_select(0, cell.view(-1)).view(W, N, 2),
+            "tasks": task,
+        }
 
     def _sum_rates(self, code: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """``[W, 2]`` deterministic (R_PU, R_SE) of ``W`` configurations (of ``worlds``), from the per-code rate
@@ -440,13 +503,7 @@ class World:
             state = self._pair_state.index_select(0, pair[:, 0])
         else:
             observation, state = self._assemble(code)
-        out = {
-            "observation": observation,
-            "action_mask": self.dynamics.masks(cell),
-            "state": state,
-            "positions": self._cell_xy.index_select(0, cell.view(-1)).view(B, N, 2),
-            "tasks": task.clone(),  # the state's own tensor stays the World's
-        }
+        out = self._outputs(observation, state, cell, task.clone())  # the state's own tensor stays the World's
         if not self.diagnostics:
             return out
         r = self._s.r.float()

@@ -29,6 +29,7 @@ from uavrl.envs.limits import (
     evaluation_horizon,
     frame_bytes,
     gib,
+    stored_transition_bytes,
     table_bytes,
     world_bytes,
 )
@@ -152,7 +153,7 @@ def check_run_costs(cfg: DictConfig, model) -> None:
         memory.append(Cost(world_bytes(model, worlds), {"agent.worlds": worlds}, "the training worlds"))
         memory.append(Cost(worlds * T * frame_bytes(model), batch, "each iteration's batch of transitions"))
         buffer = {"agent.buffer_size": int(a.buffer_size)}
-        memory.append(Cost(int(a.buffer_size) * frame_bytes(model), buffer, "the replay buffer"))
+        memory.append(Cost(int(a.buffer_size) * stored_transition_bytes(model), buffer, "the replay buffer"))
     evaluations = max(tables, 1) * starts * horizon
     eval_factors = {"eval.num_starts": starts, "eval.horizon": horizon} | ({"agent.runs": tables} if tables > 1 else {})
     steps.append(Cost(evaluations, eval_factors, "the evaluation"))

@@ -35,6 +35,7 @@ The package, one job a module, each read top to bottom:
 - :mod:`.networks`: :class:`TeamQNet` and the modules that turn its values into valid actions (:class:`ValidGreedy`);
 - :mod:`.loss`: :class:`DoubleQMixerLoss`, the factored head's double-DQN loss;
 - :mod:`.settings`: :func:`check_settings`, the one-line errors for settings the agent cannot run;
+- :mod:`.transitions`: :class:`CompactTransitions`, the replay buffer's transitions kept as configurations;
 - :mod:`.builders`: the Q network, policies, mixer, loss, replay buffer and collector built from the settings;
 - :mod:`.migration`: replay buffers of earlier checkpoints, loaded as the current agent would have saved them;
 - :mod:`.agent`: :class:`DQNAgent`, the learner behind ``python -m uavrl.train agent=dqn``.
@@ -62,15 +63,16 @@ from .builders import (
     build_q_network,
     build_replay_buffer,
     exploration_schedule,
-    transition_keys,
 )
 from .loss import DoubleQMixerLoss
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
 from .settings import MAX_JOINT_ACTIONS, check_settings
+from .transitions import CompactTransitions, transition_keys
 
 __all__ = [
     "MAX_JOINT_ACTIONS",
     "Q_INPUTS",
+    "CompactTransitions",
     "DQNAgent",
     "DecodeJointAction",
     "DoubleQMixerLoss",

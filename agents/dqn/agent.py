@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 from torch import nn
-from torchrl.objectives import SoftUpdate
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
@@ -16,19 +15,21 @@ from uavrl.envs.grid import cells_or_away
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.rewards import log_gap_reward
+from uavrl.envs.world import World
 from uavrl.evaluation import episode_metrics
 
 from .builders import (
+    TargetUpdate,
     build_collector,
     build_loss,
     build_policies,
     build_q_network,
     build_replay_buffer,
     exploration_schedule,
-    transition_keys,
 )
 from .migration import load_replay_buffer
 from .settings import check_settings
+from .transitions import CompactTransitions, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
@@ -69,9 +70,10 @@ class DQNAgent(Agent):
         self.greedy, self.exploration = policies.greedy, policies.exploration
         self.loss = build_loss(self.env, a, policies)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
-        self.target_update = SoftUpdate(self.loss, tau=float(a.tau))
-        self.buffer = build_replay_buffer(a, self.device)
-        self._keys = transition_keys(a, policies.action_keys)
+        self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
+        self.transitions = CompactTransitions(self.env.world, policies.action_keys)  # what the buffer keeps of each
+        self.buffer = build_replay_buffer(a, self.transitions)
+        self._keys = transition_keys(self.env.world, policies.action_keys)
         self.collector = build_collector(self.env, policies.explore)
         self._batches = iter(self.collector)
 
@@ -150,6 +152,12 @@ class DQNAgent(Agent):
         self.target_update.step()
         return loss.detach()
 
+    def _layouts_of(self, iteration: int) -> torch.Tensor:
+        """``[W, 4, 3]`` the layouts iteration ``iteration``'s worlds were reset to (:meth:`train_iteration`)."""
+        world = World(self.env_cfg, int(self.settings.worlds), self.device, self._world_seed(iteration))
+        world.reset()
+        return world.nodes
+
     def policies(self) -> list[CheckedPolicy]:
         """The greedy policy: reads the env's keys, writes ``("agents", "action")``, in environments of the run's grid,
         number of UAVs and layout only."""
@@ -173,7 +181,12 @@ class DQNAgent(Agent):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.exploration.load_state_dict(state["exploration"])
-        load_replay_buffer(self.buffer, state, self.env.observation_size, self.device)  # also earlier versions' buffers
+        # also earlier versions' buffers; their random layouts are those each iteration's worlds were reset to
+        layouts = None if self.env_cfg.layout != "random" else self._layouts_of
+        frames = int(self.settings.worlds) * self.env_cfg.max_steps
+        load_replay_buffer(
+            self.buffer, self.transitions, state, self.env.observation_size, self.device, layouts, frames
+        )
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:

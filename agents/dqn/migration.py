@@ -1,26 +1,97 @@
 """Checkpoints of earlier versions, loaded as the current agent would have saved them (a resumed run continues bit for
-bit): a replay buffer stored as the filled slots of a ``TensorDict``, and the earlier observation layout (the node
-positions in every UAV's observation)."""
+bit): a replay buffer of full transitions (observations, masks, states; before :mod:`.transitions`) compacted, one
+stored as the filled slots of a ``TensorDict``, and the earlier observation layout (the node positions in every UAV's
+observation)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
+from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
 from uavrl.compat import load_buffer_state
 from uavrl.envs import NODE_FEATURES
 
+from .transitions import CompactTransitions
 
-def load_replay_buffer(buffer: TensorDictReplayBuffer, state: dict, observation_size: int, device) -> None:
+
+def load_replay_buffer(
+    buffer: TensorDictReplayBuffer,
+    transitions: CompactTransitions,
+    state: dict,
+    observation_size: int,
+    device,
+    layouts: Callable[[int], torch.Tensor] | None = None,
+    frames: int = 1,
+) -> None:
     """Fill ``buffer`` from the checkpoint ``state`` of any version (``state["buffer"]``, and
-    ``state["buffer_writes"]`` in the oldest)."""
-    transitions = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
-    if transitions is not None:
-        _nodes_out_of_observation(transitions, observation_size)
+    ``state["buffer_writes"]`` in the oldest).
+
+    Full transitions are compacted by ``transitions``, the buffer's transform.  With random layouts they kept no nodes:
+    ``layouts(k)`` gives iteration ``k``'s ``[W, 4, 3]`` (the layouts its worlds were reset to), ``frames`` the
+    transitions an iteration writes; a layout is taken only where its observations and states come out bit for bit
+    as stored, and a buffer where one does not is refused in one line.
+    """
+    saved = state["buffer"] if "buffer_writes" in state else state["buffer"]["_storage"]["_storage"]
+    if saved is not None and _holds_observations(saved):
+        _nodes_out_of_observation(saved, observation_size)
     if "buffer_writes" in state:  # a checkpoint of an earlier version: the filled slots, in slot order
-        _load_filled_slots(buffer, state["buffer"], state["buffer_writes"], device)
-    else:
-        load_buffer_state(buffer, state["buffer"])
+        data = state["buffer"]
+        if data is not None and layouts is not None:
+            data = _with_layouts(transitions, data, _writes(len(data), state["buffer_writes"]), layouts, frames)
+        _load_filled_slots(buffer, data, state["buffer_writes"], device)
+        return
+    stored = state["buffer"]["_storage"]
+    if _holds_observations(stored["_storage"]):
+        full = TensorDict().load_state_dict(stored["_storage"], strict=False)
+        if layouts is not None:
+            writes = _writes(len(full), state["buffer"]["_writer"]["_write_count"])
+            full = _with_layouts(transitions, full, writes, layouts, frames, filled=stored["_len"])
+        compact = transitions.inv(full)
+        if "index" in full.keys():  # each slot's own index, written by TorchRL's writer beside the transition
+            compact.set("index", full.get("index"))
+        stored = {**stored, "_storage": compact.state_dict()}
+    load_buffer_state(buffer, {**state["buffer"], "_storage": stored})
+
+
+def _writes(size: int, count: int) -> torch.Tensor:
+    """``[size]`` which of ``count`` writes (0, 1, ...) each slot of a ring of ``size`` slots holds now."""
+    slots = torch.arange(size)
+    return slots + size * ((count - 1 - slots).clamp(min=0) // size)
+
+
+def _holds_observations(storage) -> bool:
+    """Whether a stored buffer holds full transitions (the observations) rather than configurations."""
+    holder, key = _stored_entry(storage, ("agents", "observation"))
+    return holder.get(key, None) is not None
+
+
+def _with_layouts(
+    transitions: CompactTransitions, full, writes: torch.Tensor, layouts, frames: int, filled: int | None = None
+):
+    """``full`` with each transition's ``nodes``: of the iteration and world its write index says, checked."""
+    filled = len(full) if filled is None else filled
+    iterations = writes // frames
+    nodes = torch.zeros(len(full), 4, 3, dtype=torch.float64)
+    for k in iterations[:filled].unique().tolist():
+        here = (iterations == k).nonzero().squeeze(-1)
+        here = here[here < filled]
+        iteration_layouts = layouts(k).cpu()  # [W, 4, 3]
+        steps = frames // len(iteration_layouts)  # a world's transitions of the iteration, in a row
+        nodes[here] = iteration_layouts[(writes[here] % frames) // steps]
+    full = full.clone(False)
+    full.set("nodes", nodes.to(full.device))
+    rebuilt = transitions(transitions.inv(full[:filled]))
+    for key in (("agents", "observation"), "state", ("next", "agents", "observation"), ("next", "state")):
+        if not torch.equal(rebuilt.get(key), full.get(key)[:filled]):
+            raise ValueError(
+                "this checkpoint's replay buffer (random layouts, written before the buffer kept configurations) "
+                "holds transitions of layouts that cannot be recovered, so it cannot be compacted: resume or evaluate "
+                "it with the uavrl that wrote it"
+            )
+    return full
 
 
 def _load_filled_slots(buffer: TensorDictReplayBuffer, data, writes: int, device) -> None:

@@ -1,0 +1,107 @@
+"""The replay buffer's transitions kept compact: configurations, not observations.
+
+A transition the loss reads holds, twice (now and ``"next"``), every UAV's
+observation, action mask, position and task and the world's state: about 2 kB
+for 6 UAVs on 10x10, 4 kB for 10 on 20x20.  All of it follows from the
+configuration (each UAV's code ``2 cell + task``), under an energy model the
+UAVs' battery and service flags, and with random layouts the layout's nodes.
+:class:`CompactTransitions`, a TorchRL ``Transform`` of the replay buffer,
+keeps only those (with the actions, the reward and the done flags) when the
+buffer is extended, and rebuilds the full transitions with the World's own
+:meth:`~uavrl.envs.world.World.configurations` when it is sampled or read:
+the same tensors, bit for bit, at a tenth of the memory or less (BENCHMARKS.md).
+
+Example:
+    >>> import torch
+    >>> from uavrl.envs import UAVSpectrumEnv
+    >>> env = UAVSpectrumEnv(batch_size=4, grid=(4, 4), num_uavs=3, max_steps=5)
+    >>> full = env.rollout(5).reshape(-1)
+    >>> compact = CompactTransitions(env.world, [("agents", "action")])
+    >>> keys = transition_keys(env.world, [("agents", "action")])
+    >>> stored = compact.inv(full.select(*keys))
+    >>> sorted(stored.keys()), stored["code"].dtype
+    (['action', 'code', 'next'], torch.int16)
+    >>> (compact(stored) == full.select(*keys)).all()
+    True
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.envs import Transform
+
+from uavrl.envs.grid import cells_or_away
+from uavrl.envs.world import World
+
+_OBSERVED = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
+_OUTCOME = ["reward", "done", "terminated"]  # of "next", stored as they are
+
+
+def transition_keys(world: World, action_keys: list) -> list:
+    """The entries of a full transition (what the loss reads), and ``"nodes"`` with random layouts."""
+    layout = ["nodes"] if world.layouts.fixed is None else []
+    return _OBSERVED + layout + action_keys + [("next", k) for k in _OBSERVED + _OUTCOME]
+
+
+class CompactTransitions(Transform):
+    """Transitions ``[B]`` kept as configurations: ``inv`` compacts (the buffer's ``extend``), the call rebuilds
+    (its ``sample`` and indexing) with ``world`` (the training env's: its grid, its fixed layout's tables).
+
+    Kept per transition: ``code`` and ``("next", "code")`` ``[N]`` (int16 while the codes fit), under an energy
+    model ``energy`` and ``("next", "energy")`` ``[N, 2]`` float32 (:meth:`World.energy_features`), with random
+    layouts ``nodes`` ``[4, 3]`` float64 (a step keeps its layout), the actions (``action`` ``[N]`` int8;
+    ``joint_action`` int16 for the joint head) and ``reward``, ``done``, ``terminated`` of ``"next"``.
+    """
+
+    def __init__(self, world: World, action_keys: list):
+        super().__init__(in_keys=[], out_keys=[])
+        self.world = world
+        self.joint = "joint_action" in action_keys
+        self.code_dtype = torch.int16 if 2 * world.dynamics.slots <= torch.iinfo(torch.int16).max else torch.int32
+
+    def _inv_call(self, td: TensorDictBase) -> TensorDictBase:
+        world, grid = self.world, self.world.cfg.grid
+        stored = {"action": td.get(("agents", "action")).to(torch.int8)}
+        if self.joint:
+            stored["joint_action"] = td.get("joint_action").to(torch.int16)
+        if world.layouts.fixed is None:
+            stored["nodes"] = td.get("nodes")
+        nxt = {key: td.get(("next", key)) for key in _OUTCOME}
+        for holder, step in ((stored, td), (nxt, td.get("next"))):
+            code = 2 * cells_or_away(step.get("positions"), grid) + step.get("tasks")
+            holder["code"] = code.to(self.code_dtype)
+            if world.energy is not None:
+                holder["energy"] = world.energy_features(step.get("state")).contiguous()
+        stored["next"] = TensorDict(nxt, batch_size=td.batch_size, device=td.device)
+        return TensorDict(stored, batch_size=td.batch_size, device=td.device)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        """The full transitions of compact ones, as they were collected."""
+        B, nxt = td.batch_size[0], td.get("next")
+
+        def both(key):  # now and next, rebuilt in one call
+            return torch.cat([td.get(key), nxt.get(key)])
+
+        energy = both("energy") if self.world.energy is not None else None
+        nodes = td.get("nodes") if self.world.layouts.fixed is None else None
+        out = self.world.configurations(both("code").long(), energy, None if nodes is None else nodes.repeat(2, 1, 1))
+        now, after = ({key: value[i * B : (i + 1) * B] for key, value in out.items()} for i in (0, 1))
+        full = self._step(now, B, td.device)
+        full.get("agents").set("action", td.get("action").long())
+        if self.joint:
+            full.set("joint_action", td.get("joint_action").long())
+        if nodes is not None:
+            full.set("nodes", nodes)
+        following = self._step(after, B, td.device)
+        for key in _OUTCOME:
+            following.set(key, nxt.get(key))
+        full.set("next", following)
+        return full
+
+    @staticmethod
+    def _step(out: dict, B: int, device) -> TensorDict:
+        agents = {"observation": out.pop("observation"), "action_mask": out.pop("action_mask")}
+        N = agents["observation"].shape[1]
+        out["agents"] = TensorDict(agents, batch_size=(B, N), device=device)
+        return TensorDict(out, batch_size=(B,), device=device)

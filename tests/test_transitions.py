@@ -1,0 +1,129 @@
+"""The DQN's compact replay buffer: what it rebuilds is, bit for bit, what a buffer of full transitions holds."""
+
+import io
+
+import pytest
+import torch
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+from uavrl.agents.dqn import DQNAgent
+from uavrl.config import model_config
+from uavrl.envs.limits import stored_transition_bytes
+
+TINY = [
+    "agent=dqn",
+    "env.max_steps=6",
+    "agent.worlds=8",
+    "agent.hidden=16",
+    "agent.depth=1",
+    "agent.batch_size=32",
+    "agent.buffer_size=100",  # 3 iterations of 48 transitions wrap around
+    "agent.updates=2",
+    "agent.learning_starts=16",
+]
+ENERGY = ["env.energy=rotary_wing", "env.base=[-1,0]", "env.battery_wh=0.3", "env.battery_init=uniform"]
+CASES = {
+    "n2-fixed-vdn": ["env.grid=[3,3]"],
+    "n6-fixed-qmix": ["env.grid=[4,4]", "env.num_uavs=6", "agent.mixer=qmix"],
+    "n2-joint": ["env.grid=[3,3]", "agent.head=joint"],
+    "n3-random-layouts": ["env.grid=[4,4]", "env.num_uavs=3", "env.layout=random", "agent.mixer=qmix"],
+    "n2-rayleigh": ["env.grid=[3,3]", "env.fading=rayleigh"],
+    "n3-energy-terminating": ["env.grid=[3,3]", "env.num_uavs=3", *ENERGY],
+    "n2-energy-recharge-spare-random": [
+        *("env.grid=[3,3]", *ENERGY, "env.recharge_steps=2", "env.num_spares=1", "env.layout=random"),
+    ],
+}
+
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
+
+
+def assert_identical(rebuilt, full):
+    """The same keys, dtypes, shapes and values, bit for bit."""
+    keys = set(full.keys(include_nested=True, leaves_only=True))
+    assert set(rebuilt.keys(include_nested=True, leaves_only=True)) == keys
+    for key in keys:
+        a, b = rebuilt.get(key), full.get(key)
+        assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b), key
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
+    cfg = compose_cfg(*TINY, *CASES[case])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=1)
+    # a buffer of the full transitions beside the agent's, extended with the same batches
+    full = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=32)
+    extend = agent.buffer.extend
+
+    def both(batch):
+        full.extend(batch.clone())
+        return extend(batch)
+
+    agent.buffer.extend = both
+    for _ in range(3):
+        agent.train_iteration()
+    assert full.write_count == agent.buffer.write_count == 3 * 48
+    # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
+    assert_identical(agent.buffer[:], full[:].exclude("index"))
+    rng = torch.get_rng_state()
+    sample = agent.buffer.sample()
+    torch.set_rng_state(rng)
+    assert_identical(sample, full.sample())
+    if "energy" in case:  # the stored batteries are the episodes' own, not one value
+        assert agent.buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
+
+
+def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
+    """Bytes per transition kept, N = 6 on 10x10: the full transitions' against the compact ones'."""
+    cfg = compose_cfg(*TINY, "env.grid=[10,10]", "env.num_uavs=6", "agent.mixer=qmix", "agent.learning_starts=1000")
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent.train_iteration()
+    stored, full = agent.buffer.storage._storage, agent.buffer[:]
+    per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
+    assert per_transition(stored) * 10 <= per_transition(full)
+    # the memory check's estimate (uavrl.settings): the stored bytes, and 2 for a joint head's action
+    assert per_transition(stored) + 2 == stored_transition_bytes(agent.env_cfg)
+
+
+def full_transitions_checkpoint(agent) -> dict:
+    """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index."""
+    state = agent.state_dict()
+    stored, filled = agent.buffer.storage._storage, len(agent.buffer)
+    full = agent.transitions(stored[:filled].exclude("index"))
+    unfilled = full[:1].apply(
+        lambda x: x.new_zeros(len(stored) - filled, *x.shape[1:]), batch_size=[len(stored) - filled]
+    )
+    full = torch.cat([full, unfilled]).set("index", stored.get("index"))
+    storage = {**state["buffer"]["_storage"], "_storage": full.state_dict()}
+    saved = io.BytesIO()  # a checkpoint on disk holds copies, not the live tensors
+    torch.save({**state, "buffer": {**state["buffer"], "_storage": storage}}, saved)
+    saved.seek(0)
+    return torch.load(saved, weights_only=False)
+
+
+@pytest.mark.parametrize("case", ["n2-fixed-vdn", "n3-random-layouts", "n2-energy-recharge-spare-random"])
+def test_a_checkpoint_of_full_transitions_is_compacted_and_resumes_exactly(case, compose_cfg):
+    """Random layouts: the nodes of each stored transition are those its iteration's worlds were reset to."""
+    cfg = compose_cfg(*TINY, *CASES[case])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    for _ in range(3):
+        agent.train_iteration()
+    state = full_transitions_checkpoint(agent)
+    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    restored.load_state_dict(state)
+    assert (restored.buffer.storage._storage == agent.buffer.storage._storage).all()
+    torch.set_rng_state(state["rng"])
+    metrics = agent.train_iteration()
+    torch.set_rng_state(state["rng"])
+    assert restored.train_iteration() == metrics
+
+
+def test_full_transitions_of_unknown_layouts_are_refused_in_one_line(compose_cfg):
+    cfg = compose_cfg(*TINY, *CASES["n3-random-layouts"])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    agent.train_iteration()
+    state = full_transitions_checkpoint(agent)
+    state["buffer"]["_storage"]["_storage"]["agents.observation"][5, 0, 4] += 0.25  # no layout of its iteration's
+    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    with pytest.raises(ValueError, match="holds transitions of layouts that cannot be recovered") as refused:
+        restored.load_state_dict(state)
+    assert "\n" not in str(refused.value)
