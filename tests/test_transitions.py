@@ -46,30 +46,40 @@ def assert_identical(rebuilt, full):
         assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b), key
 
 
-@pytest.mark.parametrize("case", CASES)
+SET = ["agent.network=set", "agent.mixer=mean", "agent.heads=2"]  # two groups: 16 of the 32 a sample each
+SET_CASES = {
+    "set-sizes": [*SET, "agent.sizes=[[2,3,3],[3,4,4]]"],
+    "set-layouts-energy": [*SET, "agent.sizes=[[2,3,3]]", "agent.layouts=[line,random]", *ENERGY],
+}
+
+
+@pytest.mark.parametrize("case", [*CASES, *SET_CASES])
 def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
-    cfg = compose_cfg(*TINY, *CASES[case])
+    """Every replay buffer: the per-size agent's, and each team and layout's of the size-free one."""
+    cfg = compose_cfg(*TINY, *CASES.get(case, ["env.grid=[3,3]"]), *SET_CASES.get(case, []))
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=1)
-    # a buffer of the full transitions beside the agent's, extended with the same batches
-    full = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=32)
-    extend = agent.buffer.extend
+    buffers = [group.buffer for group in agent.groups] if case in SET_CASES else [agent.buffer]
+    # a buffer of the full transitions beside each of the agent's, extended with the same batches
+    fulls = [TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=b.batch_size) for b in buffers]
+    for buffer, full in zip(buffers, fulls, strict=True):
 
-    def both(batch):
-        full.extend(batch.clone())
-        return extend(batch)
+        def both(batch, full=full, extend=buffer.extend):
+            full.extend(batch.clone())
+            return extend(batch)
 
-    agent.buffer.extend = both
+        buffer.extend = both
     for _ in range(3):
         agent.train_iteration()
-    assert full.write_count == agent.buffer.write_count == 3 * 48
-    # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
-    assert_identical(agent.buffer[:], full[:].exclude("index"))
-    rng = torch.get_rng_state()
-    sample = agent.buffer.sample()
-    torch.set_rng_state(rng)
-    assert_identical(sample, full.sample())
-    if "energy" in case:  # the stored batteries are the episodes' own, not one value
-        assert agent.buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
+    for buffer, full in zip(buffers, fulls, strict=True):
+        assert full.write_count == buffer.write_count == 3 * 48
+        # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
+        assert_identical(buffer[:], full[:].exclude("index"))
+        rng = torch.get_rng_state()
+        sample = buffer.sample()
+        torch.set_rng_state(rng)
+        assert_identical(sample, full.sample())
+        if "energy" in case:  # the stored batteries are the episodes' own, not one value
+            assert buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
 
 
 def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
