@@ -46,30 +46,46 @@ def assert_identical(rebuilt, full):
         assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b), key
 
 
-@pytest.mark.parametrize("case", CASES)
+SET = ["agent.network=set", "agent.mixer=mean", "agent.heads=2"]  # two groups: 16 of the 32 a sample each
+SET_CASES = {
+    "set-sizes": [*SET, "agent.sizes=[[2,3,3],[3,4,4]]"],
+    "set-layouts-energy": [
+        *SET,
+        "agent.sizes=[[2,3,3]]",
+        "agent.layouts=[line,random]",
+        *ENERGY,
+        "env.recharge_steps=2",
+    ],
+}
+
+
+@pytest.mark.parametrize("case", [*CASES, *SET_CASES])
 def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
-    cfg = compose_cfg(*TINY, *CASES[case])
+    """Every replay buffer: the per-size agent's, and each team and layout's of the size-free one."""
+    cfg = compose_cfg(*TINY, *CASES.get(case, ["env.grid=[3,3]"]), *SET_CASES.get(case, []))
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=1)
-    # a buffer of the full transitions beside the agent's, extended with the same batches
-    full = TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=32)
-    extend = agent.buffer.extend
+    buffers = [group.buffer for group in agent.groups] if case in SET_CASES else [agent.buffer]
+    # a buffer of the full transitions beside each of the agent's, extended with the same batches
+    fulls = [TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=b.batch_size) for b in buffers]
+    for buffer, full in zip(buffers, fulls, strict=True):
 
-    def both(batch):
-        full.extend(batch.clone())
-        return extend(batch)
+        def both(batch, full=full, extend=buffer.extend):
+            full.extend(batch.clone())
+            return extend(batch)
 
-    agent.buffer.extend = both
+        buffer.extend = both
     for _ in range(3):
         agent.train_iteration()
-    assert full.write_count == agent.buffer.write_count == 3 * 48
-    # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
-    assert_identical(agent.buffer[:], full[:].exclude("index"))
-    rng = torch.get_rng_state()
-    sample = agent.buffer.sample()
-    torch.set_rng_state(rng)
-    assert_identical(sample, full.sample())
-    if "energy" in case:  # the stored batteries are the episodes' own, not one value
-        assert agent.buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
+    for buffer, full in zip(buffers, fulls, strict=True):
+        assert full.write_count == buffer.write_count == 3 * 48
+        # a full buffer also stores the slots' indices ("index", written by TorchRL's extend); a sample has them anew
+        assert_identical(buffer[:], full[:].exclude("index"))
+        rng = torch.get_rng_state()
+        sample = buffer.sample()
+        torch.set_rng_state(rng)
+        assert_identical(sample, full.sample())
+        if "energy" in case:  # the stored batteries are the episodes' own, not one value
+            assert buffer.storage._storage.get("energy")[..., 0].unique().numel() > 1
 
 
 def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
@@ -85,32 +101,44 @@ def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
 
 
 def full_transitions_checkpoint(agent) -> dict:
-    """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index."""
+    """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index (a
+    size-free agent: in each group's buffer)."""
     state = agent.state_dict()
-    stored, filled = agent.buffer.storage._storage, len(agent.buffer)
-    full = agent.transitions(stored[:filled].exclude("index"))
-    unfilled = full[:1].apply(
-        lambda x: x.new_zeros(len(stored) - filled, *x.shape[1:]), batch_size=[len(stored) - filled]
-    )
-    full = torch.cat([full, unfilled]).set("index", stored.get("index"))
-    storage = {**state["buffer"]["_storage"], "_storage": full.state_dict()}
+    if hasattr(agent, "groups"):
+        buffers = [(g.buffer, g.transitions, saved) for g, saved in zip(agent.groups, state["buffer"], strict=True)]
+        state["buffer"] = [full_buffer_state(*held) for held in buffers]
+    else:
+        state["buffer"] = full_buffer_state(agent.buffer, agent.transitions, state["buffer"])
     saved = io.BytesIO()  # a checkpoint on disk holds copies, not the live tensors
-    torch.save({**state, "buffer": {**state["buffer"], "_storage": storage}}, saved)
+    torch.save(state, saved)
     saved.seek(0)
     return torch.load(saved, weights_only=False)
 
 
-@pytest.mark.parametrize("case", ["n2-fixed-vdn", "n3-random-layouts", "n2-energy-recharge-spare-random"])
+def full_buffer_state(buffer, transitions, saved: dict) -> dict:
+    stored, filled = buffer.storage._storage, len(buffer)
+    full = transitions(stored[:filled].exclude("index"))
+    unfilled = full[:1].apply(
+        lambda x: x.new_zeros(len(stored) - filled, *x.shape[1:]), batch_size=[len(stored) - filled]
+    )
+    full = torch.cat([full, unfilled]).set("index", stored.get("index"))
+    return {**saved, "_storage": {**saved["_storage"], "_storage": full.state_dict()}}
+
+
+@pytest.mark.parametrize(
+    "case", ["n2-fixed-vdn", "n3-random-layouts", "n2-energy-recharge-spare-random", "set-layouts-energy"]
+)
 def test_a_checkpoint_of_full_transitions_is_compacted_and_resumes_exactly(case, compose_cfg):
     """Random layouts: the nodes of each stored transition are those its iteration's worlds were reset to."""
-    cfg = compose_cfg(*TINY, *CASES[case])
+    cfg = compose_cfg(*TINY, *CASES.get(case, ["env.grid=[3,3]"]), *SET_CASES.get(case, []))
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     for _ in range(3):
         agent.train_iteration()
     state = full_transitions_checkpoint(agent)
     restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     restored.load_state_dict(state)
-    assert (restored.buffer.storage._storage == agent.buffer.storage._storage).all()
+    for group, again in zip(getattr(agent, "groups", [agent]), getattr(restored, "groups", [restored]), strict=True):
+        assert (again.buffer.storage._storage == group.buffer.storage._storage).all()
     torch.set_rng_state(state["rng"])
     metrics = agent.train_iteration()
     torch.set_rng_state(state["rng"])

@@ -154,9 +154,7 @@ class DQNAgent(Agent):
 
     def _layouts_of(self, iteration: int) -> torch.Tensor:
         """``[W, 4, 3]`` the layouts iteration ``iteration``'s worlds were reset to (:meth:`train_iteration`)."""
-        world = World(self.env_cfg, int(self.settings.worlds), self.device, self._world_seed(iteration))
-        world.reset()
-        return world.nodes
+        return reset_layouts(self.env_cfg, int(self.settings.worlds), self.device, self._world_seed(iteration))
 
     def policies(self) -> list[CheckedPolicy]:
         """The greedy policy: reads the env's keys, writes ``("agents", "action")``, in environments of the run's grid,
@@ -169,8 +167,7 @@ class DQNAgent(Agent):
             "iteration": self.iteration,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
-            "exploration": self.exploration.state_dict(),
-            "buffer": self.buffer.state_dict(),  # storage, write cursor and count, sampler
+            **self._experience_state(),
             "rng": torch.get_rng_state(),
         }
         if self.device.type == "cuda":
@@ -180,14 +177,30 @@ class DQNAgent(Agent):
     def load_state_dict(self, state: dict):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
-        self.exploration.load_state_dict(state["exploration"])
-        # also earlier versions' buffers; their random layouts are those each iteration's worlds were reset to
-        layouts = None if self.env_cfg.layout != "random" else self._layouts_of
-        frames = int(self.settings.worlds) * self.env_cfg.max_steps
-        load_replay_buffer(
-            self.buffer, self.transitions, state, self.env.observation_size, self.device, layouts, frames
-        )
+        self._load_experience(state)
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:
             torch.cuda.set_rng_state(state["cuda_rng"], self.device)
+
+    def _experience_state(self) -> dict:
+        """``"exploration"`` and ``"buffer"`` (storage, write cursor and count, sampler) of the state."""
+        return {"exploration": self.exploration.state_dict(), "buffer": self.buffer.state_dict()}
+
+    def _load_experience(self, state: dict) -> None:
+        self.exploration.load_state_dict(state["exploration"])
+        self._load_buffer(self.buffer, self.transitions, state, self.env, self._layouts_of)
+
+    def _load_buffer(self, buffer, transitions: CompactTransitions, state: dict, env: UAVSpectrumEnv, layouts_of):
+        """``buffer`` (of ``env``'s transitions) from ``state["buffer"]``, also earlier versions' (:mod:`.migration`):
+        with random layouts those of iteration ``k`` are ``layouts_of(k)``, what its worlds were reset to."""
+        layouts = layouts_of if env.cfg.layout == "random" else None
+        frames = env.num_worlds * env.cfg.max_steps
+        load_replay_buffer(buffer, transitions, state, env.observation_size, self.device, layouts, frames)
+
+
+def reset_layouts(cfg: ModelConfig, worlds: int, device, seed: int) -> torch.Tensor:
+    """``[worlds, 4, 3]`` the layouts ``worlds`` worlds of ``cfg`` seeded ``seed`` are reset to."""
+    world = World(cfg, worlds, device, seed)
+    world.reset()
+    return world.nodes

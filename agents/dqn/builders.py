@@ -173,11 +173,12 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
     return loss
 
 
-def build_replay_buffer(a, transitions: CompactTransitions) -> TensorDictReplayBuffer:
+def build_replay_buffer(a, transitions: CompactTransitions, batch_size: int | None = None) -> TensorDictReplayBuffer:
     """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), uniform samples of
-    ``agent.batch_size``."""
+    ``batch_size`` (``agent.batch_size`` unless given)."""
     storage = LazyTensorStorage(int(a.buffer_size), device=transitions.world.device)
-    return TensorDictReplayBuffer(storage=storage, batch_size=int(a.batch_size), transform=transitions)
+    batch_size = int(a.batch_size) if batch_size is None else batch_size
+    return TensorDictReplayBuffer(storage=storage, batch_size=batch_size, transform=transitions)
 
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:

@@ -22,14 +22,14 @@ Example:
 
 from __future__ import annotations
 
+from functools import partial
+
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
-from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.compat import load_buffer_state
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.channel import rates
 from uavrl.envs.fading import fading_part
@@ -39,10 +39,11 @@ from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.rewards import log_gap_reward
 from uavrl.evaluation import episode_metrics
 
-from .agent import _SEED_MODULUS, DQNAgent
-from .builders import build_collector, build_policies, exploration_schedule, transition_keys
+from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
+from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
 from .networks import Q_INPUTS
 from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
+from .transitions import CompactTransitions, transition_keys
 
 
 def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
@@ -116,10 +117,10 @@ class _Group:
         )
         policies = build_policies(self.env, a, values, exploration_schedule(a, frames, agent.device))
         self.greedy, self.exploration = policies.greedy, policies.exploration
-        self.keys = transition_keys(a, policies.action_keys)
-        # agent.buffer_size transitions of this size; samples of its share of agent.batch_size
-        storage = LazyTensorStorage(int(a.buffer_size), device=agent.device)
-        self.buffer = TensorDictReplayBuffer(storage=storage, batch_size=agent.batch_size)
+        self.keys = transition_keys(self.env.world, policies.action_keys)
+        # agent.buffer_size transitions of this size, kept compact; samples of its share of agent.batch_size
+        self.transitions = CompactTransitions(self.env.world, policies.action_keys)
+        self.buffer = build_replay_buffer(a, self.transitions, agent.batch_size)
         self.collector = build_collector(self.env, policies.explore)
         self.batches = iter(self.collector)
         self.u_star = None  # a fixed layout's U*, solved once
@@ -249,29 +250,22 @@ class SetDQNAgent(DQNAgent):
 
         return [evaluate(self.policy_for(env_cfg), env_cfg, **kwargs)]
 
-    def state_dict(self) -> dict:
-        """The core and its target, optimizer, every size's exploration and replay buffer, RNG and progress."""
-        state = {
-            "iteration": self.iteration,
-            "loss": self.loss.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
+    def _experience_state(self) -> dict:
+        """Every size's ``"exploration"`` and ``"buffer"``, in the order of the groups."""
+        return {
             "exploration": [group.exploration.state_dict() for group in self.groups],
             "buffer": [group.buffer.state_dict() for group in self.groups],
-            "rng": torch.get_rng_state(),
         }
-        if self.device.type == "cuda":
-            state["cuda_rng"] = torch.cuda.get_rng_state(self.device)
-        return state
 
-    def load_state_dict(self, state: dict):
-        self.loss.load_state_dict(state["loss"])
-        self.optimizer.load_state_dict(state["optimizer"])
+    def _load_experience(self, state: dict) -> None:
         if len(state["buffer"]) != len(self.groups):
             raise ValueError(f"the state holds {len(state['buffer'])} team sizes, the agent {len(self.groups)}")
-        for group, exploration, buffer in zip(self.groups, state["exploration"], state["buffer"], strict=True):
-            group.exploration.load_state_dict(exploration)
-            load_buffer_state(group.buffer, buffer)
-        self.iteration = int(state["iteration"])
-        torch.set_rng_state(state["rng"])
-        if "cuda_rng" in state:
-            torch.cuda.set_rng_state(state["cuda_rng"], self.device)
+        for g, group in enumerate(self.groups):
+            group.exploration.load_state_dict(state["exploration"][g])
+            layouts_of = partial(self._group_layouts, g)
+            self._load_buffer(group.buffer, group.transitions, {"buffer": state["buffer"][g]}, group.env, layouts_of)
+
+    def _group_layouts(self, g: int, iteration: int) -> torch.Tensor:
+        """``[W, 4, 3]`` the layouts group ``g``'s worlds were reset to at ``iteration`` (:meth:`_collect`)."""
+        group = self.groups[g]
+        return reset_layouts(group.cfg, group.env.num_worlds, self.device, self._group_seed(iteration, g))
