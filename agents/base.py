@@ -49,6 +49,11 @@ class Agent(abc.ABC):
     def policies(self) -> list:
         """Greedy TorchRL policies, one per independent run (read the env's keys, write ``("agents", "action")``)."""
 
+    def policy_for(self, env_cfg, run: int = 0):
+        """The greedy policy of run ``run`` for environments of ``env_cfg``.  Here the run's own policy, which acts
+        only in its run's environment; a size-free agent overrides it to act at any size."""
+        return self.policies()[run]
+
     def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
         """:func:`uavrl.evaluation.evaluate` (``kwargs``: its settings) of each of :meth:`policies`.
 

@@ -40,11 +40,8 @@ def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
         refusal = network_refusal(cfg, env_config, model_config(cfg))
         if refusal:
             raise ValueError(f"env_config={env_config.num_uavs} UAVs on {env_config.grid} is invalid: {refusal}")
-        if hasattr(agent, "policy_for"):
-            return agent.policy_for(env_config), env_config
-    policies = agent.policies()
-    if not 0 <= run < len(policies):
-        raise ValueError(
-            f"run={run} is invalid: this run directory holds {len(policies)} trained run(s), 0 to {len(policies) - 1}"
-        )
-    return policies[run], model_config(cfg)
+    runs = len(agent.policies())
+    if not 0 <= run < runs:
+        raise ValueError(f"run={run} is invalid: this run directory holds {runs} trained run(s), 0 to {runs - 1}")
+    env_config = model_config(cfg) if env_config is None else env_config
+    return agent.policy_for(env_config, run), env_config

@@ -127,7 +127,7 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     from uavrl.video import comparison_frames, save_videos, video_settings
 
     env_cfg, label = model_config(saved), saved.agent.name
-    policy = agent.policy_for(env_cfg) if hasattr(agent, "policy_for") else agent.policies()[0]
+    policy = agent.policy_for(env_cfg)
     frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))
     for path in save_videos(frames, out_dir, int(cfg.eval.video_fps)):
         print(f"wrote {path}", file=sys.stderr)

@@ -225,9 +225,9 @@ class SetDQNAgent(DQNAgent):
         self.loss.update_target(float(self.settings.tau))
         return loss.detach()
 
-    def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
-        """The greedy policy in environments of ``env_cfg``: any grid and number of UAVs of the run's model (a
-        one-line ValueError for another model: other observations, or actions)."""
+    def policy_for(self, env_cfg: ModelConfig, run: int = 0) -> CheckedPolicy:
+        """The greedy policy (one run: ``run`` 0) in environments of ``env_cfg``: any grid and number of UAVs of the
+        run's model (a one-line ValueError for another model: other observations, or actions)."""
         if (env_cfg.energy != "none") != self.core.energy or env_cfg.num_actions != self.env_cfg.num_actions:
             raise ValueError(
                 f"env.energy={env_cfg.energy!r} is invalid for this network, trained with "
