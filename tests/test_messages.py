@@ -131,3 +131,14 @@ def test_reproduce_checks_its_memory_budget_before_any_work(monkeypatch, tmp_pat
         check_settings(cfg)
     check_settings(compose_cfg("grids=[2]", "runs=1", config_name="reproduce"))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "fraction, shown", [(1.0, "100%"), (199 / 200, "99.5%"), (0.9999, "99.9%"), (63 / 64, "98.4%"), (0.29, "29%")]
+)
+def test_a_share_of_starts_never_rounds_a_miss_up_to_all(fraction, shown):
+    """199 of 200 starts is 99.5%, not 100%: the summary's shares round down to 0.1%."""
+    from uavrl.runs import share_of_starts, yardstick_line
+
+    assert share_of_starts(fraction) == shown
+    assert yardstick_line(None, {"eval/reach_999": fraction}) == f"yardstick: 0.999 U* reached from {shown} of starts"

@@ -34,6 +34,7 @@ from uavrl.cli import run_command
 from uavrl.envs.config import make_config
 from uavrl.io import quoted, save_json, save_text, save_torch
 from uavrl.rules import check, shown
+from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
 from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs
 
@@ -251,7 +252,7 @@ def yardstick_finding(row: dict) -> str:
         return f"{grid}: against exact optimal control: no exact values for this grid"
     return (
         f"{grid}: against exact optimal control: return ratio {row['return_ratio']:.3f} of the best possible, "
-        f"0.999 U* reached from {row['reach_999']:.0%} of starts"
+        f"0.999 U* reached from {share_of_starts(row['reach_999'])} of starts"
         + (f" in {row['step_ratio_999']:.2f}x the fewest steps" if row.get("step_ratio_999") is not None else "")
     )
 

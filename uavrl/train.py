@@ -39,7 +39,7 @@ from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import WriteError, quoted, save_json, save_text
 from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
-from uavrl.runs import claim_run_dir, eval_settings, flat_hparams, yardstick_line
+from uavrl.runs import claim_run_dir, eval_settings, flat_hparams, share_of_starts, yardstick_line
 from uavrl.settings import check_run, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
@@ -373,7 +373,7 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
             f"trained {trained}: {result['iterations']} iterations in {result['total_seconds']:.1f} s",
             f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
             f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
-            f"{within:.0%} of starts within 1% of U*)",
+            f"{share_of_starts(within)} of starts within 1% of U*)",
             yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
             f"look at it: tensorboard --logdir {quoted(run_dir)}   "
