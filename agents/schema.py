@@ -16,17 +16,20 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from uavrl.envs.config import LAYOUTS
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
 
+if TYPE_CHECKING:
+    from uavrl.envs.config import ModelConfig
+
 METHODS = ("q_learning", "value_iteration")
 MEMORY_BUDGET = positive()
 
 
-def team_sizes() -> Rule:
+def team_sizes_rule() -> Rule:
     """A list of teams ``[N, L1, L2]`` (whole numbers >= 1), or ``[]``."""
 
     def accepts(v):
@@ -35,6 +38,23 @@ def team_sizes() -> Rule:
         )
 
     return Rule(accepts, "give a list of teams [num_uavs, L1, L2], e.g. [[2,6,6],[6,10,10]], or [] (the run's own)")
+
+
+def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
+    """``[(N, (L1, L2))]`` the teams of ``agent.sizes``, or the run's own."""
+    sizes = list(a.get("sizes") or [])
+    return [(int(n), (int(l1), int(l2))) for n, l1, l2 in sizes] or [(env_cfg.num_uavs, tuple(env_cfg.grid))]
+
+
+def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
+    """The models one run trains on: every team of :func:`team_sizes` in every layout of ``agent.layouts`` (or
+    ``env.layout``), the run's model otherwise."""
+    layouts = list(a.get("layouts") or []) or [env_cfg.layout]
+    return [
+        env_cfg.replace(num_uavs=n, grid=grid, layout=layout)
+        for n, grid in team_sizes(env_cfg, a)
+        for layout in layouts
+    ]
 
 
 @dataclass
@@ -85,7 +105,7 @@ class DQNSchema:
         "other UAVs, any N and grid: agents/dqn/setnet.py)",
     )
     sizes: list[Any] = setting(
-        rule=team_sizes(),
+        rule=team_sizes_rule(),
         doc="agent.network=set: the teams [num_uavs, L1, L2] one run trains on ([]: env.num_uavs on env.grid)",
         factory=list,
     )

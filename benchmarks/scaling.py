@@ -92,8 +92,14 @@ def main():
     parser.add_argument("--out", type=Path, required=True, help="where the specialists' runs are (or go)")
     parser.add_argument("--starts", type=int, default=64)
     parser.add_argument("--only", type=int, nargs="+", help="these team sizes only")
+    parser.add_argument("--train-only", action="store_true", help="train the missing specialists, evaluate nothing")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    sizes = [size for size in SIZES if not args.only or size[0] in args.only]
+    if args.train_only:
+        for n, _, overrides in sizes:
+            print(n, train_specialist(args.out / f"{n}uav", overrides), flush=True)
+        return
     free = args.size_free
     run_cfg = model_config(load_agent(free)[1])
     free_metrics = json.loads((free / "metrics.json").read_text())
@@ -103,9 +109,7 @@ def main():
         "| reach 0.999 U* | steps / fewest | / oracle |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for n, grid, overrides in SIZES:
-        if args.only and n not in args.only:
-            continue
+    for n, grid, overrides in sizes:
         oracle = oracle_steps(run_cfg, n, grid, args.starts)
         specialist = args.out / f"{n}uav"
         rows = [

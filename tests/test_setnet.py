@@ -167,3 +167,23 @@ def test_bad_set_settings_are_refused_in_one_line(set_cfg, overrides, message):
     with pytest.raises(ValueError, match=None) as err:
         DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_cost_check_counts_every_team_and_layout_of_a_size_free_run(tmp_path, compose_cfg):
+    """Each group of agent.sizes x agent.layouts has its own worlds, batch and buffer: a team that alone fits but
+    with the others does not is refused by the command in one line, before any file is written."""
+    from uavrl.settings import check_run_costs
+
+    base = ["agent=dqn", "agent.network=set", "agent.mixer=mean", "agent.worlds=128", "agent.memory_budget=150000000"]
+    one, both = "agent.sizes=[[30,40,40]]", "agent.sizes=[[30,40,40],[30,40,40]]"
+    fits, over = compose_cfg(*base, one), compose_cfg(*base, both)
+    check_run_costs(fits, model_config(fits))
+    with pytest.raises(ValueError, match=r"x groups \(agent.sizes x agent.layouts\) = .* x 2\) needs about"):
+        check_run_costs(over, model_config(over))
+    done = subprocess.run(
+        [sys.executable, "-m", "uavrl.train", *base, both, f"run_dir={tmp_path / 'run'}"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 1 and done.stdout == "" and len(done.stderr.splitlines()) == 1
+    assert "groups (agent.sizes x agent.layouts)" in done.stderr and not (tmp_path / "run").exists()

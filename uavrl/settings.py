@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents import AGENTS
-from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules
+from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules, training_models
 from uavrl.envs.config import make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
@@ -146,14 +146,28 @@ def check_run_costs(cfg: DictConfig, model) -> None:
     elif a.name == "tabular":
         tables = 1
     elif a.name == "dqn":
-        worlds = int(a.worlds)
-        training = {"agent.iterations": int(a.iterations), "agent.worlds": worlds, "env.max_steps": T}
-        steps.append(Cost(_product(training), training, "training"))
-        batch = {"agent.worlds": worlds, "env.max_steps": T}
-        memory.append(Cost(world_bytes(model, worlds), {"agent.worlds": worlds}, "the training worlds"))
-        memory.append(Cost(worlds * T * frame_bytes(model), batch, "each iteration's batch of transitions"))
-        buffer = {"agent.buffer_size": int(a.buffer_size)}
-        memory.append(Cost(int(a.buffer_size) * stored_transition_bytes(model), buffer, "the replay buffer"))
+        # a size-free run trains every team of agent.sizes in every layout of agent.layouts: each group has its own
+        # worlds, batch and replay buffer (agents/dqn/multisize.py)
+        groups = training_models(model, a)
+        for group in groups:
+            check_optimum_exists(group, "agent.sizes")
+        worlds, buffer_size = int(a.worlds), int(a.buffer_size)
+        each = {"groups (agent.sizes x agent.layouts)": len(groups)} if len(groups) > 1 else {}
+        fixed = tuple(each)
+        training = {"agent.iterations": int(a.iterations), "agent.worlds": worlds, "env.max_steps": T} | each
+        steps.append(Cost(_product(training), training, "training", fixed))
+        batch = {"agent.worlds": worlds, "env.max_steps": T} | each
+        buffer = {"agent.buffer_size": buffer_size} | each
+        memory += [
+            Cost(
+                sum(world_bytes(m, worlds) for m in groups),
+                {"agent.worlds": worlds} | each,
+                "the training worlds",
+                fixed,
+            ),
+            Cost(worlds * T * sum(map(frame_bytes, groups)), batch, "each iteration's batch of transitions", fixed),
+            Cost(buffer_size * sum(map(stored_transition_bytes, groups)), buffer, "the replay buffers", fixed),
+        ]
     evaluations = max(tables, 1) * starts * horizon
     eval_factors = {"eval.num_starts": starts, "eval.horizon": horizon} | ({"agent.runs": tables} if tables > 1 else {})
     steps.append(Cost(evaluations, eval_factors, "the evaluation"))

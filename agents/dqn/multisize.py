@@ -30,6 +30,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.schema import team_sizes, training_models
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.channel import rates
 from uavrl.envs.fading import fading_part
@@ -44,23 +45,6 @@ from .builders import build_collector, build_policies, build_replay_buffer, expl
 from .networks import Q_INPUTS
 from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
 from .transitions import CompactTransitions, transition_keys
-
-
-def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
-    """``[(N, (L1, L2))]`` the teams of ``agent.sizes``, or the run's own."""
-    sizes = list(a.get("sizes") or [])
-    return [(int(n), (int(l1), int(l2))) for n, l1, l2 in sizes] or [(env_cfg.num_uavs, tuple(env_cfg.grid))]
-
-
-def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
-    """The models one run trains on: every team of :func:`team_sizes` in every layout of ``agent.layouts`` (or
-    ``env.layout``), the run's model otherwise."""
-    layouts = list(a.get("layouts") or []) or [env_cfg.layout]
-    return [
-        env_cfg.replace(num_uavs=n, grid=grid, layout=layout)
-        for n, grid in team_sizes(env_cfg, a)
-        for layout in layouts
-    ]
 
 
 def check_set_settings(env_cfg: ModelConfig, a) -> None:
