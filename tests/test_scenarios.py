@@ -17,6 +17,7 @@ SCENARIOS = {  # name: (grid, UAVs, preset, option values, agents)
     "rayleigh": ((6, 6), 2, "paper", {"fading": "rayleigh"}, {"tabular", "dqn", "random", "oracle"}),
     "reference_code": ((6, 6), 2, "reference_code", {"reward": "best_so_far"}, {"tabular", "dqn", "random", "oracle"}),
     "large_20x20": ((20, 20), 10, "paper", {}, {"dqn", "random", "oracle"}),
+    "size_free": ((10, 10), 6, "paper", {}, {"dqn", "random", "oracle"}),
     "a2g_urban": (
         (10, 10),
         6,
