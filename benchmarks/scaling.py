@@ -114,7 +114,8 @@ def main():
         specialist = args.out / f"{n}uav"
         rows = [
             ("specialist", specialist, train_specialist(specialist, overrides), None, True),
-            ("size-free", free, free_usage, free_metrics, False),
+            # the run's own team is evaluated as its own (eval.json), any other zero-shot (eval-<N>uav-<grid>.json)
+            ("size-free", free, free_usage, free_metrics, (n, grid) == (run_cfg.num_uavs, tuple(run_cfg.grid))),
         ]
         for name, run_dir, usage, metrics, own in rows:
             metrics = metrics or json.loads((run_dir / "metrics.json").read_text())
