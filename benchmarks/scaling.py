@@ -5,7 +5,7 @@
 For each size (``SIZES``: N = 2 on 6x6, 6 on 10x10, 10 on 20x20, 20 on 30x30, 50 on 50x50), the specialist is the
 training command a user types (``python -m uavrl.train agent=dqn ...`` with that size's overrides, seed 0, one
 thread), run as a whole process unless ``<out>/<N>uav/metrics.json`` is already there; its wall and CPU seconds and
-peak resident memory come from ``os.wait4`` (saved beside the run as ``resources.json``).  The size-free checkpoint
+peak resident memory come from GNU time (saved beside the run as ``resources.json``).  The size-free checkpoint
 (``agent.network=set``, trained once on other teams) is measured the same way if ``<run>/resources.json`` exists,
 else from its ``metrics.json``.  Each checkpoint is then evaluated on each size by ``python -m uavrl.evaluate
 checkpoint=<run> [env.num_uavs=N env.grid=[L1,L2]] eval.num_starts=<starts>``, a whole process (its wall seconds and
@@ -18,7 +18,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -42,20 +44,24 @@ SIZES = [
     ),
 ]
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+GNU_TIME = "/usr/bin/time"
 
 
 def run_with_usage(argv: list[str]) -> dict:
-    """Run a whole command, one torch thread; wall and CPU seconds and peak resident memory (MB) from ``wait4``."""
-    began = time.perf_counter()
-    pid = os.posix_spawn(sys.executable, [sys.executable, *argv], {**os.environ, **ONE_THREAD})
-    _, status, usage = os.wait4(pid, 0)
-    if os.waitstatus_to_exitcode(status):
-        raise SystemExit(f"failed: python {' '.join(argv)}")
-    return {
-        "wall_s": time.perf_counter() - began,
-        "cpu_s": usage.ru_utime + usage.ru_stime,
-        "peak_mb": usage.ru_maxrss / 1024,  # Linux reports kilobytes
-    }
+    """Run ``python <argv>`` as a whole process, one torch thread, its own report kept out of the table; wall and CPU
+    seconds and peak resident memory (MB) from GNU time: ``wait4`` from this process would count this process's
+    memory too (Linux keeps the larger of the two across the child's ``exec``)."""
+    if not Path(GNU_TIME).exists():
+        raise SystemExit(f"{GNU_TIME} not found: install GNU time (Debian: apt install time)")
+    with tempfile.NamedTemporaryFile("r") as report:
+        began = time.perf_counter()
+        command = [GNU_TIME, "-f", "%U %S %M", "-o", report.name, sys.executable, *argv]
+        done = subprocess.run(command, env={**os.environ, **ONE_THREAD}, stdout=subprocess.DEVNULL)
+        wall = time.perf_counter() - began
+        if done.returncode:
+            raise SystemExit(f"failed: python {' '.join(argv)}")
+        user, system, peak_kb = report.read().split()[-3:]
+    return {"wall_s": wall, "cpu_s": float(user) + float(system), "peak_mb": int(peak_kb) / 1024}
 
 
 def train_specialist(run_dir: Path, overrides: list[str]) -> dict:
