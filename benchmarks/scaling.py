@@ -6,10 +6,11 @@ For each size (``SIZES``: N = 2 on 6x6, 6 on 10x10, 10 on 20x20, 20 on 30x30, 50
 training command a user types (``python -m uavrl.train agent=dqn ...`` with that size's overrides, seed 0, one
 thread), run as a whole process unless ``<out>/<N>uav/metrics.json`` is already there; its wall and CPU seconds and
 peak resident memory come from GNU time (saved beside the run as ``resources.json``).  The size-free checkpoint
-(``agent.network=set``, trained once on other teams) is measured the same way if ``<run>/resources.json`` exists,
-else from its ``metrics.json``.  Each checkpoint is then evaluated on each size by ``python -m uavrl.evaluate
-checkpoint=<run> [env.num_uavs=N env.grid=[L1,L2]] eval.num_starts=<starts>``, a whole process (its wall seconds and
-peak memory), and the oracle planner from the same starts in this process; "/ oracle" is the quotient of the two
+(``agent.network=set``, trained once on other teams) has its training's seconds from its ``metrics.json`` and its
+peak memory from ``<run>/resources.json`` where one was written (``{"peak_mb": ...}``, e.g. from ``/usr/bin/time
+-v``).  Each checkpoint is then evaluated on each size by ``python -m uavrl.evaluate checkpoint=<run>
+[env.num_uavs=N env.grid=[L1,L2]] eval.num_starts=<starts>``, a whole process (its wall seconds and peak memory),
+and the oracle planner from the same starts in this process; "/ oracle" is the quotient of the two
 mean step counts to 0.999 U* over the fewest (each over its own reaching starts).
 """
 
