@@ -71,6 +71,12 @@ def train_specialist(run_dir: Path, overrides: list[str]) -> dict:
     if not (run_dir / "metrics.json").exists():
         argv = ["-m", "uavrl.train", "agent=dqn", *overrides, "seed=0", "progress=false", f"run_dir={run_dir}"]
         resources.write_text(json.dumps(run_with_usage(argv)))
+    return resources_of(run_dir)
+
+
+def resources_of(run_dir: Path) -> dict:
+    """The training's measured resources (``resources.json``), ``{}`` where none were written."""
+    resources = run_dir / "resources.json"
     return json.loads(resources.read_text()) if resources.exists() else {}
 
 
@@ -110,7 +116,6 @@ def main():
     free = args.size_free
     run_cfg = model_config(load_agent(free)[1])
     free_metrics = json.loads((free / "metrics.json").read_text())
-    free_usage = json.loads((free / "resources.json").read_text()) if (free / "resources.json").exists() else {}
     print(
         "| N | grid | policy | train s (CPU s) | train peak MB | checkpoint MB | eval s | eval peak MB "
         "| reach 0.999 U* | steps / fewest | / oracle |"
@@ -122,7 +127,7 @@ def main():
         rows = [
             ("specialist", specialist, train_specialist(specialist, overrides), None, True),
             # the run's own team is evaluated as its own (eval.json), any other zero-shot (eval-<N>uav-<grid>.json)
-            ("size-free", free, free_usage, free_metrics, (n, grid) == (run_cfg.num_uavs, tuple(run_cfg.grid))),
+            ("size-free", free, resources_of(free), free_metrics, (n, grid) == (run_cfg.num_uavs, tuple(run_cfg.grid))),
         ]
         for name, run_dir, usage, metrics, own in rows:
             metrics = metrics or json.loads((run_dir / "metrics.json").read_text())
