@@ -155,3 +155,19 @@ def test_full_transitions_of_unknown_layouts_are_refused_in_one_line(compose_cfg
     with pytest.raises(ValueError, match="holds transitions of layouts that cannot be recovered") as refused:
         restored.load_state_dict(state)
     assert "\n" not in str(refused.value)
+
+
+def test_two_runs_of_one_seed_save_the_same_bytes_before_the_buffer_fills(compose_cfg):
+    """The slots not yet written are zeros, not the allocator's leftovers (``agents/dqn/builders.py``)."""
+    cfg = compose_cfg(*TINY, "env.grid=[3,3]", "agent.buffer_size=1000")
+    saved = []
+    for _ in range(2):
+        agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+        agent.train_iteration()
+        assert len(agent.buffer) < 1000
+        file = io.BytesIO()
+        torch.save(agent.state_dict(), file)
+        saved.append(file.getvalue())
+        del agent
+        torch.full((1 << 16,), -1, dtype=torch.int64)  # leftovers for the second run's storage, were it not zeroed
+    assert saved[0] == saved[1]

@@ -173,10 +173,20 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
     return loss
 
 
+class ZeroedStorage(LazyTensorStorage):
+    """TorchRL's ``LazyTensorStorage`` with its slots zeroed when it is first written: its ``torch.empty`` leaves
+    whatever bytes the allocator held in the slots not yet filled, which a checkpoint saves, so two runs of the same
+    seed would write different files."""
+
+    def _init(self, data) -> None:
+        super()._init(data)
+        self._storage.zero_()
+
+
 def build_replay_buffer(a, transitions: CompactTransitions, batch_size: int | None = None) -> TensorDictReplayBuffer:
     """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), uniform samples of
     ``batch_size`` (``agent.batch_size`` unless given)."""
-    storage = LazyTensorStorage(int(a.buffer_size), device=transitions.world.device)
+    storage = ZeroedStorage(int(a.buffer_size), device=transitions.world.device)
     batch_size = int(a.batch_size) if batch_size is None else batch_size
     return TensorDictReplayBuffer(storage=storage, batch_size=batch_size, transform=transitions)
 
