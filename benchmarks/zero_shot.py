@@ -9,7 +9,9 @@ reaching 0.999 U* and their steps over the fewest (exact or a lower bound, ``min
 seconds the row took (the first row of a team also computes its starts' references).  Then, per team, how the
 checkpoint's starts that miss 0.999 U* fail: still moving or switching in the last 10 steps (wandering near U*: action
 gaps the values do not resolve, or the greedy rule's back and forth) or stuck (a configuration the values rate best),
-and the best U / U* they reached.
+and the best U / U* they reached.  Last, per team of a fixed layout, the checkpoint started at U*'s own configuration
+(its UAVs in 16 random orders): whether its values rate staying there best, UAV by UAV, and whether its greedy policy
+holds 0.999 U* over the evaluation's horizon (wandering from U* itself: the values, not the search, miss it).
 """
 
 from __future__ import annotations
@@ -63,6 +65,8 @@ def main(run_dir: str, num_starts: int = 64, teams=DEFAULT_TEAMS) -> None:
             row = [str(n), f"{grid[0]}x{grid[1]}", cfg.layout, name, *cells(metrics), f"{seconds:.0f}"]
             print("| " + " | ".join(row) + " |", flush=True)
         reasons.append(failures(agent, cfg, num_starts))
+        if cfg.layout != "random":
+            reasons.append(from_the_optimum(agent, cfg))
     print("\n" + "\n".join(f"- {line}" for line in reasons))
 
 
@@ -85,6 +89,36 @@ def failures(agent, cfg, num_starts: int) -> str:
         f"{cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} ({cfg.layout}): {int(missed.sum())} of {num_starts} "
         f"starts miss 0.999 U*: {int((missed & acting).sum())} still acting in the last 10 of {horizon} steps, "
         f"{int((missed & ~acting).sum())} stuck{worst}; {int((~missed & acting).sum())} that reached it still act"
+    )
+
+
+@torch.no_grad()
+def from_the_optimum(agent, cfg, orders: int = 16) -> str:
+    """The checkpoint started at U*'s configuration, its UAVs in ``orders`` random orders (module doc)."""
+    horizon = evaluation_horizon(cfg)
+    env = UAVSpectrumEnv(batch_size=orders, config=cfg.replace(max_steps=horizon), seed=EVAL_SEED)
+    start = env.reset()
+    u_star, positions, tasks = env.optimum()
+    generator = torch.Generator().manual_seed(0)
+    order = torch.stack([torch.randperm(cfg.num_uavs, generator=generator) for _ in range(orders)])
+    code = (2 * env.cells_of(positions) + tasks).gather(1, order)
+    start.update(env._outputs(env.world.start_at(code)))  # reset's done flags, the optimum's observations
+    assert torch.allclose(env.world.utility(start["positions"], start["tasks"])[2], u_star)
+    policy = agent.policy_for(cfg).bind_env(env)
+    first = policy(start.clone())
+    values, allowed = first["agents", "action_value"], first["agents", "action_mask"]
+    stay = 4 + (code & 1)  # a switch to the task it has
+    margin = values.masked_fill(~allowed, -torch.inf).max(-1).values - values.gather(-1, stay[..., None])[..., 0]
+    rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
+    ratio = env.world.utility(rollout["next", "positions"], rollout["next", "tasks"])[2] / u_star[:, None]
+    held = (ratio >= 0.999).all(-1)
+    leaving = (margin > 0).sum()
+    return (
+        f"{cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} started at U*'s configuration ({orders} orders of its "
+        f"UAVs): {int(leaving)} of {margin.numel()} UAVs value a move or switch above staying (by up to "
+        f"{float(margin.max()):.3g}; staying's value {float(values.gather(-1, stay[..., None]).mean()):.3g} on "
+        f"average); the greedy policy holds 0.999 U* over all {horizon} steps in {int(held.sum())} of {orders}, "
+        f"ends there in {int((ratio[:, -1] >= 0.999).sum())}, lowest U / U* on the way {float(ratio.min()):.4f}"
     )
 
 
