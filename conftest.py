@@ -26,8 +26,8 @@ FOLDERS = {ROOT / folder: package for package, folder in _PACKAGE_DIRS.items() i
 NEEDS = {
     "uavrl.agents.benchmarl": "benchmarl",
     "uavrl.benchmarl": "benchmarl",
-    "uavrl.envs.gym_env": "gymnasium",
-    "uavrl.envs.pettingzoo_env": "pettingzoo",
+    "uavrl.envs.adapters.gym_env": "gymnasium",
+    "uavrl.envs.adapters.pettingzoo_env": "pettingzoo",
 }
 
 

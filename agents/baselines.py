@@ -7,9 +7,9 @@ them and saves a run directory like any agent's, so ``load_policy`` and the
 reports treat them alike).
 
 The **oracle** knows the model.  Each step it lists every optimal
-configuration of each world (:func:`uavrl.envs.bounds.optimal_configurations`),
+configuration of each world (:func:`uavrl.envs.solvers.bounds.optimal_configurations`),
 assigns the UAVs to the (cell, task) pairs of one of them by the bottleneck
-assignment (:func:`uavrl.envs.bounds.best_assignment`: the fewest steps for
+assignment (:func:`uavrl.envs.solvers.bounds.best_assignment`: the fewest steps for
 the slowest UAV, then the fewest UAVs on long paths) and moves every UAV one
 step along it: the UAV with the most steps left chooses first, a task change
 comes first, then a move that shortens its path along the longer axis, then
@@ -36,11 +36,11 @@ from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
 from uavrl.agents.generators import PolicyGenerator
 from uavrl.envs import ModelConfig
-from uavrl.envs.bounds import assignment_costs, best_assignment, optimal_configurations
-from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
-from uavrl.envs.exact import fixed_layout_tables
-from uavrl.envs.grid import cells_or_away, grid_neighbours
-from uavrl.envs.optimum import optimum
+from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, relay_contributions
+from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
+from uavrl.envs.solvers.bounds import assignment_costs, best_assignment, optimal_configurations
+from uavrl.envs.solvers.exact import fixed_layout_tables
+from uavrl.envs.solvers.optimum import optimum
 
 UP, DOWN, LEFT, RIGHT, SENSE = range(5)
 
@@ -73,7 +73,7 @@ class OraclePolicy(TensorDictModuleBase):
     each world's layout from the tensordict it gets: the node positions
     ``nodes`` that :class:`~uavrl.envs.UAVSpectrumEnv` publishes for random
     layouts, from which it computes the world's tables as the environment does
-    (:mod:`uavrl.envs.channel`).  So it needs no environment and acts alike in
+    (:mod:`uavrl.envs.physics.channel`).  So it needs no environment and acts alike in
     a plain env, a ``SerialEnv``, a ``ParallelEnv`` and a collector's workers,
     and a pickled copy too.  Leading batch dimensions are planned world by
     world, as one batch.  It acts only in environments of ``cfg``'s grid,

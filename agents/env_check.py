@@ -34,9 +34,9 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from uavrl.envs.channel import fixed_layout
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.grid import cells_of, grid_neighbours, on_grid
+from uavrl.envs.physics.channel import fixed_layout
+from uavrl.envs.physics.grid import cells_of, grid_neighbours, on_grid
 from uavrl.envs.world import NODE_FEATURES
 
 ADVICE = (

@@ -48,11 +48,11 @@ from tensordict import TensorDictBase
 
 from uavrl.agents.baselines import SENSE, BaselineAgent, OraclePolicy
 from uavrl.envs import ModelConfig
-from uavrl.envs.bounds import assignment_costs, best_assignment
-from uavrl.envs.channel import rates
 from uavrl.envs.config import RETURN
-from uavrl.envs.energy import Energy
-from uavrl.envs.grid import cells_or_away, manhattan
+from uavrl.envs.physics.channel import rates
+from uavrl.envs.physics.energy import Energy
+from uavrl.envs.physics.grid import cells_or_away, manhattan
+from uavrl.envs.solvers.bounds import assignment_costs, best_assignment
 
 MAX_CYCLE_UAVS = 7  # B is searched over 4^n neighbour combinations: 16,384 at 7 UAVs in service
 

@@ -1,4 +1,5 @@
-"""World-steps per second of the Gymnasium vector env (uavrl.envs.gym_env) beside UAVSpectrumEnv.step, in one run.
+"""World-steps per second of the Gymnasium vector env (uavrl.envs.adapters.gym_env) beside UAVSpectrumEnv.step, in one
+run.
 
 Both step ``B`` worlds with the same pre-drawn uniform actions (drawing them is not timed), episodes longer
 than the run (no resets), and every step's outputs kept alive only until the next step:
@@ -44,7 +45,7 @@ def loops(B: int, N: int, L: int, T: int) -> dict:
     from torchrl.envs.utils import step_mdp
 
     from uavrl.envs import UAVSpectrumEnv
-    from uavrl.envs.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
+    from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
 
     options = {"grid": (L, L), "num_uavs": N}
     actions = torch.randint(0, 6, (T, B, N), generator=torch.Generator().manual_seed(0))

@@ -1,7 +1,7 @@
 """Time the exact solver (BENCHMARKS.md, "The yardstick"): Q* of the fixed layout, beside a dense baseline.
 
 For each case it times, in this process with one torch thread, the solver of
-``uavrl.envs.exact`` from nothing to the exact Q* of every configuration
+``uavrl.envs.solvers.exact`` from nothing to the exact Q* of every configuration
 (building the configuration graph, value iteration to the fixed point, Q* of
 every configuration and joint action), and the same Q* by a dense baseline
 written here that numbers *ordered* configurations (UAV i is UAV i, N! times
@@ -20,8 +20,8 @@ import time
 import torch
 
 from uavrl.envs import make_config
-from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
-from uavrl.envs.grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
+from uavrl.envs.physics.grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
+from uavrl.envs.solvers.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
 
 CASES = {"n2-10x10": ((10, 10), 2, 1.0), "n3-6x6": ((6, 6), 3, 30.0)}
 

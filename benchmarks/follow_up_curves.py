@@ -37,7 +37,7 @@ import torch
 
 from uavrl.agents.tabular import TeamQLearner
 from uavrl.envs import make_config
-from uavrl.envs.power import FOLLOW_UP_MOVE, FOLLOW_UP_TRANSMISSION
+from uavrl.envs.physics.power import FOLLOW_UP_MOVE, FOLLOW_UP_TRANSMISSION
 
 REGION = (27, 27)  # one region of the follow-up's 81x81 area of 9 regions
 THEIR_STEPS = 6000  # their steps per episode on 81x81 with 9 regions (their Table 2)

@@ -1,9 +1,9 @@
 """Time the exact mission solver (BENCHMARKS.md, "Exact mission optimum"), and compare policies with it.
 
 ``--time``: for each case, in a fresh process (so its peak memory is its own) with one torch thread, the solver of
-``uavrl.envs.mission_exact`` from the 64 evaluation starts (``eval.seed``) of rotary_wing with the base at (-1, 0)
-over the default mission horizon: its estimate, the states and transitions it solved, CPU and wall seconds and the
-process's peak RSS, beside the baseline of the same run: the random policy's whole evaluation on the same starts
+``uavrl.envs.solvers.mission_exact`` from the 64 evaluation starts (``eval.seed``) of rotary_wing with the base at
+(-1, 0) over the default mission horizon: its estimate, the states and transitions it solved, CPU and wall seconds and
+the process's peak RSS, beside the baseline of the same run: the random policy's whole evaluation on the same starts
 without the solver (what an evaluation costs before the optimum is added).
 
 ``--compare``: the evaluation's delivered data of the random policy and the energy-unaware oracle on one case,
@@ -30,7 +30,7 @@ import torch
 from uavrl import evaluation
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon
-from uavrl.envs.mission_exact import mission_size, optimal_mission
+from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
 from uavrl.evaluation import EVAL_SEED, evaluate
 

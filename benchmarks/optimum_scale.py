@@ -14,7 +14,7 @@ import time
 import torch
 
 from uavrl.envs import make_config
-from uavrl.envs.optimum import MAX_EXCHANGE_UAVS, solve
+from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS, solve
 from uavrl.envs.world import World
 
 WORLDS = 64

@@ -47,7 +47,7 @@ def main(argv=None):
     from stable_baselines3 import PPO
 
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-    from uavrl.envs.gym_env import TeamActionPolicy, UAVSpectrumGymEnv
+    from uavrl.envs.adapters.gym_env import TeamActionPolicy, UAVSpectrumGymEnv
     from uavrl.evaluation import evaluate
 
     torch.set_num_threads(1)

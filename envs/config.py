@@ -19,8 +19,8 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
-from . import power, radio
 from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
+from .physics import power, radio
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; an energy model with recharging adds RETURN
@@ -29,7 +29,7 @@ SENSING, RELAYING = 0, 1
 NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
-FADINGS = ("none", "rayleigh", "los_nlos", "rician")  # uavrl.envs.fading: one part each
+FADINGS = ("none", "rayleigh", "los_nlos", "rician")  # uavrl.envs.physics.fading: one part each
 REWARDS = ("delta", "best_so_far", "log_gap", "delivered")
 RATE_MODELS = ("af", "reference_code")
 INIT_TASKS = ("random", "sensing", "relaying")
@@ -78,11 +78,11 @@ class ModelConfig:
     ``"af"`` is the normalised amplify-and-forward form of docs/model.md (How good a configuration is);
     ``"reference_code"`` is the authors' published formula (docs/model.md, the authors' code),
     where ``reference_gain`` replaces the power products.  ``fading`` draws every link's power gain anew each step
-    (:mod:`uavrl.envs.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.  ``energy`` gives the
-    UAVs batteries (:mod:`uavrl.envs.energy`): a UAV leaves service for the ``base`` when its battery reaches the
-    reserve the flight there needs (or, given ``recharge_steps``, when the controller sends it home), and either
-    stays out or recharges there for ``recharge_steps`` steps; ``num_spares`` more UAVs wait charged at the base to
-    keep ``num_uavs`` in service; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
+    (:mod:`uavrl.envs.physics.fading`); ``rician_k_db`` is the K-factor of ``fading="rician"`` in dB.  ``energy`` gives
+    the UAVs batteries (:mod:`uavrl.envs.physics.energy`): a UAV leaves service for the ``base`` when its battery
+    reaches the reserve the flight there needs (or, given ``recharge_steps``, when the controller sends it home), and
+    either stays out or recharges there for ``recharge_steps`` steps; ``num_spares`` more UAVs wait charged at the base
+    to keep ``num_uavs`` in service; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
     """
 
     grid: tuple[int, int] = (6, 6)
@@ -328,7 +328,7 @@ class ModelConfig:
 
     @property
     def step_energies(self) -> power.StepEnergies:
-        """What a step costs a UAV under ``energy`` (not ``none``): :func:`uavrl.envs.power.step_energies`."""
+        """What a step costs a UAV under ``energy`` (not ``none``): :func:`uavrl.envs.physics.power.step_energies`."""
         return power.step_energies(
             self.energy, self.cell_size, self.slot_s, self.powers_w[2], self.circuit_power_w, self.battery_wh
         )

@@ -29,7 +29,7 @@ import math
 import numbers
 import sys
 
-from . import radio
+from .physics import radio
 
 NODE_NAMES = ("PT", "PR", "S", "E")
 _LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
@@ -199,8 +199,8 @@ def _is_number(value) -> bool:
 
 
 def radio_problem(values: dict) -> tuple[str, str] | None:
-    """The option of a physical channel outside where its model holds (:mod:`uavrl.envs.radio`), and why; ``None``
-    when every one lies inside.  ``values`` as :func:`physics_problem` reads them, with ``altitude_m``."""
+    """The option of a physical channel outside where its model holds (:mod:`uavrl.envs.physics.radio`), and why;
+    ``None`` when every one lies inside.  ``values`` as :func:`physics_problem` reads them, with ``altitude_m``."""
     v, channel = values, values["channel"]
     low, high = radio.CARRIER_GHZ[channel]
     ranges = {
@@ -369,7 +369,7 @@ def _rounded(value: float, direction) -> str:
 
 # ---------------------------------------------------------------------------------------------------------- sizes
 DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest allocations) may take unless raised
-EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
+EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.solvers.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
 
 
 def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
@@ -378,7 +378,7 @@ def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
 
 
 def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
-    """Memory of the exact solver (:class:`uavrl.envs.exact.ConfigurationSpace`): the int32 successor table, the
+    """Memory of the exact solver (:class:`uavrl.envs.solvers.exact.ConfigurationSpace`): the int32 successor table, the
     configurations and one chunked sweep of ``2^23`` gathered values."""
     K, A = num_configurations(grid, num_uavs), 6**num_uavs
     return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + (1 << 23) * 16
@@ -445,14 +445,14 @@ def stored_transition_bytes(cfg) -> int:
 
 
 def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
-    """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.bounds`) where the exact solver does not fit:
-    each world's best reachable terms ``[K + 1, N]``, then the relaxation (chunks of (world, step) rows over every
+    """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.solvers.bounds`) where the exact solver does not
+    fit: each world's best reachable terms ``[K + 1, N]``, then the relaxation (chunks of (world, step) rows over every
     split of up to ``MAX_SPLIT_UAVS`` UAVs, or a few ``[rows, N]`` tensors beyond), and the optimal sets (at most
     ``MAX_CANDIDATES`` candidates, or ``[N, C]`` moves per listed set where they are searched)."""
     N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
-    chunk = 1 << 22  # uavrl.envs.bounds._CHUNK_ELEMENTS
+    chunk = 1 << 22  # uavrl.envs.solvers.bounds._CHUNK_ELEMENTS
     reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
-    if N <= 10:  # uavrl.envs.bounds.MAX_SPLIT_UAVS
+    if N <= 10:  # uavrl.envs.solvers.bounds.MAX_SPLIT_UAVS
         relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
         candidates = 2_000_000 * N * 8 * 4
     else:

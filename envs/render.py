@@ -57,10 +57,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .channel import PR, PT, E, S
 from .config import NODE_NAMES, RELAYING
-from .energy import CHARGING, OUT, RETURNING, WAITING
-from .optimum import optimum as exact_optimum
+from .physics.channel import PR, PT, E, S
+from .physics.energy import CHARGING, OUT, RETURNING, WAITING
+from .solvers.optimum import optimum as exact_optimum
 
 RENDER_MODES = ("rgb_array",)
 RELAY_COLOUR = (0x1F, 0x77, 0xB4)  # matplotlib's tab:blue

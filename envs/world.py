@@ -4,13 +4,13 @@
 for this model, and holds what they share: every world's layout and the tables computed from it, the UAVs' state and
 the per-world random streams.  The parts are
 
-- ``layouts`` (:mod:`.layouts`): where the four nodes are, fixed or drawn at each reset;
-- the channel and the rate model (:mod:`.channel`): the mean gain of every link and the AF rates, turned into
+- ``layouts`` (:mod:`.physics.layouts`): where the four nodes are, fixed or drawn at each reset;
+- the channel and the rate model (:mod:`.physics.channel`): the mean gain of every link and the AF rates, turned into
   per-cell and per-code tables once per layout;
-- ``fading`` (:mod:`.fading`): the links' random power gains drawn each step, and whether the channel is random;
-- ``dynamics`` (:mod:`.dynamics`): the per-UAV state variables, their start, their step, the masks, termination;
-- ``reward`` (:class:`.rewards.TeamReward`): ``env.reward`` from the rates;
-- ``energy`` (:mod:`.energy`, under ``env.energy`` other than ``none``): the batteries, who serves, termination.
+- ``fading`` (:mod:`.physics.fading`): the links' random power gains drawn each step, and whether the channel is random;
+- ``dynamics`` (:mod:`.physics.dynamics`): the per-UAV state variables, their start, their step, the masks, termination;
+- ``reward`` (:class:`.physics.rewards.TeamReward`): ``env.reward`` from the rates;
+- ``energy`` (:mod:`.physics.energy`, under ``env.energy`` other than ``none``): the batteries, who serves, termination.
 
 A step is their pipeline: dynamics, rates, reward, termination, observation.  :meth:`World.reset` and
 :meth:`World.step` return plain tensors (observations, masks, rates, rewards);
@@ -36,17 +36,17 @@ import numbers
 
 import torch
 
-from . import streams
-from .channel import direct_terms, link_gains, rates, rates_from_sums, relay_contributions
 from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
-from .dynamics import UAV_STATE, Dynamics
-from .energy import ENERGY_STATE, energy_part
-from .fading import fading_part
-from .grid import cells_of, decode_joint_actions, joint_action_valid, targets_valid
-from .layouts import Layouts
 from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
-from .optimum import optimum as exact_optimum
-from .rewards import U_STAR_REWARDS, TeamReward
+from .physics import streams
+from .physics.channel import direct_terms, link_gains, rates, rates_from_sums, relay_contributions
+from .physics.dynamics import UAV_STATE, Dynamics
+from .physics.energy import ENERGY_STATE, energy_part
+from .physics.fading import fading_part
+from .physics.grid import cells_of, decode_joint_actions, joint_action_valid, targets_valid
+from .physics.layouts import Layouts
+from .physics.rewards import U_STAR_REWARDS, TeamReward
+from .solvers.optimum import optimum as exact_optimum
 
 SEED_LIMIT = 2**63  # world seeds are int64
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
@@ -115,8 +115,8 @@ class _WorldsState:
     """The mutable per-world state, kept outside the ``nn.Module`` (whose ``__setattr__`` costs ~6 us a step per
     tensor).
 
-    Per UAV, one ``[B, N]`` tensor for each name of :data:`~uavrl.envs.dynamics.UAV_STATE` (``cell``, ``task``)
-    and, under an energy model, of :data:`~uavrl.envs.energy.ENERGY_STATE` (``battery``, ``status``, ``timer``;
+    Per UAV, one ``[B, N]`` tensor for each name of :data:`~uavrl.envs.physics.dynamics.UAV_STATE` (``cell``, ``task``)
+    and, under an energy model, of :data:`~uavrl.envs.physics.energy.ENERGY_STATE` (``battery``, ``status``, ``timer``;
     ``None`` without one); per world: ``r`` ``[B, 2]`` the current (R_PU, R_SE); ``best`` the episode's best
     ``R_PU + R_SE`` (the reward part's memory for ``best_so_far``); ``steps`` the episode clock; ``terminated``
     whether the last step ended the episode (``None``: no world's); ``started`` whether a world has been reset;
@@ -249,8 +249,8 @@ class World:
     def to(self, device) -> World:
         """Move every tensor the worlds own (parts, tables, state, random streams) to ``device``; returns ``self``.
 
-        Each stream is a pure function of its key and counter (:mod:`.streams`), so the worlds go on from where they
-        were and a step gives the same outputs on any device.
+        Each stream is a pure function of its key and counter (:mod:`.physics.streams`), so the worlds go on from where
+        they were and a step gives the same outputs on any device.
         """
         device = resolve_device(device)
         for owner in (self, *self.parts.values()):
@@ -615,9 +615,9 @@ class World:
         return out, reward, s.steps >= self.cfg.max_steps
 
     def _advance(self, state, action: torch.Tensor) -> torch.Tensor:
-        """Set ``state``'s per-UAV variables (:data:`~.dynamics.UAV_STATE`, :data:`~.energy.ENERGY_STATE`) to those
-        after the joint actions ``[W, N]``: the dynamics part's step, then the energy part's; returns the codes
-        ``2 cell + task`` after it."""
+        """Set ``state``'s per-UAV variables (:data:`~.physics.dynamics.UAV_STATE`,
+        :data:`~.physics.energy.ENERGY_STATE`) to those after the joint actions ``[W, N]``: the dynamics part's step,
+        then the energy part's; returns the codes ``2 cell + task`` after it."""
         cell = state.cell
         for name, value in self.dynamics.step(state, action).items():
             setattr(state, name, value)
@@ -632,9 +632,9 @@ class World:
         """Any ``W`` states after joint actions, for the solvers: what :meth:`step` does to the per-UAV variables
         and the rates, without the worlds' own state, clock or streams.
 
-        ``state``: ``[W, N]`` tensors by the names of :data:`~.dynamics.UAV_STATE` (and
-        :data:`~.energy.ENERGY_STATE` under an energy model); ``action`` ``[W, N]``; ``worlds`` ``[W]``: whose layout
-        each row is in (``None``: a fixed layout's).  Returns the variables after the step and the deterministic
+        ``state``: ``[W, N]`` tensors by the names of :data:`~.physics.dynamics.UAV_STATE` (and
+        :data:`~.physics.energy.ENERGY_STATE` under an energy model); ``action`` ``[W, N]``; ``worlds`` ``[W]``: whose
+        layout each row is in (``None``: a fixed layout's).  Returns the variables after the step and the deterministic
         ``(R_PU, R_SE)`` ``[W, 2]`` float64 of the configurations they reach (the mean channel: a random channel is
         refused).
         """
@@ -695,7 +695,7 @@ class World:
         """Exact ``U*`` ``[B]`` and one optimal configuration per world (positions ``[B, N, 2]``, tasks ``[B, N]``).
 
         Over all placements on distinct cells and all task vectors, for the
-        deterministic (mean) channels.  See :func:`uavrl.envs.optimum.optimum`.
+        deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum`.
         """
         self._require_layout()
         # a fixed layout has one row of tables: solved once, the same answer for every world
@@ -760,6 +760,6 @@ class World:
 
     @property
     def status(self) -> torch.Tensor | None:
-        """``[B, N]`` every UAV's status now (:data:`~uavrl.envs.energy.SERVING` ... ``WAITING``); ``None`` without an
-        energy model."""
+        """``[B, N]`` every UAV's status now (:data:`~uavrl.envs.physics.energy.SERVING` ... ``WAITING``); ``None``
+        without an energy model."""
         return None if self._s.status is None else self._s.status.clone()

@@ -1,5 +1,6 @@
-"""The Gymnasium and PettingZoo adapters (uavrl.envs.gym_env, uavrl.envs.pettingzoo_env): their official checkers,
-the same physics and seeds as UAVSpectrumEnv, Stable-Baselines3 training on them and the yardstick measuring it.
+"""The Gymnasium and PettingZoo adapters (uavrl.envs.adapters.gym_env, uavrl.envs.adapters.pettingzoo_env): their
+official checkers, the same physics and seeds as UAVSpectrumEnv, Stable-Baselines3 training on them and the yardstick
+measuring it.
 
 Skipped where the [gym] extra is not installed (pip install -e ".[gym]"; CI: .ci/leg-gym).
 """
@@ -23,8 +24,8 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, ren
 from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 
 from uavrl.envs import UAVSpectrumEnv, make_config, observation_with_nodes  # noqa: E402
-from uavrl.envs.gym_env import ENV_ID, TeamActionPolicy, UAVSpectrumGymEnv, UAVSpectrumVectorEnv  # noqa: E402
-from uavrl.envs.pettingzoo_env import UAVSpectrumParallelEnv  # noqa: E402
+from uavrl.envs.adapters.gym_env import ENV_ID, TeamActionPolicy, UAVSpectrumGymEnv, UAVSpectrumVectorEnv  # noqa: E402
+from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv  # noqa: E402
 from uavrl.evaluation import EVAL_SEED, evaluate  # noqa: E402
 
 # the paper's preset, a team of 3 on random layouts with fading (per-world layouts and fading draws), the

@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.envs.channel import cell_xyz, fixed_layout, link_gains
 from uavrl.envs.config import InvalidOption, ModelConfig
-from uavrl.envs.pathloss import al_hourani_los_probability, mean_path_loss_db, uma_av_los_probability
+from uavrl.envs.physics.channel import cell_xyz, fixed_layout, link_gains
+from uavrl.envs.physics.pathloss import al_hourani_los_probability, mean_path_loss_db, uma_av_los_probability
 
 C = 299_792_458.0
 # Al-Hourani, Kandeepan, Lardner, IEEE WCL 3(6), 2014, Table I at 2 GHz: (a, b, eta_LoS dB, eta_NLoS dB)

@@ -22,7 +22,8 @@ UP, DOWN, LEFT, RIGHT, SENSE, RELAY = range(6)
 
 
 def zeng_power(v: float) -> float:
-    """Zeng, Xu, Zhang (IEEE TWC 2019) eq. (12) with their Table I, written out independently of envs/power.py."""
+    """Zeng, Xu, Zhang (IEEE TWC 2019) eq. (12) with their Table I, written out independently of
+    envs/physics/power.py."""
     W, rho, R, A, Omega, U_tip, s, d0, k, delta = 20.0, 1.225, 0.4, 0.503, 300.0, 120.0, 0.05, 0.6, 0.1, 0.012
     P0 = delta / 8 * rho * s * A * Omega**3 * R**3
     Pi = (1 + k) * W**1.5 / math.sqrt(2 * rho * A)
@@ -48,7 +49,7 @@ def steps_home(x: int, y: int) -> int:
 
 
 def test_propulsion_power_is_zengs():
-    from uavrl.envs import power
+    from uavrl.envs.physics import power
 
     assert power.BLADE_PROFILE_POWER == pytest.approx(79.86, abs=0.05)  # P0 ~ 79.9 W
     assert power.INDUCED_POWER == pytest.approx(88.63, abs=0.05)  # Pi ~ 88.6 W
@@ -385,8 +386,8 @@ def test_the_gymnasium_and_pettingzoo_adapters_terminate_and_autoreset_apart():
     pytest.importorskip("pettingzoo")
     import numpy as np
 
-    from uavrl.envs.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
-    from uavrl.envs.pettingzoo_env import UAVSpectrumParallelEnv
+    from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
+    from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv
 
     options = _energy(3) | dict(battery_wh=0.6, battery_init="uniform", max_steps=30)
     rng = np.random.default_rng(0)

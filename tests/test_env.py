@@ -1,7 +1,7 @@
 """The environment against docs/model.md: hand-worked rates, dynamics properties, batching, TorchRL integration.
 
 The reference values here are computed with plain Python ``math`` from docs/model.md's
-formulas, never with :mod:`uavrl.envs.channel`, so a wrong formula in the
+formulas, never with :mod:`uavrl.envs.physics.channel`, so a wrong formula in the
 package cannot hide behind the same wrong formula in the test.
 """
 
@@ -695,7 +695,7 @@ def test_check_env_specs(B, grid, N, preset, options):
 def test_random_layouts_publish_the_nodes_every_table_is_computed_from(preset, options):
     """``nodes`` after a reset and a step, and after an auto-reset's new layouts, give the env's own tables through
     the channel functions, bit for bit (what the oracle plans on)."""
-    from uavrl.envs.channel import cell_xyz, direct_terms, link_gains, relay_contributions
+    from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, relay_contributions
 
     env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2, preset=preset, max_steps=2, layout="random", **options)
     td = env.rollout(3, break_when_any_done=False)  # the third step starts from new layouts
@@ -874,7 +874,7 @@ def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(o
 def test_log_gap_reward_is_the_change_of_the_potential_of_the_mean_channel_utility(options):
     """reward='log_gap': each step's reward is the change of -log(1 - U/U* + floor), U the mean-channel utility of
     the configuration and U* the exact optimum of the world's layout, whatever the fading draws."""
-    from uavrl.envs.rewards import log_gap_potential
+    from uavrl.envs.physics.rewards import log_gap_potential
 
     env = UAVSpectrumEnv(batch_size=8, grid=(4, 4), reward="log_gap", seed=1, **options)
     td = env.rollout(10, RandomPolicy(seed=2), break_when_any_done=False)

@@ -71,7 +71,7 @@ def test_no_module_imports_upward():
     commands = {"train", "evaluate", "reproduce", "report", "benchmarl", "render", "cli", "settings", "config"}
     commands |= {"runs", "rundir"}
     agents_layer = {"evaluation", "checkpoints", "logger", "compat", "video", "plots", "schema", "rules", "io"}
-    layers = {"model": [*root.glob("envs/*.py")], "agents": [*root.glob("agents/**/*.py")]}
+    layers = {"model": [*root.glob("envs/**/*.py")], "agents": [*root.glob("agents/**/*.py")]}
     layers["agents"] += [root / "uavrl" / f"{name}.py" for name in agents_layer]
     layers["commands"] = [root / "uavrl" / f"{name}.py" for name in commands]
     above = {

@@ -14,7 +14,7 @@ import torch
 
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon, mission_steps
-from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
+from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
 from uavrl.envs.world import World
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py

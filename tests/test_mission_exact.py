@@ -1,7 +1,7 @@
-"""The exact mission solver (envs/mission_exact.py; docs/model.md, The exact mission solver): against brute-force
-optimal control written out in tests/test_mission.py (its own dynamics, costs and rates), under the proved bound,
-above what the random policy and the oracle deliver in the shared evaluation, its policy played through the World,
-and its refusals."""
+"""The exact mission solver (envs/solvers/mission_exact.py; docs/model.md, The exact mission solver): against
+brute-force optimal control written out in tests/test_mission.py (its own dynamics, costs and rates), under the proved
+bound, above what the random policy and the oracle deliver in the shared evaluation, its policy played through the
+World, and its refusals."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from test_mission import Mission, rotary  # brute force over joint actions, writ
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon
-from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
-from uavrl.envs.mission_exact import MissionTooLarge, NotCovered, mission_size, optimal_mission
+from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
+from uavrl.envs.solvers.mission_exact import MissionTooLarge, NotCovered, mission_size, optimal_mission
 from uavrl.envs.world import World
 from uavrl.evaluation import evaluate
 

@@ -1,4 +1,4 @@
-"""The branch and bound of envs/optimum.py (method="search") and the bounds beyond 20 UAVs, against the exchange
+"""The branch and bound of envs/solvers/optimum.py (method="search") and the bounds beyond 20 UAVs, against the exchange
 method, brute force and the enumerations they replace."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from uavrl.envs import make_config
-from uavrl.envs.bounds import _searched_configurations, optimal_configurations, relaxed_best_utility
-from uavrl.envs.grid import cells_of
-from uavrl.envs.optimum import SplitSearch, optimum, optimum_bound, ratio_order, solve, split_relaxation
+from uavrl.envs.physics.grid import cells_of
+from uavrl.envs.solvers.bounds import _searched_configurations, optimal_configurations, relaxed_best_utility
+from uavrl.envs.solvers.optimum import SplitSearch, optimum, optimum_bound, ratio_order, solve, split_relaxation
 from uavrl.envs.world import World
 
 VARIANTS = [
@@ -164,7 +164,7 @@ def test_split_relaxation_bound_is_at_least_every_split_beyond_ten_uavs():
     w = World(cfg, 3, "cpu", 2)
     start = w.reset()
     cells = cells_of(start["positions"], 20)
-    import uavrl.envs.bounds as bounds
+    import uavrl.envs.solvers.bounds as bounds
 
     split = relaxed_best_utility(cells, start["tasks"], w.cell_contributions, w.direct, cfg, 40)
     limit, bounds.MAX_SPLIT_UAVS = bounds.MAX_SPLIT_UAVS, 12
@@ -187,7 +187,7 @@ def test_oracle_evaluation_at_fifty_uavs():
 
 
 def test_the_evaluation_reports_the_gap_where_the_search_stopped(monkeypatch):
-    import uavrl.envs.optimum as optimum_module
+    import uavrl.envs.solvers.optimum as optimum_module
     from uavrl.evaluation import u_star_gap
 
     w = world("paper", (5, 5), 22, {"layout": "random"}, 8, 1)  # crowded: the best cells of both networks overlap

@@ -7,7 +7,7 @@ from matplotlib.colors import to_rgba
 
 from uavrl.cli import compose_config
 from uavrl.envs import make_config
-from uavrl.envs.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
+from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
 from uavrl.envs.render import STATUS_COLOURS
 from uavrl.plots import battery_figure, mission_events, mission_history, pyplot, save_figure
 from uavrl.render import render_checkpoint

@@ -254,8 +254,8 @@ def test_the_oracle_plans_for_the_uavs_in_service_and_never_returns():
 def test_the_adapters_have_the_fleet_and_seven_actions():
     pytest.importorskip("gymnasium")
     pytest.importorskip("pettingzoo")
-    from uavrl.envs.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
-    from uavrl.envs.pettingzoo_env import UAVSpectrumParallelEnv
+    from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv, UAVSpectrumVectorEnv
+    from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv
 
     options = dict(grid=(3, 3), num_uavs=2, energy="follow_up", base=BASE, recharge_steps=2, num_spares=1)
     gym_env = UAVSpectrumGymEnv(**options)

@@ -14,7 +14,7 @@ from torchrl.record.loggers import CSVLogger
 
 from uavrl.cli import compose_config
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.envs.energy import CHARGING, WAITING
+from uavrl.envs.physics.energy import CHARGING, WAITING
 from uavrl.envs.render import (
     GAUGE_HEIGHT,
     GAUGE_LEVELS,

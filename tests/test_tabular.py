@@ -7,7 +7,8 @@ import torch
 
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
 from uavrl.compat import make_collector
-from uavrl.envs import UAVSpectrumEnv, make_config, streams
+from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs.physics import streams
 from uavrl.evaluation import EPISODE_METRICS, episode_metrics, evaluate
 
 

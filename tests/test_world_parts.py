@@ -17,13 +17,14 @@ from scipy import stats
 
 from uavrl.agents.tabular import TabularModel
 from uavrl.agents.tabular.tables import exact_q_table
-from uavrl.envs import UAVSpectrumEnv, make_config, streams
+from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.config import FADINGS, InvalidOption
-from uavrl.envs.dynamics import UAV_STATE, Dynamics
-from uavrl.envs.fading import FADING_PARTS, Fading, fading_part, rician_power, rician_shares
-from uavrl.envs.layouts import Layouts
 from uavrl.envs.limits import FADING_PEAKS, fixed_node_positions
-from uavrl.envs.rewards import TeamReward
+from uavrl.envs.physics import streams
+from uavrl.envs.physics.dynamics import UAV_STATE, Dynamics
+from uavrl.envs.physics.fading import FADING_PARTS, Fading, fading_part, rician_power, rician_shares
+from uavrl.envs.physics.layouts import Layouts
+from uavrl.envs.physics.rewards import TeamReward
 from uavrl.envs.world import World
 
 

@@ -26,8 +26,8 @@ decide whether a level is reached):
 
 Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
 :func:`mission_metrics` adds its delivered data, lifetimes, energy per bit and the ratio to an upper bound on what
-any policy delivers (:mod:`uavrl.envs.mission`), and where the exact mission solver fits
-(:mod:`uavrl.envs.mission_exact`) the exact optimum and the share of it delivered; the return, whose exact best
+any policy delivers (:mod:`uavrl.envs.solvers.mission`), and where the exact mission solver fits
+(:mod:`uavrl.envs.solvers.mission_exact`) the exact optimum and the share of it delivered; the return, whose exact best
 ignores energy, is left out, and the levels and the end are read while the full team serves.
 
 Example:
@@ -48,13 +48,14 @@ import time
 
 import torch
 
-from uavrl.envs import ModelConfig, exact, mission_exact
-from uavrl.envs.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
-from uavrl.envs.grid import cells_of, on_grid
+from uavrl.envs import ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, EXACT_SOLVER_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
-from uavrl.envs.mission import delivered_bound, optimum_by_count, service_steps_bound
-from uavrl.envs.optimum import MAX_EXCHANGE_UAVS, optimum_bound
+from uavrl.envs.physics.grid import cells_of, on_grid
+from uavrl.envs.solvers import exact, mission_exact
+from uavrl.envs.solvers.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
+from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
+from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS, optimum_bound
 from uavrl.envs.world import World
 from uavrl.rules import refuse, rule_of
 from uavrl.schema import EvalSchema
@@ -151,8 +152,8 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
     """Per start ``[B]``: the exact best return ``V*_H`` (or ``None``) and the fewest steps to each level; under an
     energy model no return (it ignores energy) but :func:`mission_references` (``world`` at its starts).
 
-    Exact where the configuration space fits (:func:`uavrl.envs.exact.fits`),
-    else lower bounds (:mod:`uavrl.envs.bounds`): the relaxation for every
+    Exact where the configuration space fits (:func:`uavrl.envs.solvers.exact.fits`),
+    else lower bounds (:mod:`uavrl.envs.solvers.bounds`): the relaxation for every
     level, and for the optimum also the bottleneck assignment to every
     optimal configuration.
     """
@@ -163,7 +164,7 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
 
 def mission_references(world: World, horizon: int) -> dict:
     """Per start ``[B]`` under an energy model, from the batteries ``world`` starts with: the most data (bit/Hz) a
-    mission of ``horizon`` steps can deliver (:func:`uavrl.envs.mission.delivered_bound`), ``U* H slot_s``, and
+    mission of ``horizon`` steps can deliver (:func:`uavrl.envs.solvers.mission.delivered_bound`), ``U* H slot_s``, and
     where the exact mission solver fits (:func:`mission_optimum`) the exact most data, else ``None``."""
     cfg = world.cfg
     u_star_by_count = optimum_by_count(world.cell_contributions, world.direct, cfg)
@@ -179,10 +180,10 @@ def mission_references(world: World, horizon: int) -> dict:
 
 
 def mission_optimum(world: World, horizon: int) -> torch.Tensor | None:
-    """``[B]`` the exact most data (bit/Hz) of each start's mission (:func:`uavrl.envs.mission_exact.optimal_mission`)
-    where it fits: 1 or 2 UAVs, deterministic channels, no recharging, and the solver's estimate within
-    :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (at most ~20 s of CPU: 4x4 with 2 UAVs and missions up to ~38 steps);
-    ``None`` elsewhere."""
+    """``[B]`` the exact most data (bit/Hz) of each start's mission
+    (:func:`uavrl.envs.solvers.mission_exact.optimal_mission`) where it fits: 1 or 2 UAVs, deterministic channels, no
+    recharging, and the solver's estimate within :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (at most ~20 s of CPU:
+    4x4 with 2 UAVs and missions up to ~38 steps); ``None`` elsewhere."""
     try:
         mission_exact.check_world(world)
         return mission_exact.optimal_mission(world, horizon, memory_budget=EXACT_SOLVER_BUDGET).value
@@ -444,7 +445,7 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
 def u_star_gap(world: World, u_star: torch.Tensor) -> float:
     """The largest relative gap ``(bound - U*) / U*`` over the worlds between a certified upper bound and the
     ``U*`` every metric divides by: 0 wherever ``U*`` is exact (always but where the search of
-    :mod:`uavrl.envs.optimum` stopped at its node limit), and then the evaluation reports it as
+    :mod:`uavrl.envs.solvers.optimum` stopped at its node limit), and then the evaluation reports it as
     ``eval/u_star_gap``."""
     if world.cfg.num_uavs <= MAX_EXCHANGE_UAVS:  # the exchange method or brute force: exact
         return 0.0

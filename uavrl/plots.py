@@ -15,7 +15,7 @@ uavrl.render <run>`` writes ``battery.png`` of the run's greedy policy so.
 
 Example:
     >>> import numpy as np
-    >>> from uavrl.envs.energy import CHARGING, RETURNING, SERVING, WAITING
+    >>> from uavrl.envs.physics.energy import CHARGING, RETURNING, SERVING, WAITING
     >>> status = np.array([[SERVING, WAITING], [RETURNING, SERVING], [CHARGING, SERVING], [SERVING, SERVING]])
     >>> [(e.step, e.uav, e.kind) for e in mission_events(status)]
     [(1, 0, 'leaves'), (1, 1, 'enters'), (2, 0, 'arrives'), (3, 0, 'recharged'), (3, 0, 'enters')]
@@ -73,7 +73,7 @@ def mission_events(status: np.ndarray) -> list[MissionEvent]:
     """The events of a mission from its statuses ``[T + 1, N]`` (the start, then after every step), in step order:
     a serving UAV that leaves (returning, or out at once), a returning one that arrives (charging, or out), a charging
     one recharged (waiting, or serving at once where a place is free), and one that enters service."""
-    from uavrl.envs.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
+    from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
 
     before, after = np.asarray(status[:-1]), np.asarray(status[1:])
     kinds = {
@@ -95,13 +95,13 @@ def _runs(values: np.ndarray):
 
 def battery_figure(battery: np.ndarray, status: np.ndarray, capacity: float, *, num_serving: int, title: str = ""):
     """The matplotlib figure of a mission's batteries ``[T + 1, N]`` (the model's units; ``capacity`` a full battery)
-    and statuses ``[T + 1, N]`` (:mod:`uavrl.envs.energy`'s), the start then every step (module doc): the top axes
-    count the UAVs serving (``num_serving`` at most at once, ``env.num_uavs``), then one axes per UAV, its events
+    and statuses ``[T + 1, N]`` (:mod:`uavrl.envs.physics.energy`'s), the start then every step (module doc): the top
+    axes count the UAVs serving (``num_serving`` at most at once, ``env.num_uavs``), then one axes per UAV, its events
     drawn as one line of markers per kind whose ``gid`` is the kind (a key of :data:`EVENT_STYLES`)."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    from uavrl.envs.energy import SERVING
+    from uavrl.envs.physics.energy import SERVING
     from uavrl.envs.render import STATUS_COLOURS, STATUS_NAMES
 
     battery, status = np.asarray(battery, dtype=float), np.asarray(status)

@@ -32,12 +32,12 @@ from torch import nn
 from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.schema import team_sizes, training_models
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
-from uavrl.envs.channel import rates
-from uavrl.envs.fading import fading_part
-from uavrl.envs.grid import cells_or_away
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.envs.optimum import MAX_EXCHANGE_UAVS
-from uavrl.envs.rewards import log_gap_reward
+from uavrl.envs.physics.channel import rates
+from uavrl.envs.physics.fading import fading_part
+from uavrl.envs.physics.grid import cells_or_away
+from uavrl.envs.physics.rewards import log_gap_reward
+from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.evaluation import episode_metrics
 
 from .agent import _SEED_MODULUS, DQNAgent, reset_layouts

@@ -22,7 +22,7 @@ from uavrl.envs import (
     observation_with_nodes,
 )
 from uavrl.envs.config import RELAYING, SENSING
-from uavrl.envs.grid import cells_or_away
+from uavrl.envs.physics.grid import cells_or_away
 
 Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
 

@@ -30,7 +30,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
 from uavrl.envs import NODE_FEATURES
-from uavrl.envs.grid import cells_or_away, grid_neighbours
+from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
 
 from .networks import Q_INPUTS, ValidGreedy
 

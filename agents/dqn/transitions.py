@@ -31,7 +31,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import Transform
 
-from uavrl.envs.grid import cells_or_away
+from uavrl.envs.physics.grid import cells_or_away
 from uavrl.envs.world import World
 
 _OBSERVED = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]

@@ -8,7 +8,7 @@ and updates ``Q[s, j] <- (1 - alpha) Q[s, j] + alpha (r + gamma max_valid Q[s', 
 
 Speed comes from tabulating the model once.  For deterministic channels the
 environment's own functions give, for every configuration, the rates (from
-:func:`uavrl.envs.channel.rates`) and, for every joint action, the next cells
+:func:`uavrl.envs.physics.channel.rates`) and, for every joint action, the next cells
 (:func:`uavrl.envs.joint_targets`).  A learning step is then a handful of table
 lookups, run by one of two interchangeable loops over the same tables and the
 same random numbers:

@@ -14,8 +14,8 @@ import math
 import torch
 
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 from uavrl.envs.world import World
 from uavrl.evaluation import (
     DEFAULT_GAMMA,

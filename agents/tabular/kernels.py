@@ -5,7 +5,7 @@
 :func:`_choose_batched` is :func:`_choose` over a batch of worlds in torch, so
 the torch backend of :class:`~uavrl.agents.tabular.TeamQLearner` makes the same
 choices from the same random numbers.  Both backends reward a step with
-:func:`uavrl.envs.rewards.team_reward` and sum its metrics with
+:func:`uavrl.envs.physics.rewards.team_reward` and sum its metrics with
 :func:`uavrl.evaluation.episode_step`, the same Python functions (numba
 compiles them for scalars here).  Call :func:`use_workqueue_threads` before
 the first parallel launch.
@@ -29,8 +29,8 @@ import numpy as np
 import torch
 from numba.extending import register_jitable
 
-from uavrl.envs import streams
-from uavrl.envs.rewards import best_so_far_reward, delta_reward, episode_best, team_reward
+from uavrl.envs.physics import streams
+from uavrl.envs.physics.rewards import best_so_far_reward, delta_reward, episode_best, team_reward
 from uavrl.evaluation import episode_start, episode_step
 
 # the reward and the episode metrics are written once, in arithmetic that serves the torch loop's tensors and these
@@ -66,7 +66,7 @@ _mix32 = numba.njit(streams._mix32)  # the random streams' mixer, compiled for i
 
 @numba.njit(cache=True, inline="always")
 def _lane_uniform(head, lane):
-    """Lane ``lane`` of the random stream with head ``head`` as a uniform: :func:`uavrl.envs.streams.lane_bits`
+    """Lane ``lane`` of the random stream with head ``head`` as a uniform: :func:`uavrl.envs.physics.streams.lane_bits`
     times ``UNIFORM_SCALE``, the numbers the torch loop draws."""
     return _mix32((head + lane * streams._GOLDEN) & streams._M32) * streams.UNIFORM_SCALE
 
@@ -130,7 +130,7 @@ def _run_episode(q, r, k, heads, T, model, learning, out):
     """Run ``r``'s episode of ``T`` steps on table ``q[r]`` from configuration ``k``; returns the last configuration.
 
     Step ``t`` draws lane ``t`` of the random stream with head ``heads[r]``
-    (:func:`uavrl.envs.streams.stream_heads`).  The episode's metrics
+    (:func:`uavrl.envs.physics.streams.stream_heads`).  The episode's metrics
     (:func:`~uavrl.evaluation.episode_step`) go to ``out[r]``.
 
     ``model`` holds the tables of :attr:`TabularModel.kernel_tables`, ``learning`` the constants

@@ -7,9 +7,10 @@ import math
 import torch
 
 from uavrl.agents.schema import TabularSchema
-from uavrl.envs import ModelConfig, streams
+from uavrl.envs import ModelConfig
 from uavrl.envs.limits import table_bytes
-from uavrl.envs.rewards import team_reward
+from uavrl.envs.physics import streams
+from uavrl.envs.physics.rewards import team_reward
 from uavrl.envs.world import World
 from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
 from uavrl.rules import refuse, rule_of
@@ -100,9 +101,9 @@ class TeamQLearner:
         return self._block_starts[offset]
 
     def _stream_heads(self) -> torch.Tensor:
-        """``[R]`` this episode's random stream of each run (:func:`uavrl.envs.streams.stream_heads`): step ``t``
-        draws its lane ``t``.  Run ``r`` has the stream key of world ``seed + r``, the episode is the counter: a pure
-        function of (seed, episode, run)."""
+        """``[R]`` this episode's random stream of each run (:func:`uavrl.envs.physics.streams.stream_heads`): step
+        ``t`` draws its lane ``t``.  Run ``r`` has the stream key of world ``seed + r``, the episode is the counter: a
+        pure function of (seed, episode, run)."""
         episode = torch.full((self.runs,), self.episode, dtype=torch.long, device=self.device)
         return streams.stream_heads(self._run_keys, episode, _LEARNER_STREAM)
 

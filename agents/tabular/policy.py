@@ -8,7 +8,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.agents.env_check import RunEnvironment
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid
+from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid
 
 from ..generators import PolicyGenerator
 from .greedy import greedy_joint_actions

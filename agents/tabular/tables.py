@@ -3,7 +3,7 @@
 :class:`TabularModel` tabulates, with the functions the environment steps with, the
 rates of every configuration and the effect of every joint action;
 :func:`exact_q_table` solves the paper's "offline" table on the configuration
-graph (:mod:`uavrl.envs.exact`).  This module uses no TorchRL (the package still imports it: learner, policy).
+graph (:mod:`uavrl.envs.solvers.exact`).  This module uses no TorchRL (the package still imports it: learner, policy).
 """
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ import math
 
 import torch
 
-from uavrl.envs.channel import rates
 from uavrl.envs.config import ModelConfig
-from uavrl.envs.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
-from uavrl.envs.fading import fading_part
-from uavrl.envs.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, row_itemsize, valid_list_itemsize
-from uavrl.envs.optimum import optimum
+from uavrl.envs.physics.channel import rates
+from uavrl.envs.physics.fading import fading_part
+from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
+from uavrl.envs.solvers.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
+from uavrl.envs.solvers.optimum import optimum
 
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
 
@@ -40,10 +40,10 @@ def _row_dtype(cfg: ModelConfig) -> torch.dtype:
 class TabularModel:
     """The model of ``cfg`` as lookup tables, computed by the model's own functions (no TorchRL).
 
-    The geometry comes from :mod:`uavrl.envs.grid`, the per-cell rate terms of
-    the fixed layout from :func:`uavrl.envs.exact.fixed_layout_tables`, the
-    rates from :func:`uavrl.envs.channel.rates` and ``U*`` from
-    :func:`uavrl.envs.optimum.optimum`: the functions the environment steps with.
+    The geometry comes from :mod:`uavrl.envs.physics.grid`, the per-cell rate terms of
+    the fixed layout from :func:`uavrl.envs.solvers.exact.fixed_layout_tables`, the
+    rates from :func:`uavrl.envs.physics.channel.rates` and ``U*`` from
+    :func:`uavrl.envs.solvers.optimum.optimum`: the functions the environment steps with.
 
     Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
     the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
@@ -142,7 +142,7 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state
     (docs/model.md, "What the agents see and learn").
 
-    Solved on the configuration graph (:mod:`uavrl.envs.exact`, the environment's
+    Solved on the configuration graph (:mod:`uavrl.envs.solvers.exact`, the environment's
     own dynamics and rates), infinite horizon, discount ``gamma``.  With
     ``state_includes_tasks`` a row is one configuration and holds ``Q*`` itself.
     The paper's location-only state hides the tasks, so no row can be exact for

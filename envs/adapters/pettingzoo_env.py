@@ -2,7 +2,7 @@
 
 Agents ``uav_0 .. uav_{N-1}`` act at once, as in the model.  Each agent observes a dict, as PettingZoo's own
 environments with action masks do: ``"observation"``, its row of the team observation of
-:mod:`uavrl.envs.gym_env` (its observation followed by the four nodes' positions, ``[F + 12]`` float32), and
+:mod:`uavrl.envs.adapters.gym_env` (its observation followed by the four nodes' positions, ``[F + 12]`` float32), and
 ``"action_mask"`` ``[6]`` int8 (1 where the move stays on the grid).  Every agent receives the team reward;
 every agent is truncated after ``max_steps`` (or, under an energy model, terminated when no UAV serves any more),
 and then ``agents`` is empty until the next reset.  ``state()`` is the world's state ``[5 N + 12]``, ``[7 N + 12]``
@@ -10,7 +10,7 @@ under an energy model (``state_space``).  The infos hold the step's ``r_pu``, ``
 ``task_switches`` (the team's, in every agent's info).
 
 The physics is a :class:`~uavrl.envs.world.World` of one world: the same observations, masks, rewards and
-seeds as :class:`~uavrl.envs.env.UAVSpectrumEnv` and :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`
+seeds as :class:`~uavrl.envs.env.UAVSpectrumEnv` and :class:`~uavrl.envs.adapters.gym_env.UAVSpectrumGymEnv`
 (``reset(seed=s)`` is the Gymnasium env's ``reset(seed=s)``; before the first seeded reset the world is seeded
 0).  ``reset`` accepts PettingZoo's ``options`` and ignores them: the model defines none.  With
 ``render_mode="rgb_array"``, ``render()`` returns the world's ``[H, W, 3]`` uint8 frame, the picture
@@ -33,7 +33,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .config import ModelConfig
+from ..config import ModelConfig
+from ..world import World
 from .gym_env import (
     RENDER_FPS,
     RENDER_MODES,
@@ -46,7 +47,6 @@ from .gym_env import (
     state_bounds,
     world_info,
 )
-from .world import World
 
 __all__ = ["UAVSpectrumParallelEnv"]
 
@@ -54,7 +54,7 @@ __all__ = ["UAVSpectrumParallelEnv"]
 class UAVSpectrumParallelEnv(ParallelEnv):
     """One world of the model as a PettingZoo ``ParallelEnv``: agent ``uav_i`` is UAV ``i``.
 
-    Arguments as :class:`~uavrl.envs.gym_env.UAVSpectrumGymEnv`'s.
+    Arguments as :class:`~uavrl.envs.adapters.gym_env.UAVSpectrumGymEnv`'s.
     """
 
     metadata = {

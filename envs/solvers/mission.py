@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import torch
 
-from .channel import rates
+from ..physics.channel import rates
 from .optimum import optimum
 
 # a battery's running sum is float64: a UAV at its exact limit is given the step its rounding might allow
@@ -34,7 +34,7 @@ ROUNDING = 1e-6
 
 def service_steps_bound(energy, battery: torch.Tensor) -> torch.Tensor:
     """``[..., N]`` the most steps after which each UAV of ``battery`` ``[..., N]`` (its level at the start) can
-    still serve, under the energy part ``energy`` (:class:`~uavrl.envs.energy.Energy`)."""
+    still serve, under the energy part ``energy`` (:class:`~uavrl.envs.physics.energy.Energy`)."""
     cheapest = min(energy.energies.move, energy.energies.stay)
     least_reserve = energy.reserve[: energy.away].min()
     return ((battery - least_reserve) / cheapest + ROUNDING).floor().clamp(min=0).long()

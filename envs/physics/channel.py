@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import torch
 
-from .config import RELAYING, ModelConfig
-from .limits import fixed_node_positions
+from ..config import RELAYING, ModelConfig
+from ..limits import fixed_node_positions
 from .pathloss import gain_from_db, link_states_db, mean_path_loss_db
 
 PT, PR, S, E = range(4)

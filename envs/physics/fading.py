@@ -10,12 +10,13 @@
   at the UAVs' cells ``[W, N, 4, ...]`` and the worlds' random streams (:mod:`.streams`, one purpose per draw);
 - ``direct(snr, keys, counters)``: the direct links' SNRs ``[W, 2]`` this step (``direct_links``).
 
-The mean gain is the channel model's (:func:`uavrl.envs.channel.link_gains`), and the Rayleigh and Rician power
+The mean gain is the channel model's (:func:`uavrl.envs.physics.channel.link_gains`), and the Rayleigh and Rician power
 gains ``X`` have mean 1, so ``U*``, the exact solver and the bounds are those of the mean channel.
 
 Example:
     >>> import torch
-    >>> from uavrl.envs import make_config, streams
+    >>> from uavrl.envs import make_config
+    >>> from uavrl.envs.physics import streams
     >>> part = fading_part(make_config("paper", fading="rician", rician_k_db=9.0))
     >>> part.random, [round(share, 4) for share in part.shares]  # K / (K + 1) and 1 / (K + 1), K = 10^0.9
     (True, [0.8882, 0.1118])
@@ -30,9 +31,9 @@ import math
 
 import torch
 
+from ..config import ModelConfig
 from . import streams
 from .channel import link_state_gains
-from .config import ModelConfig
 
 
 def _uniforms(keys: torch.Tensor, counters: torch.Tensor, purpose: int, shape) -> torch.Tensor:
@@ -103,7 +104,7 @@ class Rayleigh(Fading):
 
 class LosNlos(Fading):
     """Each air-to-ground link in line of sight with probability ``P_LoS``, drawn anew: the LoS or the NLoS gain of
-    the physical channel (:func:`uavrl.envs.channel.link_state_gains`); its channels have no direct links."""
+    the physical channel (:func:`uavrl.envs.physics.channel.link_state_gains`); its channels have no direct links."""
 
     name, random = "los_nlos", True
 

@@ -45,10 +45,10 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .config import SENSING
-from .energy import OUT, SERVING
-from .grid import decode_joint_actions
-from .limits import gib
+from ..config import SENSING
+from ..limits import gib
+from ..physics.energy import OUT, SERVING
+from ..physics.grid import decode_joint_actions
 
 MAX_UAVS = 2
 MEMORY_BUDGET = 2**31  # bytes of the solver's tables (every step's next-state table) unless raised

@@ -20,7 +20,8 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
 
 Example:
     >>> import torch
-    >>> from uavrl.envs import make_config, streams
+    >>> from uavrl.envs import make_config
+    >>> from uavrl.envs.physics import streams
     >>> part = Energy(make_config("paper", grid=(3, 3), energy="follow_up", base=(-1, 0)))
     >>> part.steps_home.tolist()  # steps from each cell to the base, then the away cell's
     [1, 2, 3, 2, 3, 4, 3, 4, 5, 0]
@@ -33,8 +34,8 @@ from __future__ import annotations
 
 import torch
 
+from ..config import RETURN, SENSING, ModelConfig
 from . import streams
-from .config import RETURN, SENSING, ModelConfig
 from .dynamics import NO_OP
 from .grid import grid_neighbours
 from .power import UNIFORM_LOW

@@ -60,11 +60,11 @@ from gymnasium.vector.utils import batch_space
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from .channel import fixed_layout
-from .config import ModelConfig, action_names, make_config
-from .render import RENDER_MODES as DRAWN_MODES
-from .render import render as render_world
-from .world import NODE_FEATURES, World, check_seed, observation_with_nodes, resolve_device
+from ..config import ModelConfig, action_names, make_config
+from ..physics.channel import fixed_layout
+from ..render import RENDER_MODES as DRAWN_MODES
+from ..render import render as render_world
+from ..world import NODE_FEATURES, World, check_seed, observation_with_nodes, resolve_device
 
 __all__ = [
     "ENV_ID",

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import torch
 
-from .config import NUM_ACTIONS
+from ..config import NUM_ACTIONS
 
 # (dx, dy) of the four moves: up, down, left, right
 MOVES = ((0, -1), (0, 1), (-1, 0), (1, 0))

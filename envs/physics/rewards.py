@@ -82,7 +82,7 @@ def delivered_reward(rates: torch.Tensor, u_star: torch.Tensor) -> torch.Tensor:
 class TeamReward:
     """The reward part: ``env.reward`` for a step of ``B`` worlds, from their rates ``[B, 2]`` (R_PU, R_SE).
 
-    ``random_channel`` is the fading part's ``random`` (:mod:`uavrl.envs.fading`): ``log_gap`` measures the gap
+    ``random_channel`` is the fading part's ``random`` (:mod:`uavrl.envs.physics.fading`): ``log_gap`` measures the gap
     to ``U*`` as the evaluation does, on the mean channel, so under a random channel it reads the configurations'
     mean-channel rates (``mean_rates()``, asked for only then) instead of the step's draw.
     """

@@ -32,12 +32,12 @@ from __future__ import annotations
 
 import torch
 
+from ..config import RELAYING, SENSING, ModelConfig
 from . import streams
-from .config import RELAYING, SENSING, ModelConfig
 from .grid import grid_neighbours
 
 UAV_STATE = ("cell", "task")  # the per-UAV variables, each a [B, N] tensor of the World's state
-NO_OP = 4  # "sense": the one action of a UAV out of service under an energy model (uavrl.envs.energy)
+NO_OP = 4  # "sense": the one action of a UAV out of service under an energy model (uavrl.envs.physics.energy)
 
 
 def _lookup(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
@@ -62,7 +62,7 @@ class Dynamics:
         self.task_after = torch.tensor([0, 1] * 4 + [SENSING] * 2 + [RELAYING] * 2 + [0, 1] * (A - 6), device=device)
         self.cell_mask = torch.cat([self.neighbours >= 0, torch.ones(C, A - 4, dtype=torch.bool, device=device)], -1)
         # under an energy model a UAV out of service sits on one more cell, C, off the grid: it stays there, and
-        # "sense" is its only action (uavrl.envs.energy)
+        # "sense" is its only action (uavrl.envs.physics.energy)
         self.slots = C + (cfg.energy != "none")
         if self.slots > C:
             self.move_to = torch.cat([self.move_to, self.move_to.new_full((A,), C)])

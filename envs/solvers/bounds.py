@@ -11,8 +11,8 @@ Two bounds, both provably never above the true fewest steps:
   real ``k``-step trajectory does better, so the first ``k`` whose relaxed best
   reaches the level is a lower bound.  Up to ``MAX_SPLIT_UAVS`` UAVs every split into relays and sensors is
   tried; beyond (2^N splits per world and step would take minutes), the split itself is relaxed too
-  (:func:`uavrl.envs.optimum.split_relaxation`: one UAV may share its contribution between the tasks), a bound no
-  smaller (by 0.02% at most in the layouts measured), computed in ``O(N log N)`` per world and step.
+  (:func:`uavrl.envs.solvers.optimum.split_relaxation`: one UAV may share its contribution between the tasks), a bound
+  no smaller (by 0.02% at most in the layouts measured), computed in ``O(N log N)`` per world and step.
 - :func:`assignment_min_steps` (the optimum itself): to end in an optimal set
   of (cell, task) pairs, some UAV must make the largest ``distance + [task
   changed]`` of the best assignment of UAVs to that set's pairs (a bottleneck
@@ -21,8 +21,8 @@ Two bounds, both provably never above the true fewest steps:
 
 Example:
     >>> from uavrl.envs.config import make_config
-    >>> from uavrl.envs.exact import fixed_layout_tables
-    >>> from uavrl.envs.optimum import optimum
+    >>> from uavrl.envs.solvers.exact import fixed_layout_tables
+    >>> from uavrl.envs.solvers.optimum import optimum
     >>> cfg = make_config("paper", grid=(6, 6), num_uavs=3)
     >>> contributions, direct = fixed_layout_tables(cfg)
     >>> u_star, cells, tasks = optimum(contributions, direct, cfg)
@@ -39,9 +39,9 @@ import math
 import numpy as np
 import torch
 
-from .channel import rates, rates_from_sums
-from .config import RELAYING, SENSING, ModelConfig
-from .grid import manhattan
+from ..config import RELAYING, SENSING, ModelConfig
+from ..physics.channel import rates, rates_from_sums
+from ..physics.grid import manhattan
 from .optimum import SplitSearch, ratio_order, split_relaxation, staffed_scale
 
 OPTIMUM_RTOL = 1e-9  # a configuration "is optimal" when U >= (1 - OPTIMUM_RTOL) U*
@@ -103,8 +103,9 @@ def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, 
 
 
 def _split_relaxed_best(best_a, best_b, direct, cfg: ModelConfig) -> torch.Tensor:
-    """``[W, K + 1]`` :func:`~uavrl.envs.optimum.split_relaxation` of the best reachable terms ``[W, K + 1, N]``: a
-    UAV with no relay cell in reach senses, one with no sensing cell relays, one with neither blocks the step."""
+    """``[W, K + 1]`` :func:`~uavrl.envs.solvers.optimum.split_relaxation` of the best reachable terms ``[W, K + 1,
+    N]``: a UAV with no relay cell in reach senses, one with no sensing cell relays, one with neither blocks the
+    step."""
     no_a, no_b = best_a == -math.inf, best_b == -math.inf
     both = ~no_a & ~no_b
     zero = best_a.new_zeros(())
@@ -177,7 +178,7 @@ def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: floa
 def _searched_configurations(contributions, direct, cfg: ModelConfig, threshold: float):
     """:func:`optimal_configurations` by search: every configuration with ``U >= threshold``.
 
-    Those the branch and bound of :mod:`uavrl.envs.optimum` lists (no unused cell before a relay in the ``a``
+    Those the branch and bound of :mod:`uavrl.envs.solvers.optimum` lists (no unused cell before a relay in the ``a``
     order or before a sensor in the ``b`` order), then every configuration one move of a UAV to an unused cell
     away, repeatedly, while ``U`` stays at the threshold.  Complete: from any configuration at the threshold, the
     moves of the exchange argument (each to an unused cell earlier in an order, none lowering ``U``) lead to a

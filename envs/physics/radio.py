@@ -1,6 +1,6 @@
 """The channel models' constants, units and ranges of validity (docs/model.md, Channel models); standard library only.
 
-:mod:`uavrl.envs.pathloss` computes the models' path losses from these numbers, :mod:`uavrl.envs.limits` and
+:mod:`uavrl.envs.physics.pathloss` computes the models' path losses from these numbers, :mod:`uavrl.envs.limits` and
 :class:`~uavrl.envs.config.ModelConfig` check the options against the ranges below before torch is imported.
 
 Example:
@@ -76,7 +76,7 @@ def noise_dbm(bandwidth_mhz: float, noise_figure_db: float) -> float:
 
 def free_space_db(distance_m: float, carrier_ghz: float) -> float:
     """``FSPL = 20 log10(4 pi f_c d / c)`` in dB of a distance in metres and a carrier in GHz (a float; the tensor
-    form is :func:`uavrl.envs.pathloss.free_space_db`)."""
+    form is :func:`uavrl.envs.physics.pathloss.free_space_db`)."""
     return 20 * math.log10(4 * math.pi * carrier_ghz * 1e9 * distance_m / SPEED_OF_LIGHT)
 
 

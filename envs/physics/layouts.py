@@ -6,7 +6,8 @@ whose :meth:`Layouts.sample` draws new positions for some worlds at each of thei
 
 Example:
     >>> import torch
-    >>> from uavrl.envs import make_config, streams
+    >>> from uavrl.envs import make_config
+    >>> from uavrl.envs.physics import streams
     >>> layouts = Layouts(make_config("paper", grid=(6, 6), layout="random"))
     >>> layouts.fixed is None
     True
@@ -21,9 +22,9 @@ import math
 
 import torch
 
+from ..config import ModelConfig
 from . import streams
 from .channel import fixed_layout
-from .config import ModelConfig
 
 
 class Layouts:

@@ -7,7 +7,7 @@ cells.  :class:`ConfigurationSpace` numbers these sets,
 combinatorial number, tasks in cell order), and tabulates for every set and
 every joint action of its UAVs (taken in cell order) the set it leads to, or
 ``-1`` for an invalid joint action.  The tables come from the environment's own
-dynamics (:mod:`uavrl.envs.grid`) and rates (:func:`uavrl.envs.channel.rates`).
+dynamics (:mod:`uavrl.envs.physics.grid`) and rates (:func:`uavrl.envs.physics.channel.rates`).
 
 On that graph, for a potential ``P`` (the utility ``U`` for the yardstick,
 ``beta1 R_PU + beta2 R_SE`` for an agent's delta reward):
@@ -39,10 +39,10 @@ import math
 
 import torch
 
-from .channel import cell_xyz, direct_terms, fixed_layout, link_gains, rates, relay_contributions
-from .config import NUM_ACTIONS, ModelConfig
-from .grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
-from .limits import EXACT_SOLVER_BUDGET, num_configurations, required_bytes
+from ..config import NUM_ACTIONS, ModelConfig
+from ..limits import EXACT_SOLVER_BUDGET, num_configurations, required_bytes
+from ..physics.channel import cell_xyz, direct_terms, fixed_layout, link_gains, rates, relay_contributions
+from ..physics.grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
 
 MEMORY_BUDGET = EXACT_SOLVER_BUDGET  # bytes of the successor table and one solver sweep
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.energy: one part each, none for "none"
+ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.physics.energy: one part each, none for "none"
 BATTERY_INITS = ("full", "uniform")
 
 # Zeng, Xu, Zhang 2019, Table I: a rotary-wing UAV of weight W = 20 N

@@ -27,7 +27,8 @@ grids) there is nothing to split.  The search stops after ``SEARCH_NODE_LIMIT`` 
 the best found; :func:`optimum_bound` returns a certified upper bound, equal to ``U*`` wherever the search ended.
 
 Brute force (every set of N cells times every task vector) checks them in tests.
-All evaluate candidates with :func:`uavrl.envs.channel.rates` (or :func:`~uavrl.envs.channel.rates_from_sums`).
+All evaluate candidates with :func:`uavrl.envs.physics.channel.rates` (or
+:func:`~uavrl.envs.physics.channel.rates_from_sums`).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ import math
 import numpy as np
 import torch
 
-from .channel import rates, rates_from_sums
-from .config import RELAYING, SENSING, ModelConfig
+from ..config import RELAYING, SENSING, ModelConfig
+from ..physics.channel import rates, rates_from_sums
 
 BRUTE_FORCE_LIMIT = 200_000  # candidate configurations per world
 MAX_EXCHANGE_UAVS = 20
@@ -300,7 +301,7 @@ class SplitSearch:
 
 def staffed_scale(cfg: ModelConfig) -> float:
     """``c`` of ``U = c (log2(1 + sum_PU) + log2(1 + sum_SE))`` with both tasks staffed, read from the rate model
-    itself (:func:`~uavrl.envs.channel.rates_from_sums`); the lease and both-tasks rules only lower ``U``."""
+    itself (:func:`~uavrl.envs.physics.channel.rates_from_sums`); the lease and both-tasks rules only lower ``U``."""
     return float(rates_from_sums(torch.ones(1, 2, dtype=torch.float64), torch.ones(1), 2, cfg)[0, 0])
 
 
