@@ -87,3 +87,55 @@ def test_no_module_imports_upward():
                 names += [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
                 upward += [f"{file.relative_to(root)}: {n}" for n in names if n.startswith(above[layer])]
     assert upward == []
+
+
+# envs/'s layers in import order (docs/architecture.md): a module imports only earlier layers, or its own subpackage
+ENVS_LAYERS = [
+    {"physics.radio", "physics.power"},
+    {"limits"},
+    {"config"},
+    {"physics"},
+    {"solvers"},
+    {"world"},
+    {"render"},
+    {"env", "adapters"},
+]
+ENVS_PACKAGES = {"physics", "solvers", "adapters"}
+
+
+def envs_layer(module: str) -> tuple[int, str]:
+    """(layer, group) of a module of envs/ named relative to it, e.g. ``physics.grid``; the group is its
+    subpackage or, directly in envs/, the module itself."""
+    group = module.split(".")[0]
+    for rank, names in enumerate(ENVS_LAYERS):
+        if module in names or group in names:
+            return rank, group
+    raise AssertionError(f"envs/{module}: in no layer of ENVS_LAYERS")
+
+
+def test_envs_layers_import_only_earlier_layers():
+    """physics/radio and power, limits, config (standard library only), the rest of physics, the solvers, the World,
+    drawing, then the TorchRL env and the other frameworks' adapters: no module of envs/ imports a later layer, nor
+    a module of its own layer outside its subpackage."""
+    import ast
+    from pathlib import Path
+
+    envs = Path(__file__).resolve().parent.parent / "envs"
+    upward = []
+    for file in envs.glob("**/*.py"):
+        if file.name == "__init__.py":
+            continue
+        package = file.parent.relative_to(envs).parts
+        module = ".".join([*package, file.stem])
+        rank, group = envs_layer(module)
+        for node in ast.walk(ast.parse(file.read_text())):
+            if not isinstance(node, ast.ImportFrom) or node.level == 0:
+                continue
+            base = [*package[: len(package) - node.level + 1], *(node.module.split(".") if node.module else [])]
+            targets = [".".join(base)] if node.module and base[-1] not in ENVS_PACKAGES else []
+            targets += [".".join([*base, a.name]) for a in node.names if not node.module or base[-1] in ENVS_PACKAGES]
+            for target in targets:
+                target_rank, target_group = envs_layer(target)
+                if target_rank > rank or (target_rank == rank and target_group != group):
+                    upward.append(f"envs/{module}: {target}")
+    assert upward == []
