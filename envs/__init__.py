@@ -11,8 +11,8 @@ The package, as the API reference shows it (docs/architecture.md):
 - :mod:`.adapters`: Gymnasium and PettingZoo over the same World (the ``[gym]`` extra).
 
 The options need only the standard library; the environment (TorchRL), the World (torch) and the joint-action
-helpers load on first use, so the commands check their settings before those imports.  The modules that moved into
-the subpackages keep their earlier names as aliases: ``uavrl.envs.exact`` is ``uavrl.envs.solvers.exact``.
+helpers load on first use, so the commands check their settings before those imports.  The subpackages' modules
+also answer to the paths of uavrl 0.1 (:data:`MOVED`): ``uavrl.envs.exact`` is ``uavrl.envs.solvers.exact``.
 """
 
 import importlib
@@ -34,8 +34,8 @@ _LAZY = {
 }
 __all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]
 
-# Where each module of the earlier flat layout lives now; the old names stay importable (user code, the README's
-# examples) and name the very same module, loaded on first use.
+# The subpackage of each module that uavrl 0.1 had directly in envs/: ``uavrl.envs.<name>`` stays importable for
+# code written against those paths and names the very same module, loaded on first use.
 MOVED = {
     **dict.fromkeys(
         (
