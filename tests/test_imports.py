@@ -139,3 +139,24 @@ def test_envs_layers_import_only_earlier_layers():
                 if target_rank > rank or (target_rank == rank and target_group != group):
                     upward.append(f"envs/{module}: {target}")
     assert upward == []
+
+
+def test_the_0_1_module_paths_name_the_moved_modules():
+    """``uavrl.envs.<name>`` of uavrl 0.1 (``uavrl.envs.MOVED``) imports the module of its subpackage itself, which
+    keeps its own spec; an unknown name still fails as any missing module does."""
+    import importlib
+    import importlib.util
+
+    from uavrl.envs import MOVED
+
+    optional = {"gym_env": "gymnasium", "pettingzoo_env": "pettingzoo"}
+    for name, package in MOVED.items():
+        if name in optional and importlib.util.find_spec(optional[name]) is None:
+            continue
+        old, new = (
+            importlib.import_module(f"uavrl.envs.{name}"),
+            importlib.import_module(f"uavrl.envs.{package}.{name}"),
+        )
+        assert old is new and new.__spec__.name == f"uavrl.envs.{package}.{name}", name
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("uavrl.envs.no_such_module")
