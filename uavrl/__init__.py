@@ -1,6 +1,16 @@
 """uavrl: learning spectrum sharing and task allocation in UAV networks with TorchRL."""
 
-__version__ = "0.1.0"
+
+def __getattr__(name):
+    """``uavrl.__version__``, read from the installed package's metadata (pyproject.toml's version, written nowhere
+    else) when first asked for: importlib.metadata costs tens of milliseconds, and every command imports uavrl to
+    refuse a bad setting before anything heavy."""
+    if name == "__version__":
+        from importlib.metadata import version
+
+        globals()["__version__"] = version("uavrl")
+        return globals()["__version__"]
+    raise AttributeError(f"module 'uavrl' has no attribute {name!r}")
 
 
 def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
