@@ -1,4 +1,4 @@
-"""Missions under an energy model (issue 26): random, the energy-unaware oracle, the energy-aware planner and the DQN
+"""Missions under an energy model: random, the energy-unaware oracle, the energy-aware planner and the DQN
 on the scenarios ``energy_4x4`` (where the exact optimum fits), ``energy_6x6`` and ``persistent_10x10``, as the user
 types them, and what each of the planner's rules buys.
 
