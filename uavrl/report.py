@@ -70,7 +70,17 @@ CONFIDENCE = 0.95
 FEW_SEEDS = 3  # cells with fewer seeds are flagged
 IQM_SEEDS = 5  # the interquartile mean is shown from this many seeds on
 # settings that never change a run's results (or are the seed itself): not used to tell runs apart
-IGNORED = {"seed", "run_dir", "sweep_dir", "resume", "checkpoint", "progress", "num_threads", "train.checkpoint_every"}
+IGNORED = {
+    "seed",
+    "run_dir",
+    "sweep_dir",
+    "resume",
+    "checkpoint",
+    "print_json",
+    "progress",
+    "num_threads",
+    "train.checkpoint_every",
+}
 CURVE_TAG = "train/sum_utility"  # per training episode; divided by env.max_steps: utility per step
 
 
