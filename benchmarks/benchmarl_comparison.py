@@ -141,7 +141,9 @@ def verdict(task: str, results: dict) -> None:
 
 def plot(task: str, results: dict, path: Path) -> None:
     """Each run's score against its training CPU seconds (log scale), one colour per row, one line per seed; at N = 6
-    (no exact return) a second panel with the steps to 0.999 U* over all starts."""
+    (no exact return) a second panel with the steps to 0.999 U* over all starts.  Every point is inside its axes: a
+    score panel whose values fall below -1 (BenchMARL's early evaluations) is drawn on a symmetric-log scale, linear
+    over [-1, 1]; one legend for the figure, under the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -153,7 +155,9 @@ def plot(task: str, results: dict, path: Path) -> None:
     panels = [(score, "return ratio (exact optimum = 1)" if exact else "discounted gain eval/return (gamma 0.9)")]
     if not exact:
         panels.append((lambda p: steps_to_optimum(p, horizon), f"steps to 0.999 U* over all starts (never: {horizon})"))
-    fig, axes = plt.subplots(1, len(panels), figsize=(7.5 * len(panels), 4.5), dpi=110, squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(7.5 * len(panels), 4.9), dpi=110, squeeze=False, layout="constrained"
+    )
     rows = list(dict.fromkeys(row for row, _ in results))
     for ax, (value, ylabel) in zip(axes[0], panels, strict=True):
         for i, row in enumerate(rows):
@@ -178,14 +182,15 @@ def plot(task: str, results: dict, path: Path) -> None:
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set(xlabel="training CPU seconds (one thread; evaluations left out)", ylabel=ylabel)
         ax.grid(alpha=0.3, which="both")
-    if exact:
-        axes[0, 0].set_ylim(max(-0.1, axes[0, 0].get_ylim()[0]), 1.02)
-    else:
-        axes[0, 0].set_ylim(-1.0, 0.5)  # BenchMARL's early evaluations go far below; the oracle planner's is ~0.4
-        axes[0, 1].set_ylim(0, horizon + 1)
+    lowest = min(y for line in axes[0, 0].get_lines() for y in line.get_ydata())
+    if lowest < -1:  # the far-below early evaluations and the differences near the top, both in view
+        axes[0, 0].set_yscale("symlog", linthresh=1.0, linscale=2.0)
+        axes[0, 0].set_ylabel(f"{panels[0][1]}\n(symmetric log scale below -1)")
+    for ax in axes[0]:
+        ax.margins(y=0.04)  # no point on an edge
     fig.suptitle(f"{task}: the yardstick during training, every seed (200 held-out starts)")
-    axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.savefig(path)
     plt.close(fig)
     print(f"{task}: curves in {path}")

@@ -8,9 +8,11 @@ uavrl.render`` turns them into videos.
 
 A frame shows, for one world:
 
-- the ``L1 x L2`` grid (``y`` grows downwards, so action 0, *up*, moves a UAV
-  up the picture) and the four nodes: PT and PR (the primary link, squares),
-  S and E (the emergency link, triangles), each labelled;
+- the ``L1 x L2`` grid with its cells' coordinates along two sides (``x``
+  from 0 at the left, ``y`` from 0 at the top: ``y`` grows downwards, so action
+  0, *up*, moves a UAV up the picture; every cell numbered up to 12 a side, every
+  few beyond) and the four nodes: PT and PR (the primary link, squares), S and E
+  (the emergency link, triangles), each labelled;
 - every UAV as a disc numbered by its index, blue when relaying (task 1), orange
   when sensing (task 0), with the links it serves: PT -> UAV -> PR for a relay,
   S -> UAV -> E for a sensing UAV, dashed grey where they earn nothing (the
@@ -18,9 +20,10 @@ A frame shows, for one world:
   every link while all UAVs do the same job);
 - a header with the step, the utility ``U = R_PU + R_SE`` of the step against the
   layout's exact optimum ``U*``, and both rates;
-- a side panel with one row per UAV: its task and its share of its network's
-  sum (the term it adds inside that network's log), room for more per-UAV
-  quantities.
+- a side panel with one row per UAV: its task and ``c/Σc``, its relay path's
+  share of its network's sum (the term ``c`` it adds inside that network's log,
+  docs/model.md, Rates), and under the rows a key to the colours, the grey
+  dashed links and that column.
 
 Under an energy model (``env.energy`` other than ``none``) a frame also shows
 the base (``env.base``, off the grid) as a pad with one slot per UAV, UAV ``i``
@@ -76,6 +79,17 @@ GAUGE_WIDTH, GAUGE_TOP, GAUGE_HEIGHT = 0.8, 0.36, 0.16  # in cells, below the UA
 BASE_COLOUR = "#2f6b3a"
 # the panel's layout in figure fractions: header on top, the map on the left, the per-UAV rows on the right
 HEADER, MAP_RIGHT, MARGIN = 0.16, 0.7, 0.02
+COORDINATE_COLOUR = "#7a7a7a"
+COORDINATE_GAP = 0.55  # cells (at least) between the grid's edge and the centre of its coordinates
+# the panel's key under its rows: (a marker's colour, or None for a grey dashed link; the text)
+PANEL_KEY = (
+    (RELAY_COLOUR, "relay: PT → UAV → PR"),
+    (SENSE_COLOUR, "sense: S → UAV → E"),
+    (None, "earns nothing"),
+    ("", "c/Σc: its path's share"),
+    ("", "of its network's sum"),
+)
+ENERGY_KEY = (("", "away: status, steps left"),)
 DPI = 100
 BACKGROUNDS_KEPT = 16  # layouts whose drawn background a renderer keeps (about 0.7 MB each at 480 x 360)
 
@@ -143,6 +157,15 @@ class WorldRenderer:
         self._uav_labels = [
             ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
         ]
+        self._make_coordinates()
+
+    def _make_coordinates(self) -> None:
+        """Each column's ``x`` and each row's ``y`` beside the grid, and the axes' names; placed per layout
+        (:meth:`_fit_coordinates`)."""
+        (L1, L2), style = self.world.cfg.grid, dict(color=COORDINATE_COLOUR, ha="center", va="center", zorder=0)
+        self._x_coordinates = [self.ax.text(x, 0, str(x), **style) for x in range(L1)]
+        self._y_coordinates = [self.ax.text(0, y, str(y), **style) for y in range(L2)]
+        self._x_name, self._y_name = (self.ax.text(0, 0, name, style="italic", **style) for name in "xy")
 
     def _make_base(self) -> None:
         """The base's pad of one slot per UAV (static), its label, and the battery gauges (one per UAV)."""
@@ -188,37 +211,53 @@ class WorldRenderer:
         self._rates = self.figure.text(MARGIN, top - HEADER / 2, "", fontsize=font, va="top", color="#404040")
 
     def _make_panel(self) -> None:
-        """One row per UAV: a disc in its colour, its number, task and share; a large team gets smaller rows."""
+        """One row per UAV: a disc in its colour, its number, task and ``c/Σc``; under the rows, the key
+        (:data:`PANEL_KEY`).  A large team gets smaller rows."""
         N = self.world.num_uavs
         panel = self.figure.add_axes((MAP_RIGHT, MARGIN, 1 - MAP_RIGHT - MARGIN, 1 - HEADER - 2 * MARGIN))
         panel.set_axis_off()
+        key = PANEL_KEY + (ENERGY_KEY if self.energy is not None else ())
         rows = max(N, 6)
-        row_points = panel.get_position().height * self.size[0] / (rows + 1) * 72 / DPI
+        lines = rows + 1.5 + 0.8 * len(key)  # the head, the rows, a gap, the key's closer lines
+        row_points = panel.get_position().height * self.size[0] / (lines + 1) * 72 / DPI
         font = min(self._font * 0.85, 0.7 * row_points)
         panel.set_xlim(0, 1)
-        panel.set_ylim(rows + 0.5, -0.5)
+        panel.set_ylim(lines, -0.5)
         if self.energy is not None:  # a fourth column, the battery
             font *= 0.85
-        head = "UAV task  share" if self.energy is None else "UAV task  share batt"
+        head = "UAV task  c/Σc" if self.energy is None else "UAV task  c/Σc batt"
         panel.text(0.12, 0, head, fontsize=font, va="center", family="monospace", color="#404040")
         self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
         self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
+        key_font = font * 0.9
+        for k, (colour, text) in enumerate(key):
+            y = rows + 1.5 + 0.8 * k
+            if colour is None:
+                panel.plot([0.0, 0.09], [y, y], color=IDLE_LINK, ls="--", lw=1.2)
+            elif colour:
+                panel.scatter([0.05], [y], s=(key_font * 0.9) ** 2, lw=0, color=np.array(colour) / 255)
+            panel.text(0.12, y, text, fontsize=key_font, va="center", color="#404040")
 
     # ----------------------------------------------------------- geometry
     def _fit(self, nodes: np.ndarray) -> None:
         """Limits that hold the grid and the nodes at equal scales, marker sizes from the cell size, and the layout's
         background (drawn unless kept)."""
         L1, L2 = self.world.cfg.grid
-        pad = 0.7  # cells around the outermost node
-        x_lo, x_hi = min(-0.5, nodes[:, 0].min() - pad), max(L1 - 0.5, nodes[:, 0].max() + pad)
-        y_lo, y_hi = min(-0.5, nodes[:, 1].min() - pad), max(L2 - 0.5, nodes[:, 1].max() + pad)
-        if self.energy is not None:  # and the base's pad
-            (bx_lo, by_lo), (bx_hi, by_hi) = self.base_box
-            x_lo, x_hi, y_lo, y_hi = min(x_lo, bx_lo), max(x_hi, bx_hi), min(y_lo, by_lo), max(y_hi, by_hi)
         box, (H, W) = self.ax.get_position(), self.size
         label_px = 1.6 * self._font * DPI / 72  # room below the lowest node for its label
         box_w, box_h = box.width * W, box.height * H
-        scale = min(box_w / (x_hi - x_lo), (box_h - label_px) / (y_hi - y_lo))  # pixels per cell
+        # room around the grid for its coordinates: their gap and widest label, in pixels, so in cells once scaled
+        font, digits = self._font * 0.8, len(str(max(L1, L2) - 1))
+        room_px, room = (0.6 * font + 3.5 + 0.4 * digits * font) * DPI / 72, 1.1
+        for _ in range(3):  # the room in cells grows as the scale shrinks with it: settled in a few rounds
+            pad = 0.7  # cells around the outermost node
+            x_lo, x_hi = min(-0.5 - room, nodes[:, 0].min() - pad), max(L1 - 0.5 + room, nodes[:, 0].max() + pad)
+            y_lo, y_hi = min(-0.5 - room, nodes[:, 1].min() - pad), max(L2 - 0.5 + room, nodes[:, 1].max() + pad)
+            if self.energy is not None:  # and the base's pad
+                (bx_lo, by_lo), (bx_hi, by_hi) = self.base_box
+                x_lo, x_hi, y_lo, y_hi = min(x_lo, bx_lo), max(x_hi, bx_hi), min(y_lo, by_lo), max(y_hi, by_hi)
+            scale = min(box_w / (x_hi - x_lo), (box_h - label_px) / (y_hi - y_lo))  # pixels per cell
+            room = max(1.1, room_px / scale)
         cx, cy = (x_lo + x_hi) / 2, (y_lo + y_hi + label_px / scale) / 2
         half_x, half_y = box_w / scale / 2, box_h / scale / 2
         self.ax.set_xlim(cx - half_x, cx + half_x)
@@ -234,6 +273,7 @@ class WorldRenderer:
         for text in self._uav_labels:
             text.set_visible(scale >= 14)  # a smaller disc has no room for a digit
             text.set_fontsize(min(self._font * 0.9, 0.45 * cell))
+        self._fit_coordinates(cell, nodes)
         key = nodes.tobytes()
         if key not in self._backgrounds:
             if len(self._backgrounds) >= BACKGROUNDS_KEPT:
@@ -241,6 +281,51 @@ class WorldRenderer:
             self.canvas.draw()
             self._backgrounds[key] = self.canvas.copy_from_bbox(self.figure.bbox)
         self._background = self._backgrounds[key]
+
+    def _fit_coordinates(self, cell: float, nodes: np.ndarray) -> None:
+        """The coordinates for cells of ``cell`` points and the layout's ``nodes``: ``x`` below the grid and ``y`` left
+        of it, or on the other side where the base's pad lies there or fewer nodes do; every one while they fit, else
+        every 2nd, 5th, 10th, ...; one that a node or its name would cover is left out."""
+        L1, L2 = self.world.cfg.grid
+        base = self.world.cfg.base if self.energy is not None else None
+        font, digits = min(self._font * 0.8, max(5.5, 0.6 * cell)), len(str(max(L1, L2) - 1))
+        gap = max(COORDINATE_GAP, (0.6 * font + 1.5) / cell)  # clear of the grid's edge however small its cells
+        columns = [
+            c
+            for c, free in ((-0.5 - gap, not base or base[0] >= 0), (L1 - 0.5 + gap, not base or base[0] < L1))
+            if free
+        ]
+        rows = [
+            r
+            for r, free in ((L2 - 0.5 + gap, not base or base[1] < L2), (-0.5 - gap, not base or base[1] >= 0))
+            if free
+        ]
+
+        # how far from a node (in cells) a label would touch its marker or its name (two letters under it)
+        marker, half = min(0.6 * cell, 14.0) / 2, 0.5 * font  # half a node's marker, half a label's height, in points
+        across = (max(marker, 0.65 * self._font) + 0.3 * digits * font) / cell
+        above, below = (marker + half) / cell, (marker + 1 + self._font + half) / cell
+
+        def covered(x: float, y: float) -> bool:
+            return bool(
+                ((abs(nodes[:, 0] - x) < across) & (y - nodes[:, 1] > -above) & (y - nodes[:, 1] < below)).any()
+            )
+
+        column = min(columns or [-0.5 - gap], key=lambda c: sum(covered(c, y) for y in range(L2)))
+        row = min(rows or [L2 - 0.5 + gap], key=lambda r: sum(covered(x, r) for x in range(L1)))
+        needed = font * (0.65 * digits + 0.5)  # points between the centres of two labels
+        every = next(k for k in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 10**9) if k * cell >= needed)
+        for x, text in enumerate(self._x_coordinates):
+            text.set_position((x, row))
+            text.set_visible(x % every == 0 and not covered(x, row))
+        for y, text in enumerate(self._y_coordinates):
+            text.set_position((column, y))
+            text.set_visible(y % every == 0 and not covered(column, y))
+        # each name at the end of its line away from the other line
+        self._x_name.set_position((L1 - 0.5 + gap if column < 0 else -0.5 - gap, row))
+        self._y_name.set_position((column, -0.5 - gap if row > 0 else L2 - 0.5 + gap))
+        for text in (*self._x_coordinates, *self._y_coordinates, self._x_name, self._y_name):
+            text.set_fontsize(font)
 
     def _draw_gauges(self, xy: np.ndarray, battery: np.ndarray) -> None:
         """Each UAV's battery gauge under it: a frame of :data:`GAUGE_WIDTH` cells filled to its fraction ``battery``

@@ -9,6 +9,7 @@ import torch
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from uavrl.cli import hydra_quoted, readable, split_sweep_dir, sweep_dir_override, typed
+from uavrl.envs import make_config
 from uavrl.train import summary
 
 ODD = "my runs/ünï (copy) #1 ~x 'q'"  # a directory name Hydra cannot read unquoted; {odd} below is tmp/ODD
@@ -110,7 +111,7 @@ def test_the_end_of_run_lines_paste(compose_cfg, tmp_path):
     cfg = compose_cfg("agent=random")
     result = {"eval/optimality": 1.0, "eval/optimality_min": 1.0, "eval/optimal_fraction": 1.0}
     result |= {"iterations": 1, "total_seconds": 1.0, "eval/return_ratio": 1.0, "eval/reach_999": 1.0}
-    env_cfg = type("Model", (), {"grid": (6, 6), "num_uavs": 2})
+    env_cfg = make_config("paper")
     last = summary(cfg, env_cfg, result, run_dir).splitlines()[-1]
     board, again = last.split("   ")
     assert shlex.split(board) == ["look", "at", "it:", "tensorboard", "--logdir", str(run_dir)]

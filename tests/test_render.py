@@ -54,6 +54,61 @@ def test_render_is_a_uint8_frame_of_the_chosen_world(tiny_env):
     assert np.array_equal(env.render(), frames[0])  # the same world drawn again is the same picture
 
 
+def drawn_texts(renderer: WorldRenderer) -> list:
+    """The texts a frame of ``renderer`` shows (the background's and the step's), with their pixels."""
+    from matplotlib.text import Text
+
+    return [t for t in renderer.figure.findobj(Text) if t.get_visible() and t.get_text()]
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        make_config("paper", grid=(10, 10), num_uavs=6),
+        make_config("paper", grid=(8, 5), num_uavs=3, layout="random"),
+        make_config("paper", grid=(50, 50), num_uavs=6),
+        make_config(
+            "paper", grid=(10, 10), num_uavs=6, energy="rotary_wing", base=(-1, 0), num_spares=2, recharge_steps=9
+        ),
+    ],
+    ids=["10x10", "random-8x5", "50x50", "energy-base-left"],
+)
+def test_a_frame_numbers_the_grid_cells_clear_of_the_nodes(cfg):
+    """x under every column (or every 2nd, 5th, ... where cells are small) and y beside every row, each on its cell's
+    line, none running into another or into a node or its name, none on the base's side of the grid."""
+    world = World(cfg, batch_size=1, seed=3)
+    world.reset()
+    renderer = WorldRenderer(world)
+    renderer.frame(0)
+    L1, L2 = cfg.grid
+    xs = [t for t in renderer._x_coordinates if t.get_visible()]
+    ys = [t for t in renderer._y_coordinates if t.get_visible()]
+    numbers = [[int(t.get_text()) for t in labels] for labels in (xs, ys)]
+    every = min(b - a for shown in numbers for a, b in zip(shown, shown[1:], strict=False))
+    assert all(n % every == 0 for shown in numbers for n in shown) and (every == 1 if max(L1, L2) <= 10 else every >= 2)
+    assert all(t.get_position()[0] == int(t.get_text()) for t in xs)  # each under its column
+    assert all(t.get_position()[1] == int(t.get_text()) for t in ys)  # each beside its row
+    assert len(xs) >= -(-L1 // every) - 3 and len(ys) >= -(-L2 // every) - 3  # a few left out beside a node
+    if cfg.energy != "none":  # the base's pad is left of the grid: y goes right of it
+        assert all(t.get_position()[0] > L1 - 0.5 for t in ys)
+    text_renderer = renderer.canvas.get_renderer()
+    boxes = [t.get_window_extent(text_renderer) for t in [*xs, *ys]]
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1 :])
+    names = [t.get_window_extent(text_renderer) for t in renderer._node_labels]
+    assert not any(box.overlaps(name) for box in boxes for name in names)
+
+
+def test_the_panel_has_a_key_and_names_its_share_column():
+    world = World(make_config("paper", grid=(6, 6), num_uavs=3), batch_size=1, seed=0)
+    world.reset()
+    renderer = WorldRenderer(world)
+    renderer.frame(0)
+    texts = [t.get_text() for t in drawn_texts(renderer)]
+    assert "UAV task  c/Σc" in texts and not any("share" in t for t in texts if t.startswith("UAV"))
+    assert {"relay: PT → UAV → PR", "sense: S → UAV → E", "earns nothing", "c/Σc: its path's share"} <= set(texts)
+    assert "away: status, steps left" not in texts  # the energy model's line
+
+
 def test_uavs_show_in_their_task_colour_where_they_are():
     world = World(make_config("paper", grid=(6, 6), num_uavs=3), batch_size=2, seed=1)
     world.reset()

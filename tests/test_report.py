@@ -3,6 +3,7 @@
 import json
 import math
 import shlex
+import warnings
 
 import numpy as np
 import pytest
@@ -229,3 +230,88 @@ def test_a_benchmarl_run_is_reported_under_its_algorithm(tmp_path):
     (run / "config.yaml").write_text(yaml.safe_dump(saved))
     text = report([tmp_path / "study"], tmp_path / "out", resamples=200).read_text()
     assert "| benchmarl_qmix | **1 (0) < 3** | 0.7 |" in text
+
+
+def laid_out_figures(monkeypatch) -> dict:
+    """The report's figures by file name, each drawn as saved (its layout applied), kept open to be inspected."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import uavrl.report as module
+
+    figures, save = {}, module.save_figure
+
+    def keep(figure, path):
+        saved = save(figure, path)
+        FigureCanvasAgg(figure).draw()  # pyplot let go of it when saved
+        figures[path.name] = figure
+        return saved
+
+    monkeypatch.setattr(module, "save_figure", keep)
+    return figures
+
+
+def drawn_inside(figure) -> bool:
+    """Whether everything the figure draws (ticks, labels, titles, legends) lies whole inside it: a cut tick label
+    or a legend off the edge reaches beyond."""
+    drawn, frame = figure.get_tightbbox(figure.canvas.get_renderer()), figure.bbox_inches
+    return drawn.x0 >= -0.01 and drawn.y0 >= -0.01 and drawn.x1 <= frame.x1 + 0.01 and drawn.y1 <= frame.y1 + 0.01
+
+
+def legend_labels(figure) -> list[str]:
+    return [text.get_text() for legend in figure.legends for text in legend.get_texts()]
+
+
+def write_curves(run_dir, values) -> None:
+    from uavrl.logger import RunLogger
+
+    logger = RunLogger(run_dir)
+    for step, value in enumerate(values, start=1):
+        logger.log({"train/sum_utility": value}, 100 * step)
+    logger.close()
+
+
+def test_report_figures_fit_with_a_legend_and_no_warning(tmp_path, monkeypatch):
+    """Long agent labels, one- and two-seed cells and three baselines: every label inside the figure, one legend
+    naming each agent with its seeds (singular for one), every baseline drawn, every value inside the y-limits, a
+    curves title that promises only what is drawn, and no warning (matplotlib's tight_layout gave up on such labels,
+    cutting them)."""
+    root = tmp_path / "study"
+    long = {"mixer": "qmix", "objective": "utility", "gamma": 0.7}
+    for seed, ratio in enumerate([0.5, 0.55]):
+        write_run(root / f"long{seed}", "dqn", seed, {"eval/return_ratio": ratio, "eval/optimality": 0.95}, long)
+        write_curves(root / f"long{seed}", [210.0 + seed, 240.0, 300.0])
+    write_run(root / "vdn", "dqn", 0, {"eval/return_ratio": 0.9, "eval/optimality": 0.99}, {**long, "mixer": "vdn"})
+    write_curves(root / "vdn", [200.0, 330.0])
+    for agent, ratio in (("oracle", 1.0), ("planner", 0.99), ("random", -0.02)):
+        write_run(root / agent, agent, 0, {"eval/return_ratio": ratio, "eval/optimality": ratio})
+    figures = laid_out_figures(monkeypatch)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        report([root], tmp_path / "out", resamples=200)
+    metrics, curves = figures["paper_metrics.png"], figures["paper_curves.png"]
+    assert drawn_inside(metrics) and drawn_inside(curves)
+    labels = legend_labels(metrics)
+    assert "dqn agent.mixer=qmix (2 seeds)" in labels and "dqn agent.mixer=vdn (1 seed)" in labels
+    assert {"oracle (baseline, 1 seed)", "planner (baseline, 1 seed)", "random (baseline, 1 seed)"} <= set(labels)
+    for ax in metrics.axes:
+        low, high = ax.get_ylim()
+        values = [y for line in ax.get_lines() for y in line.get_ydata()]
+        assert values and all(low < y < high for y in values)  # none on an edge, hidden by the frame
+        assert len([line for line in ax.get_lines() if "baseline" in line.get_label()]) == 3
+    assert "dqn agent.mixer=vdn (1 seed)" in legend_labels(curves)
+    (ax,) = curves.axes
+    legend = curves.legends[0].get_window_extent()
+    assert not legend.overlaps(ax.get_window_extent())  # the legend covers no curve
+    assert "lines: the baselines' greedy evaluation" in ax.get_title()  # eval/sum_utility: write_run's 200
+
+
+def test_the_curves_title_names_no_baseline_lines_when_none_is_drawn(tmp_path, monkeypatch):
+    root = tmp_path / "study"
+    write_run(root / "dqn", "dqn", 0, {"eval/return_ratio": 0.5})
+    write_curves(root / "dqn", [200.0, 300.0])
+    figures = laid_out_figures(monkeypatch)
+    report([root], tmp_path / "out", resamples=200)
+    title = figures["paper_curves.png"].axes[0].get_title()
+    assert (
+        "lines" not in title and "band" not in title and legend_labels(figures["paper_curves.png"]) == ["dqn (1 seed)"]
+    )

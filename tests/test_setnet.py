@@ -4,6 +4,7 @@ several sizes with an exact resume, zero-shot evaluation and the one-line refusa
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -108,6 +109,20 @@ def test_training_over_sizes_resumes_exactly(tmp_path, set_cfg, interrupt_at):
     )
 
 
+def test_a_size_free_run_is_filed_and_summarised_as_size_free(tmp_path, set_cfg, monkeypatch, capsys):
+    """``runs/dqn-set/<env>/<stamp>``, apart from the per-size DQN's ``runs/dqn/``, and a summary naming the teams and
+    layouts it trained on."""
+    monkeypatch.chdir(tmp_path)
+    run_dir = train(set_cfg("agent.iterations=2", "agent.layouts=[line,random]"))
+    assert run_dir.parent == Path("runs/dqn-set/paper")
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("trained dqn with a size-free network (agent.network=set) on paper: 2 iterations in ")
+    assert lines[1] == (
+        "size-free: trained on 2 teams (N = 2 on 3x3, N = 3 on 4x4) in layouts 'line', 'random'; its own evaluation: "
+        "6x6 grid, 2 UAVs, layout 'line', channel 'paper'"
+    )
+
+
 def test_a_size_free_checkpoint_is_evaluated_zero_shot_on_other_sizes(tmp_path, set_cfg, compose_cfg):
     run_dir = train(set_cfg(f"run_dir={tmp_path / 'set'}", "agent.iterations=2"))
     other = ["env.grid=[7,5]", "env.num_uavs=6", "env.layout=random"]
@@ -136,7 +151,16 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
     )
     command = [sys.executable, "-m", "uavrl.evaluate", "eval.num_starts=4", "env.grid=[9,9]", "env.num_uavs=5"]
     done = subprocess.run([*command, f"checkpoint={size_free}"], capture_output=True, text=True, check=True)
-    assert json.loads(done.stdout) == json.loads((size_free / "eval-5uav-9x9.json").read_text())
+    lines = done.stdout.splitlines()
+    assert lines[:2] == [
+        f"evaluated dqn with a size-free network (agent.network=set) of the paper run {size_free} on: 9x9 grid, 5 "
+        "UAVs, layout 'line', channel 'paper'",
+        "zero-shot: trained on 2 teams (N = 2 on 3x3, N = 3 on 4x4) in layout 'line', evaluated on N = 5 on 9x9 in "
+        "layout 'line'",
+    ]
+    assert lines[-1].startswith(f"metrics: {size_free / 'eval-5uav-9x9.json'} (all ")
+    as_json = subprocess.run([*command, "print_json=true", f"checkpoint={size_free}"], capture_output=True, text=True)
+    assert json.loads(as_json.stdout) == json.loads((size_free / "eval-5uav-9x9.json").read_text())
     refused = subprocess.run([*command, f"checkpoint={team}"], capture_output=True, text=True)
     assert refused.returncode == 1 and refused.stdout == ""
     assert refused.stderr.splitlines() == [

@@ -91,6 +91,35 @@ def test_evaluate_a_checkpoint(tmp_path, compose_cfg):
     assert json.loads((run_dir / "eval.json").read_text()) == metrics
 
 
+def test_the_evaluate_command_prints_a_summary_and_json_on_request(tmp_path, compose_cfg, capsys):
+    """``python -m uavrl.evaluate``: the run's agent and model, the headline metrics, the yardstick and where the
+    file went, in words; ``print_json=true``: the metrics as JSON, as in the file."""
+    from uavrl.evaluate import print_evaluation
+
+    run_dir = train(compose_cfg(*SMALL, f"run_dir={tmp_path / 'r'}"))
+    capsys.readouterr()
+    print_evaluation(compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=8"), [])
+    lines = capsys.readouterr().out.splitlines()
+    assert (
+        lines[0] == f"evaluated tabular of the paper run {run_dir} on: 3x3 grid, 2 UAVs, layout 'line', channel 'paper'"
+    )
+    assert lines[1].startswith("optimality ") and lines[2].startswith("yardstick: return ratio ")
+    assert lines[3].startswith(f"metrics: {run_dir / 'eval.json'} (all ") and len(lines) == 4
+    print_evaluation(compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=8", "print_json=true"), [])
+    assert json.loads(capsys.readouterr().out) == json.loads((run_dir / "eval.json").read_text())
+
+
+def test_a_baseline_says_it_does_not_train(tmp_path, compose_cfg, capsys):
+    from uavrl.evaluate import print_evaluation
+
+    run_dir = train(compose_cfg("agent=random", "env.grid=[3,3]", "eval.num_starts=4", f"run_dir={tmp_path / 'r'}"))
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("evaluated the random baseline (no training) on paper (3x3 grid, 2 UAVs, layout 'line'")
+    assert "iterations" not in first and "trained" not in first
+    print_evaluation(compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=4"), [])
+    assert capsys.readouterr().out.startswith(f"evaluated the random baseline (no training) of the paper run {run_dir}")
+
+
 @pytest.mark.parametrize(
     "override, message",
     [

@@ -2,12 +2,16 @@
 
 Rebuilds the agent from the checkpoint's own config (a run directory's newest
 readable checkpoint, or the file given), runs the shared greedy evaluation
-(``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), prints
-the metrics as JSON and writes them to ``eval.json`` beside the checkpoint.
+(``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), writes
+the metrics as JSON to ``eval.json`` beside the checkpoint and prints a summary
+in words: the agent, the model it was evaluated on, the headline metrics and
+the yardstick, where the file went (``print_json=true`` prints the metrics as
+JSON in its place).
 
 A size-free network (``agent=dqn agent.network=set``) is evaluated zero-shot on another team size or grid with
 ``env.num_uavs=<N>``, ``env.grid=[L1,L2]`` and ``env.layout`` (``eval-<N>uav-<L1>x<L2>.json``); any other policy is
-refused there in one line, as is any other ``env.*`` that differs from the saved run's.
+refused there in one line, as is any other ``env.*`` that differs from the saved run's.  The summary names the
+teams the network trained on and the one it was evaluated on (``zero-shot: ...`` when it is not one of them).
 """
 
 from __future__ import annotations
@@ -29,7 +33,16 @@ from uavrl.checkpoints import (
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import quoted, save_json
-from uavrl.runs import eval_settings
+from uavrl.runs import (
+    BASELINE_AGENTS,
+    eval_settings,
+    is_size_free,
+    model_words,
+    optimality_line,
+    size_free_teams,
+    team_words,
+    yardstick_line,
+)
 from uavrl.settings import check_evaluation_floor, check_run, check_video_cost
 
 
@@ -98,6 +111,12 @@ def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
 
 
 def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
+    """The metrics of ``cfg.checkpoint``'s greedy policy (the module doc), written beside it."""
+    return evaluate_and_save(cfg, overrides)[0]
+
+
+def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], DictConfig, DictConfig, Path]:
+    """``(metrics, the saved run's config, the config evaluated, the JSON file written)``."""
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
 
@@ -114,10 +133,11 @@ def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
         check_video_cost(cfg, model_config(evaluated))
     metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
     out_dir = output_dir(cfg.checkpoint)
-    save_json(metrics, out_dir / evaluation_file(saved, evaluated))
+    path = out_dir / evaluation_file(saved, evaluated)
+    save_json(metrics, path)
     if cfg.eval.video:
         save_video(agent, evaluated, cfg, device, out_dir)
-    return metrics
+    return metrics, saved, evaluated, path
 
 
 def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path) -> None:
@@ -136,9 +156,50 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     logger.close()
 
 
+def trained_teams(saved: DictConfig) -> set[tuple[int, tuple[int, int], str]]:
+    """``{(N, (L1, L2), layout)}`` a size-free run trained on (``agent.sizes`` x ``agent.layouts``, or its own)."""
+    from uavrl.agents.schema import training_models
+
+    return {(m.num_uavs, tuple(m.grid), m.layout) for m in training_models(model_config(saved), saved.agent)}
+
+
+def summary(cfg: DictConfig, saved: DictConfig, evaluated: DictConfig, metrics: dict, path: Path) -> str:
+    """An evaluation in words: what was evaluated on which model (a size-free network: the teams it trained on, and
+    ``zero-shot`` where the team evaluated is not one of them), the headline metrics, where they went."""
+    run, model = model_config(saved), model_config(evaluated)
+    name = saved.agent.name
+    if name in BASELINE_AGENTS:
+        agent = f"the {name} baseline (no training)"
+    elif is_size_free(saved):
+        agent = "dqn with a size-free network (agent.network=set)"
+    else:
+        agent = name
+    lines = [f"evaluated {agent} of the {saved.env.name} run {quoted(cfg.checkpoint)} on: {model_words(model)}"]
+    if is_size_free(saved):
+        unseen = (model.num_uavs, tuple(model.grid), model.layout) not in trained_teams(saved)
+        evaluated_team = team_words(model.num_uavs, model.grid) + f" in layout {model.layout!r}"
+        lines.append(
+            f"{'zero-shot' if unseen else 'size-free'}: trained on {size_free_teams(saved, run)}, evaluated on "
+            f"{evaluated_team}"
+        )
+    return "\n".join(
+        [
+            *lines,
+            optimality_line(cfg, metrics),
+            yardstick_line(cfg, metrics),
+            f"metrics: {quoted(path)} (all {len(metrics)}, as JSON; print_json=true prints them in place of this "
+            "summary)",
+        ]
+    )
+
+
 def print_evaluation(cfg: DictConfig, overrides) -> None:
-    """``python -m uavrl.evaluate``: the metrics as JSON on stdout."""
-    print(json.dumps(evaluate_checkpoint(cfg, overrides), indent=2, sort_keys=True))
+    """``python -m uavrl.evaluate``: the summary in words, or with ``print_json=true`` the metrics as JSON."""
+    metrics, saved, evaluated, path = evaluate_and_save(cfg, overrides)
+    if cfg.print_json:
+        print(json.dumps(metrics, indent=2, sort_keys=True))
+    else:
+        print(summary(cfg, saved, evaluated, metrics, path))
 
 
 if __name__ == "__main__":

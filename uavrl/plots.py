@@ -51,8 +51,10 @@ def pyplot():
 
 
 def save_figure(figure, path: Path) -> Path:
-    """The figure as a PNG written atomically (a temporary file renamed over it), then closed."""
-    figure.tight_layout()
+    """The figure as a PNG written atomically (a temporary file renamed over it), then closed; laid out by its own
+    layout engine (``layout="constrained"``), else by ``tight_layout``."""
+    if figure.get_layout_engine() is None:
+        figure.tight_layout()
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
     save_bytes(buffer.getvalue(), path)

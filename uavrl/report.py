@@ -9,9 +9,10 @@ metric with a 95% percentile-bootstrap confidence interval (numpy, a fixed
 seed: the same runs give the same report) and, with 5 seeds or more, the
 interquartile mean (rliable's recommendation).  ``report.md`` holds the tables,
 the number of seeds per cell (cells with fewer than 3 flagged) and, per
-setting, a PNG of the metrics (agents side by side, the random and oracle
-baselines as reference lines) and one of the learning curves (mean over seeds
-with a 95% bootstrap band).
+setting, a PNG of the metrics (agents side by side, the baselines -- random,
+oracle, planner -- as reference lines, one legend naming every agent with its
+seeds) and one of the learning curves (mean over seeds with a 95% bootstrap
+band).
 
 A run whose files cannot be used (``metrics.json`` or ``config.yaml``
 truncated, empty, not an object, a metric or setting of the wrong type, an
@@ -69,7 +70,17 @@ CONFIDENCE = 0.95
 FEW_SEEDS = 3  # cells with fewer seeds are flagged
 IQM_SEEDS = 5  # the interquartile mean is shown from this many seeds on
 # settings that never change a run's results (or are the seed itself): not used to tell runs apart
-IGNORED = {"seed", "run_dir", "sweep_dir", "resume", "checkpoint", "progress", "num_threads", "train.checkpoint_every"}
+IGNORED = {
+    "seed",
+    "run_dir",
+    "sweep_dir",
+    "resume",
+    "checkpoint",
+    "print_json",
+    "progress",
+    "num_threads",
+    "train.checkpoint_every",
+}
 CURVE_TAG = "train/sum_utility"  # per training episode; divided by env.max_steps: utility per step
 
 
@@ -416,20 +427,57 @@ def file_stem(label: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in label)
 
 
-def baseline_lines(ax, cells: list[Cell], value) -> None:
-    """The baselines' mean of ``value(run)`` as dashed and dotted reference lines."""
-    for cell, style in zip((c for c in cells if c.is_baseline), ("--", ":"), strict=False):
+def seeds_count(n: int) -> str:
+    """``1 seed``, ``2 seeds``."""
+    return f"{n} seed" if n == 1 else f"{n} seeds"
+
+
+# the baselines' reference lines: (line style, colour), one per baseline in name order
+BASELINE_STYLES = (("--", "black"), (":", "black"), ("-.", "0.45"), ((0, (6, 2, 1, 2, 1, 2)), "0.45"))
+
+
+def baseline_lines(ax, cells: list[Cell], value) -> list:
+    """The baselines' mean of ``value(run)`` as reference lines (every baseline, each its own style); the lines
+    drawn, labelled with the baseline and its seeds."""
+    drawn = []
+    for i, cell in enumerate(c for c in cells if c.is_baseline):
         values = [value(run) for run in cell.runs if value(run) is not None]
         if values:
-            ax.axhline(np.mean(values), linestyle=style, color="k", linewidth=1, label=cell.agent)
+            style, colour = BASELINE_STYLES[i % len(BASELINE_STYLES)]
+            label = f"{cell.agent} (baseline, {seeds_count(len(cell.runs))})"
+            drawn.append(ax.axhline(np.mean(values), linestyle=style, color=colour, linewidth=1.2, label=label))
+    return drawn
+
+
+def legend_columns(handles, most: int) -> int:
+    """Columns of a legend under the figure: one where a label is long (it would run off the figure), else ``most``
+    at most."""
+    longest = max((len(h.get_label()) for h in handles), default=0)
+    return 1 if longest > 40 else max(1, min(len(handles), most))
+
+
+def padded_limits(values: list[float]) -> tuple[float, float]:
+    """Axis limits that hold every value with a margin (a line on an edge is hidden by the frame)."""
+    low, high = min(values), max(values)
+    pad = 0.08 * (high - low) if high > low else 0.05 * max(abs(high), 1.0)
+    return low - pad, high + pad
 
 
 def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
+    """Per metric, one panel: each learner's seeds (grey) and mean with its interval (its colour), the baselines'
+    means as lines; one legend for the figure below the panels, naming every agent with its seeds."""
+    from matplotlib.lines import Line2D
+
     learners = [c for c in cells if not c.is_baseline]
-    baselines = [c for c in cells if c.is_baseline]
     plotted = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
-    figure, axes = pyplot().subplots(1, len(plotted), figsize=(3.2 * len(plotted), 3.6), squeeze=False)
-    for ax, metric in zip(axes[0], plotted, strict=True):
+    columns = min(len(plotted), 4)
+    rows = -(-len(plotted) // columns)
+    figure, axes = pyplot().subplots(
+        rows, columns, figsize=(max(3.1 * columns, 6.4), 2.5 * rows + 1.2), squeeze=False, layout="constrained"
+    )
+    baselines_drawn: dict[str, Line2D] = {}
+    for ax, metric in zip(axes.flat, plotted, strict=False):
+        shown_values = []
         for x, cell in enumerate(learners):
             values = cell.values(metric)
             if not values:
@@ -439,13 +487,29 @@ def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, see
             ax.plot([x] * len(values), values, "o", color="0.6", markersize=3)  # the seeds
             error = None if np.isnan(low) else [[mean - low], [high - mean]]
             ax.errorbar([x], [mean], yerr=error, fmt="s", color=f"C{x}", capsize=4)
-        baseline_lines(ax, cells, lambda run, metric=metric: run.metrics.get(metric))
-        ax.set_xticks(range(len(learners)), [c.agent for c in learners], rotation=20, ha="right")
+            shown_values += [*values, *([] if np.isnan(low) else [low, high])]
+        for line in baseline_lines(ax, cells, lambda run, metric=metric: run.metrics.get(metric)):
+            baselines_drawn.setdefault(line.get_label(), line)
+            shown_values.append(line.get_ydata()[0])
+        ax.set_xticks([])  # the legend names the agents by colour
         ax.set_xlim(-0.6, max(len(learners), 1) - 0.4)
+        ax.set_ylim(*padded_limits(shown_values))
         ax.set_title(METRICS[metric], fontsize=10)
-        if baselines and ax is axes[0][0] and ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="best")
-    figure.suptitle(f"{label}: mean and 95% bootstrap CI over seeds (grey: seeds; lines: baselines)", fontsize=10)
+        ax.tick_params(labelsize=8)
+    for ax in axes.flat[len(plotted) :]:
+        ax.set_axis_off()
+    handles = [
+        Line2D([], [], marker="s", linestyle="", color=f"C{x}", label=f"{cell.agent} ({seeds_count(len(cell.runs))})")
+        for x, cell in enumerate(learners)
+    ]
+    if learners:
+        handles.append(Line2D([], [], marker="o", linestyle="", color="0.6", markersize=3, label="one seed"))
+    handles += sorted(baselines_drawn.values(), key=lambda line: line.get_label())
+    figure.legend(
+        handles=handles, loc="outside lower center", ncol=legend_columns(handles, 3), fontsize=8, frameon=False
+    )
+    what = "mean over seeds with its 95% bootstrap interval" if learners else "the baselines' mean over seeds"
+    figure.suptitle(f"{label}: {what}", fontsize=10)
     return save_figure(figure, out / f"{file_stem(label)}_metrics.png")
 
 
@@ -465,21 +529,25 @@ def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path |
     drawn = [(cell, found) for cell, found in drawn if found is not None]
     if not drawn:
         return None
-    figure, ax = pyplot().subplots(figsize=(7, 4.2))
+    figure, ax = pyplot().subplots(figsize=(7, 4.8), layout="constrained")
+    banded = False
     for x, (cell, (steps, values)) in enumerate(drawn):
         low, high = bootstrap_band(values, seed=seed)
-        ax.plot(steps, values.mean(axis=0), color=f"C{x}", label=f"{cell.agent} ({len(values)} seeds)")
+        ax.plot(steps, values.mean(axis=0), color=f"C{x}", label=f"{cell.agent} ({seeds_count(len(values))})")
         if not np.isnan(low).all():
             ax.fill_between(steps, low, high, color=f"C{x}", alpha=0.25)
-    baseline_lines(ax, cells, evaluated_utility_per_step)
+            banded = True
+    lines = baseline_lines(ax, cells, evaluated_utility_per_step)
     ax.set_xlabel("team steps")
     ax.set_ylabel("utility per step (bit/s/Hz)")
-    ax.legend(fontsize=8, loc="best")
-    ax.set_title(
-        f"{label}: training episodes (exploration included), mean and 95% bootstrap band over seeds;\n"
-        "lines: the baselines' evaluation",
-        fontsize=9,
+    handles, labels = ax.get_legend_handles_labels()
+    figure.legend(
+        handles, labels, loc="outside lower center", ncol=legend_columns(handles, 2), fontsize=8, frameon=False
     )
+    what = "mean over seeds" + (" with its 95% bootstrap band" if banded else "")
+    baselines = "; lines: the baselines' greedy evaluation" if lines else ""
+    ax.set_title(f"{label}: utility per step of the training episodes (exploration included),\n{what}{baselines}",
+                 fontsize=9)  # fmt: skip
     return save_figure(figure, out / f"{file_stem(label)}_curves.png")
 
 
@@ -503,7 +571,7 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
         f"seeds on, also the interquartile mean (IQM). Seed counts below {FEW_SEEDS} are in bold: their interval is "
         "not to be trusted (with one seed there is none). `(n=k)`: the metric exists for k seeds only (steps are "
         "counted over the starts that reach the level). The yardstick's metrics are described in the README "
-        "(The yardstick); random and oracle are the baselines.",
+        "(The yardstick); random, oracle and planner are the baselines.",
     ]
     for label, setting_cells in cells.items():
         lines += ["", f"## {label}", "", describe(setting_cells[0].runs[0]), "", *table(setting_cells, resamples, seed)]

@@ -88,3 +88,72 @@ def yardstick_line(cfg: DictConfig, result: dict) -> str:
         fewest = "fewest" if result["eval/min_steps_exact"] == 1.0 else "a lower bound on the fewest"
         reach += f" in {result['eval/step_ratio_999']:.2f}x {fewest} steps"
     return "yardstick: " + "; ".join([*parts, reach])
+
+
+# agents with nothing to learn: a run of one is its evaluation (agents/baselines.py, agents/planner.py)
+BASELINE_AGENTS = ("random", "oracle", "planner")
+
+
+def is_size_free(cfg: DictConfig) -> bool:
+    """Whether the run's agent is the DQN with a size-free network (``agent=dqn agent.network=set``)."""
+    return cfg.agent.name == "dqn" and OmegaConf.select(cfg, "agent.network", default="team") == "set"
+
+
+def agent_label(cfg: DictConfig) -> str:
+    """The name a run is filed under (``runs/<label>/<env>/``): ``agent.name``, ``dqn-set`` for a size-free network.
+
+    Example:
+        >>> agent_label(OmegaConf.create({"agent": {"name": "dqn", "network": "set"}}))
+        'dqn-set'
+    """
+    return f"{cfg.agent.name}-set" if is_size_free(cfg) else cfg.agent.name
+
+
+def team_words(num_uavs: int, grid) -> str:
+    """``N = 6 on 10x10``."""
+    return f"N = {num_uavs} on {grid[0]}x{grid[1]}"
+
+
+def model_words(env_cfg) -> str:
+    """A model (:class:`uavrl.envs.ModelConfig`) in a few words: grid, team, layout, channel, fading, energy model.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> model_words(make_config("paper", grid=(10, 10), num_uavs=6))
+        "10x10 grid, 6 UAVs, layout 'line', channel 'paper'"
+    """
+    words = [f"{env_cfg.grid[0]}x{env_cfg.grid[1]} grid", f"{env_cfg.num_uavs} UAVs", f"layout {env_cfg.layout!r}"]
+    fading = f" with {env_cfg.fading} fading" if env_cfg.fading != "none" else ""
+    words.append(f"channel {env_cfg.channel!r}{fading}")
+    if env_cfg.energy != "none":
+        spares = f" + {env_cfg.num_spares} spares" if env_cfg.num_spares else ""
+        words.append(f"energy model {env_cfg.energy!r} ({env_cfg.battery_wh:g} Wh{spares})")
+    return ", ".join(words)
+
+
+def size_free_teams(cfg: DictConfig, env_cfg) -> str:
+    """The teams and layouts a size-free run trained on (``agent.sizes``, ``agent.layouts``; empty: the run's own).
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> cfg = OmegaConf.create({"agent": {"name": "dqn", "network": "set", "sizes": [[2, 6, 6], [6, 10, 10]],
+        ...                                   "layouts": ["line", "random"]}})
+        >>> size_free_teams(cfg, make_config("paper"))
+        "2 teams (N = 2 on 6x6, N = 6 on 10x10) in layouts 'line', 'random'"
+    """
+    sizes = list(OmegaConf.select(cfg, "agent.sizes", default=None) or []) or [[env_cfg.num_uavs, *env_cfg.grid]]
+    layouts = list(OmegaConf.select(cfg, "agent.layouts", default=None) or []) or [env_cfg.layout]
+    teams = ", ".join(team_words(n, (l1, l2)) for n, l1, l2 in sizes)
+    count = f"{len(sizes)} teams" if len(sizes) > 1 else "1 team"
+    in_layouts = ", ".join(repr(layout) for layout in layouts)
+    return f"{count} ({teams}) in layout{'s' if len(layouts) > 1 else ''} {in_layouts}"
+
+
+def optimality_line(cfg: DictConfig, result: dict) -> str:
+    """The final configuration's utility against U*, in words."""
+    optimality, worst = result["eval/optimality"], result["eval/optimality_min"]
+    return (
+        f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
+        f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
+        f"{share_of_starts(result['eval/optimal_fraction'])} of starts within 1% of U*)"
+    )

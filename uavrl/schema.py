@@ -162,7 +162,7 @@ class RunSchema:
     run_dir: Optional[str] = setting(
         None,
         optional(path(), "runs/<agent>/<env>/<timestamp>"),
-        "the run directory; null: runs/<agent>/<env>/<timestamp>",
+        "the run directory; null: runs/<agent>/<env>/<timestamp> (<agent>: dqn-set for a size-free network)",
     )
     sweep_dir: Optional[str] = setting(
         None,
@@ -174,6 +174,9 @@ class RunSchema:
     )
     checkpoint: Optional[str] = setting(
         None, optional(path(), "unset"), "uavrl.evaluate: a checkpoint.pt or run directory to evaluate"
+    )
+    print_json: bool = setting(
+        False, flag(), "uavrl.evaluate: print the metrics as JSON (the file it writes) in place of its summary"
     )
     progress: bool = setting(True, flag(), "a progress bar with rate and ETA")
     train: TrainSchema = section(TrainSchema)

@@ -39,7 +39,18 @@ from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import WriteError, quoted, save_json, save_text
 from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
-from uavrl.runs import claim_run_dir, eval_settings, flat_hparams, share_of_starts, yardstick_line
+from uavrl.runs import (
+    BASELINE_AGENTS,
+    agent_label,
+    claim_run_dir,
+    eval_settings,
+    flat_hparams,
+    is_size_free,
+    model_words,
+    optimality_line,
+    size_free_teams,
+    yardstick_line,
+)
 from uavrl.settings import check_run, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
@@ -70,11 +81,12 @@ def seed_everything(seed: int) -> None:
 
 def hold_run_dir(cfg: DictConfig) -> RunDirectory:
     """The run directory, locked (:mod:`uavrl.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job gets one
-    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>``."""
+    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>`` (``<agent>``: :func:`uavrl.runs.agent_label`,
+    ``dqn-set`` for a size-free network)."""
     if cfg.resume:
         return hold(run_directory(cfg.resume, "resume"), "resume")
     refusal = already_a_run(cfg.run_dir) if cfg.run_dir else ""
-    return claim_run_dir(cfg.run_dir, cfg.agent.name, cfg.env.name, checkpoint_files, refusal)
+    return claim_run_dir(cfg.run_dir, agent_label(cfg), cfg.env.name, checkpoint_files, refusal)
 
 
 def already_a_run(run_dir) -> str:
@@ -236,7 +248,7 @@ class Training:
                 initial=self.start,
                 total=agent.num_iterations,
                 disable=not cfg.progress,
-                desc=f"{cfg.agent.name} {cfg.env.name}",
+                desc=f"{agent_label(cfg)} {cfg.env.name}",
                 unit="it",
                 dynamic_ncols=True,
             )
@@ -364,16 +376,25 @@ def interrupted_note(run_dir: Path, saved: int, iterations: int, resumed: bool) 
 
 
 def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
-    """The end of a run in words: what was trained, what the numbers mean, where the run is, how to look at it."""
-    optimality, worst = result["eval/optimality"], result["eval/optimality_min"]
-    within = result["eval/optimal_fraction"]
-    trained = f"{cfg.agent.name} on {cfg.env.name} ({env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs)"
+    """The end of a run in words: what was trained (a baseline: evaluated, it has nothing to learn; a size-free
+    network: the teams it trained on), what the numbers mean, where the run is, how to look at it."""
+    seconds = f"{result['total_seconds']:.1f} s"
+    if cfg.agent.name in BASELINE_AGENTS:
+        first = f"evaluated the {cfg.agent.name} baseline (no training) on {cfg.env.name} ({model_words(env_cfg)})"
+        lines = [f"{first} in {seconds}"]
+    elif is_size_free(cfg):
+        lines = [
+            f"trained dqn with a size-free network (agent.network=set) on {cfg.env.name}: {result['iterations']} "
+            f"iterations in {seconds}",
+            f"size-free: trained on {size_free_teams(cfg, env_cfg)}; its own evaluation: {model_words(env_cfg)}",
+        ]
+    else:
+        trained = f"{cfg.agent.name} on {cfg.env.name} ({model_words(env_cfg)})"
+        lines = [f"trained {trained}: {result['iterations']} iterations in {seconds}"]
     return "\n".join(
         [
-            f"trained {trained}: {result['iterations']} iterations in {result['total_seconds']:.1f} s",
-            f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
-            f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
-            f"{share_of_starts(within)} of starts within 1% of U*)",
+            *lines,
+            optimality_line(cfg, result),
             yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
             f"look at it: tensorboard --logdir {quoted(run_dir)}   "

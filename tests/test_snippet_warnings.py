@@ -1,0 +1,30 @@
+"""The documentation's TorchRL Collector snippet runs without a warning of TorchRL's (a FutureWarning: a Collector of a
+policy module over an env without ``is_init``, which torchrl 0.14 warns of and 0.15 fixes by adding InitTracker)."""
+
+import re
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def collector_blocks() -> list[tuple[str, str]]:
+    """``(file, code)`` of every Python block of README.md and docs/*.md that builds TorchRL's Collector."""
+    files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    return [
+        (path.name, code)
+        for path in files
+        for code in re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), flags=re.S)
+        if "from torchrl.collectors import Collector" in code
+    ]
+
+
+def test_the_collector_snippet_runs_without_a_warning(tmp_path, monkeypatch, capsys):
+    blocks = collector_blocks()
+    assert blocks, "no Collector snippet found in README.md or docs/*.md"
+    monkeypatch.chdir(tmp_path)
+    for name, code in blocks:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", FutureWarning)
+            exec(compile(code, name, "exec"), {"__name__": "snippet"})
+    assert "tensor(" in capsys.readouterr().out
