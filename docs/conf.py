@@ -47,7 +47,6 @@ autosummary_imported_members = False
 autodoc_default_options = {"members": True, "show-inheritance": True, "member-order": "bysource"}
 autodoc_typehints = "description"
 autodoc_typehints_format = "short"
-autodoc_class_signature = "separated"
 # a method documents itself or not at all: the docstrings TorchRL, Gymnasium and PettingZoo give the methods we
 # override are theirs to format (and change), not reST this build can vouch for
 autodoc_inherit_docstrings = False
@@ -91,3 +90,18 @@ html_title = f"uavrl {release}"
 html_static_path = ["_static"]
 html_css_files = ["custom.css"]
 html_show_sourcelink = False
+
+
+def init_signature(app, what, name, obj, options, signature, return_annotation):
+    """A class whose base defines ``__new__(*args, **kwargs)`` (TorchRL's ``EnvBase``, tensordict's modules) shows the
+    arguments of its own ``__init__`` instead."""
+    if what != "class" or signature != "(*args, **kwargs)" or "__init__" not in vars(obj):
+        return None
+    import inspect
+
+    parameters = list(inspect.signature(obj.__init__).parameters.values())[1:]  # without self
+    return str(inspect.Signature(parameters)), return_annotation
+
+
+def setup(app):
+    app.connect("autodoc-process-signature", init_signature)
