@@ -292,9 +292,9 @@ def evaluate(
         memory_budget: the bytes its worlds may take (``agent.memory_budget`` on the command line); more is refused.
 
     Returns:
-        The metrics, ``eval/...`` keys to floats: ``eval/optimality`` (final utility over U*),
-        ``eval/return_ratio`` (discounted gain over the exact best), ``eval/reach_999`` (share of starts that reach
-        0.999 U*) and the rest of the yardstick (docs: The yardstick).
+        The metrics by ``eval/...`` key, among them ``eval/optimality`` (final utility over U*),
+        ``eval/return_ratio`` (discounted gain over the exact best) and ``eval/reach_999`` (share of starts that
+        reach 0.999 U*); docs/yardstick.md explains each.
 
     The oracle planner on a 4x4 grid, from 4 starts:
 
