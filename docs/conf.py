@@ -87,8 +87,6 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 html_theme = "furo"
 html_title = f"uavrl {release}"
-html_static_path = ["_static"]
-html_css_files = ["custom.css"]
 html_show_sourcelink = False
 
 
