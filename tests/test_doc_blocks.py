@@ -41,8 +41,10 @@ LINE_TIMEOUT_S = 600  # a line still running by then (a server, a full-size run)
 EXTRAS = {
     "ray": ("hydra_plugins.hydra_ray_launcher", re.compile(r"hydra/launcher=ray|\bimport ray\b|^\s*ray\s", re.M)),
     "joblib": ("hydra_plugins.hydra_joblib_launcher", re.compile(r"hydra/launcher=joblib")),
-    "gym": ("gymnasium", re.compile(r"gymnasium|gym_env|stable_baselines3|sb3_contrib")),
-    "pettingzoo": ("pettingzoo", re.compile(r"pettingzoo")),
+    "gym": ("gymnasium", re.compile(r"gymnasium|gym_env|pettingzoo")),
+    "gym (pettingzoo)": ("pettingzoo", re.compile(r"pettingzoo")),
+    "gym (stable-baselines3)": ("stable_baselines3", re.compile(r"stable_baselines3|sb3_contrib")),
+    "gym (sb3-contrib)": ("sb3_contrib", re.compile(r"sb3_contrib")),
     "benchmarl": ("benchmarl", re.compile(r"benchmarl")),
 }
 
