@@ -9,7 +9,8 @@ Per Markdown file, in file order and in a fresh temporary directory (the working
   Hydra's later overrides win), so they run in seconds with the reader's settings otherwise;
 - a block with ``<!-- doc-test: skip REASON -->`` on the line right above its fence does not run (a ``pip install``,
   a GPU-only line), and neither does a block that needs an extra that is not installed (Ray, Gymnasium, BenchMARL,
-  ...): the test then says so as a skip, after running the rest. ```text and other languages are output, not run.
+  ...), nor the blocks after it (they may use what it makes): the test then says so as a skip, after running the
+  blocks before it. ```text and other languages are output, not run.
 
 The fast test of each file parses its blocks, compiles its Python and composes every ``python -m uavrl.X`` line's
 settings with the smoke overrides, checking them as the commands do before torch is imported (``uavrl.settings``):
@@ -232,14 +233,15 @@ def markdown_files() -> list[Path]:
 
 
 def estimated_seconds(blocks: list[Block]) -> float:
-    """A rough cost of running a file's blocks: a Python block or a ``python`` command imports torch (several seconds
-    each on a 2-core machine), a plain shell line costs little."""
-    seconds = 0.0
+    """A rough cost of running a file's blocks: a ``python`` command imports torch (several seconds each on a 2-core
+    machine), so does the first Python block (the rest share its imports), a plain shell line costs little."""
+    seconds, imported = 0.0, False
     for block in blocks:
         if block.skip_reason is not None or block.language not in {"python", "bash"}:
             continue
-        if block.language == "python":
-            seconds += 10
+        if block.language == "python":  # in-process: torch is imported once per test session
+            seconds += 2 if imported else 10
+            imported = True
         else:
             seconds += sum(10 if re.search(r"\bpython3?\b", line) else 1 for line in bash_lines(block.text))
     return seconds
@@ -330,16 +332,16 @@ def test_blocks_run(path: Path, tmp_path: Path, monkeypatch):
         if block.skip_reason is not None or block.language not in {"python", "bash"}:
             continue
         needs = missing_extras(block.text)
-        if needs:
-            skipped.append(f"{block.where} (needs {', '.join(needs)})")
-            continue
+        if needs:  # the blocks after it may use what it makes (a sweep's directory): they wait for the extra too
+            skipped.append(f"{block.where} and the blocks after it (needs {', '.join(needs)})")
+            break
         if block.language == "python":
             run_python_block(block, namespace)
         else:
             for line in bash_lines(block.text):
                 run_bash_line(line, tmp_path, block.where)
     if skipped:
-        pytest.skip(f"ran the other blocks; not installed for: {'; '.join(skipped)}")
+        pytest.skip(f"ran the blocks before; not installed for: {'; '.join(skipped)}")
 
 
 def test_smoke_overrides_shorten_the_commands():
