@@ -32,6 +32,16 @@ def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
     (``agent=dqn agent.network=set``) acts there, any other policy is refused
     in one line.
 
+    Args:
+        run_dir: a run directory (``runs/<agent>/<env>/<stamp>``, or the ``run_dir=`` given to train) or a
+            checkpoint file in one.
+        device: the torch device of the policy.
+        run: which independent run's policy, for agents that train several (the tabular agent's ``agent.runs``).
+        env_config: the model to act in; None: the run's own.
+
+    Returns:
+        ``(policy, env_config)``: the greedy TorchRL policy and the model it acts in.
+
     Reading the run executes nothing its files hold (``weights_only`` loads): a
     file holding objects uavrl does not write is refused.  When ``checkpoint.pt``
     is missing or unreadable, a warning names the file and iteration used instead.

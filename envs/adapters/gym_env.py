@@ -263,6 +263,7 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         return self._worlds.world
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Gymnasium's reset: ``(observation, info)`` of a new episode (``seed`` seeds it and those that follow)."""
         super().reset(seed=None if seed is None else check_seed(seed))
         if options:
             raise ValueError(f"options={options!r} is invalid: this env takes no reset options (give None or {{}})")
@@ -271,6 +272,8 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         return out["observation"][0], world_info(out, 0)
 
     def step(self, action):
+        """Gymnasium's step: the team's ``action`` (one per UAV, checked) to ``(observation, reward, terminated,
+        truncated, info)``."""
         actions = check_actions(action, (self.cfg.fleet_size,), "action", self.cfg.num_actions)
         out, reward, truncated = self._worlds.step(actions[None])
         self._mask = out["action_mask"][0]
@@ -334,6 +337,7 @@ class UAVSpectrumVectorEnv(VectorEnv):
         return self._worlds.world
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Gymnasium's vector reset: batched ``(observations, infos)`` of new episodes in every world."""
         if seed is not None and not isinstance(seed, int):
             raise ValueError(f"seed={seed!r} is invalid: give one int (world i is seeded seed + i) or None")
         super().reset(seed=None if seed is None else check_seed(seed))
@@ -347,6 +351,8 @@ class UAVSpectrumVectorEnv(VectorEnv):
         return out["observation"], self._infos(out)
 
     def step(self, actions):
+        """Gymnasium's vector step: ``actions`` ``[num_envs, N]`` to batched ``(observations, rewards, terminations,
+        truncations, infos)``; a world whose episode ended resets on its next step (next-step autoreset)."""
         B = self.num_envs
         ended = self._autoreset  # next-step autoreset: the actions of worlds whose episode ended are ignored
         if ended.all():  # episodes of one length that nothing terminates end together

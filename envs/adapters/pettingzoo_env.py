@@ -103,17 +103,22 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         return self._worlds.world
 
     def observation_space(self, agent: str) -> spaces.Dict:
+        """The observation space of ``agent`` (a UAV's name): its observation and its action mask."""
         return self.observation_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Discrete:
+        """The action space of ``agent``: one of the model's actions (6, or 7 with recharging)."""
         return self.action_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict | None = None):
+        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode."""
         out = self._worlds.reset(seed)
         self.agents = self.possible_agents[:]
         return self._observations(out), self._infos(out)
 
     def step(self, actions: dict):
+        """PettingZoo's parallel step: an action for every live UAV, by name, to ``(observations, rewards,
+        terminations, truncations, infos)``; every UAV gets the team reward."""
         if not self.agents:
             raise RuntimeError("step() with no live agents: call reset() first (the episode ended or never began)")
         unknown = sorted(set(actions) - set(self.agents), key=str)
@@ -141,6 +146,7 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         return None if frames is None else frames[0]
 
     def state(self) -> np.ndarray:
+        """The global state (the team's configuration and the nodes), as :class:`~uavrl.envs.UAVSpectrumEnv`'s."""
         if self._state is None:
             raise RuntimeError("state() before any reset: call reset() first")
         return self._state.copy()

@@ -140,5 +140,11 @@ FADING_PARTS: dict[str, type[Fading]] = {part.name: part for part in (Fading, Ra
 
 
 def fading_part(cfg: ModelConfig) -> Fading:
-    """The fading part of ``cfg.fading``."""
+    """The fading part of the model ``cfg``: an instance of ``FADING_PARTS[cfg.fading]`` (:class:`Fading` for
+    ``none``, :class:`Rayleigh`, :class:`Rician`, :class:`LosNlos`), built from ``cfg``'s options.
+
+    >>> from uavrl.envs import make_config
+    >>> type(fading_part(make_config("paper", fading="rayleigh"))).__name__
+    'Rayleigh'
+    """
     return FADING_PARTS[cfg.fading](cfg)

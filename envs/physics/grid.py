@@ -70,7 +70,14 @@ def manhattan(cells: torch.Tensor, others: torch.Tensor, width: int) -> torch.Te
 
 
 def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
-    """``[6^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i 6^i``."""
+    """``[6^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i 6^i`` of ``num_uavs`` UAVs, on ``device``.
+
+    A team's joint action indexes the rows: UAV ``i``'s action is digit ``i`` of ``j`` in base 6. More than 7 UAVs
+    (6^8 joint actions) is refused.
+
+    >>> decode_joint_actions(2)[[0, 1, 6, 35]].tolist()
+    [[0, 0], [1, 0], [0, 1], [5, 5]]
+    """
     if NUM_ACTIONS**num_uavs > MAX_JOINT_ACTIONS:
         raise ValueError(f"num_uavs={num_uavs} has 6^{num_uavs} joint actions: joint-action tables allow N <= 7")
     j = torch.arange(NUM_ACTIONS**num_uavs, device=device)
@@ -79,7 +86,12 @@ def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
 
 def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
     """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the
-    grid)."""
+    grid).
+
+    ``cells`` are flat cell indices (``y * L1 + x``), ``neighbours`` the ``[L1 * L2, 4]`` table of the cell
+    each move (up, down, left, right) leads to (-1 off the grid, :func:`grid_neighbours`), ``num_uavs`` the team's
+    size N; a task action keeps the UAV in its cell.
+    """
     actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
     moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
     moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
@@ -94,7 +106,14 @@ def joint_next_tasks(tasks: torch.Tensor, num_uavs: int) -> torch.Tensor:
 
 def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
     """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells
-    distinct."""
+    distinct.
+
+    ``cells``, ``neighbours`` and ``num_uavs`` as in :func:`joint_targets`. Two UAVs side by side on a 2x2 grid:
+
+    >>> valid = joint_action_valid(torch.tensor([0, 1]), grid_neighbours((2, 2)), 2)
+    >>> int(valid.sum()), bool(valid[decode_joint_actions(2).tolist().index([4, 5])])  # UAV 0 senses, UAV 1 relays
+    (12, True)
+    """
     return targets_valid(joint_targets(cells, neighbours, num_uavs))
 
 

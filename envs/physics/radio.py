@@ -66,6 +66,11 @@ POWER_DBM = (-100.0, 100.0)  # -100 dBm (0.1 pW) to 100 dBm (10 MW)
 
 
 def dbm_to_watts(dbm: float) -> float:
+    """A power of ``dbm`` dBm in watts.
+
+    >>> dbm_to_watts(30.0), dbm_to_watts(0.0)
+    (1.0, 0.001)
+    """
     return 10 ** ((dbm - 30) / 10)
 
 

@@ -184,7 +184,7 @@ def optimal_values(
     """``[B, K]`` best discounted return ``sum_{t=1..H} gamma^(t-1) (P_t - P_{t-1})`` from every configuration.
 
     ``horizon=None``: the infinite-horizon value, iterated until no value moves by
-    more than ``CONVERGENCE_TOLERANCE`` x max |P| (``gamma < 1``; with
+    more than ``CONVERGENCE_TOLERANCE x max |P|`` (``gamma < 1``; with
     ``gamma = 1`` the sweeps stop changing once every configuration has seen the
     best one it can reach).
     """
