@@ -570,8 +570,8 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
         f"percentile-bootstrap interval in brackets ({resamples:,} resamples, seed {seed}); from {IQM_SEEDS} "
         f"seeds on, also the interquartile mean (IQM). Seed counts below {FEW_SEEDS} are in bold: their interval is "
         "not to be trusted (with one seed there is none). `(n=k)`: the metric exists for k seeds only (steps are "
-        "counted over the starts that reach the level). The yardstick's metrics are described in the README "
-        "(The yardstick); random, oracle and planner are the baselines.",
+        "counted over the starts that reach the level). The yardstick's metrics are described in docs/yardstick.md "
+        "(What is measured); random, oracle and planner are the baselines.",
     ]
     for label, setting_cells in cells.items():
         lines += ["", f"## {label}", "", describe(setting_cells[0].runs[0]), "", *table(setting_cells, resamples, seed)]
