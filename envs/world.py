@@ -75,7 +75,10 @@ def resolve_device(device) -> torch.device:
         raise InvalidOption("device", device, "use 'cpu', 'cuda' or 'cuda:<index>'")
     count = torch.cuda.device_count() if torch.cuda.is_available() else 0
     if resolved.type == "cuda" and (resolved.index or 0) >= count:
-        raise ValueError(f"device={device!r} is not available: this torch sees {count} CUDA devices (docs/getting-started.md, Install)")
+        raise ValueError(
+            f"device={device!r} is not available: this torch sees {count} CUDA devices "
+            "(docs/getting-started.md, Install)"
+        )
     return resolved
 
 
