@@ -82,7 +82,7 @@ optimizer = torch.optim.Adam(loss.parameters(), lr=1e-3)
 # -----------------
 # Each iteration plays one episode in every world, then takes a few gradient steps on it.
 returns = []
-for iteration in range(ITERATIONS):
+for _ in range(ITERATIONS):
     with torch.no_grad():
         batch = base.rollout(STEPS, explore).reshape(-1)
     for key in ("done", "terminated"):  # the root's done keys, one per UAV
