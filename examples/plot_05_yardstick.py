@@ -23,7 +23,7 @@ import torch
 from tensordict.nn import TensorDictModule
 
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-from uavrl.envs import ACTION_NAMES, make_config
+from uavrl.envs import ACTION_NAMES, exact, make_config
 from uavrl.evaluation import evaluate
 
 NUM_STARTS = 64  # the evaluation's default is 200 starts
@@ -60,6 +60,23 @@ for name, metrics in scores.items():
         f"{name:>24}: return ratio {metrics['eval/return_ratio']:.3f}, "
         f"reach 0.999 U* {metrics['eval/reach_999']:.2f}, final U/U* {metrics['eval/optimality']:.3f}"
     )
+
+# %%
+# The exact solver itself
+# -----------------------
+# ``evaluate`` reads its references from :mod:`uavrl.envs.exact`, which you can query directly: every
+# configuration of 2 interchangeable UAVs on 6x6 (cells and tasks), its utility, the fewest steps from it to ``U*``
+# (breadth-first search) and the best discounted return from it (value iteration).
+space = exact.ConfigurationSpace(cfg.grid, cfg.num_uavs)
+utility = space.utility(cfg, *exact.fixed_layout_tables(cfg))  # [1, K]
+at_optimum = utility >= utility.max() * (1 - 1e-9)
+fewest = exact.min_steps(space, at_optimum)
+best_return = exact.optimal_values(space, utility, gamma=0.9)
+print(
+    f"{utility.shape[1]:,} configurations, {int(at_optimum.sum())} of them optimal; fewest steps to U*: "
+    f"{fewest.float().mean():.2f} on average, {int(fewest.max())} at most; "
+    f"best return {best_return.mean():.3f} on average"
+)
 
 # %%
 # What the numbers say
