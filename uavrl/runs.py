@@ -72,7 +72,7 @@ def share_of_starts(fraction: float) -> str:
 
 
 def yardstick_line(cfg: DictConfig, result: dict) -> str:
-    """Against exact optimal control (README, The yardstick): return ratio and steps to 0.999 U*."""
+    """Against exact optimal control (docs/yardstick.md): return ratio and steps to 0.999 U*."""
     parts = []
     if "eval/return_ratio" in result:
         parts.append(
