@@ -9,14 +9,18 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def collector_blocks() -> list[tuple[str, str]]:
-    """``(file, code)`` of every Python block of README.md and docs/*.md that builds TorchRL's Collector."""
+    """``(file, code)`` of each Python block of README.md and docs/*.md that builds TorchRL's Collector, joined to the
+    blocks of its file before it (a page's blocks share one namespace, as tests/test_doc_blocks.py runs them)."""
     files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-    return [
-        (path.name, code)
-        for path in files
-        for code in re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), flags=re.S)
-        if "from torchrl.collectors import Collector" in code
-    ]
+    snippets = []
+    for path in files:
+        blocks = re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), flags=re.S)
+        snippets += [
+            (path.name, "\n".join(blocks[: i + 1]))
+            for i, code in enumerate(blocks)
+            if "from torchrl.collectors import Collector" in code
+        ]
+    return snippets
 
 
 def test_the_collector_snippet_runs_without_a_warning(tmp_path, monkeypatch, capsys):
