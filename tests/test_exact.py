@@ -146,14 +146,18 @@ def test_bfs_distances_by_hand():
 
 BOUND_CASES = [
     ((6, 6), 2, {}),
-    pytest.param((6, 6), 3, {}, marks=pytest.mark.slow),  # ~0.95 GB: the fast suite stays within 1 GB
+    ((6, 6), 3, {}),
     ((4, 4), 3, {"preset": "reference_code"}),
     ((5, 4), 3, {"layout": "random"}),
     ((3, 3), 4, {}),
 ]
 
 
-@pytest.mark.parametrize("grid,N,options", BOUND_CASES)
+# the exact minimum over every configuration takes 0.6-0.95 GB from 3 UAVs on: those cases run with the slow tests,
+# so that each process of the fast suite stays under 1 GB
+@pytest.mark.parametrize(
+    "grid,N,options", [case if case[1] < 3 else pytest.param(*case, marks=pytest.mark.slow) for case in BOUND_CASES]
+)
 def test_bounds_never_exceed_the_exact_minimum(grid, N, options):
     B = 12 if options.get("layout") == "random" else 40  # random layouts: one solve per world
     env = UAVSpectrumEnv(batch_size=B, grid=grid, num_uavs=N, seed=11, **options)
