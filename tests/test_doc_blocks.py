@@ -14,7 +14,8 @@ Per Markdown file, in file order and in a fresh temporary directory (the working
 
 The fast test of each file parses its blocks, compiles its Python and composes every ``python -m uavrl.X`` line's
 settings with the smoke overrides, checking them as the commands do before torch is imported (``uavrl.settings``):
-a mistyped setting in the docs fails here in a second. Running the blocks is ``slow`` where it takes more than ~20 s.
+a mistyped setting in the docs fails here in a second. Running the blocks is ``slow`` (CI's docs leg runs it with every
+extra installed; in-process, a page's snippets hold up to ~0.8 GB, over the fast suite's memory).
 
 ``python tests/test_doc_blocks.py smoke ARGS`` prints the overrides appended to ``python ARGS`` (one a line): the
 bash blocks' ``python`` calls it.
@@ -232,29 +233,6 @@ def markdown_files() -> list[Path]:
     return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
-def estimated_seconds(blocks: list[Block]) -> float:
-    """A rough cost of running a file's blocks: a ``python`` command imports torch (several seconds each on a 2-core
-    machine), so does the first Python block (the rest share its imports), a plain shell line costs little."""
-    seconds, imported = 0.0, False
-    for block in blocks:
-        if block.skip_reason is not None or block.language not in {"python", "bash"}:
-            continue
-        if block.language == "python":  # in-process: torch is imported once per test session
-            seconds += 2 if imported else 10
-            imported = True
-        else:
-            seconds += sum(10 if re.search(r"\bpython3?\b", line) else 1 for line in bash_lines(block.text))
-    return seconds
-
-
-def file_params(slow_over_s: float = 20.0):
-    params = []
-    for path in markdown_files():
-        slow = estimated_seconds(blocks_of(path)) > slow_over_s
-        params.append(pytest.param(path, id=str(path.relative_to(ROOT)), marks=[pytest.mark.slow] if slow else []))
-    return params
-
-
 def bash_prelude() -> str:
     """``python`` of the bash blocks: this interpreter, with the smoke overrides appended to ``-m uavrl.X``."""
     return f"""
@@ -321,7 +299,8 @@ def test_blocks_are_well_formed(path: Path):
     assert not problems, "\n".join(problems)
 
 
-@pytest.mark.parametrize("path", file_params())
+@pytest.mark.slow
+@pytest.mark.parametrize("path", markdown_files(), ids=lambda path: str(path.relative_to(ROOT)))
 def test_blocks_run(path: Path, tmp_path: Path, monkeypatch):
     """Every block of the file runs, in order, in a fresh directory."""
     monkeypatch.chdir(tmp_path)

@@ -5,6 +5,8 @@ import re
 import warnings
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -23,6 +25,7 @@ def collector_blocks() -> list[tuple[str, str]]:
     return snippets
 
 
+@pytest.mark.slow  # in CI's docs leg: the page's snippets in-process hold ~0.8 GB, over the fast suite's memory
 def test_the_collector_snippet_runs_without_a_warning(tmp_path, monkeypatch, capsys):
     blocks = collector_blocks()
     assert blocks, "no Collector snippet found in README.md or docs/*.md"
