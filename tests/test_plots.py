@@ -1,5 +1,9 @@
 """The battery-over-time figure of a mission (uavrl/plots.py) and ``python -m uavrl.render`` writing it."""
 
+import os
+import subprocess
+import sys
+
 import imageio.v3 as iio
 import numpy as np
 import pytest
@@ -123,3 +127,28 @@ def test_the_render_command_writes_the_battery_figure_of_the_runs_mission(tmp_pa
     label = "oracle (greedy)"
     again = mission_figure(OraclePolicy(cfg), cfg, tmp_path / "again.png", horizon=30, seed=seed, label=label)
     assert (run_dir / "battery.png").read_bytes() == again.read_bytes()
+
+
+@pytest.mark.parametrize("chosen", ["pyplot first", "MPLBACKEND"])
+def test_pyplot_keeps_the_backend_the_caller_chose(chosen):
+    """A user's own backend survives uavrl's figures; a command alone (no choice made) draws without a display."""
+    script = (
+        "import matplotlib\n"
+        + ("matplotlib.use('svg'); import matplotlib.pyplot\n" if chosen == "pyplot first" else "")
+        + "from uavrl.plots import pyplot\n"
+        "pyplot()\n"
+        "print(matplotlib.get_backend())\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
+    if chosen == "MPLBACKEND":
+        env["MPLBACKEND"] = "svg"
+    chosen_backend = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    assert chosen_backend.stdout.strip() == "svg"
+    alone = subprocess.run(
+        [sys.executable, "-c", "from uavrl.plots import pyplot; print(pyplot().get_backend())"],
+        env={k: v for k, v in os.environ.items() if k != "MPLBACKEND"},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert alone.stdout.strip().lower() == "agg"

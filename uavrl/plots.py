@@ -24,6 +24,8 @@ Example:
 from __future__ import annotations
 
 import io
+import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,10 +43,12 @@ EVENT_STYLES = {
 
 
 def pyplot():
-    """matplotlib's pyplot without a display."""
+    """matplotlib's pyplot, without a display unless the caller chose a backend: a script or notebook that imported
+    pyplot first, or set ``MPLBACKEND``, keeps its own (so ``plt.show()`` still shows our figures there)."""
     import matplotlib
 
-    matplotlib.use("Agg")
+    if "matplotlib.pyplot" not in sys.modules and not os.environ.get("MPLBACKEND"):
+        matplotlib.use("Agg")  # the commands only write PNGs: no window, and no display needed
     import matplotlib.pyplot as plt
 
     return plt
