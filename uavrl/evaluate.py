@@ -34,7 +34,7 @@ from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
 from uavrl.io import quoted, save_json
 from uavrl.runs import (
-    BASELINE_AGENTS,
+    agent_words,
     eval_settings,
     is_size_free,
     model_words,
@@ -167,14 +167,9 @@ def summary(cfg: DictConfig, saved: DictConfig, evaluated: DictConfig, metrics: 
     """An evaluation in words: what was evaluated on which model (a size-free network: the teams it trained on, and
     ``zero-shot`` where the team evaluated is not one of them), the headline metrics, where they went."""
     run, model = model_config(saved), model_config(evaluated)
-    name = saved.agent.name
-    if name in BASELINE_AGENTS:
-        agent = f"the {name} baseline (no training)"
-    elif is_size_free(saved):
-        agent = "dqn with a size-free network (agent.network=set)"
-    else:
-        agent = name
-    lines = [f"evaluated {agent} of the {saved.env.name} run {quoted(cfg.checkpoint)} on: {model_words(model)}"]
+    lines = [
+        f"evaluated {agent_words(saved)} of the {saved.env.name} run {quoted(cfg.checkpoint)} on: {model_words(model)}"
+    ]
     if is_size_free(saved):
         unseen = (model.num_uavs, tuple(model.grid), model.layout) not in trained_teams(saved)
         evaluated_team = team_words(model.num_uavs, model.grid) + f" in layout {model.layout!r}"

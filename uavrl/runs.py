@@ -109,6 +109,20 @@ def agent_label(cfg: DictConfig) -> str:
     return f"{cfg.agent.name}-set" if is_size_free(cfg) else cfg.agent.name
 
 
+def agent_words(cfg: DictConfig) -> str:
+    """The run's agent as its summaries name it: a baseline says it does not train, a size-free network says so.
+
+    Example:
+        >>> agent_words(OmegaConf.create({"agent": {"name": "oracle"}}))
+        'the oracle baseline (no training)'
+    """
+    if cfg.agent.name in BASELINE_AGENTS:
+        return f"the {cfg.agent.name} baseline (no training)"
+    if is_size_free(cfg):
+        return "dqn with a size-free network (agent.network=set)"
+    return cfg.agent.name
+
+
 def team_words(num_uavs: int, grid) -> str:
     """``N = 6 on 10x10``."""
     return f"N = {num_uavs} on {grid[0]}x{grid[1]}"

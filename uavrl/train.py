@@ -42,6 +42,7 @@ from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argum
 from uavrl.runs import (
     BASELINE_AGENTS,
     agent_label,
+    agent_words,
     claim_run_dir,
     eval_settings,
     flat_hparams,
@@ -380,12 +381,10 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
     network: the teams it trained on), what the numbers mean, where the run is, how to look at it."""
     seconds = f"{result['total_seconds']:.1f} s"
     if cfg.agent.name in BASELINE_AGENTS:
-        first = f"evaluated the {cfg.agent.name} baseline (no training) on {cfg.env.name} ({model_words(env_cfg)})"
-        lines = [f"{first} in {seconds}"]
+        lines = [f"evaluated {agent_words(cfg)} on {cfg.env.name} ({model_words(env_cfg)}) in {seconds}"]
     elif is_size_free(cfg):
         lines = [
-            f"trained dqn with a size-free network (agent.network=set) on {cfg.env.name}: {result['iterations']} "
-            f"iterations in {seconds}",
+            f"trained {agent_words(cfg)} on {cfg.env.name}: {result['iterations']} iterations in {seconds}",
             f"size-free: trained on {size_free_teams(cfg, env_cfg)}; its own evaluation: {model_words(env_cfg)}",
         ]
     else:
