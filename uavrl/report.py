@@ -47,7 +47,7 @@ from uavrl.envs.limits import default_horizon
 from uavrl.io import quoted, save_text
 from uavrl.plots import pyplot, save_figure
 from uavrl.rules import Rule, rules_of, shown, whole
-from uavrl.runs import flat_settings
+from uavrl.runs import BASELINE_AGENTS, flat_settings
 from uavrl.schema import RunSchema
 
 # the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
@@ -65,7 +65,6 @@ METRICS = {
     "eval/energy_per_bit": "energy per bit",
     "train_seconds": "training s",
 }
-BASELINES = ("random", "oracle", "planner")
 CONFIDENCE = 0.95
 FEW_SEEDS = 3  # cells with fewer seeds are flagged
 IQM_SEEDS = 5  # the interquartile mean is shown from this many seeds on
@@ -139,7 +138,7 @@ class Cell:
 
     @property
     def is_baseline(self) -> bool:
-        return self.runs[0].agent in BASELINES
+        return self.runs[0].agent in BASELINE_AGENTS
 
     def values(self, metric: str) -> list[float]:
         return [run.metrics[metric] for run in self.runs if metric in run.metrics]
@@ -546,8 +545,9 @@ def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path |
     )
     what = "mean over seeds" + (" with its 95% bootstrap band" if banded else "")
     baselines = "; lines: the baselines' greedy evaluation" if lines else ""
-    ax.set_title(f"{label}: utility per step of the training episodes (exploration included),\n{what}{baselines}",
-                 fontsize=9)  # fmt: skip
+    ax.set_title(
+        f"{label}: utility per step of the training episodes (exploration included),\n{what}{baselines}", fontsize=9
+    )
     return save_figure(figure, out / f"{file_stem(label)}_curves.png")
 
 
