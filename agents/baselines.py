@@ -50,6 +50,15 @@ class RandomPolicy(TensorDictModuleBase):
 
     It acts in any environment; ``RandomAgent.policies`` wraps it in a
     :class:`~uavrl.agents.env_check.CheckedPolicy`, as every policy of a run.
+
+    Args:
+        seed: seeds its generator.
+
+    Example:
+        >>> from uavrl.envs import UAVSpectrumEnv
+        >>> env = UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_uavs=2)
+        >>> env.rollout(5, RandomPolicy(seed=0))["agents", "action"].shape
+        torch.Size([2, 5, 2])
     """
 
     in_keys = [("agents", "action_mask")]
@@ -202,7 +211,14 @@ class OraclePolicy(TensorDictModuleBase):
 
 
 class BaselineAgent(Agent):
-    """An agent with nothing to learn (contract: :class:`~uavrl.agents.base.Agent`): no iteration, no checkpoint."""
+    """An agent with nothing to learn (contract: :class:`~uavrl.agents.base.Agent`): no iteration, no checkpoint.
+
+    Args:
+        env_cfg: the run's :class:`~uavrl.envs.ModelConfig`, the environments its policy acts in.
+        cfg: the full Hydra config (a baseline has no settings of its own).
+        device: unused: a baseline's policy acts on the device of the tensordict it gets.
+        seed: seeds the random baseline's generator.
+    """
 
     num_iterations = 0
     env_steps = 0

@@ -58,7 +58,13 @@ MAX_CYCLE_UAVS = 7  # B is searched over 4^n neighbour combinations: 16,384 at 7
 
 
 class PlannerPolicy(OraclePolicy):
-    """The energy-aware planner's policy (module doc); under ``energy="none"`` it is the oracle."""
+    """The energy-aware planner's policy (module doc); under ``energy="none"`` it is the oracle.
+
+    Args:
+        cfg: the model (:func:`~uavrl.envs.make_config`) it plans for, its energy model among it.
+        env: an environment to check up front (as :meth:`~uavrl.agents.baselines.OraclePolicy.bind_env`); None:
+            none.
+    """
 
     def __init__(self, cfg: ModelConfig, env=None):
         super().__init__(cfg, env)

@@ -40,6 +40,12 @@ class DQNAgent(Agent):
 
     ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length;
     ``agent.network=set`` builds the size-free :class:`~.multisize.SetDQNAgent` instead.
+
+    Args:
+        env_cfg: the run's :class:`~uavrl.envs.ModelConfig` (its ``max_steps`` the episode length).
+        cfg: the full Hydra config; the agent reads ``cfg.agent``.
+        device: the torch device of the networks, the replay buffer and the training worlds.
+        seed: seeds the networks' initial weights and every iteration's worlds.
     """
 
     def __new__(cls, env_cfg: ModelConfig, cfg, device, seed: int):

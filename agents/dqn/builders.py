@@ -37,7 +37,12 @@ class Policies:
 
 
 def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
-    """:class:`TeamQNet` as a module writing ``("agents", "action_value")`` (factored) or ``"joint_action_value"``."""
+    """:class:`TeamQNet` as a module writing ``("agents", "action_value")`` (factored) or ``"joint_action_value"``.
+
+    Args:
+        env: the training environment (its observation keys and sizes).
+        a: the agent's settings ``cfg.agent`` (``head``, ``hidden``, ``depth``).
+    """
     net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
     return TensorDictModule(net, in_keys=list(Q_INPUTS), out_keys=[_values_key(a)])
 
@@ -48,7 +53,13 @@ def _values_key(a):
 
 def exploration_schedule(a, frames: int, device) -> dict:
     """``EGreedyModule`` keywords: epsilon from ``agent.eps_start`` to ``agent.eps_end`` over ``agent.eps_fraction``
-    of the run's ``frames``."""
+    of the run's ``frames``.
+
+    Args:
+        a: the agent's settings ``cfg.agent``.
+        frames: the team steps of the whole run (worlds times steps times iterations).
+        device: the torch device of epsilon.
+    """
     steps = max(1, int(float(a.eps_fraction) * frames))
     return dict(eps_init=float(a.eps_start), eps_end=float(a.eps_end), annealing_num_steps=steps, device=device)
 
@@ -93,7 +104,14 @@ class TargetUpdate(SoftUpdate):
 
 
 def build_policies(env: UAVSpectrumEnv, a, q: TensorDictModule, eps: dict) -> Policies:
-    """The greedy and the exploring policy of ``agent.head`` around the Q network ``q``."""
+    """The greedy and the exploring policy of ``agent.head`` around the Q network ``q``.
+
+    Args:
+        env: the training environment.
+        a: the agent's settings ``cfg.agent`` (``head``: ``factored`` or ``joint``).
+        q: the Q network (:func:`build_q_network`).
+        eps: the exploration's keywords (:func:`exploration_schedule`).
+    """
     return (_factored_policies if a.head == "factored" else _joint_policies)(env, q, eps)
 
 
@@ -143,7 +161,12 @@ def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Poli
 
 
 def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
-    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``)."""
+    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``).
+
+    Args:
+        env: the training environment (``N`` and, for QMIX, the size of ``state``).
+        a: the agent's settings ``cfg.agent`` (``mixer``, ``mixing_embed_dim``).
+    """
     if a.mixer == "vdn":
         return TensorDictModule(
             VDNMixer(env.num_uavs, env.device),
@@ -158,7 +181,13 @@ def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
 
 
 def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
-    """Double-DQN loss with target networks: mixed per-UAV values (factored) or the joint head's (joint)."""
+    """Double-DQN loss with target networks: mixed per-UAV values (factored) or the joint head's (joint).
+
+    Args:
+        env: the training environment.
+        a: the agent's settings ``cfg.agent`` (``head``, ``mixer``, ``gamma``).
+        policies: the policies of :func:`build_policies`, whose value network the loss trains.
+    """
     if a.head == "factored":
         return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), policies.action_spec, float(a.gamma))
     loss = DQNLoss(
@@ -185,14 +214,25 @@ class ZeroedStorage(LazyTensorStorage):
 
 def build_replay_buffer(a, transitions: CompactTransitions, batch_size: int | None = None) -> TensorDictReplayBuffer:
     """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), uniform samples of
-    ``batch_size`` (``agent.batch_size`` unless given)."""
+    ``batch_size`` (``agent.batch_size`` unless given).
+
+    Args:
+        a: the agent's settings ``cfg.agent`` (``buffer_size``, ``batch_size``).
+        transitions: the transform that compacts and rebuilds the transitions.
+        batch_size: the transitions per sample; None: ``agent.batch_size``.
+    """
     storage = ZeroedStorage(int(a.buffer_size), device=transitions.world.device)
     batch_size = int(a.batch_size) if batch_size is None else batch_size
     return TensorDictReplayBuffer(storage=storage, batch_size=batch_size, transform=transitions)
 
 
 def build_collector(env: UAVSpectrumEnv, policy: TensorDictSequential) -> Collector:
-    """One episode of every world of ``env`` per batch."""
+    """One episode of every world of ``env`` per batch.
+
+    Args:
+        env: the training environment; every batch is ``[worlds, max_steps]``.
+        policy: the exploring policy that acts.
+    """
     return make_collector(
         env, policy, frames_per_batch=env.num_worlds * env.cfg.max_steps, total_frames=-1, device=env.device
     )

@@ -21,6 +21,13 @@ class DoubleQMixerLoss(QMixerLoss):
     ``y = r + gamma (1 - terminated) Mix_target(Q_target(s', a'), s')`` where the
     online network's :class:`ValidGreedy` picks ``a'``; the loss is the Huber
     distance to ``Mix(Q(s, a), s)``.
+
+    Args:
+        greedy: the value network followed by its :class:`ValidGreedy` (``Policies.value_network`` of
+            :func:`build_policies`); the loss keeps a target copy of its parameters.
+        mixer: the module that mixes the UAVs' chosen values into the team value (:func:`build_mixer`).
+        action_spec: the per-UAV action spec ``[N]`` (``Policies.action_spec``).
+        gamma: the discount of the targets.
     """
 
     def __init__(self, greedy: TensorDictSequential, mixer: TensorDictModule, action_spec, gamma: float):

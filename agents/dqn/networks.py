@@ -122,6 +122,12 @@ class ValidGreedy(nn.Module):
     two relays of N = 2 both turning to sensing) can land in a worse
     configuration than either alone, and flip back and forth forever.
 
+    Args:
+        neighbours: the grid's neighbour table ``[C, 4]`` (``UAVSpectrumEnv.neighbours``): the cell each move
+            reaches, -1 off the grid.
+        width: the grid's ``L1``, to turn positions ``(x, y)`` into cells ``x + L1 y``.
+        num_actions: the actions of a UAV (6; 7 with a ``return`` action).
+
     Example:
         >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
         >>> allowed = torch.ones(1, 2, 6, dtype=torch.bool)
@@ -190,7 +196,13 @@ class ValidGreedy(nn.Module):
 
 
 class JointActionMask(nn.Module):
-    """``[*, 6^N]`` valid joint actions at positions ``[*, N, 2]`` (the environment's rule)."""
+    """``[*, 6^N]`` valid joint actions at positions ``[*, N, 2]`` (the environment's rule).
+
+    Args:
+        neighbours: the grid's neighbour table ``[C, 4]`` (``UAVSpectrumEnv.neighbours``).
+        width: the grid's ``L1``, to turn positions ``(x, y)`` into cells ``x + L1 y``.
+        num_uavs: ``N``.
+    """
 
     def __init__(self, neighbours: torch.Tensor, width: int, num_uavs: int):
         super().__init__()
@@ -202,7 +214,12 @@ class JointActionMask(nn.Module):
 
 
 class DecodeJointAction(nn.Module):
-    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i 6^i``."""
+    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i 6^i``.
+
+    Args:
+        num_uavs: ``N``.
+        device: the torch device of its decoding table ``[6^N, N]``.
+    """
 
     def __init__(self, num_uavs: int, device):
         super().__init__()

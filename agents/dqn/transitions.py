@@ -52,6 +52,11 @@ class CompactTransitions(Transform):
     model ``energy`` and ``("next", "energy")`` ``[N, 2]`` float32 (:meth:`World.energy_features`), with random
     layouts ``nodes`` ``[4, 3]`` float64 (a step keeps its layout), the actions (``action`` ``[N]`` int8;
     ``joint_action`` int16 for the joint head) and ``reward``, ``done``, ``terminated`` of ``"next"``.
+
+    Args:
+        world: the training env's :class:`~uavrl.envs.World`.
+        action_keys: the action entries a transition stores (``Policies.action_keys``: ``("agents", "action")``,
+            and ``"joint_action"`` for the joint head).
     """
 
     def __init__(self, world: World, action_keys: list):

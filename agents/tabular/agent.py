@@ -21,6 +21,14 @@ class TabularAgent(Agent):
     ``agent.method=q_learning`` (the paper's learner): one iteration is one
     episode of ``agent.runs`` runs of ``env.max_steps`` steps.
     ``agent.method=value_iteration``: one iteration solves :func:`exact_q_table`.
+
+    Args:
+        env_cfg: the run's :class:`~uavrl.envs.ModelConfig` (its ``max_steps`` the episode length); a model with an
+            energy model is refused.
+        cfg: the full Hydra config; the agent reads ``cfg.agent`` (``configs/agent/tabular.yaml``).
+        device: the torch device of the tables and the learner's worlds.
+        seed: seeds the learner's episode starts and random numbers (run ``r`` plays worlds from ``seed + r``);
+            value iteration draws nothing.
     """
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):

@@ -23,6 +23,11 @@ class TabularPolicy(TensorDictModuleBase):
     Ties are broken uniformly at random (docs/model.md) from the policy's own
     generator seeded ``seed``, so a rollout is reproducible.
 
+    Args:
+        q: the Q table ``[S, 6^N]``, one row per tabular state (``state_index``), one column per joint action.
+        cfg: the :class:`~uavrl.envs.ModelConfig` the table was made for.
+        seed: seeds the tie-breaking generator.
+
     Example:
         >>> from uavrl.envs import UAVSpectrumEnv
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(3, 3), num_uavs=2)

@@ -152,6 +152,16 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     only to come from the reset (QMDP).  Its greedy policy is the best such a
     table can express, not an optimal policy.  Invalid joint actions hold 0, as
     in a learned table (policies mask them).
+
+    Args:
+        cfg: the model (:func:`~uavrl.envs.make_config`) to solve: the delta reward, a fixed layout and
+            deterministic channels (others are refused).
+        gamma: the discount, in (0, 1].
+        device: the torch device the graph is solved on.
+        memory_budget: the bytes the solve may take; a larger model is refused with one line.
+
+    Returns:
+        ``Q*`` ``[S, 6^N]`` float64 on ``device``.
     """
     if cfg.reward != "delta":
         raise ValueError(
