@@ -83,6 +83,70 @@ class ModelConfig:
     reaches the reserve the flight there needs (or, given ``recharge_steps``, when the controller sends it home), and
     either stays out or recharges there for ``recharge_steps`` steps; ``num_spares`` more UAVs wait charged at the base
     to keep ``num_uavs`` in service; ``battery_wh``, ``slot_s`` and ``circuit_power_w`` are ``rotary_wing``'s.
+    Build one with :func:`make_config` (a preset plus overrides); every option is checked here, a bad one raises
+    :class:`InvalidOption` in one line.
+
+    Args:
+        grid: ``(L1, L2)`` cells.
+        num_uavs: ``N``, the UAVs in service, 1 to ``L1 L2``.
+        max_steps: the episode length ``T`` in steps.
+        layout: where PT, PR, S and E are: ``"line"`` (on a line through the grid's middle), ``"random"`` (drawn
+            per world at each reset) or ``"reference_code"`` (the authors' code's fixed positions).
+        cell_size: a cell's side in m.
+        altitude: the UAVs' (and S's and E's) height in cells; None: ``L1`` (or ``altitude_m``).
+        altitude_m: the same height in m; give at most one of the two.
+        channel: the mean gain of a link: ``"paper"``, ``"reference_code"`` (power laws), ``"al_hourani"``,
+            ``"tr36777_uma"``, ``"tr36777_umi"`` or ``"tr36777_rma"`` (physical models).
+        alpha: the power law's path-loss exponent; None: the channel's own (2 for ``paper``, 4 for
+            ``reference_code``).
+        g0: the power law's gain at unit distance; None: the channel's own (1 or 2).
+        fading: ``"none"``, ``"rayleigh"``, ``"los_nlos"`` or ``"rician"``: each link's power gain drawn anew each step.
+        rician_k_db: the K-factor of ``fading="rician"`` in dB.
+        p_pt: PT's transmit power in W (power laws).
+        p_s: S's transmit power in W (power laws).
+        p_u: a UAV's transmit power in W (power laws).
+        noise: the noise power in W (power laws).
+        environment: the Al-Hourani environment of ``channel="al_hourani"``: ``"suburban"``, ``"urban"``,
+            ``"dense_urban"`` or ``"highrise"``.
+        carrier_ghz: the carrier frequency in GHz (physical models).
+        bandwidth_mhz: the bandwidth in MHz, which sets the noise power (physical models).
+        noise_figure_db: the receivers' noise figure in dB (physical models).
+        p_pt_dbm: PT's transmit power in dBm (physical models).
+        p_s_dbm: S's transmit power in dBm (physical models).
+        p_u_dbm: a UAV's transmit power in dBm (physical models).
+        direct_links: add the direct links PT to PR and S to E inside the rates' logarithms.
+        lease_rule: the emergency network gets no rate unless some UAV relays for the primary one (docs/model.md,
+            The picture).
+        rate_model: ``"af"`` or ``"reference_code"`` (above).
+        reference_gain: the power products' replacement in ``rate_model="reference_code"``.
+        reward: ``"delta"`` (the paper's), ``"best_so_far"`` (the authors' code's), ``"log_gap"`` or ``"delivered"``
+            (docs/model.md, Rewards and episodes).
+        beta1: the weight of R_PU in the reward.
+        beta2: the weight of R_SE in the reward.
+        init_tasks: the UAVs' tasks at a reset: ``"random"``, ``"sensing"`` or ``"relaying"`` (all alike).
+        reset_positions: ``"random"`` (distinct random cells at each reset) or ``"keep"`` (continue from where the
+            last episode ended).
+        state_includes_tasks: the tabular state also holds the UAVs' tasks (the paper's holds their cells only).
+        energy: ``"none"``, ``"follow_up"`` or ``"rotary_wing"``: the UAVs' batteries and what a step costs.
+        base: the base's cell ``(x, y)``, on the grid or off it; an energy model needs one.
+        battery_wh: a full battery in Wh.
+        battery_init: the batteries at a reset: ``"full"``, or ``"uniform"`` (each drawn uniformly from 80% to 100%
+            of full).
+        recharge_steps: the steps a UAV recharges at the base; None: a UAV that left service stays out.
+        num_spares: UAVs beyond ``num_uavs`` waiting charged at the base (needs ``recharge_steps``).
+        slot_s: a step's duration in s.
+        circuit_power_w: a serving UAV's radio circuit power in W.
+        preset: the preset the options came from (:func:`make_config` sets it; one-line errors name its values);
+            not compared between configurations.
+
+    Example:
+        >>> cfg = make_config("paper", grid=(4, 4), num_uavs=3)
+        >>> cfg.grid, cfg.num_uavs, cfg.layout
+        ((4, 4), 3, 'line')
+        >>> cfg.replace(num_uavs=20)
+        Traceback (most recent call last):
+        ...
+        uavrl.envs.config.InvalidOption: num_uavs=20 is invalid: a 4x4 grid holds 1 to 16 UAVs (one per cell)
     """
 
     grid: tuple[int, int] = (6, 6)

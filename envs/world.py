@@ -156,6 +156,23 @@ class World:
     ``diagnostics=False`` they leave out those of :data:`DIAGNOSTICS` (the
     step's rates, counts and the tabular state index), which nothing that
     acts or learns from the observation needs.
+
+    Args:
+        cfg: the model (:func:`~uavrl.envs.make_config`).
+        batch_size: the number of independent worlds ``B``.
+        device: the torch device of every tensor.
+        seed: seed of world 0.
+        diagnostics: also return the outputs of :data:`DIAGNOSTICS`.
+        memory_budget: the bytes the worlds may take; more is refused with one line before anything is allocated.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> world = World(make_config("paper", grid=(4, 4), num_uavs=2), batch_size=3, seed=0)
+        >>> world.reset()["observation"].shape
+        torch.Size([3, 2, 16])
+        >>> outputs, reward, done = world.step(torch.full((3, 2), 4))  # every UAV switches to sensing
+        >>> reward.shape
+        torch.Size([3])
     """
 
     def __init__(

@@ -72,14 +72,29 @@ LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 def check_settings(gamma, horizon, num_starts) -> None:
     """One-line errors for evaluation settings by their rules (:class:`~uavrl.schema.EvalSchema`), named as on the
-    command line."""
+    command line.
+
+    Args:
+        gamma: the yardstick's discount (``eval.gamma``).
+        horizon: steps per rollout, or None (``eval.horizon``).
+        num_starts: fixed starts of the evaluation (``eval.num_starts``).
+    """
     for name, value in (("gamma", gamma), ("horizon", horizon), ("num_starts", num_starts)):
         refuse(f"eval.{name}", value, rule_of(EvalSchema, name))
 
 
 def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
     """A one-line refusal, before anything is allocated, when the evaluation would need more than ``memory_budget``
-    bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line."""
+    bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line.
+
+    Args:
+        cfg: the evaluated model.
+        num_starts: the evaluation's starts (worlds).
+        horizon: its steps per rollout.
+        tables: how many Q tables the tabular agent plays greedily, each from every start (0: a TorchRL policy's
+            rollout).
+        memory_budget: the bytes it may take.
+    """
     need = evaluation_bytes(cfg, num_starts, horizon, tables)
     if need > memory_budget:
         name, value = ("eval.horizon", horizon) if horizon > num_starts else ("eval.num_starts", num_starts)
@@ -98,6 +113,20 @@ def episode_metrics(r_pu, r_se, task_switches, moves, u_star, utility=None) -> d
     task switches and moves (Fig. 4), and the number of steps until U first
     reaches 90% of U* (Fig. 5; T if never).  ``utility`` ``[W, T]``, the
     mean-channel utility, decides that under fading (default: R_PU + R_SE).
+
+    Args:
+        r_pu: each step's primary rate R_PU ``[W, T]`` (bit/s/Hz).
+        r_se: each step's emergency rate R_SE ``[W, T]`` (bit/s/Hz).
+        task_switches: each step's task switches ``[W, T]``.
+        moves: each step's moves ``[W, T]``.
+        u_star: each episode's best utility U* ``[W]``.
+        utility: the mean-channel utility ``[W, T]``, or None.
+
+    Example:
+        >>> rates = torch.tensor([[0.5, 1.0, 1.0]])
+        >>> metrics = episode_metrics(rates, rates, torch.zeros(1, 3), torch.ones(1, 3), torch.tensor([2.0]))
+        >>> metrics["sum_utility"], metrics["moves"], metrics["steps_to_90"]
+        (tensor([5.], dtype=torch.float64), tensor([3.], dtype=torch.float64), tensor([2.], dtype=torch.float64))
     """
     sum_utility = (r_pu + r_se).double()
     reach_utility = sum_utility if utility is None else utility.double()
@@ -156,6 +185,17 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
     else lower bounds (:mod:`uavrl.envs.solvers.bounds`): the relaxation for every
     level, and for the optimum also the bottleneck assignment to every
     optimal configuration.
+
+    Args:
+        world: the worlds of the starts, just reset.
+        start: the worlds' outputs at the start (:meth:`~uavrl.envs.World.reset`: ``positions``, ``tasks``).
+        u_star: each world's best utility U* ``[B]``.
+        horizon: the evaluation's steps per rollout ``H``.
+        gamma: the discount of the best return.
+
+    Returns:
+        ``best_return`` ``[B]`` (or None), ``min_steps`` ``[B, 3]`` (the fewest steps to 0.99 U*, 0.999 U* and U*)
+        and ``exact`` (whether they are exact or lower bounds).
     """
     if world.energy is not None:  # the exact return ignores energy: a mission is measured by its delivered data
         return {**_level_references(world, start, u_star, horizon, gamma, False), **mission_references(world, horizon)}
@@ -183,7 +223,12 @@ def mission_optimum(world: World, horizon: int) -> torch.Tensor | None:
     """``[B]`` the exact most data (bit/Hz) of each start's mission
     (:func:`uavrl.envs.solvers.mission_exact.optimal_mission`) where it fits: 1 or 2 UAVs, deterministic channels, no
     recharging, and the solver's estimate within :data:`~uavrl.envs.limits.EXACT_SOLVER_BUDGET` (at most ~20 s of CPU:
-    4x4 with 2 UAVs and missions up to ~38 steps); ``None`` elsewhere."""
+    4x4 with 2 UAVs and missions up to ~38 steps); ``None`` elsewhere.
+
+    Args:
+        world: the worlds of the starts under an energy model, just reset (their batteries the missions' own).
+        horizon: the mission's steps ``H``.
+    """
     try:
         mission_exact.check_world(world)
         return mission_exact.optimal_mission(world, horizon, memory_budget=EXACT_SOLVER_BUDGET).value
@@ -233,6 +278,13 @@ def yardstick_metrics(
 
     ``full_team`` ``[B]`` (an energy model): the last column at which every UAV served.  The levels count only up to
     it, the end is read there, and the return is left out (its exact best ignores energy).
+
+    Args:
+        utility: the mean-channel utility ``[B, H + 1]`` at the start and after each step (bit/s/Hz).
+        u_star: each start's best utility U* ``[B]``.
+        references: the start references of :func:`start_references`.
+        gamma: the discount of ``eval/return`` and ``eval/return_ratio``.
+        full_team: the last column at which every UAV served ``[B]``, or None (no energy model).
     """
     H = utility.shape[1] - 1
     if full_team is None:
@@ -364,6 +416,15 @@ def evaluation_starts(
 
     Returns the world of the ``num_starts`` starts (reset), its outputs at the
     start, ``U*`` ``[B]``, the start references and the horizon.
+
+    Args:
+        cfg: the evaluated model.
+        num_starts: how many fixed starts (worlds).
+        horizon: steps per rollout; None: the evaluation's default (as :func:`evaluate`).
+        seed: seeds the starts.
+        device: the torch device of the world.
+        gamma: the yardstick's discount.
+        memory_budget: the bytes the world may take; more is refused.
     """
     check_settings(gamma, horizon, num_starts)
     horizon = horizon or evaluation_horizon(cfg)
@@ -384,6 +445,15 @@ def greedy_metrics(
     energy model, also :func:`mission_metrics` (``batteries``: the UAVs'
     ``[B, N]`` at the start and at the end, or ``None``), and the end of the
     episode is the last step before the first UAV left service.
+
+    Args:
+        world: the worlds of the starts (their model, layouts and energy model).
+        start: the worlds' outputs at the start.
+        steps: each step's outputs by key, ``[B, H, ...]``.
+        u_star: each start's best utility U* ``[B]``.
+        references: the start references of :func:`start_references`.
+        gamma: the yardstick's discount.
+        batteries: the UAVs' batteries ``[B, N]`` at the start and at the end (an energy model), or None.
     """
     positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
@@ -424,7 +494,15 @@ def _leaves(away: torch.Tensor) -> torch.Tensor:
 
 
 def first_step(flags: torch.Tensor) -> torch.Tensor:
-    """``[B]`` the first step (from 1) whose flag ``[B, H]`` is set, ``H + 1`` where none is."""
+    """``[B]`` the first step (from 1) whose flag ``[B, H]`` is set, ``H + 1`` where none is.
+
+    Args:
+        flags: ``[B, H]`` booleans, one per step.
+
+    Example:
+        >>> first_step(torch.tensor([[False, True, True], [False, False, False]]))
+        tensor([2, 4])
+    """
     H = flags.shape[-1]
     return torch.where(flags.any(-1), flags.long().argmax(-1) + 1, H + 1)
 
@@ -437,7 +515,16 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     (``eval/delivered_optimum``) and the data delivered over it (``eval/delivered_optimality``, sums over the starts
     as ``eval/delivered_ratio``, read from the mean-channel utility).  ``away`` ``[B, H + 1, N]``: who is out of
     service at the start and after each step; ``utility`` ``[B, H + 1]`` the mean-channel utility, which the ratio
-    to the bound (proved for mean channels) reads."""
+    to the bound (proved for mean channels) reads.
+
+    Args:
+        cfg: the evaluated model (its energy model, ``slot_s``).
+        steps: each step's outputs by key, ``[B, H, ...]`` (``r_pu``, ``r_se``).
+        away: who is out of service ``[B, H + 1, N]``.
+        utility: the mean-channel utility ``[B, H + 1]``.
+        references: the start references (:func:`start_references`, with :func:`mission_references`' bounds).
+        batteries: the UAVs' batteries ``[B, N]`` at the start and at the end.
+    """
     H = away.shape[1] - 1
     delivered = (steps["r_pu"].double() + steps["r_se"].double()).sum(-1) * cfg.slot_s  # [B] bit/Hz
     bound = references["delivered_bound"]
@@ -470,7 +557,12 @@ def u_star_gap(world: World, u_star: torch.Tensor) -> float:
     """The largest relative gap ``(bound - U*) / U*`` over the worlds between a certified upper bound and the
     ``U*`` every metric divides by: 0 wherever ``U*`` is exact (always but where the search of
     :mod:`uavrl.envs.solvers.optimum` stopped at its node limit), and then the evaluation reports it as
-    ``eval/u_star_gap``."""
+    ``eval/u_star_gap``.
+
+    Args:
+        world: the evaluated worlds (their layouts' tables).
+        u_star: the ``U*`` ``[B]`` the evaluation computed for them.
+    """
     if world.cfg.num_uavs <= MAX_EXCHANGE_UAVS:  # the exchange method or brute force: exact
         return 0.0
     upper = optimum_bound(world.cell_contributions, world.direct, world.cfg).expand_as(u_star)
@@ -527,7 +619,21 @@ def _references(world, start, u_star, horizon, gamma) -> dict:
 
 def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
     """Average :func:`evaluate` over an agent's greedy policies (one per independent run; ``agent.evaluate``);
-    the worst start's optimality."""
+    the worst start's optimality.
+
+    Args:
+        agent: an :class:`~uavrl.agents.base.Agent` (trained, or loaded from a run).
+        cfg: the model to evaluate in (the agent's own, or another size for a size-free agent).
+        **kwargs: the settings of :func:`evaluate` (``num_starts``, ``horizon``, ``seed``, ...).
+
+    Example:
+        >>> from uavrl.agents.baselines import OracleAgent
+        >>> from uavrl.envs import make_config
+        >>> cfg = make_config("paper", grid=(4, 4), num_uavs=2)
+        >>> metrics = evaluate_agent(OracleAgent(cfg, None, "cpu", 0), cfg, num_starts=4)
+        >>> metrics["eval/optimality"] > 0.99
+        True
+    """
     results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):
