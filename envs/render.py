@@ -453,6 +453,23 @@ def render(world, mode: str = "rgb_array", env_index=0, agent_index_focus: int |
 
     Refuses, in one line, a mode other than ``"rgb_array"``, a world or UAV index out of range, and a world never
     reset.
+
+    Args:
+        world: the :class:`World` (``env.world``), reset at least once.
+        mode: ``"rgb_array"``, the only mode.
+        env_index: the world to draw, or a list of worlds to tile.
+        agent_index_focus: the UAV to ring in the picture, or None.
+
+    Returns:
+        The ``[H, W, 3]`` uint8 frame.
+
+    Example:
+        >>> from uavrl.envs import UAVSpectrumEnv
+        >>> env = UAVSpectrumEnv(batch_size=2, grid=(4, 4), num_uavs=2)
+        >>> _ = env.reset()
+        >>> frame = render(env.world, env_index=1, agent_index_focus=0)
+        >>> frame.ndim, frame.shape[-1], frame.dtype
+        (3, 3, dtype('uint8'))
     """
     if mode not in RENDER_MODES:
         raise ValueError(

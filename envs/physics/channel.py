@@ -37,13 +37,36 @@ PT, PR, S, E = range(4)
 
 
 def fixed_layout(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor | None:
-    """The ``[4, 3]`` node positions of a fixed layout, or ``None`` for ``layout=random``."""
+    """The ``[4, 3]`` node positions of a fixed layout, or ``None`` for ``layout=random``.
+
+    Args:
+        cfg: the model (its ``layout``, ``grid`` and height).
+        dtype: the positions' dtype.
+        device: their torch device.
+
+    Returns:
+        ``(x, y, z)`` in cells of PT, PR, S and E, one row each.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> fixed_layout(make_config("paper", grid=(4, 4)))
+        tensor([[ 0.,  2.,  0.],
+                [ 4.,  2.,  0.],
+                [-2.,  2.,  4.],
+                [ 6.,  2.,  4.]], dtype=torch.float64)
+    """
     rows = fixed_node_positions(cfg.layout, cfg.grid, cfg.height)
     return None if rows is None else torch.tensor(rows, dtype=dtype, device=device)
 
 
 def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor:
-    """``[C, 3]`` centre of every cell at UAV altitude, in cell index order ``c = y * L1 + x``."""
+    """``[C, 3]`` centre of every cell at UAV altitude, in cell index order ``c = y * L1 + x``, in cells.
+
+    Args:
+        cfg: the model (its ``grid`` and height).
+        dtype: the positions' dtype.
+        device: their torch device.
+    """
     L1, L2 = cfg.grid
     c = torch.arange(L1 * L2, device=device)
     return torch.stack(
@@ -60,6 +83,18 @@ def link_gains(
     ``10^(-PL / 10)`` of the mean path loss in dB for the physical models (:mod:`.pathloss`); ``d`` is the 3-D
     distance in metres (cells times ``cell_size``).  ``fading`` is the ``[..., N, 4]`` power gain ``X`` (Exp(1) for
     Rayleigh), 1 when omitted.
+
+    Args:
+        uav_xyz: the UAVs' positions ``[..., N, 3]`` in cells.
+        nodes: PT, PR, S and E ``[..., 4, 3]`` in cells.
+        cfg: the model (its channel and ``cell_size``).
+        fading: the power gains ``X`` ``[..., N, 4]``, or None for 1.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> cfg = make_config("paper", grid=(4, 4))
+        >>> link_gains(cell_xyz(cfg), fixed_layout(cfg), cfg).shape  # every cell to every node
+        torch.Size([16, 4])
     """
     if cfg.is_physical:
         gain = gain_from_db(mean_path_loss_db(uav_xyz, nodes, cfg))
@@ -71,7 +106,13 @@ def link_gains(
 
 def link_state_gains(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
     """``[..., N, 4, 3]``: per link ``P_LoS`` and the gains ``10^(-PL / 10)`` in line of sight and out of it, what
-    ``fading="los_nlos"`` draws from (physical channels; docs/model.md, Channel models)."""
+    ``fading="los_nlos"`` draws from (physical channels; docs/model.md, Channel models).
+
+    Args:
+        uav_xyz: the UAVs' positions ``[..., N, 3]`` in cells.
+        nodes: PT, PR, S and E ``[..., 4, 3]`` in cells.
+        cfg: the model (a physical channel, its ``cell_size``).
+    """
     p_los, los, nlos = link_states_db(uav_xyz, nodes, cfg)
     return torch.stack([p_los, gain_from_db(los), gain_from_db(nlos)], -1)
 
@@ -83,6 +124,10 @@ def relay_contributions(gains: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
     ``g2 = P_U |h_j,dst|^2 / sigma^2`` (docs/model.md, How good a configuration is; powers and noise in W).
     ``reference_code``: ``A / (1 + A)`` with ``A = reference_gain |h_a,j|^2 |h_j,b|^2`` (docs/model.md, The
     authors' code as a preset).
+
+    Args:
+        gains: the power gains ``[..., N, 4]`` from every UAV to PT, PR, S and E (:func:`link_gains`).
+        cfg: the model (its ``rate_model``, powers and noise).
     """
     src = gains[..., [PT, S]]
     dst = gains[..., [PR, E]]
@@ -97,7 +142,12 @@ def relay_contributions(gains: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
 
 
 def direct_terms(nodes: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
-    """``[..., 2]`` direct-link SNRs ``(PT->PR, S->E)``; zeros unless ``direct_links``."""
+    """``[..., 2]`` direct-link SNRs ``(PT->PR, S->E)``; zeros unless ``direct_links``.
+
+    Args:
+        nodes: PT, PR, S and E ``[..., 4, 3]`` in cells.
+        cfg: the model (its ``direct_links``, channel, powers and noise).
+    """
     if not cfg.direct_links:
         return nodes.new_zeros(nodes.shape[:-2] + (2,))
     gains = link_gains(nodes[..., [PT, S], :], nodes[..., [PR, E], :], cfg)  # [..., 2, 2]
@@ -129,6 +179,15 @@ def rates_from_sums(sums: torch.Tensor, num_relaying: torch.Tensor, num_uavs: in
     The sums hold the direct terms plus the contributions of the relaying (PU) and
     sensing (SE) UAVs; this applies the 1/2 factor (``af``), the lease rule and the
     authors' "both tasks staffed" rule.
+
+    Args:
+        sums: the sums inside the logarithms of R_PU and R_SE ``[..., 2]``.
+        num_relaying: the number of relaying UAVs ``[...]``.
+        num_uavs: ``N``, the UAVs in service.
+        cfg: the model (its ``rate_model`` and ``lease_rule``).
+
+    Returns:
+        (R_PU, R_SE) ``[..., 2]`` in bit/s/Hz.
     """
     r = torch.log2(1 + sums)  # a fresh tensor: the rules below edit it in place
     if cfg.rate_model == "reference_code":

@@ -46,7 +46,12 @@ SERVING, RETURNING, OUT, CHARGING, WAITING = 0, 1, 2, 3, 4  # a UAV's status; th
 
 class Energy:
     """The batteries and service of the UAVs of the model ``cfg`` (``energy`` not ``none``; the module's
-    docstring)."""
+    docstring).
+
+    Args:
+        cfg: the model (its energy model, ``base``, ``recharge_steps`` and step energies).
+        device: the torch device of its tables.
+    """
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
         self.cfg = cfg
@@ -153,5 +158,10 @@ class Energy:
 
 
 def energy_part(cfg: ModelConfig, device="cpu") -> Energy | None:
-    """The energy part of ``cfg.energy``; ``None`` for ``none`` (the World then does no energy work at all)."""
+    """The energy part of ``cfg.energy``; ``None`` for ``none`` (the World then does no energy work at all).
+
+    Args:
+        cfg: the model.
+        device: the torch device of the part's tables.
+    """
     return None if cfg.energy == "none" else Energy(cfg, device)

@@ -59,6 +59,11 @@ def rician_power(uniforms: torch.Tensor, shares: tuple[float, float]) -> torch.T
 
     Box-Muller turns the pair ``(u1, u2)`` into two independent ``N(0, 1)``, ``r cos(2 pi u2)`` and
     ``r sin(2 pi u2)`` with ``r = sqrt(-2 ln(1 - u1))``; ``CN(0, 1)`` is their sum ``(n1 + i n2) / sqrt(2)``.
+
+    Args:
+        uniforms: independent uniforms on [0, 1) ``[..., 2]``.
+        shares: ``(K / (K + 1), 1 / (K + 1))``, the line-of-sight and the scattered share of the mean power
+            (:func:`rician_shares` of the K-factor in dB).
     """
     u1, u2 = uniforms.unbind(-1)
     scattered = math.sqrt(shares[1] / 2) * torch.sqrt(-2 * torch.log1p(-u1))
@@ -67,7 +72,11 @@ def rician_power(uniforms: torch.Tensor, shares: tuple[float, float]) -> torch.T
 
 
 class Fading:
-    """``fading=none``, and the contract every fading part keeps (the module's docstring): no draws, ``X = 1``."""
+    """``fading=none``, and the contract every fading part keeps (the module's docstring): no draws, ``X = 1``.
+
+    Args:
+        cfg: the model whose links it fades.
+    """
 
     name, random = "none", False
 
@@ -118,7 +127,11 @@ class LosNlos(Fading):
 
 class Rician(Fading):
     """Every link (UAV-node and direct, on any channel model) in line of sight with K-factor ``rician_k_db``: its
-    power gain times a fresh Rician ``X`` of mean 1 (:func:`rician_power`)."""
+    power gain times a fresh Rician ``X`` of mean 1 (:func:`rician_power`).
+
+    Args:
+        cfg: the model (its ``rician_k_db``, the K-factor in dB).
+    """
 
     name, random = "rician", True
 

@@ -29,7 +29,12 @@ from .channel import fixed_layout
 
 class Layouts:
     """The layouts of the model ``cfg``: ``fixed`` positions ``[4, 3]`` (``None`` for ``layout=random``) and
-    :meth:`sample`."""
+    :meth:`sample`.
+
+    Args:
+        cfg: the model (its ``layout`` and ``grid``).
+        device: the torch device of the positions.
+    """
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
         self.cfg = cfg

@@ -23,13 +23,30 @@ AIR_TO_GROUND = (True, True, False, False)  # per node (PT, PR, S, E): is the UA
 
 
 def free_space_db(distance_m: torch.Tensor, carrier_ghz: float) -> torch.Tensor:
-    """``FSPL = 20 log10(4 pi f_c d / c)``, ``d`` in metres, ``f_c`` in GHz."""
+    """``FSPL = 20 log10(4 pi f_c d / c)``, ``d`` in metres, ``f_c`` in GHz.
+
+    Args:
+        distance_m: the distances ``d`` in m, any shape.
+        carrier_ghz: the carrier frequency ``f_c`` in GHz.
+
+    Returns:
+        The free-space path loss in dB, the shape of ``distance_m``.
+
+    Example:
+        >>> free_space_db(torch.tensor([100.0, 1000.0]), carrier_ghz=2.0)
+        tensor([78.4684, 98.4684])
+    """
     return 20 * torch.log10(distance_m * (4 * math.pi * carrier_ghz * 1e9 / SPEED_OF_LIGHT))
 
 
 def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) -> torch.Tensor:
     """``P_LoS = 1 / (1 + a exp(-b (theta - a)))``, ``theta`` the elevation angle in degrees (Al-Hourani et al.
-    2014)."""
+    2014).
+
+    Args:
+        elevation_deg: the elevation angles ``theta`` in degrees, any shape.
+        environment: ``"suburban"``, ``"urban"``, ``"dense_urban"`` or ``"highrise"`` (its ``a``, ``b``).
+    """
     a, b, _, _ = AL_HOURANI[environment]
     return 1 / (1 + a * torch.exp(-b * (elevation_deg - a)))
 
@@ -38,7 +55,15 @@ def al_hourani_states(
     horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float, environment: str
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(P_LoS, PL_LoS, PL_NLoS)``: ``PL = FSPL(d) + eta`` in dB in each state (Al-Hourani et al. 2014), the excess
-    loss eta in dB added to the free-space loss in dB."""
+    loss eta in dB added to the free-space loss in dB.
+
+    Args:
+        horizontal_m: the horizontal distances in m.
+        height_m: the UAV's heights above the ground node in m.
+        distance_m: the 3-D distances in m.
+        carrier_ghz: the carrier frequency in GHz.
+        environment: ``"suburban"``, ``"urban"``, ``"dense_urban"`` or ``"highrise"``.
+    """
     _, _, eta_los, eta_nlos = AL_HOURANI[environment]
     p_los = al_hourani_los_probability(torch.rad2deg(torch.atan2(height_m, horizontal_m)), environment)
     free = free_space_db(distance_m, carrier_ghz)
@@ -52,7 +77,13 @@ def _maximum(x: torch.Tensor, y) -> torch.Tensor:
 def tr36777_los_probability(channel: str, horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
     """TR 36.777 Table B-1: 1 within ``d_1`` (and above the scenario's all-LoS height), else ``d_1 / d_2D +
     exp(-d_2D / p_1) (1 - d_1 / d_2D)``, the scenario's ``p_1`` and ``d_1`` from
-    :func:`.radio.tr36777_los_parameters`."""
+    :func:`.radio.tr36777_los_parameters`.
+
+    Args:
+        channel: ``"tr36777_uma"``, ``"tr36777_umi"`` or ``"tr36777_rma"``.
+        horizontal_m: the horizontal distances ``d_2D`` in m.
+        height_m: the UAV's heights ``h`` in m.
+    """
     p1, d1 = tr36777_los_parameters(channel, torch.log10(height_m), _maximum)
     ratio = d1 / horizontal_m.clamp(min=d1)  # 1 within d_1: the formula then gives 1 too
     p_los = ratio + torch.exp(-horizontal_m / p1) * (1 - ratio)
@@ -61,7 +92,12 @@ def tr36777_los_probability(channel: str, horizontal_m: torch.Tensor, height_m: 
 
 def uma_av_los_probability(horizontal_m: torch.Tensor, height_m: torch.Tensor) -> torch.Tensor:
     """TR 36.777 Table B-1, UMa-AV: ``p_1 = 4300 log10(h) - 3800`` and ``d_1 = max(460 log10(h) - 700, 18)`` metres,
-    ``P_LoS = 1`` above 100 m."""
+    ``P_LoS = 1`` above 100 m.
+
+    Args:
+        horizontal_m: the horizontal distances ``d_2D`` in m.
+        height_m: the UAV's heights ``h`` in m.
+    """
     return tr36777_los_probability("tr36777_uma", horizontal_m, height_m)
 
 
@@ -69,7 +105,15 @@ def tr36777_states(
     channel: str, horizontal_m: torch.Tensor, height_m: torch.Tensor, distance_m: torch.Tensor, carrier_ghz: float
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """TR 36.777 Tables B-1 and B-2 (``channel`` ``tr36777_uma``, ``tr36777_umi`` or ``tr36777_rma``): ``(P_LoS,
-    PL_LoS, PL_NLoS)`` in dB (:func:`.radio.tr36777_losses_db`)."""
+    PL_LoS, PL_NLoS)`` in dB (:func:`.radio.tr36777_losses_db`).
+
+    Args:
+        channel: the scenario.
+        horizontal_m: the horizontal distances ``d_2D`` in m.
+        height_m: the UAV's heights ``h`` in m.
+        distance_m: the 3-D distances ``d_3D`` in m.
+        carrier_ghz: the carrier frequency in GHz.
+    """
     log_h = torch.log10(height_m)
     los, nlos = tr36777_losses_db(channel, torch.log10(distance_m), log_h, carrier_ghz, _maximum)
     return tr36777_los_probability(channel, horizontal_m, height_m), los, nlos
@@ -87,6 +131,11 @@ def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[tor
     Air-to-ground links (PT, PR) follow ``cfg.channel``; air-to-air ones (S, E) are free space in line of sight
     (``P_LoS = 1``).  ``h`` is the UAV's height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D
     distance, all in metres.
+
+    Args:
+        uav_xyz: the UAVs' positions ``[..., N, 3]`` in cells.
+        nodes: PT, PR, S and E ``[..., 4, 3]`` in cells.
+        cfg: the model (a physical channel, its ``cell_size``, ``carrier_ghz`` and ``environment``).
     """
     delta = (uav_xyz.unsqueeze(-2) - nodes.unsqueeze(-3)) * cfg.cell_size
     horizontal = torch.linalg.vector_norm(delta[..., :2], dim=-1)
@@ -103,10 +152,25 @@ def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[tor
 
 
 def mean_path_loss_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> torch.Tensor:
-    """``[..., N, 4]`` mean path loss in dB of :func:`link_states_db` (free space on the air-to-air links)."""
+    """``[..., N, 4]`` mean path loss in dB of :func:`link_states_db` (free space on the air-to-air links):
+    ``P_LoS PL_LoS + (1 - P_LoS) PL_NLoS``.
+
+    Args:
+        uav_xyz: the UAVs' positions ``[..., N, 3]`` in cells.
+        nodes: PT, PR, S and E ``[..., 4, 3]`` in cells.
+        cfg: the model (a physical channel).
+    """
     return _mean(*link_states_db(uav_xyz, nodes, cfg))
 
 
 def gain_from_db(path_loss_db: torch.Tensor) -> torch.Tensor:
-    """The power gain ``|h|^2 = 10^(-PL / 10)`` of a path loss in dB."""
+    """The power gain ``|h|^2 = 10^(-PL / 10)`` of a path loss in dB.
+
+    Args:
+        path_loss_db: path losses ``PL`` in dB, any shape.
+
+    Example:
+        >>> gain_from_db(torch.tensor([30.0, 100.0]))
+        tensor([1.0000e-03, 1.0000e-10])
+    """
     return torch.pow(10.0, -path_loss_db / 10)

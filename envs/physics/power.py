@@ -109,7 +109,20 @@ def step_energies(
     energy: str, cell_size: float, slot_s: float, comm_power_w: float, circuit_power_w: float, battery_wh: float
 ) -> StepEnergies:
     """The :class:`StepEnergies` of ``energy`` (``follow_up`` or ``rotary_wing``): a move flies one cell at
-    ``cell_size / slot_s`` m/s; a serving UAV also transmits at ``comm_power_w`` and runs its radio's circuit."""
+    ``cell_size / slot_s`` m/s; a serving UAV also transmits at ``comm_power_w`` and runs its radio's circuit.
+
+    Args:
+        energy: ``"follow_up"`` (the follow-up paper's fixed costs; the other arguments unused) or ``"rotary_wing"``.
+        cell_size: a cell's side in m.
+        slot_s: a step's duration in s.
+        comm_power_w: a serving UAV's transmit power in W.
+        circuit_power_w: its radio circuit's power in W.
+        battery_wh: a full battery in Wh.
+
+    Returns:
+        The energies: ``rotary_wing``'s in J (a full battery is ``battery_wh`` times 3600 J), ``follow_up``'s in
+        the follow-up's own units (a full battery is 5000).
+    """
     if energy == "follow_up":
         return StepEnergies(
             move=FOLLOW_UP_MOVE + FOLLOW_UP_TRANSMISSION,

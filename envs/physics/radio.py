@@ -47,7 +47,14 @@ CARRIER_GHZ = {
 @dataclass(frozen=True)
 class AerialScenario:
     """One scenario of 3GPP TR 36.777 Annex B (Tables B-1, B-2) for aerial UEs: where its formulas hold (the UAV's
-    height ``h`` and the horizontal distance ``d_2D``, metres) and the height above which ``P_LoS = 1``."""
+    height ``h`` and the horizontal distance ``d_2D``, metres) and the height above which ``P_LoS = 1``.
+
+    Args:
+        name: the standard's name of the scenario (``"UMa-AV"``, ``"UMi-AV"``, ``"RMa-AV"``).
+        height_m: the heights ``(low, high]`` in m where its formulas hold.
+        max_d2d_m: the largest horizontal distance ``d_2D`` in m where they hold.
+        all_los_above_m: the height in m above which every link is in line of sight (``inf``: none).
+    """
 
     name: str
     height_m: tuple[float, float]  # (low, high]: h in it
@@ -75,7 +82,16 @@ def dbm_to_watts(dbm: float) -> float:
 
 
 def noise_dbm(bandwidth_mhz: float, noise_figure_db: float) -> float:
-    """The receiver's noise power in dBm: ``-174 dBm/Hz + 10 log10(B / 1 Hz) + NF``."""
+    """The receiver's noise power in dBm: ``-174 dBm/Hz + 10 log10(B / 1 Hz) + NF``.
+
+    Args:
+        bandwidth_mhz: the bandwidth ``B`` in MHz.
+        noise_figure_db: the receiver's noise figure ``NF`` in dB.
+
+    Example:
+        >>> noise_dbm(10.0, 9.0)
+        -95.0
+    """
     return THERMAL_NOISE_DBM_PER_HZ + 10 * math.log10(bandwidth_mhz * 1e6) + noise_figure_db
 
 
@@ -88,7 +104,13 @@ def free_space_db(distance_m: float, carrier_ghz: float) -> float:
 def tr36777_los_parameters(channel: str, log_h, maximum):
     """TR 36.777 Table B-1: ``(p_1, d_1)`` in metres of the LoS probability ``d_1 / d_2D + exp(-d_2D / p_1)
     (1 - d_1 / d_2D)`` beyond ``d_1``, for ``log_h = log10(h / 1 m)``.  Arithmetic and ``maximum(x, floor)`` only, so
-    plain floats and tensors share the formulas."""
+    plain floats and tensors share the formulas.
+
+    Args:
+        channel: ``"tr36777_uma"``, ``"tr36777_umi"`` or ``"tr36777_rma"``.
+        log_h: ``log10`` of the UAV's height in m (a float or a tensor).
+        maximum: ``maximum(x, floor)`` for the type of ``log_h``.
+    """
     if channel == "tr36777_uma":
         return 4300 * log_h - 3800, maximum(460 * log_h - 700, 18.0)
     if channel == "tr36777_umi":
@@ -99,7 +121,15 @@ def tr36777_los_parameters(channel: str, log_h, maximum):
 def tr36777_losses_db(channel: str, log_d, log_h, carrier_ghz: float, maximum):
     """TR 36.777 Table B-2: ``(PL_LoS, PL_NLoS)`` in dB for ``log_d = log10(d_3D / 1 m)`` and ``log_h``, the carrier in
     GHz; ``maximum(x, y)`` of floats or tensors (see :func:`tr36777_los_parameters`).  The free-space term is the
-    standard's ``20 log10(40 pi d_3D f_c / 3)`` (c = 3e8 m/s)."""
+    standard's ``20 log10(40 pi d_3D f_c / 3)`` (c = 3e8 m/s).
+
+    Args:
+        channel: ``"tr36777_uma"``, ``"tr36777_umi"`` or ``"tr36777_rma"``.
+        log_d: ``log10`` of the 3-D distance in m (a float or a tensor).
+        log_h: ``log10`` of the UAV's height in m.
+        carrier_ghz: the carrier frequency in GHz.
+        maximum: ``maximum(x, y)`` for the type of ``log_d``.
+    """
     log_f = math.log10(carrier_ghz)
     free_space = 20 * math.log10(40 * math.pi * carrier_ghz / 3)  # plus 20 log10(d_3D)
     if channel == "tr36777_uma":

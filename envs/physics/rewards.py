@@ -23,7 +23,20 @@ import torch
 
 
 def delta_reward(r_pu, r_se, prev_r_pu, prev_r_se, beta1, beta2):
-    """Eq. 7: weighted change of both rates.  Works on tensors and on plain floats (numba)."""
+    """Eq. 7: weighted change of both rates.  Works on tensors and on plain floats (numba).
+
+    Args:
+        r_pu: R_PU after the step (bit/s/Hz).
+        r_se: R_SE after the step.
+        prev_r_pu: R_PU before it.
+        prev_r_se: R_SE before it.
+        beta1: the weight of R_PU's change.
+        beta2: the weight of R_SE's change.
+
+    Example:
+        >>> delta_reward(2.0, 1.0, 1.5, 1.0, beta1=1.0, beta2=1.0)
+        0.5
+    """
     return beta1 * (r_pu - prev_r_pu) + beta2 * (r_se - prev_r_se)
 
 
@@ -31,6 +44,14 @@ def best_so_far_reward(total, best):
     """The authors' reward: ``10 (S - M)`` above the episode's best ``M``, ``S - M`` below, 0 level.
 
     Written with arithmetic only so it serves tensors and numba-compiled scalars alike.
+
+    Args:
+        total: the step's ``S = R_PU + R_SE``.
+        best: the episode's best ``M`` before the step (0 at the start).
+
+    Example:
+        >>> best_so_far_reward(3.0, 2.5), best_so_far_reward(2.0, 2.5)
+        (5.0, -0.5)
     """
     diff = total - best
     return diff * (1 + 9 * (diff > 0))
@@ -48,6 +69,19 @@ def team_reward(r_pu, r_se, prev_r_pu, prev_r_se, best, use_best_so_far, beta1, 
 
     ``use_best_so_far`` picks :func:`best_so_far_reward` over :func:`delta_reward` (``env.reward``; ``log_gap``
     is :func:`log_gap_reward`, on tensors only).  Tensors or numba scalars, as those.
+
+    Args:
+        r_pu: R_PU after the step.
+        r_se: R_SE after the step.
+        prev_r_pu: R_PU before it.
+        prev_r_se: R_SE before it.
+        best: the episode's best ``R_PU + R_SE`` before the step.
+        use_best_so_far: the authors' reward (True) or the paper's (False).
+        beta1: the weight of R_PU in the delta reward.
+        beta2: the weight of R_SE in the delta reward.
+
+    Returns:
+        ``(reward, best)``: the step's reward and the episode's best after it.
     """
     if use_best_so_far:
         total = r_pu + r_se
@@ -61,21 +95,43 @@ LOG_GAP_FLOOR = 1e-4  # reward="log_gap": gaps below this fraction of U* count a
 
 def log_gap_potential(utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR) -> torch.Tensor:
     """``-log(1 - U / U* + floor)`` (the gap to the optimum clamped at 0): ``reward="log_gap"`` is its change over
-    a step, so every halving of the gap to U* is worth the same, down to ``floor``."""
+    a step, so every halving of the gap to U* is worth the same, down to ``floor``.
+
+    Args:
+        utility: the utility ``U = R_PU + R_SE`` (bit/s/Hz), any shape.
+        u_star: the best utility ``U*``, broadcast against it.
+        floor: the smallest gap, a fraction of U*, that counts.
+    """
     return -torch.log((1 - utility / u_star).clamp(min=0) + floor)
 
 
 def log_gap_reward(
     utility: torch.Tensor, prev_utility: torch.Tensor, u_star: torch.Tensor, floor: float = LOG_GAP_FLOOR
 ) -> torch.Tensor:
-    """``reward="log_gap"``: the change of :func:`log_gap_potential` from ``prev_utility`` to ``utility``."""
+    """``reward="log_gap"``: the change of :func:`log_gap_potential` from ``prev_utility`` to ``utility``.
+
+    Args:
+        utility: the utility after the step.
+        prev_utility: the utility before it.
+        u_star: the best utility ``U*``.
+        floor: the smallest gap, a fraction of U*, that counts.
+
+    Example:
+        >>> log_gap_reward(torch.tensor([1.5]), torch.tensor([1.0]), torch.tensor([2.0]))  # gap 1/2 to 1/4
+        tensor([0.6929])
+    """
     return log_gap_potential(utility, u_star, floor) - log_gap_potential(prev_utility, u_star, floor)
 
 
 def delivered_reward(rates: torch.Tensor, u_star: torch.Tensor) -> torch.Tensor:
     """``reward="delivered"``: the data ``(R_PU + R_SE) slot_s`` the step delivered (``rates`` ``[B, 2]``) in units
     of ``U* slot_s``, the most one step can deliver: a mission's rewards add up to its delivered data
-    (``eval/delivered_bit_per_hz``) over ``U* slot_s``."""
+    (``eval/delivered_bit_per_hz``) over ``U* slot_s``.
+
+    Args:
+        rates: the step's (R_PU, R_SE) ``[B, 2]``.
+        u_star: each layout's ``U*`` ``[B]`` or ``[1]``.
+    """
     return rates.sum(-1) / u_star
 
 
@@ -85,6 +141,10 @@ class TeamReward:
     ``random_channel`` is the fading part's ``random`` (:mod:`uavrl.envs.physics.fading`): ``log_gap`` measures the gap
     to ``U*`` as the evaluation does, on the mean channel, so under a random channel it reads the configurations'
     mean-channel rates (``mean_rates()``, asked for only then) instead of the step's draw.
+
+    Args:
+        cfg: the model (its ``reward``, ``beta1`` and ``beta2``).
+        random_channel: whether the model's fading draws its channels.
     """
 
     def __init__(self, cfg, random_channel: bool):
