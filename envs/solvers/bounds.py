@@ -58,6 +58,16 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
     ``-inf`` where no cell of that task is within reach (a task change alone takes a step).  Per UAV, the best
     value at each cost (moves + task change) is bucketed, then the running maximum over the costs gives every ``k``:
     a few ``[w, N, C]`` tensors for a chunk of worlds at a time, whatever ``K``.
+
+    Args:
+        cells: the UAVs' cells ``[W, N]`` at the start.
+        tasks: their tasks ``[W, N]``.
+        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        grid: ``(L1, L2)`` cells.
+        max_steps: ``K``.
+
+    Returns:
+        The relay and the sensing bests, ``[W, K + 1, N]`` each.
     """
     W, N = cells.shape
     C, K = contributions.shape[-2], max_steps
@@ -78,7 +88,16 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
 
 
 def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
-    """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps."""
+    """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps.
+
+    Args:
+        cells: the UAVs' cells ``[W, N]`` at the start.
+        tasks: their tasks ``[W, N]``.
+        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        direct: the direct-link terms ``[W, 2]`` (or ``[1, 2]``).
+        cfg: the model (its grid, ``num_uavs`` and rate model).
+        max_steps: ``K``.
+    """
     N = cfg.num_uavs
     best_a, best_b = reachable_best(cells, tasks, contributions, cfg.grid, max_steps)
     W, K1 = best_a.shape[:2]
@@ -121,6 +140,15 @@ def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, lev
     """``[W, L]`` lower bound on the steps from ``[W, N]`` cells/tasks to utility ``>= levels`` ``[W, L]``.
 
     ``max_steps + 1`` where even the relaxation does not reach a level within ``max_steps``.
+
+    Args:
+        cells: the UAVs' cells ``[W, N]`` at the start.
+        tasks: their tasks ``[W, N]``.
+        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        direct: the direct-link terms ``[W, 2]`` (or ``[1, 2]``).
+        cfg: the model (its grid, ``num_uavs`` and rate model).
+        levels: the utilities to reach ``[W, L]`` (bit/s/Hz).
+        max_steps: the most steps looked at.
     """
     reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(
         1
@@ -138,6 +166,13 @@ def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: floa
     ``delta = (1 + direct + sum of the N largest) (2^(2 rtol U*) - 1)``; so
     relays lie within ``delta`` of the top N relay cells, sensors likewise,
     and the candidates are every split of those cells.
+
+    Args:
+        contributions: the world's cell contributions ``[C, 2]``.
+        direct: its direct-link terms ``[2]``.
+        cfg: the model (its ``num_uavs`` and rate model).
+        u_star: the world's ``U*``.
+        rtol: the relative tolerance below ``U*`` that still counts as optimal.
     """
     N = cfg.num_uavs
     slack = 2.0 ** (2 * rtol * u_star) - 1
@@ -224,7 +259,15 @@ def _searched_configurations(contributions, direct, cfg: ModelConfig, threshold:
 
 
 def assignment_costs(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
-    """``[S, N, N]`` steps UAV ``i`` (cells/tasks ``[N]``) needs to hold pair ``j`` of target set ``s`` (``[S, N]``)."""
+    """``[S, N, N]`` steps UAV ``i`` (cells/tasks ``[N]``) needs to hold pair ``j`` of target set ``s`` (``[S, N]``).
+
+    Args:
+        cells: the UAVs' cells ``[N]``.
+        tasks: their tasks ``[N]``.
+        target_cells: the target sets' cells ``[S, N]``.
+        target_tasks: their tasks ``[S, N]``.
+        grid: ``(L1, L2)`` cells (Manhattan distances on it).
+    """
     distance = manhattan(cells[:, None, None], target_cells[None], grid[0])  # [N, S, N]
     return (distance + (tasks[:, None, None] != target_tasks[None])).permute(1, 0, 2)
 
@@ -270,7 +313,15 @@ def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
 
 
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
-    """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists)."""
+    """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists).
+
+    Args:
+        cells: the UAVs' cells ``[W, N]``.
+        tasks: their tasks ``[W, N]``.
+        target_cells: per world, the target sets' cells ``[S, N]`` (a list of ``W``).
+        target_tasks: per world, their tasks ``[S, N]``.
+        grid: ``(L1, L2)`` cells.
+    """
     return torch.tensor(
         [
             best_assignment(assignment_costs(c, t, tc, tt, grid))[0]

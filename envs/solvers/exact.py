@@ -59,7 +59,12 @@ def fits(cfg: ModelConfig, memory_budget: int = MEMORY_BUDGET) -> bool:
 
 def fixed_layout_tables(cfg: ModelConfig, device=None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(contributions [1, C, 2], direct [1, 2])`` of a fixed layout (not ``layout=random``), from the channel
-    model."""
+    model.
+
+    Args:
+        cfg: the model; ``layout="random"`` is refused with one line.
+        device: the torch device of the tables (float64).
+    """
     nodes = fixed_layout(cfg, torch.float64, device)
     if nodes is None:
         raise ValueError(
@@ -78,6 +83,17 @@ class ConfigurationSpace:
 
     Raises ``ValueError`` (one line, with the bytes it would need) when the
     tables exceed ``memory_budget``.
+
+    Args:
+        grid: ``(L1, L2)`` cells.
+        num_uavs: ``N``.
+        device: the torch device of the tables.
+        memory_budget: the bytes the tables may take.
+
+    Example:
+        >>> space = ConfigurationSpace((3, 3), 2)
+        >>> space.cells.shape, space.successors.shape  # C(9, 2) cell sets x 4 task vectors; 6^2 joint actions
+        (torch.Size([144, 2]), torch.Size([144, 36]))
     """
 
     def __init__(self, grid: tuple[int, int], num_uavs: int, device="cpu", memory_budget: int = MEMORY_BUDGET):
@@ -187,6 +203,13 @@ def optimal_values(
     more than ``CONVERGENCE_TOLERANCE x max |P|`` (``gamma < 1``; with
     ``gamma = 1`` the sweeps stop changing once every configuration has seen the
     best one it can reach).
+
+    Args:
+        space: the configurations and their transitions.
+        potential: the potential ``P`` ``[B, K]`` of every configuration in ``B`` layouts
+            (:meth:`ConfigurationSpace.utility`).
+        gamma: the discount, in (0, 1].
+        horizon: the steps ``H``; None: the infinite horizon.
     """
     if not 0 < gamma <= 1:
         raise ValueError(f"gamma={gamma} is invalid: it must lie in (0, 1]")
@@ -204,6 +227,10 @@ def min_steps(space: ConfigurationSpace, target: torch.Tensor) -> torch.Tensor:
     """``[B, K]`` int32 fewest steps from every configuration to one where ``target`` ``[B, K]`` holds (BFS).
 
     ``UNREACHABLE`` where no valid sequence of joint actions gets there.
+
+    Args:
+        space: the configurations and their transitions.
+        target: ``[B, K]`` booleans, the configurations to reach in each of ``B`` layouts.
     """
     steps = torch.where(target, 0, UNREACHABLE).int()
     while True:

@@ -42,7 +42,13 @@ def service_steps_bound(energy, battery: torch.Tensor) -> torch.Tensor:
 
 def optimum_by_count(cell_contributions: torch.Tensor, direct: torch.Tensor, cfg) -> torch.Tensor:
     """``[B, N + 1]`` float64 ``U*_k`` for ``k = 0..N`` UAVs on the layouts of ``[B, C, 2]`` contributions and
-    ``[B, 2]`` direct terms (``U*_0``: the direct links alone)."""
+    ``[B, 2]`` direct terms (``U*_0``: the direct links alone).
+
+    Args:
+        cell_contributions: each cell's relay and sensing contributions ``[B, C, 2]``.
+        direct: the direct-link terms ``[B, 2]``.
+        cfg: the model (``num_uavs`` is the largest ``k``).
+    """
     none = rates(cell_contributions.new_zeros(len(direct), 0, 2), direct.new_zeros(len(direct), 0).long(), direct, cfg)
     by_count = [none[0] + none[1]]
     for k in range(1, cfg.num_uavs + 1):
@@ -52,7 +58,19 @@ def optimum_by_count(cell_contributions: torch.Tensor, direct: torch.Tensor, cfg
 
 def delivered_bound(service_steps: torch.Tensor, u_star_by_count: torch.Tensor, horizon: int, slot_s: float):
     """``[B]`` the most data (bit/Hz) ``H = horizon`` steps of ``slot_s`` seconds can deliver: ``slot_s sum_t
-    U*_{m_t}``, ``m_t`` the UAVs whose ``service_steps`` ``[B, N]`` reach step ``t``."""
+    U*_{m_t}``, ``m_t`` the UAVs whose ``service_steps`` ``[B, N]`` reach step ``t``.
+
+    Args:
+        service_steps: the most steps each UAV can serve ``[B, N]``.
+        u_star_by_count: ``U*_k`` ``[B, N + 1]`` in bit/s/Hz (:func:`optimum_by_count`).
+        horizon: the mission's steps ``H``.
+        slot_s: a step's duration in s.
+
+    Example:
+        >>> u_star_by_count = torch.tensor([[0.0, 1.0, 1.5]])  # no UAV, one, two
+        >>> delivered_bound(torch.tensor([[2, 5]]), u_star_by_count, horizon=4, slot_s=1.0)  # two UAVs, then one
+        tensor([5.], dtype=torch.float64)
+    """
     ends = service_steps.clamp(max=horizon).sort(-1).values  # after the k-th smallest (from 1), N - k can serve
     edges = torch.cat([ends.new_zeros(len(ends), 1), ends, ends.new_full((len(ends), 1), horizon)], -1)
     steps_with = edges.diff(dim=-1).double()  # [B, N + 1]: steps with N, N - 1, ..., 0 UAVs able to serve

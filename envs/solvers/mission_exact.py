@@ -75,7 +75,9 @@ class MissionOptimum:
     ``value`` ``[B]`` float64: the most data (bit/Hz) a mission of ``horizon`` steps delivers from each start;
     ``first_action`` ``[B, N]``: an optimal joint action there (the UAVs in the World's order); ``states``,
     ``transitions``: how many states and (state, joint action) pairs were solved; ``seconds``: the time it took.
-    :meth:`actions` plays the optimal policy step by step.
+    :meth:`actions` plays the optimal policy step by step.  ``start_index`` ``[B]``: each start's state among the
+    first step's.  The fields ``_cells``, ``_best`` and ``_next`` are the solver's per-step tables that
+    :meth:`actions` reads (the solver fills them; not for users).
     """
 
     value: torch.Tensor
@@ -100,7 +102,14 @@ class MissionOptimum:
 
 
 def check_world(world) -> None:
-    """One-line refusals of what the solver does not cover, before any work."""
+    """One-line refusals of what the solver does not cover, before any work.
+
+    Args:
+        world: the :class:`~uavrl.envs.World` whose starts would be solved, reset.
+
+    Raises:
+        NotCovered: no energy model, a random channel, recharging or more than 2 UAVs.
+    """
     cfg = world.cfg
     if world.energy is None:
         raise NotCovered("the exact mission solver needs an energy model: env.energy is 'none' (use envs.exact)")

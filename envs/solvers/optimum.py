@@ -55,18 +55,53 @@ def optimum(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, 
     subset method above, N <= 20), ``"search"`` (the branch and bound above) or ``"auto"`` (brute force when it has
     at most ``BRUTE_FORCE_LIMIT`` candidates per world, else the exchange method up to ``MAX_EXCHANGE_UAVS``, else
     the search).  Where the search stopped at its node limit, ``U*`` is the best found (:func:`optimum_bound`).
+
+    Args:
+        cell_contrib: each cell's contributions ``[B, C, 2]`` when relaying and when sensing
+            (``env.cell_contributions``, or :func:`~uavrl.envs.solvers.exact.fixed_layout_tables`).
+        direct: the direct-link terms ``[B, 2]`` (``env.direct``).
+        cfg: the model (its ``num_uavs`` and rate model).
+        method: ``"auto"``, ``"brute"``, ``"exchange"`` or ``"search"``.
+
+    Returns:
+        ``U*`` ``[B]`` in bit/s/Hz, and an optimal configuration: the UAVs' cells ``[B, N]`` and tasks ``[B, N]``.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> from uavrl.envs.solvers.exact import fixed_layout_tables
+        >>> cfg = make_config("paper", grid=(4, 4), num_uavs=2)
+        >>> u_star, cells, tasks = optimum(*fixed_layout_tables(cfg), cfg)
+        >>> u_star.shape, cells.shape, tasks.shape
+        (torch.Size([1]), torch.Size([1, 2]), torch.Size([1, 2]))
+        >>> sorted(tasks[0].tolist())  # one relays for the primary link, one senses
+        [0, 1]
     """
     return solve(cell_contrib, direct, cfg, method)[:3]
 
 
 def optimum_bound(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig) -> torch.Tensor:
     """``[B]`` a certified upper bound on ``U*``: ``U*`` itself wherever :func:`optimum` is exact (everywhere but
-    where the search stopped at ``SEARCH_NODE_LIMIT`` nodes)."""
+    where the search stopped at ``SEARCH_NODE_LIMIT`` nodes).
+
+    Args:
+        cell_contrib: each cell's contributions ``[B, C, 2]`` when relaying and when sensing
+            (``env.cell_contributions``, or :func:`~uavrl.envs.solvers.exact.fixed_layout_tables`).
+        direct: the direct-link terms ``[B, 2]`` (``env.direct``).
+        cfg: the model (its ``num_uavs`` and rate model).
+    """
     return solve(cell_contrib, direct, cfg)[3]
 
 
 def solve(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, method: str = "auto"):
-    """``(U [B], cells [B, N], tasks [B, N], upper [B])``: :func:`optimum` with its certified upper bound."""
+    """``(U [B], cells [B, N], tasks [B, N], upper [B])``: :func:`optimum` with its certified upper bound.
+
+    Args:
+        cell_contrib: each cell's contributions ``[B, C, 2]`` when relaying and when sensing
+            (``env.cell_contributions``, or :func:`~uavrl.envs.solvers.exact.fixed_layout_tables`).
+        direct: the direct-link terms ``[B, 2]`` (``env.direct``).
+        cfg: the model (its ``num_uavs`` and rate model).
+        method: as :func:`optimum`'s.
+    """
     N, C = cfg.num_uavs, cfg.num_cells
     brute_size = math.comb(C, N) * 2**N
     if method not in ("auto", "brute", "exchange", "search"):
@@ -181,6 +216,13 @@ class SplitSearch:
 
     ``a``, ``b``: ``[C]`` relay and sensing contributions; ``direct``: ``[2]``.  Sums ``X = 1 + direct + A`` and
     ``Y = 1 + direct + B`` are what the two logs take.
+
+    Args:
+        a: the cells' relay contributions ``[C]``.
+        b: the cells' sensing contributions ``[C]``.
+        direct: the world's direct-link terms ``[2]``.
+        num_uavs: ``N``.
+        cfg: the model (its rate model).
     """
 
     def __init__(self, a: np.ndarray, b: np.ndarray, direct: np.ndarray, num_uavs: int, cfg: ModelConfig):
@@ -301,7 +343,11 @@ class SplitSearch:
 
 def staffed_scale(cfg: ModelConfig) -> float:
     """``c`` of ``U = c (log2(1 + sum_PU) + log2(1 + sum_SE))`` with both tasks staffed, read from the rate model
-    itself (:func:`~uavrl.envs.physics.channel.rates_from_sums`); the lease and both-tasks rules only lower ``U``."""
+    itself (:func:`~uavrl.envs.physics.channel.rates_from_sums`); the lease and both-tasks rules only lower ``U``.
+
+    Args:
+        cfg: the model (its ``rate_model``: 1/2 for ``af``, 1 for ``reference_code``).
+    """
     return float(rates_from_sums(torch.ones(1, 2, dtype=torch.float64), torch.ones(1), 2, cfg)[0, 0])
 
 
@@ -319,6 +365,13 @@ def split_relaxation(a: torch.Tensor, b: torch.Tensor, x: torch.Tensor, y: torch
     on the path that moves the items in that order, at most one of them in part.  On each item's segment
     ``d/dtheta [log(X + theta a) + log(Y - theta b)] = 0`` at ``theta = (a Y - b X) / (2 a b)``.  No split of the
     items, with ``X, Y >= 1``, has a larger ``U``: an upper bound for every integral split.
+
+    Args:
+        a: each item's relay contribution ``[..., n]``, in :func:`ratio_order`.
+        b: each item's sensing contribution ``[..., n]``, in the same order.
+        x: the sum ``X`` ``[...]`` before any item relays.
+        y: the sum ``Y`` ``[...]`` with every item sensing.
+        scale: the rate model's ``c`` (:func:`staffed_scale`).
     """
     if a.shape[-1] == 0:
         zero = torch.zeros(a.shape[:-1], dtype=torch.long)
