@@ -254,6 +254,11 @@ class CheckpointWriter:
     ``newest_is_readable=False`` (a resume that had to skip an unreadable
     newest file) replaces that file without keeping it, so the readable
     previous one stays until a new readable checkpoint exists.
+
+    Args:
+        run_dir: the run directory the checkpoints are written to.
+        newest_is_readable: whether the run's newest checkpoint file could be read (False: the first save replaces
+            it without keeping it as the previous one).
     """
 
     def __init__(self, run_dir, newest_is_readable: bool = True):

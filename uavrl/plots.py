@@ -56,7 +56,15 @@ def pyplot():
 
 def save_figure(figure, path: Path) -> Path:
     """The figure as a PNG written atomically (a temporary file renamed over it), then closed; laid out by its own
-    layout engine (``layout="constrained"``), else by ``tight_layout``."""
+    layout engine (``layout="constrained"``), else by ``tight_layout``.
+
+    Args:
+        figure: a matplotlib figure.
+        path: the PNG file to write.
+
+    Returns:
+        ``path``.
+    """
     if figure.get_layout_engine() is None:
         figure.tight_layout()
     buffer = io.BytesIO()
@@ -78,7 +86,12 @@ class MissionEvent:
 def mission_events(status: np.ndarray) -> list[MissionEvent]:
     """The events of a mission from its statuses ``[T + 1, N]`` (the start, then after every step), in step order:
     a serving UAV that leaves (returning, or out at once), a returning one that arrives (charging, or out), a charging
-    one recharged (waiting, or serving at once where a place is free), and one that enters service."""
+    one recharged (waiting, or serving at once where a place is free), and one that enters service.
+
+    Args:
+        status: the statuses ``[T + 1, N]`` of :mod:`uavrl.envs.physics.energy` (``SERVING`` 0, ``RETURNING`` 1,
+            ``OUT`` 2, ``CHARGING`` 3, ``WAITING`` 4).
+    """
     from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
 
     before, after = np.asarray(status[:-1]), np.asarray(status[1:])
@@ -103,7 +116,15 @@ def battery_figure(battery: np.ndarray, status: np.ndarray, capacity: float, *, 
     """The matplotlib figure of a mission's batteries ``[T + 1, N]`` (the model's units; ``capacity`` a full battery)
     and statuses ``[T + 1, N]`` (:mod:`uavrl.envs.physics.energy`'s), the start then every step (module doc): the top
     axes count the UAVs serving (``num_serving`` at most at once, ``env.num_uavs``), then one axes per UAV, its events
-    drawn as one line of markers per kind whose ``gid`` is the kind (a key of :data:`EVENT_STYLES`)."""
+    drawn as one line of markers per kind whose ``gid`` is the kind (a key of :data:`EVENT_STYLES`).
+
+    Args:
+        battery: the batteries ``[T + 1, N]`` (J for ``rotary_wing``, the follow-up's units for ``follow_up``).
+        status: the statuses ``[T + 1, N]``.
+        capacity: a full battery, in the batteries' units.
+        num_serving: the most UAVs in service at once.
+        title: the figure's title.
+    """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -158,7 +179,15 @@ def battery_figure(battery: np.ndarray, status: np.ndarray, capacity: float, *, 
 def mission_history(policy, cfg, horizon: int, seed: int, device="cpu") -> tuple[np.ndarray, np.ndarray]:
     """``(battery, status)`` ``[horizon + 1, N]`` of the mission ``policy`` (a TorchRL policy) plays from the
     evaluation's first start (world 0 of ``eval.seed=seed``) under ``cfg`` (an energy model) for ``horizon`` steps:
-    the start, then after every step."""
+    the start, then after every step.
+
+    Args:
+        policy: a TorchRL policy of the model.
+        cfg: the model, with an energy model.
+        horizon: the mission's steps.
+        seed: the evaluation's seed, whose first start is played.
+        device: the torch device of the mission's world.
+    """
     import torch
 
     from uavrl.envs.env import UAVSpectrumEnv
@@ -182,7 +211,17 @@ def mission_history(policy, cfg, horizon: int, seed: int, device="cpu") -> tuple
 def mission_figure(policy, cfg, path: Path, *, horizon: int | None, seed: int, device="cpu", label="policy") -> Path:
     """``path`` written: :func:`battery_figure` of the mission ``policy`` plays from the evaluation's first start for
     ``horizon`` steps (None: the evaluation's, the whole mission) under ``cfg`` (an energy model); ``label`` names
-    the policy in the title."""
+    the policy in the title.
+
+    Args:
+        policy: a TorchRL policy of the model (``uavrl.load_policy`` returns one for a saved run).
+        cfg: the model, with an energy model.
+        path: the PNG file to write.
+        horizon: the mission's steps; None: the evaluation's.
+        seed: the evaluation's seed (``eval.seed``), whose first start is played.
+        device: the torch device of the mission's world.
+        label: the policy's name in the title.
+    """
     from uavrl.envs.limits import evaluation_horizon
 
     horizon = horizon or evaluation_horizon(cfg)

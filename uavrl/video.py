@@ -41,7 +41,17 @@ def video_settings(cfg, device) -> dict:
 
 
 def rollout_frames(policy, cfg: ModelConfig, starts: int, horizon: int, seed: int, device, label: str) -> list:
-    """``[H + 1]`` lists of ``starts`` frames: the evaluation's first ``starts`` starts played by ``policy``."""
+    """``[H + 1]`` lists of ``starts`` frames: the evaluation's first ``starts`` starts played by ``policy``.
+
+    Args:
+        policy: a TorchRL policy of the model.
+        cfg: the model.
+        starts: how many of the evaluation's starts to play.
+        horizon: steps ``H`` per rollout.
+        seed: the evaluation's seed.
+        device: the torch device of the worlds.
+        label: the policy's name in each frame's heading.
+    """
     from uavrl.envs.env import UAVSpectrumEnv
     from uavrl.envs.render import WorldRenderer
 
@@ -73,7 +83,24 @@ def comparison_frames(
     label: str = "policy",
 ) -> np.ndarray:
     """``[H + 1, height, width, 3]`` uint8 frames: row ``i`` shows start ``i`` played by ``policy`` (left, headed
-    ``label``) and by the oracle (right), for ``horizon`` steps (default: the yardstick's)."""
+    ``label``) and by the oracle (right), for ``horizon`` steps (default: the yardstick's).
+
+    Args:
+        policy: a TorchRL policy of the model (``uavrl.load_policy`` returns one for a saved run).
+        cfg: the model.
+        starts: how many of the evaluation's starts, one row each.
+        horizon: steps per rollout; None: the yardstick's.
+        seed: the evaluation's seed (``eval.seed``).
+        device: the torch device of the worlds.
+        label: the policy's heading.
+
+    Example:
+        >>> from uavrl.agents.baselines import RandomPolicy
+        >>> from uavrl.envs import make_config
+        >>> frames = comparison_frames(RandomPolicy(), make_config("paper", grid=(3, 3)), starts=1, horizon=2)
+        >>> len(frames), frames.dtype
+        (3, dtype('uint8'))
+    """
     from uavrl.agents.baselines import OraclePolicy
     from uavrl.envs.render import tile
 
@@ -90,7 +117,13 @@ def comparison_frames(
 
 
 def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
-    """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4."""
+    """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4.
+
+    Args:
+        frames: ``[T, H, W, 3]`` uint8 frames.
+        fps: frames per second.
+        extension: ``".gif"`` or ``".mp4"`` (needs PyAV: ``pip install -e ".[video]"``).
+    """
     import imageio.v3 as iio
 
     refuse("fps", fps, rule_of(RunEvalSchema, "video_fps"))
@@ -107,7 +140,13 @@ def can_write_mp4() -> bool:
 
 
 def save_videos(frames: np.ndarray, out_dir, fps: int) -> list[Path]:
-    """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written."""
+    """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written.
+
+    Args:
+        frames: ``[T, H, W, 3]`` uint8 frames (:func:`comparison_frames`).
+        out_dir: the folder to write to.
+        fps: frames (steps) per second.
+    """
     kinds = (".gif", ".mp4") if can_write_mp4() else (".gif",)
     paths = [Path(out_dir) / f"video{kind}" for kind in kinds]
     for path, kind in zip(paths, kinds, strict=True):
