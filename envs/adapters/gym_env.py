@@ -132,7 +132,14 @@ def _position_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
 def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
     and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid (or for a UAV out of
-    service), the batteries and service flags of an energy model in [0, 1], then the nodes."""
+    service), the batteries and service flags of an energy model in [0, 1], then the nodes.
+
+    Args:
+        cfg: the model.
+
+    Returns:
+        The lower and the upper bounds, ``[N, F + 12]`` float32 each.
+    """
     N, (position_low, position_high) = cfg.fleet_size, _position_bounds(cfg)
     energy = 0 if cfg.energy == "none" else 2 * N
     node_low, node_high = _node_bounds(cfg)
@@ -145,7 +152,14 @@ def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
 def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
     then the nodes; under an energy model ``[7 N + 12]``: a UAV out of service at the base with contributions -1,
-    then each UAV's battery and service flag in [0, 1], then the nodes."""
+    then each UAV's battery and service flag in [0, 1], then the nodes.
+
+    Args:
+        cfg: the model.
+
+    Returns:
+        The lower and the upper bounds, float32.
+    """
     node_low, node_high = _node_bounds(cfg)
     if cfg.energy == "none":
         per_uav = 5 * cfg.fleet_size
@@ -300,6 +314,28 @@ class UAVSpectrumVectorEnv(VectorEnv):
     Autoreset is ``NEXT_STEP``: the step after an episode ends resets the worlds, ignores their actions and
     returns their first observation with reward 0.  ``reset(seed=s)`` seeds world ``i`` with ``s + i``.
     Arguments as :class:`UAVSpectrumGymEnv`'s, plus ``num_envs`` (the batch).
+
+    Args:
+        num_envs: the number of worlds ``B``.
+        grid: ``(L1, L2)`` cells.
+        num_uavs: ``N``, at most ``L1 * L2``.
+        preset: ``"paper"``, ``"reference_code"`` or ``"a2g_urban"``; ``grid`` and ``num_uavs`` given here win over
+            the preset's.
+        max_steps: the episode length ``T`` in steps.
+        device: the torch device of the world (observations come back as NumPy arrays).
+        render_mode: ``"rgb_array"`` or None.
+        config: a complete :class:`~uavrl.envs.config.ModelConfig`; replaces ``grid``, ``num_uavs``, ``preset``,
+            ``max_steps`` and the overrides.
+        **overrides: any model option (:class:`~uavrl.envs.config.ModelConfig`'s fields), e.g. ``channel="al_hourani"``.
+
+    Example:
+        >>> vector_env = UAVSpectrumVectorEnv(num_envs=4, grid=(4, 4), num_uavs=2)
+        >>> observation, info = vector_env.reset(seed=0)
+        >>> observation.shape
+        (4, 2, 28)
+        >>> observation, reward, terminated, truncated, info = vector_env.step(vector_env.action_space.sample())
+        >>> reward.shape, truncated.shape
+        ((4,), (4,))
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS, "autoreset_mode": AutoresetMode.NEXT_STEP}

@@ -55,6 +55,28 @@ class UAVSpectrumParallelEnv(ParallelEnv):
     """One world of the model as a PettingZoo ``ParallelEnv``: agent ``uav_i`` is UAV ``i``.
 
     Arguments as :class:`~uavrl.envs.adapters.gym_env.UAVSpectrumGymEnv`'s.
+
+    Args:
+        grid: ``(L1, L2)`` cells.
+        num_uavs: ``N``, at most ``L1 * L2``.
+        preset: ``"paper"``, ``"reference_code"`` or ``"a2g_urban"``; ``grid`` and ``num_uavs`` given here win over
+            the preset's.
+        max_steps: the episode length ``T`` in steps.
+        device: the torch device of the world (observations come back as NumPy arrays).
+        render_mode: ``"rgb_array"`` or None.
+        config: a complete :class:`~uavrl.envs.config.ModelConfig`; replaces ``grid``, ``num_uavs``, ``preset``,
+            ``max_steps`` and the overrides.
+        **overrides: any model option (:class:`~uavrl.envs.config.ModelConfig`'s fields), e.g. ``channel="al_hourani"``.
+
+    Example:
+        >>> env = UAVSpectrumParallelEnv(grid=(4, 4), num_uavs=2)
+        >>> observations, infos = env.reset(seed=0)
+        >>> sorted(observations)
+        ['uav_0', 'uav_1']
+        >>> actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+        >>> observations, rewards, terminations, truncations, infos = env.step(actions)
+        >>> rewards["uav_0"] == rewards["uav_1"]  # the team reward
+        True
     """
 
     metadata = {
