@@ -92,7 +92,13 @@ class YardstickCallback(Callback):
     policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had trained by
     then (``time/...``, :class:`~uavrl.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
     point.  The TensorBoard writer opens in ``on_setup``: BenchMARL pickles its callbacks with the experiment's
-    config before."""
+    config before.
+
+    Args:
+        env_cfg: the model the greedy policy is evaluated in (the task's).
+        eval_kwargs: the settings of :func:`uavrl.evaluation.evaluate` (``num_starts``, ``horizon``, ``seed``, ...).
+        run_dir: the run directory its TensorBoard events go to.
+    """
 
     def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, run_dir):
         super().__init__()
