@@ -55,7 +55,8 @@ class Agent(abc.ABC):
         return self.policies()[run]
 
     def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
-        """:func:`uavrl.evaluation.evaluate` (``kwargs``: its settings) of each of :meth:`policies`.
+        """:func:`uavrl.evaluation.evaluate` in the model ``env_cfg`` (``kwargs``: its settings) of each of
+        :meth:`policies`.
 
         An agent may override it with a faster evaluation of the same greedy
         policies that gives the same numbers (the tabular agent reads its tables).
@@ -70,4 +71,4 @@ class Agent(abc.ABC):
 
     @abc.abstractmethod
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state_dict` of an agent built with the same settings."""
+        """Continue from ``state``, the :meth:`state_dict` of an agent built with the same settings."""

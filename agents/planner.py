@@ -96,7 +96,8 @@ class PlannerPolicy(OraclePolicy):
         return found
 
     def cycles(self, world: int, nodes) -> bool:
-        """Whether the full team cycles between ``A`` (the first optimal configuration of the world) and ``B``."""
+        """Whether the full team cycles between ``A`` (the first optimal configuration of the world) and ``B``;
+        ``world`` is the world's index, ``nodes`` its node positions (None for a fixed layout)."""
         target_cells, target_tasks = self._optimal_sets(world, nodes)
         return self._partners(world, nodes, target_cells[0], target_tasks[0])[1]
 

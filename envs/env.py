@@ -321,8 +321,8 @@ class UAVSpectrumEnv(EnvBase):
         return super().step(tensordict)
 
     def reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        """TorchRL's ``reset``; a one-line error for a ``"_reset"`` mask that is not ``[B]`` or ``[B, 1]`` booleans
-        (on the CPU or a CUDA device: it is moved to the env's)."""
+        """TorchRL's ``reset`` (``tensordict``, ``kwargs``: as TorchRL's); a one-line error for a ``"_reset"`` mask
+        that is not ``[B]`` or ``[B, 1]`` booleans (on the CPU or a CUDA device: it is moved to the env's)."""
         mask = None if tensordict is None else tensordict.get("_reset", None)
         if mask is not None:
             B, shapes = self.num_worlds, ((self.num_worlds,), (self.num_worlds, 1))
@@ -339,7 +339,8 @@ class UAVSpectrumEnv(EnvBase):
         return super().reset(tensordict, **kwargs)
 
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
-        """TorchRL's ``rollout``; one-line errors for ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
+        """TorchRL's ``rollout`` (``args``, ``kwargs``: as TorchRL's, the policy first); one-line errors for
+        ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
             raise ValueError(f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1")
         try:
@@ -374,7 +375,8 @@ class UAVSpectrumEnv(EnvBase):
         """VMAS's ``render``: an ``[H, W, 3]`` uint8 picture of world ``env_index`` now, or of a list of worlds tiled.
 
         It shows the grid, the nodes, each UAV coloured by task with the links it serves, and the step's utility
-        against U* (:mod:`uavrl.envs.render`); ``agent_index_focus`` rings one UAV.
+        against U* (:mod:`uavrl.envs.render`); ``agent_index_focus`` rings one UAV.  ``mode``: ``"rgb_array"``, the
+        only one.
         """
         from .render import render
 
@@ -386,11 +388,13 @@ class UAVSpectrumEnv(EnvBase):
         return self.world.cells_of(positions)
 
     def utility(self, positions: torch.Tensor, tasks: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(R_PU, R_SE, U)`` of configurations of this env's worlds (:meth:`World.utility`)."""
+        """``(R_PU, R_SE, U)`` of configurations of this env's worlds (:meth:`World.utility`): the UAVs' ``positions``
+        ``[B, N, 2]`` and ``tasks`` ``[B, N]``."""
         return self.world.utility(positions, tasks)
 
     def optimum(self, method: str = "auto") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Exact ``U*`` ``[B]`` and one optimal configuration per world (:meth:`World.optimum`)."""
+        """Exact ``U*`` ``[B]`` and one optimal configuration per world (:meth:`World.optimum`; ``method`` as
+        :func:`uavrl.envs.solvers.optimum.optimum`'s)."""
         return self.world.optimum(method)
 
     def joint_action_mask(self, positions: torch.Tensor | None = None) -> torch.Tensor:

@@ -427,7 +427,8 @@ class WorldRenderer:
         return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
 
     def frames(self, indices: Sequence[int], focus: int | None = None, columns: int | None = None) -> np.ndarray:
-        """The frames of worlds ``indices`` tiled, ``columns`` per row (default: about a square)."""
+        """The frames of worlds ``indices`` tiled, ``columns`` per row (default: about a square); ``focus``: the UAV
+        to ring."""
         return tile([self.frame(i, focus) for i in indices], columns)
 
 

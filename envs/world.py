@@ -611,7 +611,8 @@ class World:
         return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
     def step(self, action: torch.Tensor) -> tuple[dict, torch.Tensor, torch.Tensor]:
-        """Every world takes the UAVs' actions ``[B, N]`` (0..5, 6 to return under recharging; checked by the caller).
+        """Every world takes the UAVs' ``action`` ``[B, N]`` (0..5, 6 to return under recharging; checked by the
+        caller).
 
         Returns the outputs (as :meth:`reset`'s), the team reward ``[B]``
         (float64) and whether the episode is over ``[B]`` (truncation after
@@ -715,7 +716,7 @@ class World:
         """Exact ``U*`` ``[B]`` and one optimal configuration per world (positions ``[B, N, 2]``, tasks ``[B, N]``).
 
         Over all placements on distinct cells and all task vectors, for the
-        deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum`.
+        deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum` (``method`` as its).
         """
         self._require_layout()
         # a fixed layout has one row of tables: solved once, the same answer for every world

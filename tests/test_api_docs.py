@@ -1,11 +1,12 @@
 """Every object of the API reference documents its arguments: each name the pages of docs/api/ list (autosummary
 entries under a ``currentmodule``) has a docstring that names every parameter of its signature (a class: of its
 ``__init__``, its own or one inherited from a uavrl class; one inherited from TorchRL, Gymnasium or BenchMARL is
-theirs to document). Parameters whose names start with ``_`` are private and left out.
+theirs to document), and so does each public method with a docstring that the class's page shows. Parameters
+whose names start with ``_`` are private and left out.
 
 A module whose optional extra is not installed (BenchMARL, Gymnasium, PettingZoo) is checked from its source
-instead (its functions' and classes' ``__init__`` signatures and docstrings), so the check covers every page
-whatever is installed. Imports only: no environment is built.
+instead (the same signatures and docstrings, parsed), so the check covers every page whatever is installed.
+Imports only: no environment is built.
 """
 
 from __future__ import annotations
@@ -79,19 +80,36 @@ def init_owner(cls: type) -> type | None:
     return None
 
 
+def shown_methods(cls: type) -> dict:
+    """The methods the class's page shows: its own public ones with a docstring (autodoc leaves out the others)."""
+    shown = {}
+    for name, member in vars(cls).items():
+        function = member.__func__ if isinstance(member, classmethod | staticmethod) else member
+        if not name.startswith("_") and inspect.isfunction(function) and function.__doc__:
+            shown[name] = function
+    return shown
+
+
 def check_object(obj) -> list[str]:
-    """What the docstring of a function or class lacks: the whole docstring, or the parameters it does not name."""
+    """What the docstring of a function or class lacks: the whole docstring, or the parameters it does not name
+    (a class: those of its ``__init__``, and those of each method its page shows, in that method's docstring)."""
     if inspect.isclass(obj):
         owner = init_owner(obj)
         docs = [obj.__doc__] if owner is None else [obj.__doc__, owner.__doc__, owner.__init__.__doc__]
         doc = "\n".join(d for d in docs if d)
         parameters = [] if owner is None else public(list(inspect.signature(owner.__init__).parameters))
+        methods = [
+            f"method {name!r}: parameter {parameter!r} not named"
+            for name, method in shown_methods(obj).items()
+            for parameter in missing_names(method.__doc__, public(list(inspect.signature(method).parameters)))
+        ]
     else:
         doc = obj.__doc__ or ""
         parameters = public(list(inspect.signature(obj).parameters))
+        methods = []
     if not doc.strip():
         return ["no docstring"]
-    return [f"parameter {name!r} not named" for name in missing_names(doc, parameters)]
+    return [f"parameter {name!r} not named" for name in missing_names(doc, parameters)] + methods
 
 
 def _function_parameters(node: ast.FunctionDef | ast.AsyncFunctionDef) -> list[str]:
@@ -117,16 +135,23 @@ def check_source(path: Path, name: str) -> list[str]:
     node = next((n for n in tree.body if getattr(n, "name", None) == name), None)
     if node is None:
         return [f"not defined in {path}"]
-    doc = ast.get_docstring(node) or ""
+    doc, methods = ast.get_docstring(node) or "", []
     if isinstance(node, ast.ClassDef):
-        init = next((n for n in node.body if isinstance(n, ast.FunctionDef) and n.name == "__init__"), None)
+        functions = [n for n in node.body if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)]
+        init = next((n for n in functions if n.name == "__init__"), None)
         parameters = [] if init is None else _function_parameters(init)  # inherited: the base's to document
         doc += "\n" + ((init and ast.get_docstring(init)) or "")
+        methods = [
+            f"method {method.name!r}: parameter {parameter!r} not named"
+            for method in functions
+            if not method.name.startswith("_") and ast.get_docstring(method)
+            for parameter in missing_names(ast.get_docstring(method), _function_parameters(method))
+        ]
     else:
         parameters = _function_parameters(node)
     if not doc.strip():
         return ["no docstring"]
-    return [f"parameter {name!r} not named" for name in missing_names(doc, parameters)]
+    return [f"parameter {name!r} not named" for name in missing_names(doc, parameters)] + methods
 
 
 def check(item: ApiObject) -> list[str]:
@@ -200,13 +225,19 @@ def test_a_class_is_checked_against_its_init(monkeypatch):
     class Child(Base):
         """A child of Base."""
 
+        def shown(self, steps, seed=0):
+            """Runs for ``steps`` steps."""
+
+        def not_shown(self, steps):  # no docstring: autodoc leaves it out
+            pass
+
     class FromLibrary(ValueError):
         """A ValueError."""
 
     for klass in (Base, Child):
         klass.__module__ = module.__name__
     assert check_object(Base) == ["parameter 'device' not named"]
-    assert check_object(Child) == ["parameter 'device' not named"]
+    assert check_object(Child) == ["parameter 'device' not named", "method 'shown': parameter 'seed' not named"]
     assert check_object(FromLibrary) == []
 
 
@@ -218,9 +249,14 @@ def test_a_module_of_a_missing_extra_is_read_from_its_source(tmp_path, monkeypat
         '    """A task."""\n\n'
         "    def __init__(self, cfg, seed):\n"
         '        """``cfg``: the model."""\n\n'
+        "    def step(self, action):\n"
+        '        """One step."""\n\n'
         "def run(task, steps):\n"
         '    """Runs ``task`` for ``steps`` steps."""\n'
     )
     monkeypatch.syspath_prepend(str(tmp_path))
-    assert check(ApiObject("planted.md", "planted_extra", "Task")) == ["parameter 'seed' not named"]
+    assert check(ApiObject("planted.md", "planted_extra", "Task")) == [
+        "parameter 'seed' not named",
+        "method 'step': parameter 'action' not named",
+    ]
     assert check(ApiObject("planted.md", "planted_extra", "run")) == []

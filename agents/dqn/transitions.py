@@ -82,7 +82,7 @@ class CompactTransitions(Transform):
         return TensorDict(stored, batch_size=td.batch_size, device=td.device)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
-        """The full transitions of compact ones, as they were collected."""
+        """The full transitions of the compact ones ``td``, as they were collected."""
         B, nxt = td.batch_size[0], td.get("next")
 
         def both(key):  # now and next, rebuilt in one call

@@ -83,7 +83,8 @@ class TabularAgent(Agent):
         return [TabularPolicy(q, self.env_cfg) for q in tables]
 
     def evaluate(self, env_cfg: ModelConfig, **kwargs) -> list[dict[str, float]]:
-        """The evaluation of :meth:`policies`, read from the tables in one batched world (no TorchRL rollouts)."""
+        """The evaluation of :meth:`policies` in the model ``env_cfg``, read from the tables in one batched world (no
+        TorchRL rollouts); ``kwargs``: the settings of :func:`uavrl.evaluation.evaluate`."""
         from .greedy import evaluate_tables
 
         return evaluate_tables(self.learner.q if self.learner is not None else self.q[None], env_cfg, **kwargs)

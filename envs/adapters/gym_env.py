@@ -277,7 +277,8 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         return self._worlds.world
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Gymnasium's reset: ``(observation, info)`` of a new episode (``seed`` seeds it and those that follow)."""
+        """Gymnasium's reset: ``(observation, info)`` of a new episode (``seed`` seeds it and those that follow;
+        ``options`` must be None or empty: the env takes none)."""
         super().reset(seed=None if seed is None else check_seed(seed))
         if options:
             raise ValueError(f"options={options!r} is invalid: this env takes no reset options (give None or {{}})")
@@ -373,7 +374,11 @@ class UAVSpectrumVectorEnv(VectorEnv):
         return self._worlds.world
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Gymnasium's vector reset: batched ``(observations, infos)`` of new episodes in every world."""
+        """Gymnasium's vector reset: batched ``(observations, infos)`` of new episodes in every world.
+
+        ``seed`` (an int) seeds world ``i`` with ``seed + i``, and the episodes that follow; ``options`` must be None
+        or empty (every reset starts all worlds).
+        """
         if seed is not None and not isinstance(seed, int):
             raise ValueError(f"seed={seed!r} is invalid: give one int (world i is seeded seed + i) or None")
         super().reset(seed=None if seed is None else check_seed(seed))

@@ -133,13 +133,14 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         return self.action_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode."""
+        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode (``seed`` seeds it
+        and those that follow; ``options`` is not read)."""
         out = self._worlds.reset(seed)
         self.agents = self.possible_agents[:]
         return self._observations(out), self._infos(out)
 
     def step(self, actions: dict):
-        """PettingZoo's parallel step: an action for every live UAV, by name, to ``(observations, rewards,
+        """PettingZoo's parallel step: ``actions``, an action for every live UAV by name, to ``(observations, rewards,
         terminations, truncations, infos)``; every UAV gets the team reward."""
         if not self.agents:
             raise RuntimeError("step() with no live agents: call reset() first (the episode ended or never began)")

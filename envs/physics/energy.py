@@ -93,7 +93,8 @@ class Energy:
 
     def step(self, state, cell_before: torch.Tensor, action: torch.Tensor) -> dict[str, torch.Tensor]:
         """The per-UAV variables after a step, from ``state`` (its ``cell`` and ``task`` the dynamics part's after the
-        step, the rest before), the cells before it and the joint actions ``[B, N]``."""
+        step, the rest before), the cells before it ``cell_before`` ``[B, N]`` and the joint actions ``action``
+        ``[B, N]``."""
         e = self.energies
         status, timer = state.status, state.timer
         serving, returning = status == SERVING, status == RETURNING
@@ -152,8 +153,8 @@ class Energy:
         return torch.stack([(state.battery / self.capacity).float(), (state.status == SERVING).float()], -1)
 
     def terminated(self, state) -> torch.Tensor | None:
-        """``[B]`` whether no UAV of a world serves any more; ``None`` with ``recharge_steps``, where every UAV serves
-        again once charged (the mission is truncated after ``max_steps``)."""
+        """``[B]`` whether no UAV of a world serves any more in ``state``; ``None`` with ``recharge_steps``, where
+        every UAV serves again once charged (the mission is truncated after ``max_steps``)."""
         return None if self.recharge_steps is not None else (state.status != SERVING).all(-1)
 
 

@@ -84,15 +84,18 @@ class Fading:
         self.cfg = cfg
 
     def table(self, cell_xyz: torch.Tensor, nodes: torch.Tensor, mean_gains: torch.Tensor) -> torch.Tensor | None:
-        """What the draws need per cell of ``k`` layouts (``nodes`` ``[k, 4, 3]``, ``mean_gains`` ``[k, C, 4]``)."""
+        """What the draws need per cell of ``k`` layouts (``cell_xyz`` ``[C, 3]``, ``nodes`` ``[k, 4, 3]``,
+        ``mean_gains`` ``[k, C, 4]``)."""
         return None
 
     def gains(self, rows: torch.Tensor, keys: torch.Tensor, counters: torch.Tensor) -> torch.Tensor:
-        """``[W, N, 4]`` power gains of the links this step from the table's rows ``[W, N, 4, ...]``."""
+        """``[W, N, 4]`` power gains of the links this step from the table's rows ``[W, N, 4, ...]``, drawn from the
+        worlds' streams (``keys``, ``counters`` ``[W]``)."""
         raise NotImplementedError(f"fading={self.name!r} draws nothing: its rates are the mean channel's")
 
     def direct(self, snr: torch.Tensor, keys: torch.Tensor, counters: torch.Tensor) -> torch.Tensor:
-        """``[W, 2]`` the direct links' SNRs this step from their mean ``snr``."""
+        """``[W, 2]`` the direct links' SNRs this step from their mean ``snr``, drawn from the worlds' streams
+        (``keys``, ``counters`` ``[W]``)."""
         return snr
 
 

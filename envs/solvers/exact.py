@@ -153,7 +153,7 @@ class ConfigurationSpace:
         layouts.
 
         ``contributions`` ``[B, C, 2]`` and ``direct`` ``[B, 2]`` as ``env.cell_contributions`` and ``env.direct``;
-        ``cfg`` gives the rate rules.
+        ``cfg`` gives the rate rules; ``beta`` the weights ``(beta1, beta2)``.
         """
         out = torch.empty(len(contributions), self.num_configurations, dtype=torch.float64, device=self.device)
         step = max(1, _CHUNK_ELEMENTS // (len(contributions) * self.num_uavs * 2))
@@ -169,7 +169,8 @@ class ConfigurationSpace:
         """``[B, ..., 6^N]`` ``Q(s, a) = P(s') - P(s) + gamma V(s')`` at ordered configurations ``[B, ..., N]``, -inf
         where invalid.
 
-        ``potential`` and ``values`` ``[B, K]`` (from :meth:`utility` and :func:`optimal_values`).
+        ``potential`` and ``values`` ``[B, K]`` (from :meth:`utility` and :func:`optimal_values`); ``cells``
+        ``[B, ..., N]`` ascending and ``tasks`` ``[B, ..., N]`` the configurations.
         """
         B = len(potential)
         k = self.index(cells, tasks).reshape(B, -1)

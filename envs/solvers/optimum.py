@@ -276,7 +276,8 @@ class SplitSearch:
         return best, max(open_bounds) if open_bounds else None
 
     def at_least(self, threshold: float, limit: int = SEARCH_NODE_LIMIT) -> list[tuple[list[int], list[int]]]:
-        """Every configuration of the candidate sets (module doc) with ``U >= threshold``: ``(relays, sensors)``."""
+        """Every configuration of the candidate sets (module doc) with ``U >= threshold``: ``(relays, sensors)``;
+        a one-line error beyond ``limit`` search nodes."""
         _, found, open_bounds = self._branch(threshold, limit)
         if open_bounds:
             raise ValueError(f"listing the configurations with U >= {threshold} took over {limit:,} search nodes")
