@@ -196,6 +196,12 @@ class ModelConfig:
                 if name in ("p_pt", "p_s", "p_u"):
                     reason += f": give the power in dBm as {name}_dbm"
                 raise InvalidOption(name, value, reason)
+        if self.channel in radio.TR36777 and self.environment != _DEFAULTS["environment"]:
+            reason = (
+                f"only channel='al_hourani' reads it, not channel={self.channel!r}, whose TR 36.777 scenario is the "
+                f"environment (choose among {', '.join(map(repr, radio.TR36777))})"
+            )
+            raise InvalidOption("environment", self.environment, reason)
         if self.is_physical and self.rate_model == "reference_code":
             reason = "the authors' formula multiplies the power law's gains; use channel='paper' or 'reference_code'"
             raise InvalidOption("rate_model", self.rate_model, reason)
@@ -288,6 +294,7 @@ class ModelConfig:
         if self.reset_positions == "keep":
             reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
             raise InvalidOption("energy", self.energy, reason)
+        self._check_step_energies()
         lowest, need, farthest = self._lowest_start_and_largest_reserve()
         if lowest <= need:
             name = "battery_wh" if self.energy == "rotary_wing" else "base"
@@ -297,6 +304,26 @@ class ModelConfig:
                 f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
                 f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
                 f"{need / scale:.4g} {unit}: give a larger battery or a nearer base"
+            )
+            raise InvalidOption(name, getattr(self, name), reason)
+
+    def _check_step_energies(self):
+        """A step's energies finite under ``rotary_wing``: its propulsion power grows with the speed ``cell_size /
+        slot_s`` to the fourth power, beyond float64 for a slot too short or a cell too long."""
+        try:
+            energies = self.step_energies
+            finite = all(math.isfinite(e) for e in (energies.move, energies.stay, energies.fly, energies.capacity))
+        except (OverflowError, ValueError):  # v^4 beyond float64, or a square root of a rounded negative
+            finite = False
+        if not finite:
+            name = (
+                "slot_s"
+                if self.slot_s != _DEFAULTS["slot_s"] or self.cell_size == _DEFAULTS["cell_size"]
+                else "cell_size"
+            )
+            reason = (
+                f"a move flies cell_size / slot_s = {self.cell_size / self.slot_s:.3g} m/s, and the rotary-wing "
+                "propulsion power at that speed is beyond float64: give a longer slot_s or a smaller cell_size"
             )
             raise InvalidOption(name, getattr(self, name), reason)
 

@@ -41,13 +41,13 @@ def run_command(
     config_name: str,
     command: Command,
     option_settings: dict[str, str],
-    check: Callable[[DictConfig], None] | None = None,
+    check: Callable[[DictConfig, list], None] | None = None,
 ) -> None:
     """Compose ``config_name`` with the command line's overrides and run ``command(cfg, overrides)``.
 
     ``option_settings`` names the model's options as the command's users type
-    them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check``
-    refuses a bad config; a command that passes it writes run directories: in
+    them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check(cfg,
+    overrides)`` refuses a bad config; a command that passes it writes run directories: in
     a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
     checked before any starts.
     """
@@ -217,7 +217,7 @@ def check_sweep(config_name: str, overrides: list[str], sweep_dir: Path | None, 
         if check is not None:
             with open_dict(cfg):
                 del cfg["hydra"]
-            check(cfg)
+            check(cfg, job)
 
 
 def compose_config(config_name: str, overrides: list[str], return_hydra_config: bool = False) -> DictConfig:

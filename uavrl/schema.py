@@ -54,6 +54,7 @@ from uavrl.rules import (
 )
 
 STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
+TIME_BUDGET = 1  # hours of one CPU core, estimated: every scenario's DQN budget takes minutes (BENCHMARKS.md)
 
 
 @dataclass
@@ -64,6 +65,12 @@ class TrainSchema:
     log_every: int = setting(1, whole(1), "iterations between TensorBoard points")
     step_budget: int = setting(
         STEP_BUDGET, whole(1), "team steps of training and evaluation; a run that needs more is refused at once"
+    )
+    time_budget: REAL = setting(
+        TIME_BUDGET,
+        positive(),
+        "hours of one CPU core the DQN's training may take, as estimated before it starts from its networks, batch, "
+        "gradient steps, worlds and grid (uavrl/settings.py); a run estimated to need more is refused at once",
     )
 
 
