@@ -175,6 +175,11 @@ def agent_rules(name: str) -> dict[str, Rule]:
 MAX_JOINT_UAVS = 4  # the joint head's 6^N outputs are for small teams
 
 
+def _plain(value):
+    """A list setting as plain lists (a config's list of lists is one of its own types)."""
+    return [_plain(v) for v in value] if not isinstance(value, (str, int, float)) else value
+
+
 def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for DQN settings that cannot go together (after the schema's rules), before torch is
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
@@ -191,9 +196,10 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
             )
         for name in ("sizes", "layouts"):
             if a.get(name):
+                value = shown(_plain(a.get(name)), label=True)
                 raise ValueError(
-                    f"agent.{name}={shown(list(a.get(name)), label=True)} is invalid with agent.network='team', which "
-                    "is sized by the run's env and trains on it alone: use agent.network=set"
+                    f"agent.{name}={value} is invalid with agent.network='team', which is sized by the run's env and "
+                    "trains on it alone: use agent.network=set"
                 )
         if a.head == "joint" and env_cfg.num_uavs > MAX_JOINT_UAVS:
             raise ValueError(
@@ -225,7 +231,7 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
         team = f"[{n}, {grid[0]}, {grid[1]}]"
         if n > grid[0] * grid[1]:
             raise ValueError(
-                f"agent.sizes={shown(list(a.sizes), label=True)} is invalid: its team {team} has {n} UAVs for the "
+                f"agent.sizes={shown(_plain(a.sizes), label=True)} is invalid: its team {team} has {n} UAVs for the "
                 f"{grid[0] * grid[1]} cells of a {grid[0]}x{grid[1]} grid (one per cell)"
             )
         try:

@@ -297,15 +297,15 @@ class ModelConfig:
         self._check_step_energies()
         lowest, need, farthest = self._lowest_start_and_largest_reserve()
         if lowest <= need:
-            name = "battery_wh" if self.energy == "rotary_wing" else "base"
+            name = self._battery_blamed()
             unit = "Wh" if self.energy == "rotary_wing" else "units"
             scale = 3600.0 if self.energy == "rotary_wing" else 1.0
             reason = (
                 f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
                 f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
-                f"{need / scale:.4g} {unit}: give a larger battery or a nearer base"
+                f"{need / scale:.4g} {unit}: {_BATTERY_ADVICE[name]}"
             )
-            raise InvalidOption(name, getattr(self, name), reason)
+            raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)
 
     def _check_step_energies(self):
         """A step's energies finite under ``rotary_wing``: its propulsion power grows with the speed ``cell_size /
@@ -327,14 +327,33 @@ class ModelConfig:
             )
             raise InvalidOption(name, getattr(self, name), reason)
 
-    def _lowest_start_and_largest_reserve(self) -> tuple[float, float, int]:
+    def _lowest_start_and_largest_reserve(self, **changes) -> tuple[float, float, int]:
         """The lowest battery a UAV may start with, the largest reserve of a cell (the farthest from the base's), and
-        that cell's steps from the base, under an energy model."""
-        (L1, L2), (bx, by) = self.grid, self.base
+        that cell's steps from the base, under an energy model (with the options ``changes`` in place of these)."""
+        v = {name: changes.get(name, getattr(self, name)) for name in _BATTERY_ADVICE}
+        (L1, L2), (bx, by) = v["grid"], v["base"]
         farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
-        energies = self.step_energies
-        lowest = energies.capacity * (power.UNIFORM_LOW if self.battery_init == "uniform" else 1.0)
+        energies = power.step_energies(
+            self.energy, v["cell_size"], v["slot_s"], self.powers_w[2], v["circuit_power_w"], v["battery_wh"]
+        )
+        lowest = energies.capacity * (power.UNIFORM_LOW if v["battery_init"] == "uniform" else 1.0)
         return lowest, energies.reserve(farthest), farthest
+
+    def _battery_blamed(self) -> str:
+        """The option to name when a battery cannot reach the base: the first one set away from its preset's value
+        whose preset value (a base next to the grid) would let it, else the battery (the base under follow_up)."""
+        preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)}
+        for name in _BATTERY_ADVICE:
+            value = getattr(self, name)
+            if value == preset[name] or (name == "base" and abs(value[0]) + abs(value[1]) <= 1):
+                continue
+            try:
+                lowest, need, _ = self._lowest_start_and_largest_reserve(**{name: preset[name]})
+            except (OverflowError, ValueError):
+                continue
+            if lowest > need:
+                return name
+        return "battery_wh" if self.energy == "rotary_wing" else "base"
 
     @property
     def steps_before_reserve(self) -> int | None:
@@ -441,6 +460,16 @@ _PRESETS = {
     ),
 }
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
+# the options a battery's reach depends on, in the order a refusal blames them, and how each would let it reach
+_BATTERY_ADVICE = {
+    "circuit_power_w": "give a smaller circuit power, a larger battery or a nearer base",
+    "slot_s": "give a shorter slot, a larger battery or a nearer base",
+    "cell_size": "give smaller cells, a larger battery or a nearer base",
+    "base": "give a nearer base or a larger battery",
+    "grid": "give a smaller grid, a nearer base or a larger battery",
+    "battery_init": "start full, or give a larger battery or a nearer base",
+    "battery_wh": "give a larger battery or a nearer base",
+}
 # what uavrl.envs.limits reads
 _PHYSICS_OPTIONS = (
     *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward", "channel", "environment"),

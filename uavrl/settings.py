@@ -421,7 +421,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     def step_bytes(low) -> int:
         s, rows = agent(low), group_batch(low)
         return sum(
-            rows * (frame_bytes(m) + 3 * FLOAT * costs.team_row_values(m.fleet_size, m.num_actions, _e(m), s))
+            rows * (frame_bytes(m) + FLOAT * costs.team_row_values(m.fleet_size, m.num_actions, _e(m), s))
             + rows * (m.num_cells + 2)  # the greedy action's occupancy of every cell
             for m in models(low)
         )
@@ -457,7 +457,11 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
             (*network, *([] if size_free else shape[1:])),
             network_bytes,
         ),
-        Cost("a gradient step's batch and activations", (batch, *network, *shape, *each), step_bytes),
+        Cost(  # agent.batch_size is shared out among the groups of a size-free run
+            "a gradient step's batch and activations",
+            (batch, *network, *shape, *(dataclasses.replace(f, multiplies=False) for f in each)),
+            step_bytes,
+        ),
     ]
     steps = [product("training", [iterations, worlds, T, *each])]
     seconds = [Cost("training", (iterations, *per_iteration, *network, *shape, *each), cpu_seconds)]
