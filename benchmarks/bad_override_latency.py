@@ -17,7 +17,9 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 COMMANDS = [
     ("python -c pass", ["-c", "pass"]),
@@ -52,7 +54,49 @@ COMMANDS = [
         "python -m uavrl.render run eval.video_starts=10**9",
         ["-m", "uavrl.render", "run", "eval.video_starts=1000000000"],
     ),
+    # the costs of the networks, the gradient steps and the grid, estimated before the work
+    ("python -m uavrl.train agent=dqn agent.hidden=10**6", ["-m", "uavrl.train", "agent=dqn", "agent.hidden=1000000"]),
+    (
+        "python -m uavrl.train agent=dqn agent.updates=10**9 (time)",
+        ["-m", "uavrl.train", "agent=dqn", "agent.updates=1000000000"],
+    ),
+    (
+        "python -m uavrl.train agent=dqn env.grid=[1000,1000] (time)",
+        ["-m", "uavrl.train", "agent=dqn", "env.grid=[1000,1000]"],
+    ),
+    # settings that cannot go together, and a size-free run's zero-shot evaluation, checked before torch
+    (
+        "python -m uavrl.train agent=dqn agent.network=set agent.heads=3",
+        ["-m", "uavrl.train", "agent=dqn", "agent.network=set", "agent.heads=3"],
+    ),
+    (
+        "python -m uavrl.train agent=dqn agent.layouts=[random]",
+        ["-m", "uavrl.train", "agent=dqn", "agent.layouts=[random]"],
+    ),
+    (
+        "python -m uavrl.evaluate checkpoint=<size-free run> env.grid=[10**6,10**6]",
+        ["-m", "uavrl.evaluate", "checkpoint={size_free}", "env.grid=[1000000,1000000]"],
+    ),
+    (
+        "python -m uavrl.evaluate checkpoint=<size-free run> env.max_steps=10**12",
+        ["-m", "uavrl.evaluate", "checkpoint={size_free}", "env.max_steps=1000000000000"],
+    ),
 ]
+
+
+def size_free_run(root: Path) -> Path:
+    """A size-free run's directory as far as the checks before torch read it: its config.yaml, and a checkpoint file
+    they never open."""
+    from omegaconf import OmegaConf
+
+    from uavrl.cli import compose_config
+
+    run = root / "size-free"
+    run.mkdir()
+    cfg = compose_config("config", ["agent=dqn", "agent.network=set", "agent.mixer=vdn"])
+    (run / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)))
+    (run / "checkpoint.pt").write_bytes(b"never read by the checks")
+    return run
 
 
 def wall_times(args: list[str], repeats: int, env: dict) -> list[float]:
@@ -78,9 +122,11 @@ def main() -> None:
     print(f"{machine}, {args.repeats} runs each")
     print(f"uavrl from {args.pythonpath or 'the installed package'}\n")
     print("| command | median | best |\n|---|---:|---:|")
-    for name, command in COMMANDS:
-        times = wall_times(command, args.repeats, env)
-        print(f"| `{name}` | {statistics.median(times):.2f} s | {min(times):.2f} s |")
+    with tempfile.TemporaryDirectory() as tmp:
+        run = size_free_run(Path(tmp))
+        for name, command in COMMANDS:
+            times = wall_times([arg.format(size_free=run) for arg in command], args.repeats, env)
+            print(f"| `{name}` | {statistics.median(times):.2f} s | {min(times):.2f} s |")
 
 
 if __name__ == "__main__":
