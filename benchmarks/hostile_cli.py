@@ -250,6 +250,7 @@ CASES = [
     # ---------------------------------------------------------------- schema
     ("schema", "--settings"),
     ("schema", "agent=dqn"),
+    ("schema", "docs/settings.md"),
 ]
 
 OUTCOMES = ("refused", "refused, names another", "traceback", "hang", "out of memory", "accepted", "data loss")

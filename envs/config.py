@@ -467,8 +467,8 @@ _BATTERY_ADVICE = {
     "cell_size": "give smaller cells, a larger battery or a nearer base",
     "base": "give a nearer base or a larger battery",
     "grid": "give a smaller grid, a nearer base or a larger battery",
-    "battery_init": "start full, or give a larger battery or a nearer base",
     "battery_wh": "give a larger battery or a nearer base",
+    "battery_init": "start full, or give a larger battery or a nearer base",
 }
 # what uavrl.envs.limits reads
 _PHYSICS_OPTIONS = (

@@ -345,4 +345,11 @@ def settings_markdown() -> str:
 
 
 if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:]:
+        raise SystemExit(
+            f"error: {sys.argv[1]} is invalid: python -m uavrl.schema takes no arguments; it prints the settings table "
+            "(python -m uavrl.schema > docs/settings.md)"
+        )
     print(settings_markdown(), end="")
