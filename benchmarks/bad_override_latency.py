@@ -3,7 +3,7 @@
     python benchmarks/bad_override_latency.py [--repeats 5] [--pythonpath DIR]
 
 Each command runs ``--repeats`` times as a fresh process; the table gives the
-median and the best wall time.  ``python -c pass`` is the interpreter's own
+median and the best wall time and the median CPU time (user + system).  ``python -c pass`` is the interpreter's own
 start-up; ``import torch, tensordict, torchrl`` is what the commands imported
 before checking their settings until they checked them first.  ``--pythonpath``
 puts ``DIR`` first on the path of every process, to time another version of
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -99,13 +100,17 @@ def size_free_run(root: Path) -> Path:
     return run
 
 
-def wall_times(args: list[str], repeats: int, env: dict) -> list[float]:
-    times = []
+def times(args: list[str], repeats: int, env: dict) -> tuple[list[float], list[float]]:
+    """Wall and CPU seconds (user + system, which other processes' load does not inflate) of each run."""
+    walls, cpus = [], []
     for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         started = time.perf_counter()
         subprocess.run([sys.executable, *args], capture_output=True, env=env)
-        times.append(time.perf_counter() - started)
-    return times
+        walls.append(time.perf_counter() - started)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpus.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return walls, cpus
 
 
 def main() -> None:
@@ -121,12 +126,13 @@ def main() -> None:
     machine = f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, Python {sys.version.split()[0]}"
     print(f"{machine}, {args.repeats} runs each")
     print(f"uavrl from {args.pythonpath or 'the installed package'}\n")
-    print("| command | median | best |\n|---|---:|---:|")
+    print("| command | median wall | best wall | median CPU |\n|---|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         run = size_free_run(Path(tmp))
         for name, command in COMMANDS:
-            times = wall_times([arg.format(size_free=run) for arg in command], args.repeats, env)
-            print(f"| `{name}` | {statistics.median(times):.2f} s | {min(times):.2f} s |")
+            walls, cpus = times([arg.format(size_free=run) for arg in command], args.repeats, env)
+            wall, best, cpu = statistics.median(walls), min(walls), statistics.median(cpus)
+            print(f"| `{name}` | {wall:.2f} s | {best:.2f} s | {cpu:.2f} s |")
 
 
 if __name__ == "__main__":

@@ -307,14 +307,19 @@ def run_case(command: str, args: list[str], cwd: Path, timeout: float) -> dict:
         argv.append("progress=false")
     with tempfile.NamedTemporaryFile("r", suffix=".time") as clock:
         started = time.perf_counter()
-        process = subprocess.Popen(
-            ["/usr/bin/time", "-f", "%U %S", "-o", clock.name, *argv],
-            cwd=cwd,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            start_new_session=True,
-            text=True,
-        )
+        for attempt in range(10):  # a machine out of processes for a moment (EAGAIN) is waited for
+            try:
+                process = subprocess.Popen(
+                    ["/usr/bin/time", "-f", "%U %S", "-o", clock.name, *argv],
+                    cwd=cwd,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    start_new_session=True,
+                    text=True,
+                )
+                break
+            except BlockingIOError:
+                time.sleep(2 * (attempt + 1))
         timed_out = threading.Event()
 
         def kill():
