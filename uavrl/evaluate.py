@@ -43,7 +43,7 @@ from uavrl.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.settings import check_evaluation_costs, check_evaluation_floor, check_run
+from uavrl.settings import check_evaluation_costs, check_evaluation_floor, check_read, check_run
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
@@ -52,6 +52,7 @@ def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -
     zero-shot evaluation and what the evaluation of that model costs (``overrides``: the command line's, so a
     refusal names what was typed)."""
     check_run(cfg)
+    check_read(overrides, "evaluate")
     video = bool(cfg.eval.video) if video is None else video
     check_evaluation_floor(cfg, video, overrides)
     if not cfg.checkpoint:

@@ -67,6 +67,34 @@ def check_agent_settings(cfg: DictConfig, model) -> None:
         check_dqn_settings(model, cfg.agent)
 
 
+# what each command of configs/config.yaml does not read, and what reads it instead
+UNREAD = {
+    "train": {"checkpoint": "python -m uavrl.evaluate's", "print_json": "python -m uavrl.evaluate's"},
+    "evaluate": {
+        "agent": "the checkpoint's agent is evaluated with its saved settings",
+        "scenario": "the checkpoint's run chose its scenario",
+        "train": "python -m uavrl.train's",
+        "resume": "python -m uavrl.train's",
+        "run_dir": "the evaluation writes beside the checkpoint",
+        "sweep_dir": "python -m uavrl.train's",
+    },
+}
+READ_ANYWAY = ("agent.memory_budget",)  # the evaluation's own budget
+
+
+def check_read(overrides, command: str) -> None:
+    """A one-line ValueError for an override the command would ignore (``checkpoint=`` on ``uavrl.train``,
+    ``agent.hidden=`` on ``uavrl.evaluate``, whose policy is the checkpoint's), naming what reads it."""
+    for override in overrides or ():
+        key = str(override).partition("=")[0].lstrip("+~")
+        if key in READ_ANYWAY:
+            continue
+        for name, reader in UNREAD[command].items():
+            if key == name or key.startswith(f"{name}."):
+                typed = str(override).lstrip("+~")
+                raise ValueError(f"{typed} is invalid for python -m uavrl.{command}, which does not read it: {reader}")
+
+
 def check_scenario(cfg: DictConfig) -> None:
     """A one-line ValueError when the chosen scenario (``configs/scenario/``) does not run the chosen agent."""
     scenario = OmegaConf.select(cfg, "scenario")

@@ -52,7 +52,7 @@ from uavrl.runs import (
     size_free_teams,
     yardstick_line,
 )
-from uavrl.settings import check_agent_settings, check_run, check_run_costs, check_scenario
+from uavrl.settings import check_agent_settings, check_read, check_run, check_run_costs, check_scenario
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -62,6 +62,7 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     """Every setting of a run, refused in one line before anything heavy is imported or any file written;
     ``overrides`` (the command line's) let a refusal name the setting as typed."""
     check_run(cfg)
+    check_read(overrides, "train")
     check_scenario(cfg)
     model = model_config(cfg)
     check_agent_settings(cfg, model)
