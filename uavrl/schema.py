@@ -56,7 +56,7 @@ from uavrl.rules import (
 
 MAX_THREADS = 1024  # threads beyond the cores only slow torch; a million of them exhaust the machine's processes
 STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
-TIME_BUDGET = 1  # hours of one CPU core, estimated: every scenario's DQN budget takes minutes (BENCHMARKS.md)
+TIME_BUDGET = 1  # hours of one CPU core, estimated: each scenario's DQN budget is estimated at 1-30 minutes
 
 
 @dataclass
