@@ -149,8 +149,8 @@ CASES = [
     ("train", "agent="),
     ("train", "env=nonexistent"),
     ("train", "print_json=2"),
-    ("train", "agent.episodes=${oc.env:HOME}"),
-    ("train", "agent.episodes=${agent.runs}0000000000000"),
+    ("train", "agent.episodes=${{oc.env:HOME}}"),
+    ("train", "agent.episodes=${{agent.runs}}0000000000000"),
     # ---------------------------------------------------------------- evaluate
     ("evaluate", "checkpoint={set} env.grid=[2000000,2000000]"),
     ("evaluate", "checkpoint={set} env.num_uavs=100000 env.grid=[1000,1000]"),
