@@ -106,7 +106,7 @@ NAMED = [
     (["agent=dqn", "agent.network=set", "agent.sizes=[[2,100000,100000]]"], "agent.sizes=", "agent.worlds"),
     (["agent=random", "env.grid=[200,200]", "env.num_uavs=200"], "env.grid=[200,200] is invalid", "eval.horizon=800"),
     (["agent=dqn", "env.grid=[100000,100000]"], "env.grid=[100000,100000] is invalid", "lower agent.worlds"),
-    (["agent=tabular", "env.grid=[10,10]", "env.num_uavs=4"], "env.grid=[10,10] is invalid: the team Q tables", "TiB"),
+    (["agent=tabular", "env.grid=[10,10]", "env.num_uavs=4"], "env.num_uavs=4 is invalid: the team Q tables", "TiB"),
     (["env=a2g_urban", "agent=dqn", "agent.hidden=1000000"], "agent.hidden=1000000 is invalid", "env.num_uavs="),
 ]
 

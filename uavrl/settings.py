@@ -236,7 +236,11 @@ def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typ
         return f.name in typed or any(name in typed for name in f.origin)
 
     pool = helps or settings or [f for f in cost.factors if not f.fixed] or list(cost.factors)
-    blamed = max(pool, key=lambda f: (given(f), f.size / max(f.least, 1)))
+
+    def saving(f: Factor) -> float:  # how many times less the part needs with the setting at its least
+        return math.log10(amount + 1) - math.log10(cost.estimate(lowered(f)) + 1)
+
+    blamed = max(pool, key=lambda f: (given(f), saving(f)))
     name = blamed.name if blamed.name in typed else next((o for o in blamed.origin if o in typed), blamed.name)
     changes = []
     for f in sorted(helps, key=lambda f: not given(f)):
