@@ -137,6 +137,9 @@ class ModelConfig:
         cells = grid[0] * grid[1]
         if not _is_int(self.num_uavs) or not 1 <= self.num_uavs <= cells:
             reason = f"a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
+            if _is_int(self.num_uavs) and self.num_uavs == _DEFAULTS["num_uavs"] and grid != _DEFAULTS["grid"]:
+                # the team left as it was: the grid is what was changed
+                raise InvalidOption("grid", self.grid, f"{reason}, and num_uavs is {self.num_uavs}")
             raise InvalidOption("num_uavs", self.num_uavs, reason)
         if not _is_int(self.max_steps) or self.max_steps < 1:
             raise InvalidOption("max_steps", self.max_steps, "an episode needs a whole number of steps >= 1")
@@ -484,7 +487,8 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     _choice("preset", preset, PRESETS)
     unknown = sorted(set(overrides) - set(OPTION_NAMES))
     if unknown:
-        raise ValueError(f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}")
+        reason = f"no model option has that name; allowed options are {', '.join(OPTION_NAMES)}"
+        raise InvalidOption(unknown[0], overrides[unknown[0]], reason)
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
 

@@ -172,7 +172,10 @@ def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
         return rest, None
     if not isinstance(value, (str, int, float)):  # a sweep over sweep_dir (a,b) or a list
         raise SystemExit(f"error: {given[-1]} is invalid: give one sweep_dir")
-    return rest, Path(str(value)).expanduser().resolve()
+    sweep_dir = Path(str(value)).expanduser().resolve()
+    if sweep_dir.exists() and not sweep_dir.is_dir():
+        raise SystemExit(f"error: {given[-1]} is invalid: it is a file, not a directory")
+    return rest, sweep_dir
 
 
 def new_sweep_dir() -> Path:

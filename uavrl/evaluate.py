@@ -43,7 +43,14 @@ from uavrl.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.settings import check_evaluation_costs, check_evaluation_floor, check_read, check_run
+from uavrl.settings import (
+    RUN_SETTINGS,
+    check_evaluation_costs,
+    check_evaluation_floor,
+    check_read,
+    check_run,
+    check_typed,
+)
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
@@ -53,6 +60,7 @@ def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -
     refusal names what was typed)."""
     check_run(cfg)
     check_read(overrides, "evaluate")
+    check_typed(cfg, overrides, RUN_SETTINGS)
     video = bool(cfg.eval.video) if video is None else video
     check_evaluation_floor(cfg, video, overrides)
     if not cfg.checkpoint:

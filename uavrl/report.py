@@ -610,6 +610,8 @@ def main(argv=None) -> None:
         )
     if args.seed < 0:
         parser.error(f"--seed={args.seed} is invalid: it must be a whole number >= 0")
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out={args.out} is invalid: it is a file, not a directory")
     try:
         path = report(args.paths, args.out or args.paths[0], args.resamples, args.seed)
     except OSError as err:

@@ -36,7 +36,7 @@ from uavrl.io import quoted, save_json, save_text, save_torch
 from uavrl.rules import check, shown
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
-from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs
+from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
@@ -91,6 +91,7 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     """Every setting, and that the output directory holds no other variant, before anything heavy is imported
     (``overrides``: the command line's, so a refusal names what was typed)."""
     check(cfg, REPRODUCE_SETTINGS)
+    check_typed(cfg, overrides, REPRODUCE_SETTINGS, ReproduceSchema)
     models = []
     for size in cfg.grids:
         if not cfg.steps and size not in PAPER_STEPS:

@@ -36,8 +36,8 @@ from uavrl.envs.limits import (
     table_bytes,
     world_bytes,
 )
-from uavrl.rules import Rule, check, one_of, rules_of, shown
-from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema, TrainSchema
+from uavrl.rules import Rule, check, flag, one_of, rules_of, shown
+from uavrl.schema import BenchmarlSchema, EnvSchema, ReproduceSchema, RunSchema, TrainSchema
 
 PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
 
@@ -93,6 +93,32 @@ def check_read(overrides, command: str) -> None:
             if key == name or key.startswith(f"{name}."):
                 typed = str(override).lstrip("+~")
                 raise ValueError(f"{typed} is invalid for python -m uavrl.{command}, which does not read it: {reader}")
+
+
+def check_typed(cfg: DictConfig, overrides, table: dict[str, Rule], schema: type | None = None) -> None:
+    """What composing lets through: a key added with ``+`` that no schema has (``+agent.new_key=1``; ``schema``: the
+    command's, else the chosen agent's for ``agent.*``), and a true/false setting typed as a number (``2``, which the
+    config reads as true)."""
+    agent = OmegaConf.select(cfg, "agent.name")
+    for override in overrides or ():
+        key, _, value = str(override).lstrip("+~").partition("=")
+        section, _, name = key.partition(".")
+        known = _fields(schema) if schema is not None else set()
+        if schema is None and section == "agent" and name and agent in AGENT_SCHEMAS:
+            known, key_name = _fields(AGENT_SCHEMAS[agent]), name
+        elif schema is None and section == "env" and name:
+            known, key_name = _fields(EnvSchema), name
+        else:
+            key_name = key
+        if str(override).startswith("+") and (known and key_name.split(".")[0] not in known):
+            raise ValueError(f"{key}={value} is invalid: no such setting (docs/settings.md lists them)")
+        rule = table.get(key)
+        if rule is not None and rule.allowed == flag().allowed and value.strip().lower() not in ("true", "false"):
+            raise ValueError(f"{key}={value} is invalid: {rule.allowed}")
+
+
+def _fields(schema: type) -> set[str]:
+    return {field.name for field in dataclasses.fields(schema)}
 
 
 def check_scenario(cfg: DictConfig) -> None:

@@ -52,7 +52,16 @@ from uavrl.runs import (
     size_free_teams,
     yardstick_line,
 )
-from uavrl.settings import check_agent_settings, check_read, check_run, check_run_costs, check_scenario
+from uavrl.settings import (
+    AGENT_SETTINGS,
+    RUN_SETTINGS,
+    check_agent_settings,
+    check_read,
+    check_run,
+    check_run_costs,
+    check_scenario,
+    check_typed,
+)
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
@@ -63,6 +72,7 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     ``overrides`` (the command line's) let a refusal name the setting as typed."""
     check_run(cfg)
     check_read(overrides, "train")
+    check_typed(cfg, overrides, {**RUN_SETTINGS, **AGENT_SETTINGS.get(cfg.agent.name, {})})
     check_scenario(cfg)
     model = model_config(cfg)
     check_agent_settings(cfg, model)
