@@ -487,7 +487,7 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     _choice("preset", preset, PRESETS)
     unknown = sorted(set(overrides) - set(OPTION_NAMES))
     if unknown:
-        reason = f"no model option has that name; allowed options are {', '.join(OPTION_NAMES)}"
+        reason = f"no model option is named {unknown[0]!r}; allowed options are {', '.join(OPTION_NAMES)}"
         raise InvalidOption(unknown[0], overrides[unknown[0]], reason)
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
