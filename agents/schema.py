@@ -170,3 +170,91 @@ AGENT_SCHEMAS = {
 def agent_rules(name: str) -> dict[str, Rule]:
     """The rules of the settings of the agent ``name``, as typed (``agent.alpha``)."""
     return rules_of(AGENT_SCHEMAS[name], "agent")
+
+
+MAX_JOINT_UAVS = 4  # the joint head's 6^N outputs are for small teams
+
+
+def _plain(value):
+    """A list setting as plain lists (a config's list of lists is one of its own types)."""
+    return [_plain(v) for v in value] if not isinstance(value, (str, int, float)) else value
+
+
+def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
+    """One-line errors for DQN settings that cannot go together (after the schema's rules), before torch is
+    imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
+    each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
+    from uavrl.envs.config import InvalidOption
+    from uavrl.rules import check, shown
+
+    check(a, agent_rules("dqn"), section="agent")
+    network = a.get("network", "team")  # run configs saved before: no setting
+    if network == "team":
+        if a.mixer == "mean":
+            raise ValueError(
+                "agent.mixer='mean' is invalid with agent.network='team': use vdn or qmix, or agent.network=set"
+            )
+        for name in ("sizes", "layouts"):
+            if a.get(name):
+                value = shown(_plain(a.get(name)), label=True)
+                raise ValueError(
+                    f"agent.{name}={value} is invalid with agent.network='team', which is sized by the run's env and "
+                    "trains on it alone: use agent.network=set"
+                )
+        if a.head == "joint" and env_cfg.num_uavs > MAX_JOINT_UAVS:
+            raise ValueError(
+                f"agent.head='joint' is invalid with env.num_uavs={env_cfg.num_uavs}: it needs 6^{env_cfg.num_uavs} "
+                f"outputs, and it is for teams of at most {MAX_JOINT_UAVS} UAVs (6^{MAX_JOINT_UAVS} = "
+                f"{6**MAX_JOINT_UAVS:,}); use agent.head=factored"
+            )
+        if a.head == "joint" and env_cfg.energy != "none":
+            raise ValueError(
+                f"agent.head='joint' is invalid with env.energy={env_cfg.energy!r}: its joint action mask knows no UAV "
+                "out of service; use agent.head=factored"
+            )
+        return
+    if a.head != "factored":
+        raise ValueError(f"agent.head={a.head!r} is invalid with agent.network='set': use agent.head=factored")
+    if a.mixer not in ("vdn", "mean"):
+        raise ValueError(
+            f"agent.mixer={a.mixer!r} is invalid with agent.network='set': its mixing weights grow with N; use "
+            "vdn (the sum) or mean"
+        )
+    if int(a.hidden) % int(a.heads):
+        raise ValueError(
+            f"agent.heads={a.heads} is invalid with agent.hidden={a.hidden}: the heads split the hidden units, so "
+            "they must divide agent.hidden"
+        )
+    for n, grid in team_sizes(env_cfg, a):
+        if not a.get("sizes"):
+            break
+        team = f"[{n}, {grid[0]}, {grid[1]}]"
+        if n > grid[0] * grid[1]:
+            raise ValueError(
+                f"agent.sizes={shown(_plain(a.sizes), label=True)} is invalid: its team {team} has {n} UAVs for the "
+                f"{grid[0] * grid[1]} cells of a {grid[0]}x{grid[1]} grid (one per cell)"
+            )
+        try:
+            env_cfg.replace(num_uavs=n, grid=grid)
+        except InvalidOption as err:
+            raise ValueError(
+                f"agent.sizes={shown(list(a.sizes), label=True)} is invalid: its team {team}: {err}"
+            ) from None
+
+
+def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
+    """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
+    when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
+    number of UAVs and layout of the same model otherwise."""
+    size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
+    same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
+    if size_free and env_cfg.replace(**same) != run_cfg:
+        return "only env.grid, env.num_uavs and env.layout may differ from the saved run's"
+    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
+        return None
+    network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
+    return (
+        f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
+        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
+        "(agent=dqn agent.network=set) acts on any size"
+    )

@@ -201,6 +201,9 @@ class ModelConfig:
         cells = grid[0] * grid[1]
         if not _is_int(self.num_uavs) or not 1 <= self.num_uavs <= cells:
             reason = f"a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
+            if _is_int(self.num_uavs) and self.num_uavs == _DEFAULTS["num_uavs"] and grid != _DEFAULTS["grid"]:
+                # the team left as it was: the grid is what was changed
+                raise InvalidOption("grid", self.grid, f"{reason}, and num_uavs is {self.num_uavs}")
             raise InvalidOption("num_uavs", self.num_uavs, reason)
         if not _is_int(self.max_steps) or self.max_steps < 1:
             raise InvalidOption("max_steps", self.max_steps, "an episode needs a whole number of steps >= 1")
@@ -260,6 +263,12 @@ class ModelConfig:
                 if name in ("p_pt", "p_s", "p_u"):
                     reason += f": give the power in dBm as {name}_dbm"
                 raise InvalidOption(name, value, reason)
+        if self.channel in radio.TR36777 and self.environment != _DEFAULTS["environment"]:
+            reason = (
+                f"only channel='al_hourani' reads it, not channel={self.channel!r}, whose TR 36.777 scenario is the "
+                f"environment (choose among {', '.join(map(repr, radio.TR36777))})"
+            )
+            raise InvalidOption("environment", self.environment, reason)
         if self.is_physical and self.rate_model == "reference_code":
             reason = "the authors' formula multiplies the power law's gains; use channel='paper' or 'reference_code'"
             raise InvalidOption("rate_model", self.rate_model, reason)
@@ -352,26 +361,66 @@ class ModelConfig:
         if self.reset_positions == "keep":
             reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
             raise InvalidOption("energy", self.energy, reason)
+        self._check_step_energies()
         lowest, need, farthest = self._lowest_start_and_largest_reserve()
         if lowest <= need:
-            name = "battery_wh" if self.energy == "rotary_wing" else "base"
+            name = self._battery_blamed()
             unit = "Wh" if self.energy == "rotary_wing" else "units"
             scale = 3600.0 if self.energy == "rotary_wing" else 1.0
             reason = (
                 f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
                 f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
-                f"{need / scale:.4g} {unit}: give a larger battery or a nearer base"
+                f"{need / scale:.4g} {unit}: {_BATTERY_ADVICE[name]}"
+            )
+            raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)
+
+    def _check_step_energies(self):
+        """A step's energies finite under ``rotary_wing``: its propulsion power grows with the speed ``cell_size /
+        slot_s`` to the fourth power, beyond float64 for a slot too short or a cell too long."""
+        try:
+            energies = self.step_energies
+            finite = all(math.isfinite(e) for e in (energies.move, energies.stay, energies.fly, energies.capacity))
+        except (OverflowError, ValueError):  # v^4 beyond float64, or a square root of a rounded negative
+            finite = False
+        if not finite:
+            name = (
+                "slot_s"
+                if self.slot_s != _DEFAULTS["slot_s"] or self.cell_size == _DEFAULTS["cell_size"]
+                else "cell_size"
+            )
+            reason = (
+                f"a move flies cell_size / slot_s = {self.cell_size / self.slot_s:.3g} m/s, and the rotary-wing "
+                "propulsion power at that speed is beyond float64: give a longer slot_s or a smaller cell_size"
             )
             raise InvalidOption(name, getattr(self, name), reason)
 
-    def _lowest_start_and_largest_reserve(self) -> tuple[float, float, int]:
+    def _lowest_start_and_largest_reserve(self, **changes) -> tuple[float, float, int]:
         """The lowest battery a UAV may start with, the largest reserve of a cell (the farthest from the base's), and
-        that cell's steps from the base, under an energy model."""
-        (L1, L2), (bx, by) = self.grid, self.base
+        that cell's steps from the base, under an energy model (with the options ``changes`` in place of these)."""
+        v = {name: changes.get(name, getattr(self, name)) for name in _BATTERY_ADVICE}
+        (L1, L2), (bx, by) = v["grid"], v["base"]
         farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
-        energies = self.step_energies
-        lowest = energies.capacity * (power.UNIFORM_LOW if self.battery_init == "uniform" else 1.0)
+        energies = power.step_energies(
+            self.energy, v["cell_size"], v["slot_s"], self.powers_w[2], v["circuit_power_w"], v["battery_wh"]
+        )
+        lowest = energies.capacity * (power.UNIFORM_LOW if v["battery_init"] == "uniform" else 1.0)
         return lowest, energies.reserve(farthest), farthest
+
+    def _battery_blamed(self) -> str:
+        """The option to name when a battery cannot reach the base: the first one set away from its preset's value
+        whose preset value (a base next to the grid) would let it, else the battery (the base under follow_up)."""
+        preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)}
+        for name in _BATTERY_ADVICE:
+            value = getattr(self, name)
+            if value == preset[name] or (name == "base" and abs(value[0]) + abs(value[1]) <= 1):
+                continue
+            try:
+                lowest, need, _ = self._lowest_start_and_largest_reserve(**{name: preset[name]})
+            except (OverflowError, ValueError):
+                continue
+            if lowest > need:
+                return name
+        return "battery_wh" if self.energy == "rotary_wing" else "base"
 
     @property
     def steps_before_reserve(self) -> int | None:
@@ -478,6 +527,16 @@ _PRESETS = {
     ),
 }
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
+# the options a battery's reach depends on, in the order a refusal blames them, and how each would let it reach
+_BATTERY_ADVICE = {
+    "circuit_power_w": "give a smaller circuit power, a larger battery or a nearer base",
+    "slot_s": "give a shorter slot, a larger battery or a nearer base",
+    "cell_size": "give smaller cells, a larger battery or a nearer base",
+    "base": "give a nearer base or a larger battery",
+    "grid": "give a smaller grid, a nearer base or a larger battery",
+    "battery_wh": "give a larger battery or a nearer base",
+    "battery_init": "start full, or give a larger battery or a nearer base",
+}
 # what uavrl.envs.limits reads
 _PHYSICS_OPTIONS = (
     *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward", "channel", "environment"),
@@ -492,7 +551,8 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     _choice("preset", preset, PRESETS)
     unknown = sorted(set(overrides) - set(OPTION_NAMES))
     if unknown:
-        raise ValueError(f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}")
+        reason = f"no model option is named {unknown[0]!r}; allowed options are {', '.join(OPTION_NAMES)}"
+        raise InvalidOption(unknown[0], overrides[unknown[0]], reason)
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
 

@@ -504,7 +504,9 @@ def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int
 
 
 def gib(size: int) -> str:
-    """``size`` bytes as ``12,345,678 bytes (11.8 MiB)``."""
+    """``size`` bytes as ``12,345,678 bytes (11.8 MiB)``; beyond 2^60 bytes as ``1.2e+21 bytes``."""
+    if size >= 2**60:
+        return f"{_shown(math.log10(size))} bytes"
     for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
         if size >= scale:
             return f"{size:,} bytes ({size / scale:.3g} {unit})"

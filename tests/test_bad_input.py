@@ -83,6 +83,19 @@ CLI_CASES = [
     ("reproduce figures grids=[2] figure_grid=6", "figure_grid=6 is invalid"),
     ("reproduce table2 out_dir={other} grids=[2]", "out_dir="),
     ("reproduce table3", "command 'table3'"),
+    # what a command would ignore or composing lets through
+    ("train checkpoint={run}", "is invalid for python -m uavrl.train, which does not read it"),
+    ("train +agent.new_key=1", "agent.new_key=1 is invalid: no such setting"),
+    ("train +env.colour=red", "env.colour=red is invalid: no such setting"),
+    ("train progress=2", "progress=2 is invalid: it must be true or false"),
+    ("train num_threads=1000000", "num_threads=1000000 is invalid"),
+    ("train env.layout=random env.grid=[1,1]", "env.grid=(1, 1) is invalid: a 1x1 grid holds 1 to 1 UAVs"),
+    ("train -m seed=0,1 sweep_dir={garbage}", "is invalid: it is a file, not a directory"),
+    ("evaluate checkpoint={run} agent.alpha=0.5", "agent.alpha=0.5 is invalid for python -m uavrl.evaluate"),
+    ("evaluate checkpoint={run} train.log_every=3", "train.log_every=3 is invalid for python -m uavrl.evaluate"),
+    ("reproduce table2 +foo=1", "foo=1 is invalid: no such setting"),
+    ("reproduce table2 state_includes_tasks=2", "state_includes_tasks=2 is invalid: it must be true or false"),
+    ("reproduce table2 grids=[2] out_dir={garbage}", "is invalid: it is a file, not a directory"),
     ("reproduce table2 episdoes=5", "episdoes"),
 ]
 

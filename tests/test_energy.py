@@ -258,7 +258,7 @@ def _energy(N):
         (_energy(2) | dict(circuit_power_w=math.nan), "circuit_power_w=nan is invalid: it must be a finite number"),
         (_energy(2) | dict(circuit_power_w=-0.1), "circuit_power_w=-0.1 is invalid"),
         (_energy(2) | dict(battery_wh=0.05), "battery_wh=0.05 is invalid: a UAV may start with 0.05 Wh (full)"),
-        (_energy(2) | dict(base=(-3000, 0)), "battery_wh=89.2 is invalid: a UAV may start with 89.2 Wh (full) at"),
+        (_energy(2) | dict(base=(-3000, 0)), "base=[-3000, 0] is invalid: a UAV may start with 89.2 Wh (full) at"),
         (_energy(2) | dict(reset_positions="keep"), "energy='rotary_wing' is invalid: a UAV that left service"),
         (dict(energy="follow_up", base=BASE, p_u=-1.0), "p_u=-1.0 is invalid: it must be a finite positive number"),
     ],

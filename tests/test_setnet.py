@@ -176,11 +176,11 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
     "overrides, message",
     [
         (["agent.network=team", "agent.sizes=[]"], "agent.mixer='mean' is invalid with agent.network='team'"),
-        (["agent.network=team", "agent.mixer=vdn"], "agent.sizes=[[2, 3, 3], [3, 4, 4]] is invalid with agent.network"),
+        (["agent.network=team", "agent.mixer=vdn"], "agent.sizes=[[2,3,3],[3,4,4]] is invalid with agent.network"),
         (["agent.mixer=qmix"], "agent.mixer='qmix' is invalid with agent.network='set'"),
         (["agent.head=joint"], "agent.head='joint' is invalid with agent.network='set'"),
-        (["agent.heads=3"], "agent.heads=3 is invalid: it must divide agent.hidden=16"),
-        (["agent.sizes=[[10,3,3]]"], "agent.sizes holds [10, 3, 3]: 10 UAVs do not fit on the 9 cells"),
+        (["agent.heads=3"], "agent.heads=3 is invalid with agent.hidden=16: the heads split the hidden units"),
+        (["agent.sizes=[[10,3,3]]"], "agent.sizes=[[10,3,3]] is invalid: its team [10, 3, 3] has 10 UAVs for the 9"),
         (["agent.sizes=[[2,3]]"], "agent.sizes=[[2, 3]] is invalid: give a list of teams [num_uavs, L1, L2]"),
         (["agent.layouts=[grid]"], "agent.layouts=['grid'] is invalid: give a list among line, random"),
         (["agent.network=tree"], "agent.network='tree' is invalid: allowed networks are 'team', 'set'"),
@@ -199,6 +199,7 @@ def test_the_cost_check_counts_every_team_and_layout_of_a_size_free_run(tmp_path
     from uavrl.settings import check_run_costs
 
     base = ["agent=dqn", "agent.network=set", "agent.mixer=mean", "agent.worlds=128", "agent.memory_budget=150000000"]
+    base += ["agent.batch_size=32", "agent.iterations=20"]  # a gradient step and the run's time within the budgets
     one, both = "agent.sizes=[[30,40,40]]", "agent.sizes=[[30,40,40],[30,40,40]]"
     fits, over = compose_cfg(*base, one), compose_cfg(*base, both)
     check_run_costs(fits, model_config(fits))

@@ -55,7 +55,7 @@ def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
     if fallback:
         warnings.warn(fallback, stacklevel=2)
     if env_config is not None:
-        from uavrl.agents.dqn.multisize import network_refusal
+        from uavrl.agents.schema import network_refusal
 
         refusal = network_refusal(cfg, env_config, model_config(cfg))
         if refusal:

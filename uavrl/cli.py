@@ -41,13 +41,13 @@ def run_command(
     config_name: str,
     command: Command,
     option_settings: dict[str, str],
-    check: Callable[[DictConfig], None] | None = None,
+    check: Callable[[DictConfig, list], None] | None = None,
 ) -> None:
     """Compose ``config_name`` with the command line's overrides and run ``command(cfg, overrides)``.
 
     ``option_settings`` names the model's options as the command's users type
-    them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check``
-    refuses a bad config; a command that passes it writes run directories: in
+    them (``grid`` -> ``env.grid``), for errors raised by the model.  ``check(cfg,
+    overrides)`` refuses a bad config; a command that passes it writes run directories: in
     a sweep (``-m``) each job gets its own under ``sweep_dir``, and every job is
     checked before any starts.
     """
@@ -172,7 +172,10 @@ def split_sweep_dir(overrides: list[str]) -> tuple[list[str], Path | None]:
         return rest, None
     if not isinstance(value, (str, int, float)):  # a sweep over sweep_dir (a,b) or a list
         raise SystemExit(f"error: {given[-1]} is invalid: give one sweep_dir")
-    return rest, Path(str(value)).expanduser().resolve()
+    sweep_dir = Path(str(value)).expanduser().resolve()
+    if sweep_dir.exists() and not sweep_dir.is_dir():
+        raise SystemExit(f"error: {given[-1]} is invalid: it is a file, not a directory")
+    return rest, sweep_dir
 
 
 def new_sweep_dir() -> Path:
@@ -217,7 +220,7 @@ def check_sweep(config_name: str, overrides: list[str], sweep_dir: Path | None, 
         if check is not None:
             with open_dict(cfg):
                 del cfg["hydra"]
-            check(cfg)
+            check(cfg, job)
 
 
 def compose_config(config_name: str, overrides: list[str], return_hydra_config: bool = False) -> DictConfig:

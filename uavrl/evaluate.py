@@ -43,18 +43,51 @@ from uavrl.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.settings import check_evaluation_floor, check_run, check_video_cost
+from uavrl.settings import (
+    RUN_SETTINGS,
+    check_evaluation_costs,
+    check_evaluation_floor,
+    check_read,
+    check_run,
+    check_typed,
+)
 
 
-def check_settings(cfg: DictConfig, video: bool | None = None) -> None:
+def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
     """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
-    anything heavy is imported."""
+    anything heavy is imported: with the run's saved ``config.yaml`` beside the checkpoint, also the ``env.*`` of a
+    zero-shot evaluation and what the evaluation of that model costs (``overrides``: the command line's, so a
+    refusal names what was typed)."""
     check_run(cfg)
-    check_evaluation_floor(cfg, bool(cfg.eval.video) if video is None else video)
+    check_read(overrides, "evaluate")
+    check_typed(cfg, overrides, RUN_SETTINGS)
+    video = bool(cfg.eval.video) if video is None else video
+    check_evaluation_floor(cfg, video, overrides)
     if not cfg.checkpoint:
         raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
     if not checkpoint_files(cfg.checkpoint):
         raise FileNotFoundError(no_checkpoint(cfg.checkpoint, "checkpoint"))
+    saved = saved_run_config(cfg.checkpoint)
+    if saved is not None:
+        evaluated = evaluated_config(saved, cfg, overrides or (), f"checkpoint={quoted(cfg.checkpoint)}")
+        check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+
+
+def saved_run_config(checkpoint) -> DictConfig | None:
+    """The run's config as ``uavrl.train`` saved it beside the checkpoint (``config.yaml``), read without torch;
+    ``None`` where there is none or it cannot be read (the checkpoint's own copy is checked once it is loaded)."""
+    import yaml
+
+    from uavrl.report import DamagedRun, SavedYamlLoader, read_small_text
+
+    path = output_dir(checkpoint) / "config.yaml"
+    if not path.is_file():
+        return None
+    try:
+        data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
+        return saved_config(data, quoted(path)) if isinstance(data, dict) else None
+    except (DamagedRun, yaml.YAMLError, RecursionError, ValueError):
+        return None
 
 
 def load_agent(path, device="cpu", setting: str = "checkpoint"):
@@ -87,11 +120,17 @@ def output_dir(checkpoint) -> Path:
 def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str) -> DictConfig:
     """The saved run's config with the command line's ``env.*`` overrides (``overrides``, as typed; ``cfg`` their
     values); a one-line ValueError beginning with ``source`` when the saved policy cannot act in that model."""
-    from uavrl.agents.dqn.multisize import network_refusal
+    from uavrl.agents.schema import network_refusal
 
     changed = [key for key in (o.split("=", 1)[0].lstrip("+~") for o in overrides) if key.startswith("env.")]
     if not changed:
         return saved
+    if "env.max_steps" in changed:  # the evaluation plays eval.horizon steps from each start, whatever it is
+        typed = next(o for o in overrides if o.split("=", 1)[0].lstrip("+~") == "env.max_steps").lstrip("+~")
+        raise ValueError(
+            f"{typed} is invalid for an evaluation, which plays eval.horizon steps from each start (env.max_steps "
+            "is the training's episode length): give eval.horizon=<steps>"
+        )
     evaluated = saved.copy()
     for key in changed:
         OmegaConf.update(evaluated, key, OmegaConf.select(cfg, key), force_add=True)
@@ -117,7 +156,7 @@ def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
 
 def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], DictConfig, DictConfig, Path]:
     """``(metrics, the saved run's config, the config evaluated, the JSON file written)``."""
-    check_settings(cfg)
+    check_settings(cfg, overrides=list(overrides) or None)
     import torch  # the heavy modules, once the settings are known to be good
 
     from uavrl.envs.world import resolve_device
@@ -129,8 +168,8 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     if fallback:
         print(f"warning: {fallback}", file=sys.stderr)
     evaluated = evaluated_config(saved, cfg, overrides, f"checkpoint={quoted(cfg.checkpoint)}")
-    if cfg.eval.video:  # refused before the evaluation's work, not after it
-        check_video_cost(cfg, model_config(evaluated))
+    # refused before the evaluation's work, not after it (a checkpoint without its run's config.yaml is known now)
+    check_evaluation_costs(cfg, saved, model_config(evaluated), bool(cfg.eval.video), list(overrides) or None)
     metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
     out_dir = output_dir(cfg.checkpoint)
     path = out_dir / evaluation_file(saved, evaluated)

@@ -26,9 +26,9 @@ from uavrl.evaluate import check_settings, load_agent, output_dir
 from uavrl.settings import check_video_cost
 
 
-def render_checkpoint(cfg: DictConfig) -> list[Path]:
-    """The run's video files, written."""
-    check_settings(cfg, video=True)
+def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:
+    """The run's video files, written (``overrides``: the command line's, named by a refusal)."""
+    check_settings(cfg, video=True, overrides=overrides)
     import torch
 
     from uavrl.envs.world import resolve_device
@@ -41,7 +41,7 @@ def render_checkpoint(cfg: DictConfig) -> list[Path]:
     if fallback:
         print(f"warning: {fallback}", file=sys.stderr)
     env_cfg = model_config(saved)
-    check_video_cost(cfg, env_cfg)
+    check_video_cost(cfg, env_cfg, overrides)
     policy, out_dir = agent.policies()[0], output_dir(cfg.checkpoint)
     frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
     written = save_videos(frames, out_dir, int(cfg.eval.video_fps))
@@ -56,9 +56,9 @@ def render_checkpoint(cfg: DictConfig) -> list[Path]:
     return written
 
 
-def print_videos(cfg: DictConfig, _overrides) -> None:
+def print_videos(cfg: DictConfig, overrides) -> None:
     """``python -m uavrl.render``: the paths written, one a line."""
-    for path in render_checkpoint(cfg):
+    for path in render_checkpoint(cfg, overrides):
         print(path)
 
 

@@ -169,6 +169,7 @@ class DamagedRun(ValueError):
     """A run directory whose files the report cannot use; the message names the file and why, in one line."""
 
 
+MAX_RESAMPLES = 10**6  # bootstrap resamples: 10^6 draws of 64 seeds take 1 GB
 # uavrl's config.yaml and metrics.json hold a few KB: a larger file is not one it wrote, and is not read whole
 MAX_FILE_BYTES = 1 << 20
 NAME = Rule(
@@ -641,10 +642,15 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     if args.out is None and len(args.paths) > 1:
         parser.error("--out is needed with several directories")
-    if args.resamples < 1:
-        parser.error(f"--resamples={args.resamples} is invalid: it must be a whole number >= 1")
+    if not 1 <= args.resamples <= MAX_RESAMPLES:
+        parser.error(
+            f"--resamples={args.resamples} is invalid: it must be a whole number in [1, {MAX_RESAMPLES:,}] (a cell's "
+            "draws take resamples x seeds x 16 bytes, and the default 10,000 already fixes the interval to ~1%)"
+        )
     if args.seed < 0:
         parser.error(f"--seed={args.seed} is invalid: it must be a whole number >= 0")
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out={args.out} is invalid: it is a file, not a directory")
     try:
         path = report(args.paths, args.out or args.paths[0], args.resamples, args.seed)
     except OSError as err:

@@ -36,7 +36,7 @@ from uavrl.io import quoted, save_json, save_text, save_torch
 from uavrl.rules import check, shown
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
-from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs
+from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}
@@ -87,16 +87,20 @@ def output_dir(cfg: DictConfig) -> Path:
     return Path(cfg.out_dir) if cfg.out_dir else Path("reproduction") / variant_name(cfg)
 
 
-def check_settings(cfg: DictConfig) -> None:
-    """Every setting, and that the output directory holds no other variant, before anything heavy is imported."""
+def check_settings(cfg: DictConfig, overrides=None) -> None:
+    """Every setting, and that the output directory holds no other variant, before anything heavy is imported
+    (``overrides``: the command line's, so a refusal names what was typed)."""
     check(cfg, REPRODUCE_SETTINGS)
+    check_typed(cfg, overrides, REPRODUCE_SETTINGS, ReproduceSchema)
     models = []
     for size in cfg.grids:
         if not cfg.steps and size not in PAPER_STEPS:
             reason = f"grid {size}x{size} is not in Table II ({sorted(PAPER_STEPS)}): also give steps=<per episode>"
             raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
         models.append(grid_model(size, cfg))
-    check_reproduce_costs(cfg, models)
+    check_reproduce_costs(cfg, models, overrides)
+    if cfg.out_dir and Path(cfg.out_dir).exists() and not Path(cfg.out_dir).is_dir():
+        raise NotADirectoryError(f"out_dir={quoted(cfg.out_dir)} is invalid: it is a file, not a directory")
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
@@ -386,9 +390,9 @@ def figures(cfg: DictConfig) -> list[Path]:
     return written
 
 
-def reproduce(cfg: DictConfig, _overrides=()) -> None:
+def reproduce(cfg: DictConfig, overrides=()) -> None:
     """``python -m uavrl.reproduce``: check the settings, then run ``cfg.command``."""
-    check_settings(cfg)
+    check_settings(cfg, [o for o in overrides if not o.startswith("command=")] or None)
     import numba  # the heavy modules, once the settings are known to be good
     import torch
 

@@ -51,6 +51,10 @@ def whole(low: int) -> Rule:
     return Rule(lambda v: _is_whole(v) and v >= low, f"it must be a whole number >= {low}")
 
 
+def whole_within(low: int, high: int) -> Rule:
+    return Rule(lambda v: _is_whole(v) and low <= v <= high, f"it must be a whole number in [{low}, {high}]")
+
+
 def interval(low: float, high: float, *, low_open: bool = False) -> Rule:
     def accepts(v):
         return _is_real(v) and (low < v if low_open else low <= v) and v <= high

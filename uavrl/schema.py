@@ -51,9 +51,12 @@ from uavrl.rules import (
     setting,
     shown,
     whole,
+    whole_within,
 )
 
+MAX_THREADS = 1024  # threads beyond the cores only slow torch; a million of them exhaust the machine's processes
 STEP_BUDGET = 10**10  # team steps: ~30 min of the compiled tabular learner, days of the DQN
+TIME_BUDGET = 1  # hours of one CPU core, estimated: each scenario's DQN budget is estimated at 1-30 minutes
 
 
 @dataclass
@@ -64,6 +67,12 @@ class TrainSchema:
     log_every: int = setting(1, whole(1), "iterations between TensorBoard points")
     step_budget: int = setting(
         STEP_BUDGET, whole(1), "team steps of training and evaluation; a run that needs more is refused at once"
+    )
+    time_budget: REAL = setting(
+        TIME_BUDGET,
+        positive(),
+        "hours of one CPU core the DQN's training may take, as estimated before it starts from its networks, batch, "
+        "gradient steps, worlds and grid (uavrl/settings.py); a run estimated to need more is refused at once",
     )
 
 
@@ -158,7 +167,9 @@ class RunSchema:
 
     seed: int = setting(0, SEED, "seeds the run: its worlds, networks and exploration")
     device: str = setting("cpu", DEVICE, "the torch device")
-    num_threads: int = setting(1, whole(1), "torch.set_num_threads; 1 is fastest for small tensors on a 2-core CPU")
+    num_threads: int = setting(
+        1, whole_within(1, MAX_THREADS), "torch.set_num_threads; 1 is fastest for small tensors on a 2-core CPU"
+    )
     run_dir: Optional[str] = setting(
         None,
         optional(path(), "runs/<agent>/<env>/<timestamp>"),
@@ -199,7 +210,7 @@ class BenchmarlSchema:
     own groups (``experiment``, ``algorithm``, ``model``, ``critic_model``) bring their schemas from BenchMARL."""
 
     seed: int = setting(0, SEED, "seeds BenchMARL's experiment")
-    num_threads: int = setting(1, whole(1), "torch.set_num_threads")
+    num_threads: int = setting(1, whole_within(1, MAX_THREADS), "torch.set_num_threads")
     run_dir: Optional[str] = setting(
         None,
         optional(path(), "runs/benchmarl_<algorithm>/<env>/<timestamp>"),
@@ -246,8 +257,10 @@ class ReproduceSchema:
         False, flag(), "true: replace the results of other settings in out_dir (refused otherwise)"
     )
     progress: bool = setting(True, flag(), "a progress bar")
-    num_threads: int = setting(1, whole(1), "torch threads")
-    numba_threads: int = setting(0, whole(0), "learner threads (runs in parallel); 0: all cores")
+    num_threads: int = setting(1, whole_within(1, MAX_THREADS), "torch threads")
+    numba_threads: int = setting(
+        0, whole_within(0, MAX_THREADS), "learner threads (runs in parallel); 0: all cores (at most numba's)"
+    )
     memory_budget: REAL = setting(
         DEFAULT_MEMORY_BUDGET, positive(), "bytes the learner's tables of one grid may take, all runs together"
     )
@@ -338,4 +351,11 @@ def settings_markdown() -> str:
 
 
 if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:]:
+        raise SystemExit(
+            f"error: {sys.argv[1]} is invalid: python -m uavrl.schema takes no arguments; it prints the settings table "
+            "(python -m uavrl.schema > docs/settings.md)"
+        )
     print(settings_markdown(), end="")

@@ -14,13 +14,16 @@ override is refused in a fraction of a second.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Callable
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
-from uavrl.agents import AGENTS
-from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules, training_models
+from uavrl.agents import AGENTS, costs
+from uavrl.agents.costs import FLOAT, TRAINING_COPIES
+from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules, check_dqn_settings, training_models
 from uavrl.envs.config import make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
@@ -33,8 +36,8 @@ from uavrl.envs.limits import (
     table_bytes,
     world_bytes,
 )
-from uavrl.rules import Rule, check, one_of, rules_of
-from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema, TrainSchema
+from uavrl.rules import Rule, check, flag, one_of, rules_of, shown
+from uavrl.schema import BenchmarlSchema, EnvSchema, ReproduceSchema, RunSchema, TrainSchema
 
 PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
 
@@ -57,6 +60,67 @@ def check_run(cfg: DictConfig) -> None:
         check(cfg, AGENT_SETTINGS[name])
 
 
+def check_agent_settings(cfg: DictConfig, model) -> None:
+    """A one-line ValueError for agent settings that cannot go together on ``model`` (the DQN's network, head,
+    mixer and training teams), before torch is imported."""
+    if OmegaConf.select(cfg, "agent.name") == "dqn":
+        check_dqn_settings(model, cfg.agent)
+
+
+# what each command of configs/config.yaml does not read, and what reads it instead
+UNREAD = {
+    "train": {"checkpoint": "python -m uavrl.evaluate's", "print_json": "python -m uavrl.evaluate's"},
+    "evaluate": {
+        "agent": "the checkpoint's agent is evaluated with its saved settings",
+        "scenario": "the checkpoint's run chose its scenario",
+        "train": "python -m uavrl.train's",
+        "resume": "python -m uavrl.train's",
+        "run_dir": "the evaluation writes beside the checkpoint",
+        "sweep_dir": "python -m uavrl.train's",
+    },
+}
+READ_ANYWAY = ("agent.memory_budget",)  # the evaluation's own budget
+
+
+def check_read(overrides, command: str) -> None:
+    """A one-line ValueError for an override the command would ignore (``checkpoint=`` on ``uavrl.train``,
+    ``agent.hidden=`` on ``uavrl.evaluate``, whose policy is the checkpoint's), naming what reads it."""
+    for override in overrides or ():
+        key = str(override).partition("=")[0].lstrip("+~")
+        if key in READ_ANYWAY:
+            continue
+        for name, reader in UNREAD[command].items():
+            if key == name or key.startswith(f"{name}."):
+                typed = str(override).lstrip("+~")
+                raise ValueError(f"{typed} is invalid for python -m uavrl.{command}, which does not read it: {reader}")
+
+
+def check_typed(cfg: DictConfig, overrides, table: dict[str, Rule], schema: type | None = None) -> None:
+    """What composing lets through: a key added with ``+`` that no schema has (``+agent.new_key=1``; ``schema``: the
+    command's, else the chosen agent's for ``agent.*``), and a true/false setting typed as a number (``2``, which the
+    config reads as true)."""
+    agent = OmegaConf.select(cfg, "agent.name")
+    for override in overrides or ():
+        key, _, value = str(override).lstrip("+~").partition("=")
+        section, _, name = key.partition(".")
+        known = _fields(schema) if schema is not None else set()
+        if schema is None and section == "agent" and name and agent in AGENT_SCHEMAS:
+            known, key_name = _fields(AGENT_SCHEMAS[agent]), name
+        elif schema is None and section == "env" and name:
+            known, key_name = _fields(EnvSchema), name
+        else:
+            key_name = key
+        if str(override).startswith("+") and (known and key_name.split(".")[0] not in known):
+            raise ValueError(f"{key}={value} is invalid: no such setting (docs/settings.md lists them)")
+        rule = table.get(key)
+        if rule is not None and rule.allowed == flag().allowed and value.strip().lower() not in ("true", "false"):
+            raise ValueError(f"{key}={value} is invalid: {rule.allowed}")
+
+
+def _fields(schema: type) -> set[str]:
+    return {field.name for field in dataclasses.fields(schema)}
+
+
 def check_scenario(cfg: DictConfig) -> None:
     """A one-line ValueError when the chosen scenario (``configs/scenario/``) does not run the chosen agent."""
     scenario = OmegaConf.select(cfg, "scenario")
@@ -67,152 +131,505 @@ def check_scenario(cfg: DictConfig) -> None:
 
 # ------------------------------------------------------------------------------------------ what a run costs
 START_BLOCK = 256  # agents/tabular/learner.py: episodes whose starts one World draws for all runs
+# The DQN's CPU time on one core of the machine of BENCHMARKS.md: a batched environment step and a gradient step cost
+# a fixed overhead and more per UAV (the greedy valid action picks UAV by UAV), the networks' multiply-adds at
+# MACS_PER_SECOND and the greedy action's per-cell work (its occupancy of the grid, per world and per sampled
+# transition) at CELLS_PER_SECOND.  Measured CPU seconds an iteration against this estimate: the defaults on 6x6
+# 0.56 (0.44), N = 6 on 10x10 with QMIX 0.63 idle, 0.86 loaded (0.82), 2 UAVs on 300x300 1.65 (1.58).
+STEP_SECONDS, UPDATE_SECONDS, UAV_SECONDS = 2e-3, 3e-3, 0.5e-3
+MACS_PER_SECOND, CELLS_PER_SECOND = 1.5e10, 8e8
+GROUPS = ("scenario", "env", "agent")  # config groups: a setting of one may come from the group's choice
+MODEL_NAMES = ("env.grid", "env.num_uavs")  # how the grid and the team are typed: uavrl.train, uavrl.evaluate
+REPRODUCE_NAMES = ("grids", "num_uavs")  # uavrl.reproduce
+TABLE_FREE = "or use agent=dqn, which keeps no table"
+
+
+class Typed:
+    """The settings a command line typed, ``{name: value as typed}`` (``+`` and ``~`` dropped; a group choice such
+    as ``env=a2g_urban`` under its group's name).  ``overrides=None`` (the Python API): every setting counts as
+    given."""
+
+    def __init__(self, cfg: DictConfig, overrides=None):
+        self.cfg = cfg
+        self.given = None if overrides is None else {}
+        for override in overrides or ():
+            key, _, value = str(override).partition("=")
+            self.given[key.lstrip("+~")] = value
+
+    def __contains__(self, name: str) -> bool:
+        return self.given is None or name in self.given
+
+    def shown(self, name: str) -> str:
+        """``name=<value>``: as typed, else the config's value and the choice it came from."""
+        if self.given is not None and name in self.given:
+            return f"{name}={self.given[name]}"
+        value = OmegaConf.select(self.cfg, name, default=None)
+        if isinstance(value, (DictConfig, ListConfig)):
+            value = OmegaConf.to_container(value, resolve=True)
+        text = f"{name}={shown(value, label=True)}"
+        if self.given is None:
+            return text
+        chosen = [g for g in GROUPS if g in self.given and (name.startswith(f"{g}.") or g == "scenario")]
+        if "agent" in self.given and name == "env.max_steps":  # an agent's yaml sets its training episode length
+            chosen.append("agent")
+        return f"{text} ({'from ' + self.shown(chosen[0]) if chosen else 'the default'})"
+
+
+@dataclass(frozen=True)
+class Factor:
+    """A number a cost grows with: ``name`` the setting as typed (words, ``fixed``, for what no setting sets),
+    ``size`` how much of the cost it makes (a grid: its cells), ``least`` the size its smallest value gives;
+    ``origin``: for a setting left null, the settings its value follows from; ``label`` names it in the formula."""
+
+    name: str
+    size: int
+    least: int = 1
+    origin: tuple[str, ...] = ()
+    label: str = ""
+    fixed: bool = False
+    multiplies: bool = True  # the cost is proportional to it (else it grows with it some other way)
 
 
 @dataclass(frozen=True)
 class Cost:
-    """What one part of a command needs: ``amount`` (bytes or steps), the settings it grows with and their values
-    (``agent.episodes x agent.runs x env.max_steps``), and what the part is, in words."""
+    """What one part of a command needs (bytes, team steps or CPU seconds): ``estimate(lowered)`` is the amount with
+    the factors named in ``lowered`` at their least, so a refusal advises only the settings that would help."""
 
-    amount: int
-    factors: dict[str, int]
     what: str
-    fixed: tuple[str, ...] = ()  # factors that are no setting
+    factors: tuple[Factor, ...]
+    estimate: Callable[[frozenset], int]
+    hint: str = ""  # another change that helps, in words
 
-    def blamed(self) -> str:
-        """The setting among the factors with the largest value: the one most likely typed too large."""
-        settings = [name for name in self.factors if name not in self.fixed] or list(self.factors)
-        return max(settings, key=lambda name: self.factors[name])
+    @property
+    def amount(self) -> int:
+        return self.estimate(frozenset())
 
     def formula(self) -> str:
-        names, values = " x ".join(self.factors), " x ".join(f"{v:,}" for v in self.factors.values())
-        return f"{self.what} ({names} = {values})"
+        """``what (a x b = 2 x 3; with c 4)``: the factors it is proportional to, then the others."""
+        product = [f for f in self.factors if f.multiplies and (f.size != 1 or not f.fixed)]
+        names = " x ".join(f.label or f.name for f in product)
+        parts = [f"{names} = {' x '.join(count(f.size) for f in product)}"] if product else []
+        others = [f"{f.label or f.name} {count(f.size)}" for f in self.factors if not f.multiplies]
+        parts += [f"with {', '.join(others)}"] if others else []
+        return f"{self.what} ({'; '.join(parts)})"
 
 
-def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str) -> None:
-    """A one-line ValueError naming the setting that grows the part over ``budget``, the estimate and what to type."""
+def product(what: str, factors, scale: int = 1) -> Cost:
+    """A cost of ``scale`` times the product of the factors' sizes."""
+    factors = tuple(factors)
+    return Cost(what, factors, lambda low: scale * math.prod(f.least if f.name in low else f.size for f in factors))
+
+
+def count(value) -> str:
+    """A whole number with thousands separators, or ``2.7e+296`` beyond 15 digits."""
+    value = int(value)
+    if abs(value) < 10**15:
+        return f"{value:,}"
+    digits = len(str(abs(value))) - 1
+    return f"{int(str(abs(value))[:3]) / 100:.3g}e+{digits:02d}" if digits > 300 else f"{float(value):.3g}"
+
+
+UNITS = {"bytes": "<bytes>", "steps": "<steps>", "seconds": "<hours>"}
+
+
+def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str, typed: Typed) -> None:
+    """A one-line ValueError for the first part over ``budget``: the setting typed that grows it, the estimate and
+    the changes that would bring it within the budget."""
     for cost in costs:
-        if cost.amount > budget:
-            name = cost.blamed()
-            estimate = gib(cost.amount) if unit == "bytes" else f"{cost.amount:,} team steps"
-            raise ValueError(
-                f"{name}={cost.factors[name]} is invalid: {cost.formula()} needs about {estimate}, over "
-                f"{budget_name}={int(budget)}: lower {name}, or raise {budget_name}=<{unit}>"
-            )
+        amount = cost.amount
+        limit = budget * 3600 if unit == "seconds" else budget
+        if amount > limit:
+            raise ValueError(over_budget(cost, amount, limit, budget_name, unit, typed))
 
 
-def evaluation_costs(model, num_starts: int, horizon: int, tables: int, names: tuple[str, str, str]) -> Cost:
-    """The memory of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
-    > 0: the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
-    references: the exact solver where it fits, else the lower bounds.  ``names``: how the number of starts, the
-    horizon and the number of tables are typed."""
-    factors = {names[0]: num_starts, names[1]: horizon} | ({names[2]: tables} if tables > 1 else {})
-    fixed = () if "." in names[1] else (names[1],)  # reproduce has no horizon setting
-    return Cost(evaluation_bytes(model, num_starts, horizon, tables), factors, "the evaluation", fixed)
+def _listed(changes: list[str]) -> str:
+    """``lower a, lower b, use c``: the changes, the ``lower`` ones run together (``lower a or b``)."""
+    lowered = [c.removeprefix("lower ") for c in changes if c.startswith("lower ")]
+    rest = [c for c in changes if not c.startswith("lower ")]
+    joined = ([f"lower {' or '.join(lowered)}"] if lowered else []) + rest
+    return ", ".join(joined)
 
 
-def starts_worlds(model, runs: int, runs_name: str) -> Cost:
-    """The tabular learner's World that draws the episode starts of ``START_BLOCK`` episodes of every run."""
-    factors = {runs_name: runs, "episodes per block": START_BLOCK}
-    fixed = ("episodes per block",)
-    return Cost(world_bytes(model, START_BLOCK * runs), factors, "the worlds of the episode starts", fixed)
+def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typed: Typed) -> str:
+    settings = [f for f in cost.factors if not f.fixed and f.size > f.least]
+
+    def lowered(f: Factor) -> frozenset:  # a setting lowered, and the null settings whose value follows from it
+        return frozenset({f.name, *(g.name for g in cost.factors if f.name in g.origin)})
+
+    helps = [f for f in settings if cost.estimate(lowered(f)) <= limit]
+
+    def given(f: Factor) -> bool:
+        return f.name in typed or any(name in typed for name in f.origin)
+
+    pool = helps or settings or [f for f in cost.factors if not f.fixed] or list(cost.factors)
+
+    def saving(f: Factor) -> float:  # how many times less the part needs with the setting at its least
+        return math.log10(amount + 1) - math.log10(cost.estimate(lowered(f)) + 1)
+
+    blamed = max(pool, key=lambda f: (given(f), saving(f)))
+    name = blamed.name if blamed.name in typed else next((o for o in blamed.origin if o in typed), blamed.name)
+    changes = []
+    for f in sorted(helps, key=lambda f: not given(f)):
+        if f.origin and name in f.origin and name not in {h.name for h in helps}:
+            changes.append(f"change {name}")
+        changes.append(f"give {f.name}={UNITS.get(f.name, '<smaller>')}" if f.origin else f"lower {f.name}")
+    advice = _listed(list(dict.fromkeys(changes))[:3])
+    advice = ", ".join(filter(None, [advice, cost.hint.removeprefix("or ") if not advice else cost.hint]))
+    raise_it = f"raise {budget_name}={UNITS[unit]}"
+    if unit == "bytes":
+        estimate = gib(amount)
+    elif unit == "steps":
+        estimate = f"{count(amount)} team steps"
+    else:
+        estimate = f"{amount / 3600:.3g} hours of one CPU core"
+    if budget_name in typed:
+        budget_text = typed.shown(budget_name)
+    else:
+        budget_text = f"{budget_name}={limit / 3600:g}" if unit == "seconds" else f"{budget_name}={int(limit)}"
+    return (
+        f"{typed.shown(name)} is invalid: {cost.formula()} needs about {estimate}, over {budget_text}: "
+        f"{advice + ', or ' if advice else ''}{raise_it}"
+    )
 
 
-def q_tables(model, tables: int, names: tuple[str, str], budget) -> Cost:
-    """The tabular learner's Q tables, one per run, and the model tables beside them; named by the number of UAVs
-    (``names[1]``) when one table alone is over ``budget``, else by the number of runs (``names[0]``)."""
-    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]} ({model.num_states:,} states x "
-    what += f"{model.num_joint_actions:,} joint actions each, with the model's lookup tables)"
-    blamed = {names[1]: model.num_uavs} if table_bytes(model, 1) > budget else {names[0]: tables}
-    return Cost(table_bytes(model, tables), blamed, what)
+class _Resized:
+    """A model with its grid, team or spares made the least a setting allows: what a cost would be with them."""
+
+    def __init__(self, model, lowered: frozenset, grid: str = "env.grid", team: str = "env.num_uavs"):
+        self._model = model
+        self.num_uavs = 1 if team in lowered else model.num_uavs
+        self.num_spares = 0 if "env.num_spares" in lowered else model.num_spares
+        self.grid = (self.num_uavs + self.num_spares, 1) if grid in lowered else model.grid
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    num_cells = property(lambda self: self.grid[0] * self.grid[1])
+    fleet_size = property(lambda self: self.num_uavs + self.num_spares)
+    num_joint_actions = property(lambda self: 6**self.num_uavs)
+    num_states = property(
+        lambda self: ((2 if self._model.state_includes_tasks else 1) * self.num_cells) ** self.num_uavs
+    )
 
 
-def check_run_costs(cfg: DictConfig, model) -> None:
+def model_factors(model, names: tuple[str, str] = ("env.grid", "env.num_uavs")) -> list[Factor]:
+    """The grid's cells and the team (and its spares) as factors of a cost, named as typed (``names``: the grid's
+    and the team's setting)."""
+    grid, team = names
+    factors = [
+        Factor(grid, model.num_cells, model.fleet_size, label=f"the cells of {grid}", multiplies=False),
+        Factor(team, model.num_uavs, multiplies=False),
+    ]
+    if model.num_spares:
+        factors.append(Factor("env.num_spares", model.num_spares, 0, multiplies=False))
+    return factors
+
+
+def horizon_factor(cfg: DictConfig, model, name: str = "eval.horizon") -> Factor:
+    """``eval.horizon``, or the default it takes when null: crossing the grid twice, or under an energy model the
+    whole mission, which the battery, the energy numbers and the base set."""
+    horizon = OmegaConf.select(cfg, name, default=None)
+    if horizon:
+        return Factor(name, int(horizon))
+    if model.energy == "none":
+        return Factor(name, default_horizon(model.grid), origin=("env.grid",), label=f"{name} (null: 2 (L1 + L2))")
+    origin = ("env.battery_wh", "env.slot_s", "env.circuit_power_w", "env.base", "env.energy", "env.grid")
+    return Factor(name, evaluation_horizon(model), origin=origin, label=f"{name} (null: the whole mission)")
+
+
+def evaluation_costs(model, starts: Factor, horizon: Factor, tables: Factor | None, names=MODEL_NAMES) -> Cost:
+    """The memory of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``:
+    the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
+    references: the exact solver where it fits, else the lower bounds.  ``names``: the grid's and the team's
+    setting."""
+    factors = [starts, horizon, *([tables] if tables and tables.size > 1 else []), *model_factors(model, names)]
+
+    def estimate(low):
+        sizes = {f.name: (f.least if f.name in low else f.size) for f in factors}
+        n_tables = sizes[tables.name] if tables and tables.size > 1 else (1 if tables else 0)
+        resized = _Resized(model, low, *names)
+        return evaluation_bytes(resized, sizes[starts.name], sizes[horizon.name], n_tables)
+
+    return Cost("the evaluation", tuple(factors), estimate)
+
+
+def check_run_costs(cfg: DictConfig, model, overrides=None) -> None:
     """A one-line refusal, before anything is built, when a run of ``python -m uavrl.train`` would need more memory
-    than ``agent.memory_budget`` or more team steps than ``train.step_budget``, or no exact optimum exists for it."""
+    than ``agent.memory_budget``, more team steps than ``train.step_budget`` or (the DQN) more CPU time than
+    ``train.time_budget``, or no exact optimum exists for it.  ``overrides``: the command line's, so a refusal names
+    what was typed (``None``: every setting counts as typed)."""
+    typed = Typed(cfg, overrides)
     check_optimum_exists(model, "env.num_uavs")
     a = cfg.agent
     memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)
     step_budget = OmegaConf.select(cfg, "train.step_budget", default=TrainSchema.step_budget)
-    horizon = cfg.eval.horizon or evaluation_horizon(model)
-    starts = int(cfg.eval.num_starts)
-    T, steps, memory, tables = model.max_steps, [], [], 0
+    time_budget = OmegaConf.select(cfg, "train.time_budget", default=TrainSchema.time_budget)
+    horizon = horizon_factor(cfg, model)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    T = Factor("env.max_steps", model.max_steps)
+    steps, memory, seconds, tables = [], [], [], None
     if a.name == "tabular" and a.get("method", TabularSchema.method) == "q_learning":
-        tables = 1 if a.shared_table else int(a.runs)
-        training = {"agent.episodes": int(a.episodes), "agent.runs": int(a.runs), "env.max_steps": T}
-        steps.append(Cost(_product(training), training, "training"))
-        memory.append(starts_worlds(model, int(a.runs), "agent.runs"))
-        memory.append(q_tables(model, tables, ("agent.runs", "env.num_uavs"), memory_budget))
+        runs = Factor("agent.runs", int(a.runs))
+        tables = runs if not a.shared_table else Factor("agent.runs", 1, fixed=True)
+        steps.append(product("training", [Factor("agent.episodes", int(a.episodes)), runs, T]))
+        memory.append(starts_worlds(model, runs))
+        memory.append(q_tables(model, tables, hint=TABLE_FREE))
     elif a.name == "tabular":
-        tables = 1
+        tables = Factor("agent.runs", 1, fixed=True)
     elif a.name == "dqn":
-        # a size-free run trains every team of agent.sizes in every layout of agent.layouts: each group has its own
-        # worlds, batch and replay buffer (agents/dqn/multisize.py)
-        groups = training_models(model, a)
-        for group in groups:
-            check_optimum_exists(group, "agent.sizes")
-        worlds, buffer_size = int(a.worlds), int(a.buffer_size)
-        each = {"groups (agent.sizes x agent.layouts)": len(groups)} if len(groups) > 1 else {}
-        fixed = tuple(each)
-        training = {"agent.iterations": int(a.iterations), "agent.worlds": worlds, "env.max_steps": T} | each
-        steps.append(Cost(_product(training), training, "training", fixed))
-        batch = {"agent.worlds": worlds, "env.max_steps": T} | each
-        buffer = {"agent.buffer_size": buffer_size} | each
-        memory += [
-            Cost(
-                sum(world_bytes(m, worlds) for m in groups),
-                {"agent.worlds": worlds} | each,
-                "the training worlds",
-                fixed,
-            ),
-            Cost(worlds * T * sum(map(frame_bytes, groups)), batch, "each iteration's batch of transitions", fixed),
-            Cost(buffer_size * sum(map(stored_transition_bytes, groups)), buffer, "the replay buffers", fixed),
-        ]
-    evaluations = max(tables, 1) * starts * horizon
-    eval_factors = {"eval.num_starts": starts, "eval.horizon": horizon} | ({"agent.runs": tables} if tables > 1 else {})
-    steps.append(Cost(evaluations, eval_factors, "the evaluation"))
-    memory.append(evaluation_costs(model, starts, horizon, tables, ("eval.num_starts", "eval.horizon", "agent.runs")))
+        dqn_memory, dqn_steps, dqn_seconds = dqn_costs(cfg, model, T)
+        memory += dqn_memory
+        steps += dqn_steps
+        seconds += dqn_seconds
+    runs_shown = [tables] if tables and tables.size > 1 else []
+    steps.append(product("the evaluation", [starts, horizon, *runs_shown]))
+    memory.append(evaluation_costs(model, starts, horizon, tables))
+    if a.name == "dqn":
+        memory.append(policy_pass(model, a, starts))
     if cfg.eval.get("video", False):
-        memory.append(video_cost(int(cfg.eval.video_starts), cfg.eval.horizon or default_horizon(model.grid)))
-    refuse_over(memory, memory_budget, "agent.memory_budget", "bytes")
-    refuse_over([total_steps(steps)], step_budget, "train.step_budget", "steps")
+        memory.append(video_cost(int(cfg.eval.video_starts), horizon_factor(cfg, _Grid(model))))
+    refuse_over(memory, memory_budget, "agent.memory_budget", "bytes", typed)
+    refuse_over([total(steps)], step_budget, "train.step_budget", "steps", typed)
+    if seconds:
+        refuse_over([total(seconds)], time_budget, "train.time_budget", "seconds", typed)
 
 
-def video_cost(starts: int, horizon: int) -> Cost:
+class _Grid:
+    """A model seen without its energy model: the video's default length is the grid's, not the mission's."""
+
+    def __init__(self, model):
+        self.grid, self.energy = model.grid, "none"
+
+
+class _Agent(dict):
+    """An agent's settings as :mod:`uavrl.agents.costs` reads them, some lowered to their least."""
+
+    __getattr__ = dict.__getitem__
+
+
+def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost], list[Cost]]:
+    """The DQN's memory (the worlds, a batch of transitions, the replay buffers, the networks with their target,
+    gradients and Adam's moments, a gradient step), its team steps and its CPU time.  A size-free run trains every
+    team of ``agent.sizes`` in every layout of ``agent.layouts``: each group has its own worlds, buffer and share of
+    the batch (agents/dqn/multisize.py)."""
+    a = cfg.agent
+    settings = {k: a.get(k) for k in ("network", "head", "mixer", "hidden", "depth", "heads", "mixing_embed_dim")}
+    size_free = settings["network"] == "set"
+    groups = training_models(model, a)
+    for group in groups:
+        check_optimum_exists(group, "agent.sizes" if a.get("sizes") else "env.num_uavs")
+    sized = bool(a.get("sizes"))
+    grid_name, team_name = ("agent.sizes", "agent.sizes") if sized else ("env.grid", "env.num_uavs")
+    largest = max(groups, key=lambda m: m.num_cells * m.fleet_size)
+    worlds = Factor("agent.worlds", int(a.worlds))
+    buffer = Factor("agent.buffer_size", int(a.buffer_size))
+    batch = Factor("agent.batch_size", int(a.batch_size))
+    iterations, updates = Factor("agent.iterations", int(a.iterations)), Factor("agent.updates", int(a.updates))
+    per_iteration = [dataclasses.replace(f, multiplies=False) for f in (updates, batch, worlds, T)]
+    each = [Factor("groups (agent.sizes x agent.layouts)", len(groups), fixed=True)] if len(groups) > 1 else []
+    shape = [
+        Factor(grid_name, largest.num_cells, largest.fleet_size, label=f"the cells of {grid_name}", multiplies=False),
+        *([] if sized else [Factor(team_name, largest.num_uavs, multiplies=False)]),
+        *([Factor("env.num_spares", largest.num_spares, 0, multiplies=False)] if largest.num_spares else []),
+    ]
+    network = [
+        Factor("agent.hidden", int(a.hidden), multiplies=False),
+        Factor("agent.depth", int(a.depth), multiplies=False),
+    ]
+    if size_free:
+        network.append(Factor("agent.heads", int(a.heads), multiplies=False))
+    elif a.mixer == "qmix" and a.head == "factored":
+        network.append(Factor("agent.mixing_embed_dim", int(a.mixing_embed_dim), multiplies=False))
+
+    def sizes(low, *factors):
+        return {f.name: (f.least if f.name in low else f.size) for f in factors}
+
+    def models(low):
+        return [_Resized(m, low, grid_name, team_name) for m in groups]
+
+    def agent(low):
+        lowered = _Agent(settings)
+        for f in network:
+            if f.name in low:
+                lowered[f.name.split(".")[1]] = f.least
+        return lowered
+
+    def group_batch(low) -> int:
+        rows = sizes(low, batch)["agent.batch_size"]
+        return max(1, rows // len(groups)) if size_free else rows  # agents/dqn/multisize.py
+
+    def network_bytes(low) -> int:
+        s = agent(low)
+        if size_free:
+            return (
+                TRAINING_COPIES
+                * FLOAT
+                * costs.set_parameters(
+                    model.num_actions, model.energy != "none", int(s.hidden), int(s.heads), int(s.depth)
+                )
+            )
+        m = models(low)[0]
+        params = costs.team_parameters(
+            m.fleet_size, m.num_actions, m.energy != "none", s.head, int(s.hidden), int(s.depth)
+        )
+        if s.head == "factored" and s.mixer == "qmix":
+            params += costs.qmix_parameters(m.fleet_size, m.energy != "none", int(s.mixing_embed_dim))
+        return TRAINING_COPIES * FLOAT * params
+
+    def step_bytes(low) -> int:
+        s, rows = agent(low), group_batch(low)
+        return sum(
+            rows * (frame_bytes(m) + FLOAT * costs.team_row_values(m.fleet_size, m.num_actions, _e(m), s))
+            + rows * (m.num_cells + 2)  # the greedy action's occupancy of every cell
+            for m in models(low)
+        )
+
+    def world_memory(low) -> int:
+        return sum(world_bytes(m, sizes(low, worlds)["agent.worlds"]) for m in models(low))
+
+    def batch_memory(low) -> int:
+        n = sizes(low, worlds, T)
+        return n["agent.worlds"] * n["env.max_steps"] * sum(frame_bytes(m) for m in models(low))
+
+    def buffer_memory(low) -> int:
+        return sizes(low, buffer)["agent.buffer_size"] * sum(stored_transition_bytes(m) for m in models(low))
+
+    def cpu_seconds(low) -> int:
+        n, s = sizes(low, iterations, updates, worlds, T), agent(low)
+        total_seconds, rows = 0.0, group_batch(low)
+        for m in models(low):
+            macs = costs.team_row_macs(m.fleet_size, m.num_actions, _e(m), s)
+            per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
+            per_step += n["agent.worlds"] * (2 * macs / MACS_PER_SECOND + m.num_cells / CELLS_PER_SECOND)
+            per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size
+            per_update += rows * (6 * macs / MACS_PER_SECOND + m.num_cells / CELLS_PER_SECOND)
+            total_seconds += n["env.max_steps"] * per_step + n["agent.updates"] * per_update
+        return math.ceil(n["agent.iterations"] * total_seconds)
+
+    memory = [
+        Cost("the training worlds", (worlds, *shape, *each), world_memory),
+        Cost("each iteration's batch of transitions", (worlds, T, *shape[1:], *each), batch_memory),
+        Cost("the replay buffers", (buffer, *shape[1:], *each), buffer_memory),
+        Cost(
+            "the networks with their targets, gradients and Adam's moments",
+            (*network, *([] if size_free else shape[1:])),
+            network_bytes,
+        ),
+        Cost(  # agent.batch_size is shared out among the groups of a size-free run
+            "a gradient step's batch and activations",
+            (batch, *network, *shape, *(dataclasses.replace(f, multiplies=False) for f in each)),
+            step_bytes,
+        ),
+    ]
+    steps = [product("training", [iterations, worlds, T, *each])]
+    seconds = [Cost("training", (iterations, *per_iteration, *network, *shape, *each), cpu_seconds)]
+    return memory, steps, seconds
+
+
+def _e(model) -> bool:
+    return model.energy != "none"
+
+
+def policy_pass(model, a, starts: Factor) -> Cost:
+    """The DQN policy's forward pass over the evaluation's starts: its activations and the greedy action's
+    occupancy of every cell."""
+    settings = _Agent({k: a.get(k) for k in ("network", "head", "mixer", "hidden", "depth", "heads")})
+    settings["mixing_embed_dim"] = a.get("mixing_embed_dim")
+
+    def estimate(low):
+        m, rows = _Resized(model, low), (starts.least if starts.name in low else starts.size)
+        values = costs.team_row_values(m.fleet_size, m.num_actions, _e(m), settings)
+        return rows * (FLOAT * values + m.num_cells + 2)
+
+    return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
+
+
+def video_cost(starts: int, horizon: Factor) -> Cost:
     """The frames of a video (:mod:`uavrl.video`): every step's panels of the policy and the oracle, their tiles and
     the stacked frames, each panel ``PANEL_BYTES``."""
-    factors = {"eval.video_starts": starts, "eval.horizon": horizon}
-    return Cost(3 * 2 * starts * (horizon + 1) * PANEL_BYTES, factors, "the video's frames (eval.video)")
+    factors = (Factor("eval.video_starts", starts), horizon)
+
+    def estimate(low):
+        n = {f.name: (f.least if f.name in low else f.size) for f in factors}
+        return 3 * 2 * n["eval.video_starts"] * (n[horizon.name] + 1) * PANEL_BYTES
+
+    return Cost("the video's frames (eval.video)", factors, estimate)
 
 
-def check_evaluation_floor(cfg: DictConfig, video: bool) -> None:
-    """Before ``python -m uavrl.evaluate`` or ``uavrl.render`` reads a checkpoint (its model still unknown): a
-    one-line refusal when the evaluation's starts, or the ``video``'s, need more than ``agent.memory_budget`` even
-    for the smallest model (one UAV on one cell, the shortest default horizon): every evaluation builds its starts'
-    worlds.  The model's own estimate follows once the checkpoint is read."""
+def check_evaluation_floor(cfg: DictConfig, video: bool, overrides=None) -> None:
+    """Before ``python -m uavrl.evaluate`` or ``uavrl.render`` knows the model: a one-line refusal when the
+    evaluation's starts, or the ``video``'s, need more than ``agent.memory_budget`` even for the smallest model (one
+    UAV on one cell, the shortest default horizon): every evaluation builds its starts' worlds."""
+    typed = Typed(cfg, overrides)
     smallest = make_config("paper", grid=(1, 1), num_uavs=1)
-    horizon = cfg.eval.horizon or default_horizon(smallest.grid)
-    starts = int(cfg.eval.num_starts)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
     what = "the evaluation's worlds, even of the smallest model (1 UAV on 1 cell)"
-    costs = [Cost(world_bytes(smallest, starts), {"eval.num_starts": starts}, what)]
+    parts = [product(what, [starts], world_bytes(smallest, 1))]
     if video:
-        costs.append(video_cost(int(cfg.eval.video_starts), horizon))
+        parts.append(video_cost(int(cfg.eval.video_starts), horizon_factor(cfg, smallest)))
     budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
-    refuse_over(costs, budget, "agent.memory_budget", "bytes")
+    refuse_over(parts, budget, "agent.memory_budget", "bytes", typed)
 
 
-def check_video_cost(cfg: DictConfig, model) -> None:
+def check_evaluation_costs(cfg: DictConfig, saved: DictConfig, model, video: bool, overrides=None) -> None:
+    """Once the saved run's config is read (``saved``, its agent; ``model`` the model evaluated): a one-line
+    refusal when the evaluation, the policy's pass or the video would need more than ``agent.memory_budget``."""
+    typed = Typed(cfg, overrides)
+    horizon = horizon_factor(cfg, model)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    tabular = saved.agent.name == "tabular"
+    tables = Factor("agent.runs", 1, fixed=True) if tabular else None
+    parts = [evaluation_costs(model, starts, horizon, tables)]
+    if saved.agent.name == "dqn":
+        parts.append(policy_pass(model, saved.agent, starts))
+    if video:
+        parts.append(video_cost(int(cfg.eval.video_starts), horizon_factor(cfg, _Grid(model))))
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
+    refuse_over(parts, budget, "agent.memory_budget", "bytes", typed)
+
+
+def check_video_cost(cfg: DictConfig, model, overrides=None) -> None:
     """A one-line refusal, before any frame is drawn, when the video of ``cfg.eval`` on ``model`` (a run read from
     its checkpoint) would need more than ``agent.memory_budget``."""
-    horizon = cfg.eval.horizon or default_horizon(model.grid)
     budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
-    refuse_over([video_cost(int(cfg.eval.video_starts), horizon)], budget, "agent.memory_budget", "bytes")
+    video = video_cost(int(cfg.eval.video_starts), horizon_factor(cfg, _Grid(model)))
+    refuse_over([video], budget, "agent.memory_budget", "bytes", Typed(cfg, overrides))
 
 
-def total_steps(parts: list[Cost]) -> Cost:
-    """The steps of every part together, named by the largest part."""
+def starts_worlds(model, runs: Factor, names=MODEL_NAMES) -> Cost:
+    """The tabular learner's World that draws the episode starts of ``START_BLOCK`` episodes of every run."""
+    block = Factor("episodes per block", START_BLOCK, fixed=True)
+    factors = (runs, block, *model_factors(model, names))
+
+    def estimate(low):
+        n = runs.least if runs.name in low else runs.size
+        return world_bytes(_Resized(model, low, *names), START_BLOCK * n)
+
+    return Cost("the worlds of the episode starts", factors, estimate)
+
+
+def q_tables(model, tables: Factor, names=MODEL_NAMES, hint: str = "") -> Cost:
+    """The tabular learner's Q tables, one per run (``tables``), and the model tables beside them; the DQN has no
+    table, and a refusal says so where one table alone is over the budget."""
+    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]} ({count(model.num_states)} states x "
+    what += f"{count(model.num_joint_actions)} joint actions each, with the model's lookup tables)"
+    factors = (tables, *model_factors(model, names))
+
+    def estimate(low):
+        n = tables.least if tables.name in low else tables.size
+        return table_bytes(_Resized(model, low, *names), n)
+
+    return Cost(what, factors, estimate, hint)
+
+
+def total(parts: list[Cost]) -> Cost:
+    """The parts together, named by the factors of the largest part."""
     largest = max(parts, key=lambda part: part.amount)
-    return Cost(sum(part.amount for part in parts), largest.factors, largest.what, largest.fixed)
+
+    def estimate(low):
+        return sum(part.estimate(low) for part in parts)
+
+    return Cost(largest.what, largest.factors, estimate)
 
 
 def check_optimum_exists(model, num_uavs_name: str) -> None:
@@ -224,25 +641,22 @@ def check_optimum_exists(model, num_uavs_name: str) -> None:
         )
 
 
-def _product(factors: dict[str, int]) -> int:
-    return math.prod(factors.values())
-
-
-def check_reproduce_costs(cfg: DictConfig, models: list) -> None:
+def check_reproduce_costs(cfg: DictConfig, models: list, overrides=None) -> None:
     """A one-line refusal, before anything is built, when the protocol of ``python -m uavrl.reproduce`` would need
     more memory on one grid than ``memory_budget`` or more team steps in all than ``step_budget``."""
-    runs, episodes, starts, steps = int(cfg.runs), int(cfg.episodes), int(cfg.eval_starts), []
+    typed = Typed(cfg, overrides)
+    runs, episodes = Factor("runs", int(cfg.runs)), Factor("episodes", int(cfg.episodes))
+    starts, steps = Factor("eval_starts", int(cfg.eval_starts)), []
     for model in models:
         check_optimum_exists(model, "num_uavs")
-        horizon = default_horizon(model.grid)
-        training = {"runs": runs, "episodes": episodes, "steps": model.max_steps}
-        steps.append(Cost(_product(training), training, f"training on {model.grid[0]}x{model.grid[1]}"))
-        evaluation = {"eval_starts": starts, "runs": runs, "its horizon": horizon}
-        steps.append(Cost(_product(evaluation), evaluation, "the evaluation", ("its horizon",)))
+        horizon = Factor("its horizon", default_horizon(model.grid), fixed=True)
+        length = Factor("steps", model.max_steps, origin=() if cfg.steps else ("grids",))
+        steps.append(product(f"training on {model.grid[0]}x{model.grid[1]}", [runs, episodes, length]))
+        steps.append(product("the evaluation", [starts, runs, horizon]))
         memory = [
-            q_tables(model, runs, ("runs", "num_uavs"), cfg.memory_budget),
-            starts_worlds(model, runs, "runs"),
-            evaluation_costs(model, starts, horizon, runs, ("eval_starts", "its horizon", "runs")),
+            q_tables(model, runs, REPRODUCE_NAMES),
+            starts_worlds(model, runs, REPRODUCE_NAMES),
+            evaluation_costs(model, starts, horizon, runs, REPRODUCE_NAMES),
         ]
-        refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes")
-    refuse_over([total_steps(steps)], cfg.step_budget, "step_budget", "steps")
+        refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes", typed)
+    refuse_over([total(steps)], cfg.step_budget, "step_budget", "steps", typed)

@@ -52,17 +52,31 @@ from uavrl.runs import (
     size_free_teams,
     yardstick_line,
 )
-from uavrl.settings import check_run, check_run_costs, check_scenario
+from uavrl.settings import (
+    AGENT_SETTINGS,
+    RUN_SETTINGS,
+    check_agent_settings,
+    check_read,
+    check_run,
+    check_run_costs,
+    check_scenario,
+    check_typed,
+)
 
 # settings a resumed run may change; everything else must match the saved run
 RESUMABLE_OVERRIDES = ("resume", "progress", "num_threads", "run_dir")
 
 
-def check_settings(cfg: DictConfig) -> None:
-    """Every setting of a run, refused in one line before anything heavy is imported or any file written."""
+def check_settings(cfg: DictConfig, overrides=None) -> None:
+    """Every setting of a run, refused in one line before anything heavy is imported or any file written;
+    ``overrides`` (the command line's) let a refusal name the setting as typed."""
     check_run(cfg)
+    check_read(overrides, "train")
+    check_typed(cfg, overrides, {**RUN_SETTINGS, **AGENT_SETTINGS.get(cfg.agent.name, {})})
     check_scenario(cfg)
-    check_run_costs(cfg, model_config(cfg))
+    model = model_config(cfg)
+    check_agent_settings(cfg, model)
+    check_run_costs(cfg, model, overrides)
     if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
         raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
     if not cfg.resume and cfg.run_dir and Path(cfg.run_dir).is_file():
@@ -137,7 +151,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     run that fails before it saved anything removes the directory it made.
     """
     try:
-        check_settings(cfg)
+        check_settings(cfg, overrides if overrides else None)
     except FileNotFoundError:
         if cfg.resume:  # a run killed in its first checkpoint's write: its temporary file goes, though refused
             tidy(run_directory(cfg.resume, "resume"))

@@ -30,7 +30,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.schema import team_sizes, training_models
+from uavrl.agents.schema import network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.physics.channel import rates
@@ -43,44 +43,8 @@ from uavrl.evaluation import episode_metrics
 from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
 from .networks import Q_INPUTS
-from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
+from .setnet import SetDoubleQLoss, SetQCore, SetQNet
 from .transitions import CompactTransitions, transition_keys
-
-
-def check_set_settings(env_cfg: ModelConfig, a) -> None:
-    """One-line errors for a size-free network the agent cannot build (after the schema's rules)."""
-    if a.head != "factored":
-        raise ValueError(f"agent.head={a.head!r} is invalid with agent.network='set': use agent.head=factored")
-    if a.mixer not in MIXERS:
-        raise ValueError(
-            f"agent.mixer={a.mixer!r} is invalid with agent.network='set': its mixing weights grow with N; use "
-            "vdn (the sum) or mean"
-        )
-    if int(a.hidden) % int(a.heads):
-        raise ValueError(f"agent.heads={a.heads} is invalid: it must divide agent.hidden={a.hidden}")
-    for n, grid in team_sizes(env_cfg, a):
-        if n > grid[0] * grid[1]:
-            raise ValueError(
-                f"agent.sizes holds [{n}, {grid[0]}, {grid[1]}]: {n} UAVs do not fit on the {grid[0] * grid[1]} cells"
-            )
-
-
-def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
-    """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
-    when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
-    number of UAVs and layout of the same model otherwise."""
-    size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
-    same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
-    if size_free and env_cfg.replace(**same) != run_cfg:
-        return "only env.grid, env.num_uavs and env.layout may differ from the saved run's"
-    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
-        return None
-    network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
-    return (
-        f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
-        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
-        "(agent=dqn agent.network=set) acts on any size"
-    )
 
 
 class _Group:
@@ -123,8 +87,7 @@ class SetDQNAgent(DQNAgent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        self._check(env_cfg, a)
-        check_set_settings(env_cfg, a)
+        self._check(env_cfg, a)  # the size-free network's checks too (agents/schema.py)
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
         self.num_iterations = int(a.iterations)

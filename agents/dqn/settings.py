@@ -1,35 +1,15 @@
-"""The checks of ``agent.*`` before any work: the schema's rules, then what the head can hold."""
+"""The checks of ``agent.*`` before any work: the schema's rules, then what the network, its head and its mixer
+allow (:func:`uavrl.agents.schema.check_dqn_settings`, standard library only: the commands run it before torch is
+imported)."""
 
 from __future__ import annotations
 
-from uavrl.agents.schema import agent_rules
+from uavrl.agents.schema import MAX_JOINT_UAVS, check_dqn_settings
 from uavrl.envs import NUM_ACTIONS, ModelConfig
-from uavrl.rules import check
 
-MAX_JOINT_ACTIONS = NUM_ACTIONS**4  # the joint head is for small teams: N <= 4
+MAX_JOINT_ACTIONS = NUM_ACTIONS**MAX_JOINT_UAVS  # the joint head is for small teams: N <= 4
 
 
 def check_settings(env_cfg: ModelConfig, a) -> None:
-    """One-line errors for settings the agent cannot run: the rules of its schema (:mod:`uavrl.agents.schema`), then
-    the head's size."""
-    check(a, agent_rules("dqn"), section="agent")
-    if a.get("network", "team") == "team":  # run configs saved before: no setting
-        if a.mixer == "mean":
-            raise ValueError(
-                "agent.mixer='mean' is invalid with agent.network='team': use vdn or qmix, or agent.network=set"
-            )
-        if a.get("sizes"):
-            raise ValueError(
-                f"agent.sizes={list(a.sizes)} is invalid with agent.network='team', which is sized by the run's env: "
-                "use agent.network=set"
-            )
-    if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
-        raise ValueError(
-            f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "
-            f"{env_cfg.num_joint_actions:,} outputs, over {MAX_JOINT_ACTIONS:,} (N <= 4): use agent.head=factored"
-        )
-    if a.head == "joint" and env_cfg.energy != "none":
-        raise ValueError(
-            f"agent.head='joint' is invalid with env.energy={env_cfg.energy!r}: its joint action mask knows no UAV out "
-            "of service; use agent.head=factored"
-        )
+    """One-line errors for settings the agent cannot run (:func:`uavrl.agents.schema.check_dqn_settings`)."""
+    check_dqn_settings(env_cfg, a)
