@@ -263,6 +263,8 @@ class ModelConfig:
                 raise InvalidOption(name, getattr(self, name), f"only {reads} reads it, not energy={self.energy!r}")
         if self.energy == "none":
             return
+        if self.energy == "rotary_wing":
+            self._check_step_energies()
         if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
             reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
             raise InvalidOption("recharge_steps", self.recharge_steps, reason)
@@ -325,6 +327,26 @@ class ModelConfig:
         lowest, need, _ = self._lowest_start_and_largest_reserve()
         energies = self.step_energies
         return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
+
+    def _check_step_energies(self):
+        """rotary_wing's step energies are finite numbers: a slot so short that a move flies faster than a float's
+        range (its propulsion power overflows) is refused naming ``slot_s``, and a battery beyond a float's range in
+        joules naming ``battery_wh``."""
+        try:
+            energies = self.step_energies
+            moving = (energies.move, energies.stay, energies.fly)
+        except OverflowError:
+            moving = (math.inf,)
+        if not all(math.isfinite(value) for value in moving):
+            speed = self.cell_size / self.slot_s
+            reason = (
+                f"a move of one cell (cell_size={self.cell_size!r} m) in it flies at {speed:.3g} m/s, whose "
+                "propulsion power overflows: give a slot of a realistic length (the default is "
+                f"{_DEFAULTS['slot_s']!r} s)"
+            )
+            raise InvalidOption("slot_s", self.slot_s, reason)
+        if not math.isfinite(energies.capacity):
+            raise InvalidOption("battery_wh", self.battery_wh, "in joules it overflows a float: give a smaller battery")
 
     @property
     def step_energies(self) -> power.StepEnergies:
