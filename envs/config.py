@@ -57,13 +57,18 @@ def action_names(num_actions: int) -> str:
 class InvalidOption(ValueError):
     """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it."""
 
-    def __init__(self, option: str, value, reason: str):
-        super().__init__(f"{option}={value!r} is invalid: {reason}")
+    def __init__(self, option: str, value=None, reason: str = "", *, message: str | None = None):
+        """``message``: the whole line, for an argument whose value is better described than printed (a tensor)."""
+        super().__init__(message or f"{option}={value!r} is invalid: {reason}")
         self.option = option
 
     def renamed(self, names: dict[str, str]) -> str:
         """The message with each ``option=`` in ``names`` written as ``names[option]=`` (``grid=`` as ``env.grid=``)."""
         return re.sub(r"\b([a-z_0-9]+)=", lambda m: f"{names.get(m.group(1), m.group(1))}=", str(self))
+
+
+class InvalidType(InvalidOption, TypeError):
+    """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: what to give``."""
 
 
 @dataclass(frozen=True)
@@ -450,7 +455,8 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     _choice("preset", preset, PRESETS)
     unknown = sorted(set(overrides) - set(OPTION_NAMES))
     if unknown:
-        raise ValueError(f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}")
+        message = f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}"
+        raise InvalidOption(unknown[0], message=message)
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
 

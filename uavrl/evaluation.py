@@ -77,6 +77,28 @@ def check_settings(gamma, horizon, num_starts) -> None:
         refuse(f"eval.{name}", value, rule_of(EvalSchema, name))
 
 
+def check_arguments(policy, cfg, **settings) -> None:
+    """:func:`evaluate`'s arguments, refused in one line of :class:`~uavrl.envs.InvalidOption` (an
+    :class:`~uavrl.envs.InvalidType` for a wrong type) that names the keyword as the caller typed it."""
+    import numbers
+
+    from uavrl.envs import InvalidOption, InvalidType
+    from uavrl.envs.world import check_seed, resolve_device
+
+    if not callable(policy):
+        raise InvalidType("policy", policy, "give a TorchRL policy (a module that writes ('agents', 'action'))")
+    if not isinstance(cfg, ModelConfig):
+        raise InvalidType("cfg", cfg, "give a ModelConfig (uavrl.envs.make_config(...))")
+    for name in ("num_starts", "horizon", "gamma"):
+        value, rule = settings[name], rule_of(EvalSchema, name)
+        if not rule.accepts(value):
+            number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            kind = InvalidOption if number or value is None else InvalidType
+            raise kind(name, message=f"{name}={value!r} is invalid: {rule.allowed.replace('null', 'None')}")
+    check_seed(settings["seed"])
+    resolve_device(settings["device"])
+
+
 def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
     """A one-line refusal, before anything is allocated, when the evaluation would need more than ``memory_budget``
     bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line."""
@@ -308,7 +330,7 @@ def evaluate(
     """
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
-    check_settings(gamma, horizon, num_starts)
+    check_arguments(policy, cfg, num_starts=num_starts, horizon=horizon, gamma=gamma, seed=seed, device=device)
     horizon = horizon or evaluation_horizon(cfg)
     check_memory(cfg, num_starts, horizon, 0, memory_budget)
     env = UAVSpectrumEnv(

@@ -33,13 +33,14 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from ..config import ModelConfig
-from ..world import World
+from ..config import InvalidOption, InvalidType, ModelConfig
+from ..world import World, check_seed
 from .gym_env import (
     RENDER_FPS,
     RENDER_MODES,
     NumpyWorlds,
     check_actions,
+    check_no_options,
     check_render_mode,
     model_config,
     observation_bounds,
@@ -112,7 +113,8 @@ class UAVSpectrumParallelEnv(ParallelEnv):
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode."""
-        out = self._worlds.reset(seed)
+        check_no_options(options)
+        out = self._worlds.reset(None if seed is None else check_seed(seed))
         self.agents = self.possible_agents[:]
         return self._observations(out), self._infos(out)
 
@@ -121,12 +123,16 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         terminations, truncations, infos)``; every UAV gets the team reward."""
         if not self.agents:
             raise RuntimeError("step() with no live agents: call reset() first (the episode ended or never began)")
+        if not isinstance(actions, dict):
+            message = f"actions is a {type(actions).__name__}: give a dict of one action per live agent, by name"
+            raise InvalidType("actions", message=message)
         unknown = sorted(set(actions) - set(self.agents), key=str)
         if unknown:
-            raise ValueError(f"actions names {unknown[0]!r}: the agents are {self.agents}")
+            raise InvalidOption("actions", message=f"actions names {unknown[0]!r}: the agents are {self.agents}")
         missing = [agent for agent in self.agents if agent not in actions]
         if missing:
-            raise ValueError(f"actions has no action for {missing[0]!r}: every live agent acts each step")
+            message = f"actions has no action for {missing[0]!r}: every live agent acts each step"
+            raise InvalidOption("actions", message=message)
         joint = check_actions(
             [actions[agent] for agent in self.possible_agents], (self.cfg.fleet_size,), "actions", self.cfg.num_actions
         )
