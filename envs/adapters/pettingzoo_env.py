@@ -40,7 +40,6 @@ from .gym_env import (
     RENDER_MODES,
     NumpyWorlds,
     check_actions,
-    check_no_options,
     check_render_mode,
     model_config,
     observation_bounds,
@@ -112,8 +111,11 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         return self.action_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode."""
-        check_no_options(options)
+        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode.
+
+        ``options`` is read by no part of the model; unlike the Gymnasium adapters, which refuse any, it is accepted
+        whatever it holds, as PettingZoo's ``parallel_api_test`` requires of a parallel env (it resets with
+        ``options={"options": 1}``)."""
         out = self._worlds.reset(None if seed is None else check_seed(seed))
         self.agents = self.possible_agents[:]
         return self._observations(out), self._infos(out)
