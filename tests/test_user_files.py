@@ -186,7 +186,7 @@ def test_an_evaluation_with_other_settings_goes_beside_the_earlier_one(run_dir, 
     assert records["eval-2.json"]["num_starts"] == 3
     # an eval.json uavrl did not record (a user's, or an earlier version's) stays as it is
     (run_dir / ".uavrl-evaluations.json").unlink()
-    assert evaluated("eval.num_starts=2").startswith(f"metrics: {run_dir / 'eval-2.json'} ")
+    assert evaluated("eval.num_starts=2").startswith(f"metrics: {run_dir / 'eval-4.json'} ")
     assert (run_dir / "eval.json").read_text() == first
 
 
@@ -200,13 +200,12 @@ def test_print_json_says_where_the_metrics_went(run_dir, compose_cfg, capsys):
 
 
 @pytest.mark.parametrize("slot", [1e-300, 1e-100])
-def test_a_slot_so_short_the_propulsion_power_overflows_names_slot_s(slot, compose_cfg):
+def test_a_slot_so_short_the_propulsion_power_overflows_names_slot_s(slot, tmp_path, command_exit):
     from uavrl.envs import InvalidOption, make_config
-    from uavrl.train import check_settings as check_train
 
     with pytest.raises(InvalidOption) as err:
         make_config("paper", energy="rotary_wing", base=(-1, 0), slot_s=slot)
     assert err.value.option == "slot_s" and "propulsion power overflows" in str(err.value)
-    energy = ["env.energy=rotary_wing", "env.base=[-1,0]", f"env.slot_s={slot}", "agent=random"]
-    with pytest.raises(ValueError, match=rf"^env.slot_s={slot} is invalid: a move of one cell \(env.cell_size=10.0"):
-        check_train(compose_cfg(*energy))
+    line = f"train env.energy=rotary_wing env.base=[-1,0] env.slot_s={slot} agent=random"
+    error = command_exit(line, tmp_path)
+    assert error.startswith(f"error: env.slot_s={slot} is invalid: a move of one cell (env.cell_size=10.0 m)"), error
