@@ -71,6 +71,21 @@ class InvalidType(InvalidOption, TypeError):
     """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: what to give``."""
 
 
+# the model's arguments of UAVSpectrumEnv and the adapters besides config=, and their defaults
+MODEL_ARGUMENTS = {"grid": (6, 6), "num_uavs": 2, "preset": "paper", "max_steps": 100}
+
+
+def check_config_alone(config, overrides: dict, **arguments) -> None:
+    """With ``config=`` (a complete model) nothing else may describe the model: a model option, or one of
+    :data:`MODEL_ARGUMENTS` changed from its default, is refused naming it (it would be ignored)."""
+    if config is None:
+        return
+    given = sorted(overrides) + [name for name, value in arguments.items() if value != MODEL_ARGUMENTS[name]]
+    if given:
+        message = f"give either config= or model options, not both (got {given})"
+        raise InvalidOption(given[0], message=message)
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """One model of docs/model.md.  Lengths are in cells unless the name says metres.

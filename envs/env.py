@@ -16,7 +16,16 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
-from .config import NUM_ACTIONS, RETURN, InvalidOption, InvalidType, ModelConfig, action_names, make_config
+from .config import (
+    NUM_ACTIONS,
+    RETURN,
+    InvalidOption,
+    InvalidType,
+    ModelConfig,
+    action_names,
+    check_config_alone,
+    make_config,
+)
 from .limits import DEFAULT_MEMORY_BUDGET
 from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
 
@@ -159,9 +168,7 @@ class UAVSpectrumEnv(EnvBase):
     ):
         if config is not None and not isinstance(config, ModelConfig):
             raise InvalidType("config", config, "give a ModelConfig (uavrl.envs.make_config(...)) or None")
-        if config is not None and overrides:
-            message = f"give either config= or model options, not both (got {sorted(overrides)})"
-            raise InvalidOption(sorted(overrides)[0], message=message)
+        check_config_alone(config, overrides, grid=grid, num_uavs=num_uavs, preset=preset, max_steps=max_steps)
         if not isinstance(diagnostics, bool):
             raise InvalidType("diagnostics", diagnostics, "give True or False")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)

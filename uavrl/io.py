@@ -92,9 +92,9 @@ class Manifest:
                     f"{setting}={quoted(self.folder)}: its record of uavrl's files is unreadable ({err}): "
                     "give another folder"
                 ) from None
-            if not isinstance(listed, list) or not all(isinstance(name, str) for name in listed):
+            if not isinstance(listed, list) or not all(isinstance(name, str) and _inside(name) for name in listed):
                 raise ValueError(
-                    f"{setting}={quoted(self.folder)}: {quoted(self.path)} is not a list of file names: "
+                    f"{setting}={quoted(self.folder)}: {quoted(self.path)} is not a list of file names inside it: "
                     "give another folder"
                 )
             self.files = set(listed)
@@ -123,9 +123,11 @@ class Manifest:
 
     def remove_all(self) -> list[str]:
         """Remove every recorded file (and the folders under ``folder`` left empty by it); the names removed."""
-        removed = []
+        removed, inside = [], self.folder.resolve()
         for name in sorted(self.files):
             path = self.folder / name
+            if not path.parent.resolve().is_relative_to(inside):  # a folder swapped for a link to elsewhere
+                continue
             if os.path.lexists(path) and not path.is_dir():
                 path.unlink()
                 removed.append(name)
@@ -138,6 +140,12 @@ class Manifest:
         self.files = set()
         self.path.unlink(missing_ok=True)
         return removed
+
+
+def _inside(name: str) -> bool:
+    """A relative path that stays in its folder (no ``..``, not absolute): what a record of written files holds."""
+    parts = Path(name).parts
+    return bool(parts) and not Path(name).is_absolute() and ".." not in parts
 
 
 def orphans(path) -> list[Path]:

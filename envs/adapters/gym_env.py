@@ -60,7 +60,7 @@ from gymnasium.vector.utils import batch_space
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from ..config import InvalidOption, InvalidType, ModelConfig, action_names, make_config
+from ..config import InvalidOption, InvalidType, ModelConfig, action_names, check_config_alone, make_config
 from ..physics.channel import fixed_layout
 from ..render import RENDER_MODES as DRAWN_MODES
 from ..render import render as render_world
@@ -86,9 +86,7 @@ def model_config(config: ModelConfig | None, preset, grid, num_uavs, max_steps, 
     """The model an adapter wraps, from a complete config or from ``UAVSpectrumEnv``'s arguments."""
     if config is not None and not isinstance(config, ModelConfig):
         raise InvalidType("config", config, "give a ModelConfig (uavrl.envs.make_config(...)) or None")
-    if config is not None and overrides:
-        message = f"give either config= or model options, not both (got {sorted(overrides)})"
-        raise InvalidOption(sorted(overrides)[0], message=message)
+    check_config_alone(config, overrides, grid=grid, num_uavs=num_uavs, preset=preset, max_steps=max_steps)
     return config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
 
 

@@ -104,11 +104,16 @@ class UAVSpectrumParallelEnv(ParallelEnv):
 
     def observation_space(self, agent: str) -> spaces.Dict:
         """The observation space of ``agent`` (a UAV's name): its observation and its action mask."""
-        return self.observation_spaces[agent]
+        return self.observation_spaces[self._known(agent)]
 
     def action_space(self, agent: str) -> spaces.Discrete:
         """The action space of ``agent``: one of the model's actions (6, or 7 with recharging)."""
-        return self.action_spaces[agent]
+        return self.action_spaces[self._known(agent)]
+
+    def _known(self, agent) -> str:
+        if agent not in self.action_spaces:
+            raise InvalidOption("agent", agent, f"the agents are {self.possible_agents}")
+        return agent
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode.
