@@ -11,7 +11,7 @@ uavrl once (address space capped at ``--memory-gib``, killed after ``--timeout``
 - ``typed``: refused by a one-line error of uavrl's own (``InvalidOption``, ``InvalidType``, ``CheckpointError``, ...;
   ``ValueError``/``TypeError`` subclasses) that names the argument;
 - ``one line``: refused in one line that names the argument, of Python's own type (``FileNotFoundError``,
-  ``FileExistsError``) or as a command's ``error:`` line;
+  ``FileExistsError``; ``RuntimeError`` for a step before any reset) or as a command's ``error:`` line;
 - ``honoured``: accepted, and the case checked that it did what was asked (a seed that seeds, a file written beside);
 - ``traceback``: a foreign exception, a message of several lines or one that does not name the argument;
 - ``hang``, ``OOM``, ``silent accept`` (accepted and ignored or wrong), ``data loss`` (a user's file gone or changed).
@@ -326,7 +326,12 @@ def classify(report: dict | None, names: str, timed_out: bool, returncode: int) 
         one_line = "\n" not in message.strip() and names.lower() in message.lower()
         if one_line and report["own"] and {"ValueError", "TypeError"} & set(report["kinds"]):
             return "typed", f"{report['raised']}: {line}"
-        if one_line and report["raised"] in ("FileNotFoundError", "FileExistsError", "NotADirectoryError"):
+        if one_line and report["raised"] in (
+            "FileNotFoundError",
+            "FileExistsError",
+            "NotADirectoryError",
+            "RuntimeError",
+        ):
             return "one line", f"{report['raised']}: {line}"
         return "traceback", f"{report['raised']}: {line}"
     outcome, command = report["outcome"], report["command"]

@@ -408,7 +408,8 @@ class UAVSpectrumEnv(EnvBase):
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
         """TorchRL's ``rollout``; one-line errors for ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
-            raise ValueError(f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1")
+            message = f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1"
+            raise (InvalidOption if isinstance(max_steps, numbers.Real) else InvalidType)("max_steps", message=message)
         try:
             return super().rollout(max_steps, *args, **kwargs)
         except RuntimeError as err:
@@ -417,7 +418,8 @@ class UAVSpectrumEnv(EnvBase):
             # tensordict refused the policy's action: the "agents" group is [B, N], so the action must be too
             expected = f"[B={self.num_worlds}, N={self.num_uavs}] (worlds, UAVs)"
             refusal = str(err).splitlines()[0]
-            raise ValueError(f"the policy wrote ('agents', 'action') not {expected}: {refusal}") from err
+            message = f"the policy wrote ('agents', 'action') not {expected}: {refusal}"
+            raise InvalidOption(ACTION_KEY, message=message) from err
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if not self.world._s.was_reset:
