@@ -262,7 +262,7 @@ CASES = [
      "o = TMP / 'o'; o.mkdir(); u = TMP / 'users'; ok = user_files(u, ('grid2x2/x',)); "
      "(o / 'tensorboard').symlink_to(u); "
      "(o / '.uavrl-written.json').write_text(json.dumps(['tensorboard/grid2x2/x'])); "
-     "command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}', 'overwrite=true'); kept(ok)"),
+     "rc = command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}', 'overwrite=true'); kept(ok); verdict(rc == 0)"),
     ("files", "reproduce figures: a FIFO history_2x2.pt", "history_2x2.pt",
      "o = TMP / 'o'; command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}'); (o / 'history_2x2.pt').unlink(); "
      "os.mkfifo(o / 'history_2x2.pt'); command('uavrl.reproduce', 'figures', *SMALL, 'figure_grid=2', f'out_dir={o}')"),
@@ -425,7 +425,7 @@ def table(results: list[dict]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
-    parser.add_argument("--timeout", type=float, default=120, help="seconds before a case counts as a hang")
+    parser.add_argument("--timeout", type=float, default=300, help="seconds before a case counts as a hang")
     parser.add_argument("--memory-gib", type=int, default=16, help="address space of each case's process")
     parser.add_argument("--only", help="run the cases of this surface only")
     parser.add_argument("--json", type=Path, help="also write the results here")
