@@ -34,7 +34,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import quoted, save_json
+from uavrl.io import Manifest, quoted, save_json
 from uavrl.runs import (
     agent_words,
     eval_settings,
@@ -185,12 +185,12 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.video`), as ``cfg.eval`` asks: files in
     ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
     from uavrl.logger import RunLogger
-    from uavrl.video import comparison_frames, save_videos, video_settings
+    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
     env_cfg, label = model_config(saved), saved.agent.name
     policy = agent.policy_for(env_cfg)
     frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))
-    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps)):
+    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps), Manifest(out_dir, "checkpoint", VIDEO_RECORD)):
         print(f"wrote {path}", file=sys.stderr)
     logger = RunLogger(out_dir)
     logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))

@@ -71,7 +71,8 @@ def read_regular_text(path, limit: int = 16 * 2**20) -> str:
 
 class Manifest:
     """The files a command wrote into a folder that may hold a user's own files too, recorded in ``.uavrl-written.json``
-    there: the command overwrites or removes only files it recorded, and refuses to write over anything else.
+    there (reproduce's; other commands name their own record): the command overwrites or removes only files it
+    recorded, and refuses to write over anything else (or, :meth:`free`, writes beside it).
 
     Paths are kept relative to the folder; a file is recorded before it is first written (so one cut short is still
     the command's own).
@@ -79,10 +80,11 @@ class Manifest:
 
     NAME = ".uavrl-written.json"
 
-    def __init__(self, folder, setting: str):
-        """``setting``: how the user gave the folder (``out_dir``), for the messages."""
+    def __init__(self, folder, setting: str, name: str = NAME):
+        """``setting``: how the user gave the folder (``out_dir``), for the messages; ``name``: the record's file,
+        one per command that writes there (one command's record never lets it remove another's files)."""
         self.folder, self.setting = Path(folder), setting
-        self.path = self.folder / self.NAME
+        self.path = self.folder / name
         self.files: set[str] = set()
         if os.path.lexists(self.path):
             try:
@@ -113,6 +115,17 @@ class Manifest:
                     f"{self.setting}={quoted(self.folder)} holds {quoted(self._name(path))}, which uavrl did not write "
                     f"there: give another {self.setting}, or move that file away (it is not overwritten)"
                 )
+
+    def free(self, path) -> Path:
+        """``path``, or ``<stem>-2<suffix>``, ``-3``, ... : the first that is absent or this command's own, recorded;
+        a user's file of that name stays and the command writes beside it."""
+        base = candidate = Path(path)
+        n = 1
+        while os.path.lexists(candidate) and not self.owns(candidate):
+            n += 1
+            candidate = base.with_name(f"{base.stem}-{n}{base.suffix}")
+        self.record(candidate)
+        return candidate
 
     def record(self, *paths) -> None:
         """Record ``paths`` as this command's before they are written."""

@@ -560,7 +560,7 @@ def claim_report_files(out: Path, stems: list[str]) -> None:
     names = ["report.md", *(f"{stem}_{kind}.png" for stem in stems for kind in ("metrics", "curves"))]
     if os.path.lexists(out) and not out.is_dir():
         raise NotADirectoryError(f"--out={quoted(out)} is {special_kind(out) or 'a file'}, not a directory")
-    manifest = Manifest(out, "--out")
+    manifest = Manifest(out, "--out", ".uavrl-report-files.json")
     earlier = out / "report.md"
     if not os.path.lexists(manifest.path) and earlier.is_file():
         with open(earlier, "rb") as file:
