@@ -209,3 +209,32 @@ def test_a_slot_so_short_the_propulsion_power_overflows_names_slot_s(slot, tmp_p
     line = f"train env.energy=rotary_wing env.base=[-1,0] env.slot_s={slot} agent=random"
     error = command_exit(line, tmp_path)
     assert error.startswith(f"error: env.slot_s={slot} is invalid: a move of one cell (env.cell_size=10.0 m)"), error
+
+
+def test_a_manifest_writes_beside_a_users_file_and_over_its_own(tmp_path):
+    manifest = Manifest(tmp_path, "checkpoint", ".uavrl-video-files.json")
+    (tmp_path / "video.gif").write_text("mine")
+    assert manifest.free(tmp_path / "video.gif") == tmp_path / "video-2.gif"
+    (tmp_path / "video-2.gif").write_text("uavrl's")
+    again = Manifest(tmp_path, "checkpoint", ".uavrl-video-files.json")  # read back from its record
+    assert again.free(tmp_path / "video.gif") == tmp_path / "video-2.gif"  # its own: written over
+    assert again.free(tmp_path / "battery.png") == tmp_path / "battery.png"  # free: taken
+    assert not os.path.lexists(tmp_path / Manifest.NAME)  # reproduce's record is another file
+    assert (tmp_path / "video.gif").read_text() == "mine"
+
+
+def test_report_writes_over_no_report_of_a_users(run_dir, tmp_path):
+    import shutil
+
+    from uavrl.report import report
+
+    study = tmp_path / "study"
+    shutil.copytree(run_dir, study / "run")
+    (study / "report.md").write_text("my own report\n")
+    with pytest.raises(FileExistsError, match=r"^--out=.* holds report.md, which uavrl did not write there"):
+        report([study], study, resamples=50)
+    assert (study / "report.md").read_text() == "my own report\n"
+    (study / "report.md").unlink()
+    path = report([study], study, resamples=50)
+    assert report([study], study, resamples=50) == path  # its own report: written again
+    assert path.read_text().startswith("# Study report\n")
