@@ -306,9 +306,9 @@ CASES = [
     ("files", "train: run_dir holding a user's config.yaml", "run_dir",
      "d = TMP / 'd'; ok = user_files(d, ('config.yaml',)); "
      "command('uavrl.train', 'agent=random', 'env.grid=[3,3]', f'run_dir={d}', *EVAL); kept(ok)"),
-    ("files", "train: resume= a run whose .uavrl.lock.holder is a FIFO", "resume",
-     "r = fresh_run(); os.mkfifo(r / '.uavrl.lock.holder'); "
-     "command('uavrl.train', f'resume={r}')"),
+    ("files", "train: resume= a run whose .uavrl.lock.holder is a FIFO (honoured)", "resume",
+     "r = fresh_run(); os.mkfifo(r / '.uavrl.lock.holder'); rc = command('uavrl.train', f'resume={r}'); "
+     "verdict(rc == 0 and not os.path.lexists(r / '.uavrl.lock.holder'))"),
 ]  # fmt: skip
 
 
