@@ -152,10 +152,24 @@ def test_the_holder_of_a_run_is_read_from_a_regular_file_only(tmp_path):
         read_regular_text(tmp_path / HOLDER)
 
 
-def test_a_damaged_record_of_written_files_is_refused(tmp_path, reproduce_cfg):
-    (tmp_path / Manifest.NAME).write_text('{"a": 1}')
-    with pytest.raises(ValueError, match=r"is not a list of file names: give another folder"):
-        check_settings(reproduce_cfg("command=table2", f"out_dir={tmp_path}"))
+@pytest.mark.parametrize("record", ['{"a": 1}', '["../victim"]', '["/etc/passwd"]', '["a", 3]'])
+def test_a_damaged_record_of_written_files_is_refused(record, tmp_path, reproduce_cfg):
+    """A record that is no list of names inside its folder is refused: nothing outside it is ever removed."""
+    (tmp_path / Manifest.NAME).write_text(record)
+    for overwrite in ("false", "true"):
+        with pytest.raises(ValueError, match=r"is not a list of file names inside it: give another folder"):
+            check_settings(reproduce_cfg("command=table2", f"out_dir={tmp_path}", f"overwrite={overwrite}"))
+
+
+def test_overwrite_removes_nothing_through_a_link_out_of_the_folder(tmp_path, reproduce_cfg):
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    (elsewhere / "grid2x2").mkdir(parents=True)
+    (elsewhere / "grid2x2" / "x").write_text("mine")
+    out.mkdir()
+    (out / "tensorboard").symlink_to(elsewhere)
+    manifest = Manifest(out, "out_dir")
+    manifest.record(out / "tensorboard" / "grid2x2" / "x")
+    assert manifest.remove_all() == [] and (elsewhere / "grid2x2" / "x").read_text() == "mine"
 
 
 @pytest.fixture(scope="module")
