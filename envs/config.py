@@ -55,10 +55,17 @@ def action_names(num_actions: int) -> str:
 
 
 class InvalidOption(ValueError):
-    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it."""
+    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it.
+
+    Args:
+        option: the argument or option refused, kept as ``.option``.
+        value: its value, shown with ``repr``.
+        reason: why, and what to give instead.
+        message: the whole line in place of the three, for an argument whose value is better described than printed
+            (a tensor).
+    """
 
     def __init__(self, option: str, value=None, reason: str = "", *, message: str | None = None):
-        """``message``: the whole line, for an argument whose value is better described than printed (a tensor)."""
         super().__init__(message or f"{option}={value!r} is invalid: {reason}")
         self.option = option
 
@@ -68,7 +75,8 @@ class InvalidOption(ValueError):
 
 
 class InvalidType(InvalidOption, TypeError):
-    """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: what to give``."""
+    """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: reason``; ``message`` the
+    whole line in their place (arguments as :class:`InvalidOption`'s)."""
 
 
 # the model's arguments of UAVSpectrumEnv and the adapters besides config=, and their defaults

@@ -366,8 +366,8 @@ class UAVSpectrumEnv(EnvBase):
         return super().step(tensordict)
 
     def reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        """TorchRL's ``reset``; a one-line error for a ``"_reset"`` mask that is not ``[B]`` or ``[B, 1]`` booleans
-        (on the CPU or a CUDA device: it is moved to the env's).
+        """TorchRL's ``reset`` (``tensordict``, ``kwargs``: as TorchRL's); a one-line error for a ``"_reset"`` mask
+        that is not ``[B]`` or ``[B, 1]`` booleans (on the CPU or a CUDA device: it is moved to the env's).
 
         ``seed`` (a keyword) seeds the worlds first, as :meth:`set_seed` does (world ``i`` draws from ``seed + i``),
         so ``reset(seed=s)`` starts the same worlds as ``set_seed(s)`` then ``reset()``; any other keyword that

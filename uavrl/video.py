@@ -110,9 +110,15 @@ VIDEO_RECORD = ".uavrl-video-files.json"  # the videos and figures render and ev
 
 
 def save_videos(frames: np.ndarray, out_dir, fps: int, manifest=None) -> list[Path]:
-    """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written.  With a
-    :class:`~uavrl.io.Manifest` of ``out_dir``, a file of those names that uavrl did not write stays: the video goes
-    beside it (``video-2.gif``)."""
+    """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written.
+
+    Args:
+        frames: ``[T, H, W, 3]`` uint8 frames (:func:`comparison_frames`).
+        out_dir: the folder to write to.
+        fps: frames (steps) per second.
+        manifest: a :class:`~uavrl.io.Manifest` of ``out_dir``: a file of those names that uavrl did not write stays,
+            and the video goes beside it (``video-2.gif``); None: the names as they are.
+    """
     kinds = (".gif", ".mp4") if can_write_mp4() else (".gif",)
     paths = [Path(out_dir) / f"video{kind}" for kind in kinds]
     paths = paths if manifest is None else [manifest.free(path) for path in paths]

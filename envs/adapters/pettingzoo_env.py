@@ -116,7 +116,8 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         return agent
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode.
+        """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode (``seed`` seeds it
+        and those that follow; ``options`` is not read).
 
         ``options`` is read by no part of the model; unlike the Gymnasium adapters, which refuse any, it is accepted
         whatever it holds, as PettingZoo's ``parallel_api_test`` requires of a parallel env (it resets with
