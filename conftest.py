@@ -7,15 +7,23 @@ and ``uavrl.agents``, see ``[tool.setuptools.package-dir]`` in pyproject.toml).
 ``envs.env`` beside the installed ``uavrl.envs.env`` (two copies of every
 class, and numba caches that name a module the installed package lacks); this
 collector imports each file by its installed name instead.
+
+It also gives CI's legs a way to fail on a skip: with ``--no-skip`` (or the
+environment variable ``UAVRL_NO_SKIP=1``) a test that skips fails instead,
+its reason kept, so a leg that installed an extra cannot pass by skipping
+the tests of that extra.  The examples of the optional extras' modules carry
+the marker ``gym`` of the [gym] extra, as its tests do.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import tomllib
 from pathlib import Path
 
+import pytest
 from _pytest.doctest import DoctestModule
 
 ROOT = Path(__file__).resolve().parent
@@ -29,6 +37,7 @@ NEEDS = {
     "uavrl.envs.adapters.gym_env": "gymnasium",
     "uavrl.envs.adapters.pettingzoo_env": "pettingzoo",
 }
+EXTRA_MARKS = {"gymnasium": "gym", "pettingzoo": "gym"}  # the marker of the [gym] extra's tests
 
 
 def installed_name(path: Path) -> str | None:
@@ -50,3 +59,40 @@ def pytest_collect_file(file_path: Path, parent):
     if name is not None and (name not in NEEDS or importlib.util.find_spec(NEEDS[name]) is not None):
         return InstalledDoctestModule.from_parent(parent, path=file_path)
     return None
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--no-skip",
+        action="store_true",
+        default=os.environ.get("UAVRL_NO_SKIP") == "1",
+        help="a test that skips fails instead (CI's legs: every test they select must run); also UAVRL_NO_SKIP=1",
+    )
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if isinstance(item.parent, InstalledDoctestModule):
+            mark = EXTRA_MARKS.get(NEEDS.get(installed_name(item.parent.path)))
+            if mark is not None:
+                item.add_marker(mark)
+
+
+def _fail_a_skip(report, config) -> None:
+    if report.skipped and not hasattr(report, "wasxfail") and config.getoption("no_skip"):
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        report.outcome = "failed"
+        report.longrepr = f"skipped under --no-skip (UAVRL_NO_SKIP=1), where every selected test must run: {reason}"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    _fail_a_skip(outcome.get_result(), item.config)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    """A test file that skips whole (a module-level ``importorskip``) fails too under ``--no-skip``."""
+    outcome = yield
+    _fail_a_skip(outcome.get_result(), collector.config)

@@ -34,7 +34,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from uavrl.envs.config import ModelConfig
+from uavrl.envs.config import InvalidOption, ModelConfig
 from uavrl.envs.physics.channel import fixed_layout
 from uavrl.envs.physics.grid import cells_of, grid_neighbours, on_grid
 from uavrl.envs.world import NODE_FEATURES
@@ -74,7 +74,7 @@ class RunEnvironment:
         return f"a {self.grid[0]}x{self.grid[1]} grid, {self.num_uavs} UAVs, layout {self.layout!r}"
 
     def _refuse(self, what: str) -> ValueError:
-        return ValueError(f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
+        return InvalidOption("env", message=f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
 
     def check_env(self, env) -> None:
         """A one-line ValueError unless ``env`` (or every worker of a ``SerialEnv``/``ParallelEnv``) has the run's

@@ -20,7 +20,7 @@ import importlib.abc
 import importlib.machinery
 import sys
 
-from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, ModelConfig, make_config
+from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, InvalidType, ModelConfig, make_config
 
 _LAZY = {
     "UAVSpectrumEnv": "env",
@@ -32,7 +32,7 @@ _LAZY = {
     "DIAGNOSTICS": "world",
     "observation_with_nodes": "world",
 }
-__all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "ModelConfig", "make_config", *_LAZY]
+__all__ = ["ACTION_NAMES", "NUM_ACTIONS", "InvalidOption", "InvalidType", "ModelConfig", "make_config", *_LAZY]
 
 # The subpackage of each module that uavrl 0.1 had directly in envs/: ``uavrl.envs.<name>`` stays importable for
 # code written against those paths and names the very same module, loaded on first use.

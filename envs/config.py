@@ -55,15 +55,43 @@ def action_names(num_actions: int) -> str:
 
 
 class InvalidOption(ValueError):
-    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it."""
+    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it.
 
-    def __init__(self, option: str, value, reason: str):
-        super().__init__(f"{option}={value!r} is invalid: {reason}")
+    Args:
+        option: the argument or option refused, kept as ``.option``.
+        value: its value, shown with ``repr``.
+        reason: why, and what to give instead.
+        message: the whole line in place of the three, for an argument whose value is better described than printed
+            (a tensor).
+    """
+
+    def __init__(self, option: str, value=None, reason: str = "", *, message: str | None = None):
+        super().__init__(message or f"{option}={value!r} is invalid: {reason}")
         self.option = option
 
     def renamed(self, names: dict[str, str]) -> str:
         """The message with each ``option=`` in ``names`` written as ``names[option]=`` (``grid=`` as ``env.grid=``)."""
         return re.sub(r"\b([a-z_0-9]+)=", lambda m: f"{names.get(m.group(1), m.group(1))}=", str(self))
+
+
+class InvalidType(InvalidOption, TypeError):
+    """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: reason``; ``message`` the
+    whole line in their place (arguments as :class:`InvalidOption`'s)."""
+
+
+# the model's arguments of UAVSpectrumEnv and the adapters besides config=, and their defaults
+MODEL_ARGUMENTS = {"grid": (6, 6), "num_uavs": 2, "preset": "paper", "max_steps": 100}
+
+
+def check_config_alone(config, overrides: dict, **arguments) -> None:
+    """With ``config=`` (a complete model) nothing else may describe the model: a model option, or one of
+    :data:`MODEL_ARGUMENTS` changed from its default, is refused naming it (it would be ignored)."""
+    if config is None:
+        return
+    given = sorted(overrides) + [name for name, value in arguments.items() if value != MODEL_ARGUMENTS[name]]
+    if given:
+        message = f"give either config= or model options, not both (got {given})"
+        raise InvalidOption(given[0], message=message)
 
 
 @dataclass(frozen=True)
@@ -336,6 +364,8 @@ class ModelConfig:
                 raise InvalidOption(name, getattr(self, name), f"only {reads} reads it, not energy={self.energy!r}")
         if self.energy == "none":
             return
+        if self.energy == "rotary_wing":
+            self._check_step_energies()
         if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
             reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
             raise InvalidOption("recharge_steps", self.recharge_steps, reason)
@@ -438,6 +468,26 @@ class ModelConfig:
         lowest, need, _ = self._lowest_start_and_largest_reserve()
         energies = self.step_energies
         return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
+
+    def _check_step_energies(self):
+        """rotary_wing's step energies are finite numbers: a slot so short that a move flies faster than a float's
+        range (its propulsion power overflows) is refused naming ``slot_s``, and a battery beyond a float's range in
+        joules naming ``battery_wh``."""
+        try:
+            energies = self.step_energies
+            moving = (energies.move, energies.stay, energies.fly)
+        except OverflowError:
+            moving = (math.inf,)
+        if not all(math.isfinite(value) for value in moving):
+            speed = self.cell_size / self.slot_s
+            reason = (
+                f"a move of one cell (cell_size={self.cell_size!r} m) in it flies at {speed:.3g} m/s, whose "
+                "propulsion power overflows: give a slot of a realistic length (the default is "
+                f"{_DEFAULTS['slot_s']!r} s)"
+            )
+            raise InvalidOption("slot_s", self.slot_s, reason)
+        if not math.isfinite(energies.capacity):
+            raise InvalidOption("battery_wh", self.battery_wh, "in joules it overflows a float: give a smaller battery")
 
     @property
     def step_energies(self) -> power.StepEnergies:
@@ -551,8 +601,8 @@ def make_config(preset: str = "paper", **overrides) -> ModelConfig:
     _choice("preset", preset, PRESETS)
     unknown = sorted(set(overrides) - set(OPTION_NAMES))
     if unknown:
-        reason = f"no model option is named {unknown[0]!r}; allowed options are {', '.join(OPTION_NAMES)}"
-        raise InvalidOption(unknown[0], overrides[unknown[0]], reason)
+        message = f"unknown model option {unknown[0]!r}: allowed options are {', '.join(OPTION_NAMES)}"
+        raise InvalidOption(unknown[0], message=message)
     return ModelConfig(**{**_PRESETS[preset], **overrides}, preset=preset)
 
 

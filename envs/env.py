@@ -16,7 +16,16 @@ from torchrl.data import Binary, Categorical, Composite, Unbounded
 from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
-from .config import NUM_ACTIONS, RETURN, ModelConfig, action_names, make_config
+from .config import (
+    NUM_ACTIONS,
+    RETURN,
+    InvalidOption,
+    InvalidType,
+    ModelConfig,
+    action_names,
+    check_config_alone,
+    make_config,
+)
 from .limits import DEFAULT_MEMORY_BUDGET
 from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
 
@@ -66,6 +75,9 @@ def _mask_patterns(n: int, device: torch.device) -> tuple[torch.Tensor, torch.Te
 
 
 _DONE_KEYS = ("done", "terminated", "truncated")
+ACTION_KEY = "('agents', 'action')"  # how the one-line errors name the action
+# the keywords TorchRL's own code passes to reset (EnvBase.reset, rollouts, collectors), besides seed
+TORCHRL_RESET_KEYWORDS = ("seed", "set_state", "select_reset_only")
 
 # TorchRL looks action spaces up by exact type (QValueModule, DQN losses, BenchMARL's Q-learners)
 ACTION_SPACE_MAP.setdefault(MaskedCategorical, "categorical")
@@ -154,12 +166,15 @@ class UAVSpectrumEnv(EnvBase):
         memory_budget: int = DEFAULT_MEMORY_BUDGET,
         **overrides,
     ):
-        if config is not None and overrides:
-            raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
+        if config is not None and not isinstance(config, ModelConfig):
+            raise InvalidType("config", config, "give a ModelConfig (uavrl.envs.make_config(...)) or None")
+        check_config_alone(config, overrides, grid=grid, num_uavs=num_uavs, preset=preset, max_steps=max_steps)
+        if not isinstance(diagnostics, bool):
+            raise InvalidType("diagnostics", diagnostics, "give True or False")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
         B = _check_batch_size(batch_size)
         if not isinstance(agent_rewards, bool):
-            raise ValueError(f"agent_rewards={agent_rewards!r} is invalid: give True or False")
+            raise InvalidType("agent_rewards", agent_rewards, "give True or False")
         check_memory(cfg, B, memory_budget)
         super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
@@ -286,43 +301,94 @@ class UAVSpectrumEnv(EnvBase):
         out.update({"done": done, "terminated": done.clone(), "truncated": done.clone()})
         return self._outputs(out)
 
-    def _check_action(self, action: torch.Tensor):
-        shape = (self.num_worlds, self.num_uavs)
-        if tuple(action.shape) != shape:
-            raise ValueError(f"('agents', 'action') has shape {tuple(action.shape)}: expected {shape} (worlds, UAVs)")
-        if action.dtype.is_floating_point or action.dtype.is_complex or action.dtype == torch.bool:
-            raise TypeError(
-                f"('agents', 'action') has dtype {action.dtype}: expected an integer dtype with values 0..5"
+    def _check_action_tensor(self, action) -> None:
+        """The action's type, shape, dtype and device, checked before TorchRL reads it (a one-line error of
+        :class:`~uavrl.envs.InvalidOption` naming ``('agents', 'action')``)."""
+        key, shape = ACTION_KEY, (self.num_worlds, self.num_uavs)
+        if not isinstance(action, torch.Tensor):
+            raise InvalidType(
+                key,
+                message=f"{key} is a {type(action).__name__}: expected a tensor of {list(shape)} "
+                f"integers {action_names(self.num_actions)}",
             )
+        if tuple(action.shape) != shape:
+            raise InvalidOption(key, message=f"{key} has shape {tuple(action.shape)}: expected {shape} (worlds, UAVs)")
+        if action.dtype.is_floating_point or action.dtype.is_complex or action.dtype == torch.bool:
+            raise InvalidType(
+                key, message=f"{key} has dtype {action.dtype}: expected an integer dtype with values 0..5"
+            )
+        if action.device.type not in ("cpu", "cuda"):
+            raise InvalidOption(
+                key,
+                message=f"{key} is on device {action.device}: expected the CPU or a CUDA device (the env's is "
+                f"{self.device})",
+            )
+
+    def _check_action(self, action: torch.Tensor):
+        self._check_action_tensor(action)
         lo, hi = torch.aminmax(action)
         if lo < 0 or hi >= self.num_actions:
             bad = (lo if lo < 0 else hi).item()
-            raise ValueError(f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}")
+            message = f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}"
+            raise InvalidOption(ACTION_KEY, message=message)
         if hi == RETURN:  # "return" is a serving UAV's only: on the grid
             away = (action == RETURN) & (self.world._s.cell >= self.cfg.num_cells)
             if away.any():
                 world, uav = (int(i) for i in away.nonzero()[0])
-                raise ValueError(
-                    f"('agents', 'action') sends UAV {uav} of world {world} home (6, return), but it does not serve: "
-                    "return is valid only for a UAV in service (its action_mask)"
+                raise InvalidOption(
+                    ACTION_KEY,
+                    message=f"('agents', 'action') sends UAV {uav} of world {world} home (6, return), but it does "
+                    "not serve: return is valid only for a UAV in service (its action_mask)",
                 )
 
     def step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """TorchRL's ``step``; one-line errors of :class:`~uavrl.envs.InvalidOption` for a tensordict or an action
+        of the wrong type, shape, dtype or device, before TorchRL reads them."""
+        if not isinstance(tensordict, TensorDictBase):
+            raise InvalidType(
+                "tensordict",
+                message=f"step() got a {type(tensordict).__name__}: give the TensorDict "
+                "that reset() or the last step returned, with ('agents', 'action') set",
+            )
         if tensordict.batch_size != self.batch_size:
-            raise ValueError(
-                f"step() got a TensorDict of batch size {list(tensordict.batch_size)}: this env has "
-                f"[B={self.num_worlds}] worlds, so ('agents', 'action') is [{self.num_worlds}, {self.num_uavs}]"
+            raise InvalidOption(
+                "tensordict",
+                message=f"step() got a TensorDict of batch size {list(tensordict.batch_size)}: this env has "
+                f"[B={self.num_worlds}] worlds, so ('agents', 'action') is [{self.num_worlds}, {self.num_uavs}]",
             )
         if tensordict.get(("agents", "action"), None) is None:
-            raise ValueError(
-                f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
-                f"{self.num_uavs}] integers {action_names(self.num_actions)}"
+            raise InvalidOption(
+                ACTION_KEY,
+                message=f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
+                f"{self.num_uavs}] integers {action_names(self.num_actions)}",
             )
+        self._check_action_tensor(tensordict.get(("agents", "action")))
         return super().step(tensordict)
 
     def reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         """TorchRL's ``reset`` (``tensordict``, ``kwargs``: as TorchRL's); a one-line error for a ``"_reset"`` mask
-        that is not ``[B]`` or ``[B, 1]`` booleans (on the CPU or a CUDA device: it is moved to the env's)."""
+        that is not ``[B]`` or ``[B, 1]`` booleans (on the CPU or a CUDA device: it is moved to the env's).
+
+        ``seed`` (a keyword) seeds the worlds first, as :meth:`set_seed` does (world ``i`` draws from ``seed + i``),
+        so ``reset(seed=s)`` starts the same worlds as ``set_seed(s)`` then ``reset()``; any other keyword that
+        TorchRL does not pass itself is refused in one line (nothing given is ignored).
+        """
+        unread = sorted(set(kwargs) - set(TORCHRL_RESET_KEYWORDS))
+        if unread:
+            name = unread[0]
+            message = (
+                f"reset() got {name}={kwargs[name]!r}: UAVSpectrumEnv.reset reads a tensordict (its '_reset' mask) "
+                "and seed, nothing else"
+            )
+            raise InvalidOption(name, message=message)
+        if tensordict is not None and not isinstance(tensordict, TensorDictBase):
+            raise InvalidType(
+                "tensordict",
+                message=f"reset() got a {type(tensordict).__name__}: give None or a "
+                "TensorDict (with a '_reset' mask of the worlds to reset)",
+            )
+        if "seed" in kwargs:
+            self.set_seed(check_seed(kwargs.pop("seed")))
         mask = None if tensordict is None else tensordict.get("_reset", None)
         if mask is not None:
             B, shapes = self.num_worlds, ((self.num_worlds,), (self.num_worlds, 1))
@@ -332,9 +398,10 @@ class UAVSpectrumEnv(EnvBase):
                 f"device {mask.device}" if mask.device.type not in ("cpu", "cuda") else "",  # moved to the env's
             ]
             if any(wrong):
-                raise ValueError(
-                    f"'_reset' has {', '.join(w for w in wrong if w)}: expected [{B}] or [{B}, 1] booleans (one per "
-                    "world, True to reset it) on the CPU or a CUDA device"
+                raise InvalidOption(
+                    "_reset",
+                    message=f"'_reset' has {', '.join(w for w in wrong if w)}: expected [{B}] or [{B}, 1] booleans "
+                    "(one per world, True to reset it) on the CPU or a CUDA device",
                 )
         return super().reset(tensordict, **kwargs)
 
@@ -342,7 +409,8 @@ class UAVSpectrumEnv(EnvBase):
         """TorchRL's ``rollout`` (``args``, ``kwargs``: as TorchRL's, the policy first); one-line errors for
         ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
-            raise ValueError(f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1")
+            message = f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1"
+            raise (InvalidOption if isinstance(max_steps, numbers.Real) else InvalidType)("max_steps", message=message)
         try:
             return super().rollout(max_steps, *args, **kwargs)
         except RuntimeError as err:
@@ -351,7 +419,8 @@ class UAVSpectrumEnv(EnvBase):
             # tensordict refused the policy's action: the "agents" group is [B, N], so the action must be too
             expected = f"[B={self.num_worlds}, N={self.num_uavs}] (worlds, UAVs)"
             refusal = str(err).splitlines()[0]
-            raise ValueError(f"the policy wrote ('agents', 'action') not {expected}: {refusal}") from err
+            message = f"the policy wrote ('agents', 'action') not {expected}: {refusal}"
+            raise InvalidOption(ACTION_KEY, message=message) from err
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         if not self.world._s.was_reset:

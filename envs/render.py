@@ -60,7 +60,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .config import NODE_NAMES, RELAYING
+from .config import NODE_NAMES, RELAYING, InvalidOption
 from .physics.channel import PR, PT, E, S
 from .physics.energy import CHARGING, OUT, RETURNING, WAITING
 from .solvers.optimum import optimum as exact_optimum
@@ -473,9 +473,10 @@ def render(world, mode: str = "rgb_array", env_index=0, agent_index_focus: int |
         (3, 3, dtype('uint8'))
     """
     if mode not in RENDER_MODES:
-        raise ValueError(
-            f"render(mode={mode!r}) is invalid: UAVSpectrumEnv renders mode='rgb_array' only (an [H, W, 3] uint8 "
-            "frame; show it with matplotlib's imshow)"
+        raise InvalidOption(
+            "mode",
+            message=f"render(mode={mode!r}) is invalid: UAVSpectrumEnv renders mode='rgb_array' only (an [H, W, 3] "
+            "uint8 frame; show it with matplotlib's imshow)",
         )
     B, N = world.num_worlds, world.num_uavs
     indices = [env_index] if isinstance(env_index, numbers.Integral) else env_index
@@ -485,7 +486,8 @@ def render(world, mode: str = "rgb_array", env_index=0, agent_index_focus: int |
         or not indices
         or not all(isinstance(i, numbers.Integral) and not isinstance(i, bool) and 0 <= i < B for i in indices)
     ):
-        raise ValueError(f"render(env_index={env_index!r}) is invalid: give a world 0..{B - 1} or a list of them")
+        message = f"render(env_index={env_index!r}) is invalid: give a world 0..{B - 1} or a list of them"
+        raise InvalidOption("env_index", message=message)
     if agent_index_focus is not None and not (
         isinstance(agent_index_focus, numbers.Integral)
         and not isinstance(agent_index_focus, bool)

@@ -36,7 +36,7 @@ import numbers
 
 import torch
 
-from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, ModelConfig
+from .config import NUM_ACTIONS, RELAYING, SENSING, InvalidOption, InvalidType, ModelConfig
 from .limits import DEFAULT_MEMORY_BUDGET, gib, world_bytes
 from .physics import streams
 from .physics.channel import direct_terms, link_gains, rates, rates_from_sums, relay_contributions
@@ -75,17 +75,20 @@ def resolve_device(device) -> torch.device:
         raise InvalidOption("device", device, "use 'cpu', 'cuda' or 'cuda:<index>'")
     count = torch.cuda.device_count() if torch.cuda.is_available() else 0
     if resolved.type == "cuda" and (resolved.index or 0) >= count:
-        raise ValueError(
-            f"device={device!r} is not available: this torch sees {count} CUDA devices "
-            "(docs/getting-started.md, Install)"
+        raise InvalidOption(
+            "device",
+            message=f"device={device!r} is not available: this torch sees {count} CUDA devices "
+            "(docs/getting-started.md, Install)",
         )
     return resolved
 
 
 def check_seed(seed) -> int:
     """``seed`` as an int; a one-line ValueError outside ``[0, 2^63)``."""
-    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or not 0 <= seed < SEED_LIMIT:
-        raise ValueError(f"seed={seed!r} is invalid: give a whole number in [0, 2^63)")
+    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool):
+        raise InvalidType("seed", seed, "give a whole number in [0, 2^63)")
+    if not 0 <= seed < SEED_LIMIT:
+        raise InvalidOption("seed", seed, "give a whole number in [0, 2^63)")
     return int(seed)
 
 

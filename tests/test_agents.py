@@ -66,7 +66,14 @@ def test_agent_contract_train_checkpoint_and_policy(name, agent_cfg):
     cls = agent_class(name)
     assert issubclass(cls, Agent)
     agent = make(cfg)
-    assert isinstance(agent.num_iterations, int) and agent.num_iterations >= 0
+    # the iterations train runs: the learner's episodes or iterations, one sweep for value iteration, none for a
+    # baseline (it does not train)
+    a = cfg.agent
+    expected = {
+        "tabular": 1 if a.get("method") == "value_iteration" else a.get("episodes"),
+        "dqn": a.get("iterations"),
+    }.get(name, 0)
+    assert isinstance(agent.num_iterations, int) and agent.num_iterations == expected
     for done in range(1, min(2, agent.num_iterations) + 1):
         metrics = agent.train_iteration()
         assert all(key.startswith("train/") and isinstance(value, float) for key, value in metrics.items())

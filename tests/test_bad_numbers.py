@@ -94,15 +94,24 @@ def test_command_line_numbers_are_refused_at_once(line, words, tmp_path, command
     ids=str,
 )
 def test_the_shipped_settings_pass_the_cost_checks(overrides, compose_cfg):
+    """The shipped settings pass, and the same settings with a memory budget of one byte do not: the checks that
+    pass them do count what these settings cost."""
     from uavrl.train import check_settings
 
     check_settings(compose_cfg(*overrides))
+    with pytest.raises(ValueError, match=r"memory_budget"):
+        check_settings(compose_cfg(*overrides, "agent.memory_budget=1"))
 
 
 def test_the_paper_protocol_passes_the_cost_checks(compose_cfg):
+    """The paper's protocol passes; with a budget of one team step, or of one byte, it is refused: the checks that
+    pass it do count its steps and its memory."""
     from uavrl.reproduce import check_settings
 
     check_settings(compose_cfg("overwrite=true", config_name="reproduce"))
+    for budget in ("step_budget", "memory_budget"):
+        with pytest.raises(ValueError, match=budget):
+            check_settings(compose_cfg("overwrite=true", f"{budget}=1", config_name="reproduce"))
 
 
 def actions(env):

@@ -381,6 +381,7 @@ def test_the_dqns_joint_head_is_refused_under_an_energy_model(tmp_path):
     assert "agent.head='joint' is invalid with env.energy='rotary_wing'" in result.stderr
 
 
+@pytest.mark.gym  # .ci/leg-gym runs it (-m gym), where a skip fails
 def test_the_gymnasium_and_pettingzoo_adapters_terminate_and_autoreset_apart():
     pytest.importorskip("gymnasium")
     pytest.importorskip("pettingzoo")

@@ -322,10 +322,11 @@ def test_a_new_run_into_a_directory_another_process_holds_is_refused_at_once(com
     process = start(run_dir, "agent.episodes=5000", "train.checkpoint_every=5000")  # holds it, saves nothing
     try:
         wait_for(run_dir / HOLDER, process)
-        started = time.perf_counter()
         with pytest.raises(RunDirectoryInUse, match=f"^run_dir={run_dir} is in use by another uavrl process \\(pid"):
             train(compose_cfg(*TABULAR, *COMMON, f"run_dir={run_dir}"))
-        assert time.perf_counter() - started < 2
+        # refused without waiting for the holder (a lock that waited would return only when it ended); how fast, on an
+        # idle machine, is a benchmark's figure (benchmarks/hostile_api.py), not a test's
+        assert process.poll() is None
     finally:
         process.kill()
         process.wait()

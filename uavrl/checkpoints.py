@@ -20,7 +20,7 @@ import re
 import warnings
 from pathlib import Path
 
-from uavrl.io import quoted, save_torch
+from uavrl.io import quoted, save_torch, special_kind
 
 CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"
@@ -58,6 +58,9 @@ def read_torch(path: Path):
 
     import torch
 
+    kind = special_kind(path)
+    if kind is not None:
+        raise CheckpointError(f"{kind}, not a regular file")
     if path.stat().st_size == 0:
         raise CheckpointError("empty file")
     try:

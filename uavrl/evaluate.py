@@ -3,7 +3,9 @@
 Rebuilds the agent from the checkpoint's own config (a run directory's newest
 readable checkpoint, or the file given), runs the shared greedy evaluation
 (``eval.*`` settings may be overridden, e.g. ``eval.num_starts=100``), writes
-the metrics as JSON to ``eval.json`` beside the checkpoint and prints a summary
+the metrics as JSON to ``eval.json`` beside the checkpoint (an earlier evaluation there with other settings or of
+another checkpoint stays: this one then goes to ``eval-2.json``, ``eval-3.json``, ...; the settings of each are
+recorded in ``.uavrl-evaluations.json``) and prints a summary
 in words: the agent, the model it was evaluated on, the headline metrics and
 the yardstick, where the file went (``print_json=true`` prints the metrics as
 JSON in its place).
@@ -32,7 +34,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import quoted, save_json
+from uavrl.io import Manifest, quoted, save_json
 from uavrl.runs import (
     agent_words,
     eval_settings,
@@ -149,6 +151,40 @@ def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
     return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}.json"
 
 
+EVALUATIONS = ".uavrl-evaluations.json"  # in the run directory: each evaluation file's settings
+EVALUATION_KEYS = ("num_starts", "horizon", "gamma", "seed")  # the eval.* settings that change the metrics
+
+
+def checkpoint_name(checkpoint) -> str:
+    path = Path(checkpoint)
+    return "checkpoint.pt" if path.is_dir() else path.name
+
+
+def free_evaluation_file(out_dir: Path, name: str, made_with: dict) -> Path:
+    """Where an evaluation made with ``made_with`` (its settings, the checkpoint and its steps) goes in ``out_dir``:
+    ``name`` when that is free or holds an evaluation with the same settings, else ``<stem>-2.json``, ``-3``, ...:
+    an earlier evaluation with other settings, or a file uavrl did not record, is never replaced.  The settings of
+    each file are recorded in ``.uavrl-evaluations.json`` there."""
+    import os
+
+    from uavrl.io import read_regular_text
+
+    record_path = out_dir / EVALUATIONS
+    try:
+        records = json.loads(read_regular_text(record_path)) if os.path.lexists(record_path) else {}
+    except (OSError, ValueError):  # an unreadable record: no file there counts as this evaluation's own
+        records = {}
+    records = records if isinstance(records, dict) else {}
+    stem, n = name.removesuffix(".json"), 1
+    while True:
+        path = out_dir / (name if n == 1 else f"{stem}-{n}.json")
+        if not os.path.lexists(path) or records.get(path.name) == made_with:
+            break
+        n += 1
+    save_json({**records, path.name: made_with}, record_path)
+    return path
+
+
 def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
     """The metrics of ``cfg.checkpoint``'s greedy policy (the module doc), written beside it."""
     return evaluate_and_save(cfg, overrides)[0]
@@ -172,7 +208,12 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     check_evaluation_costs(cfg, saved, model_config(evaluated), bool(cfg.eval.video), list(overrides) or None)
     metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
     out_dir = output_dir(cfg.checkpoint)
-    path = out_dir / evaluation_file(saved, evaluated)
+    made_with = {
+        **{key: OmegaConf.select(cfg, f"eval.{key}") for key in EVALUATION_KEYS},
+        "checkpoint": checkpoint_name(cfg.checkpoint),
+        "env_steps": int(getattr(agent, "env_steps", 0)),
+    }
+    path = free_evaluation_file(out_dir, evaluation_file(saved, evaluated), made_with)
     save_json(metrics, path)
     if cfg.eval.video:
         save_video(agent, evaluated, cfg, device, out_dir)
@@ -183,12 +224,12 @@ def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path)
     """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.video`), as ``cfg.eval`` asks: files in
     ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
     from uavrl.logger import RunLogger
-    from uavrl.video import comparison_frames, save_videos, video_settings
+    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
     env_cfg, label = model_config(saved), saved.agent.name
     policy = agent.policy_for(env_cfg)
     frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))
-    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps)):
+    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps), Manifest(out_dir, "checkpoint", VIDEO_RECORD)):
         print(f"wrote {path}", file=sys.stderr)
     logger = RunLogger(out_dir)
     logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
@@ -232,6 +273,7 @@ def print_evaluation(cfg: DictConfig, overrides) -> None:
     metrics, saved, evaluated, path = evaluate_and_save(cfg, overrides)
     if cfg.print_json:
         print(json.dumps(metrics, indent=2, sort_keys=True))
+        print(f"metrics: {quoted(path)}", file=sys.stderr)
     else:
         print(summary(cfg, saved, evaluated, metrics, path))
 

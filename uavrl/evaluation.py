@@ -48,7 +48,7 @@ import time
 
 import torch
 
-from uavrl.envs import ModelConfig
+from uavrl.envs import InvalidOption, ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, EXACT_SOLVER_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.physics.grid import cells_of, on_grid
@@ -83,6 +83,33 @@ def check_settings(gamma, horizon, num_starts) -> None:
         refuse(f"eval.{name}", value, rule_of(EvalSchema, name))
 
 
+def check_arguments(policy, cfg, **settings) -> None:
+    """:func:`evaluate`'s arguments, refused in one line of :class:`~uavrl.envs.InvalidOption` (an
+    :class:`~uavrl.envs.InvalidType` for a wrong type) that names the keyword as the caller typed it."""
+    import numbers
+
+    from uavrl.envs import InvalidType
+    from uavrl.envs.world import check_seed, resolve_device
+
+    if not callable(policy):
+        raise InvalidType("policy", policy, "give a TorchRL policy (a module that writes ('agents', 'action'))")
+    if not isinstance(cfg, ModelConfig):
+        raise InvalidType("cfg", cfg, "give a ModelConfig (uavrl.envs.make_config(...))")
+    for name in ("num_starts", "horizon", "gamma"):
+        value, rule = settings[name], rule_of(EvalSchema, name)
+        if not rule.accepts(value):
+            number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            kind = InvalidOption if number or value is None else InvalidType
+            raise kind(name, message=f"{name}={value!r} is invalid: {rule.allowed.replace('null', 'None')}")
+    check_seed(settings["seed"])
+    resolve_device(settings["device"])
+    budget = settings["memory_budget"]
+    if not isinstance(budget, numbers.Real) or isinstance(budget, bool):
+        raise InvalidType("memory_budget", budget, "give the bytes the evaluation may take, a positive number")
+    if not budget > 0:
+        raise InvalidOption("memory_budget", budget, "give the bytes the evaluation may take, a positive number")
+
+
 def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
     """A one-line refusal, before anything is allocated, when the evaluation would need more than ``memory_budget``
     bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line.
@@ -98,10 +125,11 @@ def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, m
     need = evaluation_bytes(cfg, num_starts, horizon, tables)
     if need > memory_budget:
         name, value = ("eval.horizon", horizon) if horizon > num_starts else ("eval.num_starts", num_starts)
-        raise ValueError(
-            f"{name}={value} is invalid: the evaluation of {num_starts:,} starts x {horizon:,} steps needs about "
-            f"{gib(need)}, over agent.memory_budget={int(memory_budget)}: lower {name}, or raise "
-            "agent.memory_budget=<bytes>"
+        raise InvalidOption(
+            name,
+            message=f"{name}={value} is invalid: the evaluation of {num_starts:,} starts x {horizon:,} steps needs "
+            f"about {gib(need)}, over agent.memory_budget={int(memory_budget)}: lower {name}, or raise "
+            "agent.memory_budget=<bytes>",
         )
 
 
@@ -360,7 +388,16 @@ def evaluate(
     """
     from uavrl.envs.env import UAVSpectrumEnv  # TorchRL, only where a TorchRL policy is evaluated
 
-    check_settings(gamma, horizon, num_starts)
+    check_arguments(
+        policy,
+        cfg,
+        num_starts=num_starts,
+        horizon=horizon,
+        gamma=gamma,
+        seed=seed,
+        device=device,
+        memory_budget=memory_budget,
+    )
     horizon = horizon or evaluation_horizon(cfg)
     check_memory(cfg, num_starts, horizon, 0, memory_budget)
     env = UAVSpectrumEnv(

@@ -15,6 +15,7 @@ import json
 import os
 import secrets
 import shlex
+import stat
 import tempfile
 from pathlib import Path
 
@@ -37,6 +38,127 @@ class WriteError(OSError):
 
     def __str__(self) -> str:
         return f"could not {self.verb} {quoted(self.filename)}: {self.strerror}"
+
+
+def special_kind(path) -> str | None:
+    """What ``path`` is when it exists and is no regular file (``a FIFO``, ``a directory``), else None: reading a FIFO
+    or a device blocks or never ends, so every reader asks this first."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode):
+        return None
+    kinds = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"))
+    kinds += ((stat.S_ISBLK, "a block device"), (stat.S_ISDIR, "a directory"))
+    return next((kind for test, kind in kinds if test(mode)), "not a regular file")
+
+
+def read_regular_text(path, limit: int = 16 * 2**20) -> str:
+    """The text of the regular file ``path`` (at most ``limit`` bytes); a ValueError naming it when it is a FIFO, a
+    device, a socket or larger, or not UTF-8, an OSError (FileNotFoundError, ...) when it cannot be opened."""
+    kind = special_kind(path)
+    if kind is not None:
+        raise ValueError(f"{quoted(path)} is {kind}, not a regular file")
+    size = os.stat(path).st_size
+    if size > limit:
+        raise ValueError(f"{quoted(path)} holds {size:,} bytes, more than the {limit:,} a uavrl file holds")
+    try:
+        return Path(path).read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{quoted(path)} is not UTF-8 text") from None
+
+
+class Manifest:
+    """The files a command wrote into a folder that may hold a user's own files too, recorded in ``.uavrl-written.json``
+    there (reproduce's; other commands name their own record): the command overwrites or removes only files it
+    recorded, and refuses to write over anything else (or, :meth:`free`, writes beside it).
+
+    Paths are kept relative to the folder; a file is recorded before it is first written (so one cut short is still
+    the command's own).
+    """
+
+    NAME = ".uavrl-written.json"
+
+    def __init__(self, folder, setting: str, name: str = NAME):
+        """``setting``: how the user gave the folder (``out_dir``), for the messages; ``name``: the record's file,
+        one per command that writes there (one command's record never lets it remove another's files)."""
+        self.folder, self.setting = Path(folder), setting
+        self.path = self.folder / name
+        self.files: set[str] = set()
+        if os.path.lexists(self.path):
+            try:
+                listed = json.loads(read_regular_text(self.path))
+            except (ValueError, OSError) as err:
+                raise ValueError(
+                    f"{setting}={quoted(self.folder)}: its record of uavrl's files is unreadable ({err}): "
+                    "give another folder"
+                ) from None
+            if not isinstance(listed, list) or not all(isinstance(name, str) and _inside(name) for name in listed):
+                raise ValueError(
+                    f"{setting}={quoted(self.folder)}: {quoted(self.path)} is not a list of file names inside it: "
+                    "give another folder"
+                )
+            self.files = set(listed)
+
+    def _name(self, path) -> str:
+        return Path(path).relative_to(self.folder).as_posix()
+
+    def owns(self, path) -> bool:
+        return self._name(path) in self.files
+
+    def check_writable(self, paths) -> None:
+        """A FileExistsError naming the first of ``paths`` that exists and that this command did not write."""
+        for path in paths:
+            if os.path.lexists(path) and not self.owns(path):
+                raise FileExistsError(
+                    f"{self.setting}={quoted(self.folder)} holds {quoted(self._name(path))}, which uavrl did not write "
+                    f"there: give another {self.setting}, or move that file away (it is not overwritten)"
+                )
+
+    def free(self, path) -> Path:
+        """``path``, or ``<stem>-2<suffix>``, ``-3``, ... : the first that is absent or this command's own, recorded;
+        a user's file of that name stays and the command writes beside it."""
+        base = candidate = Path(path)
+        n = 1
+        while os.path.lexists(candidate) and not self.owns(candidate):
+            n += 1
+            candidate = base.with_name(f"{base.stem}-{n}{base.suffix}")
+        self.record(candidate)
+        return candidate
+
+    def record(self, *paths) -> None:
+        """Record ``paths`` as this command's before they are written."""
+        names = {self._name(path) for path in paths}
+        if not names <= self.files:
+            self.files |= names
+            save_json(sorted(self.files), self.path)
+
+    def remove_all(self) -> list[str]:
+        """Remove every recorded file (and the folders under ``folder`` left empty by it); the names removed."""
+        removed, inside = [], self.folder.resolve()
+        for name in sorted(self.files):
+            path = self.folder / name
+            if not path.parent.resolve().is_relative_to(inside):  # a folder swapped for a link to elsewhere
+                continue
+            if os.path.lexists(path) and not path.is_dir():
+                path.unlink()
+                removed.append(name)
+            for parent in Path(name).parents:
+                if parent != Path("."):
+                    try:
+                        (self.folder / parent).rmdir()  # only when empty: a user's file there keeps the folder
+                    except OSError:
+                        pass
+        self.files = set()
+        self.path.unlink(missing_ok=True)
+        return removed
+
+
+def _inside(name: str) -> bool:
+    """A relative path that stays in its folder (no ``..``, not absolute): what a record of written files holds."""
+    parts = Path(name).parts
+    return bool(parts) and not Path(name).is_absolute() and ".." not in parts
 
 
 def orphans(path) -> list[Path]:

@@ -23,6 +23,7 @@ from omegaconf import DictConfig
 from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.evaluate import check_settings, load_agent, output_dir
+from uavrl.io import Manifest
 from uavrl.settings import check_video_cost
 
 
@@ -33,7 +34,7 @@ def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:
 
     from uavrl.envs.world import resolve_device
     from uavrl.plots import mission_figure
-    from uavrl.video import comparison_frames, save_videos, video_settings
+    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)
@@ -44,13 +45,20 @@ def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:
     check_video_cost(cfg, env_cfg, overrides)
     policy, out_dir = agent.policies()[0], output_dir(cfg.checkpoint)
     frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
-    written = save_videos(frames, out_dir, int(cfg.eval.video_fps))
+    written_here = Manifest(out_dir, "checkpoint", VIDEO_RECORD)  # a user's video.gif or battery.png there stays
+    written = save_videos(frames, out_dir, int(cfg.eval.video_fps), written_here)
     if env_cfg.energy != "none":  # the mission's batteries
         horizon, seed = cfg.eval.horizon, int(cfg.eval.seed)
         label = f"{saved.agent.name} (greedy)"
         written.append(
             mission_figure(
-                policy, env_cfg, out_dir / "battery.png", horizon=horizon, seed=seed, device=device, label=label
+                policy,
+                env_cfg,
+                written_here.free(out_dir / "battery.png"),
+                horizon=horizon,
+                seed=seed,
+                device=device,
+                label=label,
             )
         )
     return written

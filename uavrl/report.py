@@ -44,7 +44,7 @@ import numpy as np
 import yaml
 
 from uavrl.envs.limits import default_horizon
-from uavrl.io import quoted, save_text
+from uavrl.io import Manifest, make_dirs, quoted, save_text, special_kind
 from uavrl.plots import pyplot, save_figure
 from uavrl.rules import Rule, rules_of, shown, whole
 from uavrl.runs import BASELINE_AGENTS, flat_settings
@@ -583,6 +583,31 @@ def curves_figure(label: str, cells: list[Cell], out: Path, seed: int) -> Path |
     return save_figure(figure, out / f"{file_stem(label)}_curves.png")
 
 
+def claim_report_files(out: Path, stems: list[str]) -> None:
+    """Record the files this report writes into ``out`` (``.uavrl-written.json``): a ``report.md`` or figure of
+    those names that uavrl did not write there is refused (FileExistsError), never overwritten.  A folder an earlier
+    uavrl reported into (its ``report.md`` and no record) is taken to hold report's files under their names."""
+    import os
+
+    names = ["report.md", *(f"{stem}_{kind}.png" for stem in stems for kind in ("metrics", "curves"))]
+    if os.path.lexists(out) and not out.is_dir():
+        raise NotADirectoryError(f"--out={quoted(out)} is {special_kind(out) or 'a file'}, not a directory")
+    manifest = Manifest(out, "--out", ".uavrl-report-files.json")
+    earlier = out / "report.md"
+    if not os.path.lexists(manifest.path) and earlier.is_file():
+        with open(earlier, "rb") as file:
+            if file.read(len(REPORT_TITLE)) == REPORT_TITLE:
+                found = [out / "report.md", *out.glob("*_metrics.png"), *out.glob("*_curves.png")]
+                manifest.files = {manifest._name(path) for path in found if path.is_file()}
+    paths = [out / name for name in names]
+    manifest.check_writable(paths)
+    make_dirs(out)
+    manifest.record(*paths)
+
+
+REPORT_TITLE = b"# Study report\n"
+
+
 def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     """Write ``report.md`` and the figures to ``out``; returns the path of ``report.md``.
 
@@ -603,6 +628,7 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
             f"no run directory (with metrics.json and config.yaml) under {' '.join(quoted(p) for p in paths)}{damaged}"
         )
     cells = group(runs)
+    claim_report_files(out, [file_stem(label) for label in cells])
     lines = [
         "# Study report",
         "",

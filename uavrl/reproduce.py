@@ -14,15 +14,16 @@ paper's joint location.  Each variant of the protocol writes to its own
 directory: ``reproduction/paper`` for the paper's settings, else
 ``reproduction/<the settings that differ>`` (e.g.
 ``reproduction/grids-6_runs-3_episodes-50``).  ``out_dir=<dir>`` chooses the
-directory; one that holds another variant is refused unless ``overwrite=true``
-(which replaces it).
+directory; one that holds another variant is refused unless ``overwrite=true``,
+which removes the files reproduce wrote there (listed in its ``.uavrl-written.json``) and nothing else: a file of
+the same name that reproduce did not write is refused, never overwritten.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
+import os
 import sys
 import time
 from pathlib import Path
@@ -32,7 +33,17 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
 from uavrl.envs.config import make_config
-from uavrl.io import quoted, save_json, save_text, save_torch
+from uavrl.io import (
+    EVENTS,
+    Manifest,
+    make_dirs,
+    quoted,
+    read_regular_text,
+    save_json,
+    save_text,
+    save_torch,
+    special_kind,
+)
 from uavrl.rules import check, shown
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
@@ -48,6 +59,10 @@ COMMANDS = ("table2", "figures")
 PROTOCOL = ("grids", "num_uavs", "runs", "episodes", "steps", "seed", "state_includes_tasks", "eval_starts")
 OUTPUTS = ("variant.json", "table2.md", "table2.json", "history_*.pt", "fig*.png", "tensorboard")
 REFUSAL = "give another out_dir, or overwrite=true to replace them"
+EXPECTED_VARIANT = (
+    "expected the JSON object of settings that reproduce writes there; give another out_dir, or remove it"
+)
+FIGURES = ("fig3_sum_utility.png", "fig4_switches_moves.png", "fig5_steps_to_90.png")
 # the paper's learner (eqs. 9-10): the defaults of agent=tabular, whatever a command line or scenario gives it
 PAPER_LEARNER = {
     name: getattr(TabularSchema, name)
@@ -104,34 +119,75 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
-    record = out_dir / "variant.json"
-    if cfg.overwrite or not out_dir.exists():
+    if os.path.lexists(out_dir) and not out_dir.is_dir():
+        kind = special_kind(out_dir) or "a file"
+        raise NotADirectoryError(f"out_dir={quoted(out_dir)} is {kind}, not a directory: give a new or existing folder")
+    if not out_dir.exists():
         return
-    if record.exists():
-        saved = json.loads(record.read_text())
-        mine = variant(cfg)
-        if saved != mine:
+    manifest = written_here(out_dir)
+    saved = saved_variant(out_dir)
+    if not cfg.overwrite:
+        if saved is not None and saved != variant(cfg):
+            mine = variant(cfg)
             changed = [key for key in PROTOCOL if saved.get(key) != mine[key]]
             differences = ", ".join(f"{key}={shown(saved.get(key))} there, {shown(mine[key])} here" for key in changed)
             raise FileExistsError(f"out_dir={quoted(out_dir)} holds another variant ({differences}): {REFUSAL}")
-    elif any(any(out_dir.glob(pattern)) for pattern in OUTPUTS):
-        raise FileExistsError(f"out_dir={str(out_dir)!r} holds results of unknown settings: {REFUSAL}")
+        if saved is None and any(any(out_dir.glob(pattern)) for pattern in OUTPUTS):
+            raise FileExistsError(f"out_dir={quoted(out_dir)} holds results of unknown settings: {REFUSAL}")
+    manifest.check_writable(planned_files(cfg, out_dir))
 
 
-def claim(out_dir: Path, cfg: DictConfig) -> None:
-    """Make ``out_dir`` this variant's: with ``overwrite``, the outputs of another one go first."""
+def planned_files(cfg: DictConfig, out_dir: Path) -> list[Path]:
+    """The files of fixed name that ``cfg.command`` writes into ``out_dir`` (TensorBoard's are named as written)."""
+    grids = cfg.grids if cfg.command == "table2" else [cfg.figure_grid]
+    files = [out_dir / "variant.json", *(out_dir / f"history_{size}x{size}.pt" for size in grids)]
+    if cfg.command == "table2":
+        return [*files, out_dir / "table2.md", out_dir / "table2.json"]
+    return [*files, *(out_dir / name for name in FIGURES)]
+
+
+def saved_variant(out_dir: Path) -> dict | None:
+    """The settings ``out_dir/variant.json`` records, None without one; a ValueError naming it when it is no regular
+    file or not the JSON object reproduce writes."""
     record = out_dir / "variant.json"
-    if cfg.overwrite and (not record.exists() or json.loads(record.read_text()) != variant(cfg)):
-        for pattern in OUTPUTS:
-            for old in out_dir.glob(pattern):
-                if old.is_dir():
-                    shutil.rmtree(old)
-                else:
-                    old.unlink()
+    if not os.path.lexists(record):
+        return None
+    try:
+        saved = json.loads(read_regular_text(record))
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{quoted(record)} is not valid JSON ({err}): {EXPECTED_VARIANT}") from None
+    except (ValueError, OSError) as err:
+        raise ValueError(f"{err}: {EXPECTED_VARIANT}") from None
+    if not isinstance(saved, dict):
+        raise ValueError(f"{quoted(record)} holds a JSON {type(saved).__name__}: {EXPECTED_VARIANT}")
+    return saved
+
+
+def written_here(out_dir: Path) -> Manifest:
+    """The record of the files reproduce wrote into ``out_dir``.  A folder an earlier uavrl wrote (a variant.json
+    and no record) is taken to hold reproduce's files under the names reproduce writes, and only those."""
+    manifest = Manifest(out_dir, "out_dir")
+    if not manifest.files and (out_dir / "variant.json").is_file() and not os.path.lexists(manifest.path):
+        names = ("variant.json", "table2.md", "table2.json", "history_*x*.pt", *FIGURES, "tensorboard/grid*/" + EVENTS)
+        manifest.files = {manifest._name(found) for name in names for found in out_dir.glob(name) if found.is_file()}
+    return manifest
+
+
+def claim(out_dir: Path, cfg: DictConfig) -> Manifest:
+    """Make ``out_dir`` this variant's: with ``overwrite``, the files reproduce wrote for another variant go first
+    (only those: a user's own files there stay)."""
+    make_dirs(out_dir)
+    manifest = written_here(out_dir)
+    if cfg.overwrite and saved_variant(out_dir) != variant(cfg):
+        manifest.remove_all()
+    manifest.check_writable(planned_files(cfg, out_dir))
+    record = out_dir / "variant.json"
+    manifest.record(record)
     save_json(variant(cfg), record)
+    return manifest
 
 
-def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
+def run_grid(size: int, cfg: DictConfig, out_dir: Path, manifest: Manifest) -> dict:
     """The protocol on a ``size x size`` grid: per-episode metrics ``[episodes, runs]``, timing, optimality.
 
     The curves go to TensorBoard (``out_dir/tensorboard/grid<size>x<size>``, replacing those of an earlier
@@ -156,7 +212,10 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     agent = TabularAgent(model, settings, "cpu", int(cfg.seed))
     history = {k: torch.empty(int(cfg.episodes), int(cfg.runs), dtype=torch.float64) for k in METRICS}
     # an earlier run's points of this variant (steps from 1 on) are replaced
-    logger = RunLogger(out_dir / "tensorboard" / f"grid{size}x{size}", resume_step=0)
+    log_dir = out_dir / "tensorboard" / f"grid{size}x{size}"
+    before = set(log_dir.glob(EVENTS))
+    logger = RunLogger(log_dir, resume_step=0)
+    manifest.record(*(set(log_dir.glob(EVENTS)) - before))
     started = time.perf_counter()
     for episode in range(int(cfg.episodes)):
         agent.train_iteration()
@@ -168,6 +227,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path) -> dict:
     logger.close()
     record = {"history": history, "grid": size, "steps_per_episode": steps}
     record |= {key: cfg[key] for key in ("num_uavs", "runs", "episodes", "seed", "state_includes_tasks")}
+    manifest.record(out_dir / f"history_{size}x{size}.pt")
     save_torch(record, out_dir / f"history_{size}x{size}.pt")
     evaluation = evaluate_agent(agent, model, num_starts=int(cfg.eval_starts))  # mean over runs, the yardstick's too
     return {
@@ -265,11 +325,12 @@ def table2(cfg: DictConfig) -> list[dict]:
     from tqdm import tqdm
 
     out_dir = output_dir(cfg)
-    claim(out_dir, cfg)
+    manifest = claim(out_dir, cfg)
+    manifest.record(out_dir / "table2.md", out_dir / "table2.json")
     rows = []
     started = time.perf_counter()
     for size in tqdm([int(g) for g in cfg.grids], desc="Table II", unit="grid", disable=not cfg.progress):
-        rows.append(run_grid(size, cfg, out_dir))
+        rows.append(run_grid(size, cfg, out_dir, manifest))
     wall = time.perf_counter() - started
     table = table2_markdown(rows, wall)
     notes = [line for r in rows for line in findings(r["history"], r["grid"]) + [yardstick_finding(r)]]
@@ -331,11 +392,12 @@ def figures(cfg: DictConfig) -> list[Path]:
     size = int(cfg.figure_grid)
     out_dir = output_dir(cfg)
     path = out_dir / f"history_{size}x{size}.pt"
+    manifest = claim(out_dir, cfg)
+    manifest.record(*(out_dir / name for name in FIGURES))
     if not path.exists():
         protocol = f"the {size}x{size} protocol ({cfg.runs} runs x {cfg.episodes} episodes, no table)"
         print(f"no {size}x{size} data in {out_dir}: running {protocol} first", file=sys.stderr)
-        claim(out_dir, cfg)
-        run_grid(size, cfg, out_dir)
+        run_grid(size, cfg, out_dir, manifest)
     record = read_history(path, size)
     history = record["history"]
     episodes = torch.arange(1, history["sum_utility"].shape[0] + 1)
@@ -350,7 +412,7 @@ def figures(cfg: DictConfig) -> list[Path]:
 
     specs = [
         (
-            "fig3_sum_utility.png",
+            FIGURES[0],
             "Fig. 3: summation throughput per episode",
             "sum over steps (bit/s/Hz)",
             [
@@ -360,13 +422,13 @@ def figures(cfg: DictConfig) -> list[Path]:
             ],
         ),
         (
-            "fig4_switches_moves.png",
+            FIGURES[1],
             "Fig. 4: task switches and moves per episode",
             "count (all UAVs, all steps)",
             [("task_switches", "task switches", "C3"), ("moves", "moves", "C4")],
         ),
         (
-            "fig5_steps_to_90.png",
+            FIGURES[2],
             "Fig. 5: steps until U first reaches 90% of U*",
             "steps",
             [("steps_to_90", "steps to 90% of U*", "C5")],

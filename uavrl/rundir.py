@@ -27,7 +27,7 @@ import sys
 import threading
 from pathlib import Path
 
-from uavrl.io import EVENTS, WriteError, make_dirs, orphans, quoted, save_text
+from uavrl.io import EVENTS, WriteError, make_dirs, orphans, quoted, read_regular_text, save_text
 
 LOCK = ".uavrl.lock"
 HOLDER = ".uavrl.lock.holder"
@@ -151,8 +151,8 @@ def _remove_orphans(path: Path) -> None:
 def holder(path: Path) -> str:
     """Who holds ``path``'s lock, as its holder file says."""
     try:
-        return (path / HOLDER).read_text().strip() or "pid unknown"
-    except OSError:
+        return read_regular_text(path / HOLDER, limit=4096).strip() or "pid unknown"
+    except (OSError, ValueError):
         return "pid unknown"
 
 

@@ -17,6 +17,7 @@ after its checks.
 
 from __future__ import annotations
 
+import os
 import random
 import sys
 import time
@@ -37,7 +38,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import WriteError, quoted, save_json, save_text
+from uavrl.io import WriteError, quoted, save_json, save_text, special_kind
 from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
 from uavrl.runs import (
     BASELINE_AGENTS,
@@ -79,10 +80,39 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     check_run_costs(cfg, model, overrides)
     if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
         raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
-    if not cfg.resume and cfg.run_dir and Path(cfg.run_dir).is_file():
-        raise NotADirectoryError(f"run_dir={quoted(cfg.run_dir)} is a file, not a directory: give a directory")
-    if not cfg.resume and cfg.run_dir and checkpoint_files(cfg.run_dir):
-        raise FileExistsError(already_a_run(cfg.run_dir))
+    run_dir = Path(cfg.run_dir) if cfg.run_dir and not cfg.resume else None
+    if run_dir is not None and os.path.lexists(run_dir) and not run_dir.is_dir():
+        kind = special_kind(run_dir) or "a file"
+        raise NotADirectoryError(f"run_dir={quoted(run_dir)} is {kind}, not a directory: give a directory")
+    if run_dir is not None and checkpoint_files(run_dir):
+        raise FileExistsError(already_a_run(run_dir))
+    if run_dir is not None:
+        check_no_foreign_run_files(run_dir)
+
+
+def check_no_foreign_run_files(run_dir: Path) -> None:
+    """A new run into an existing folder replaces no file of its names that uavrl did not write: a
+    ``metrics.json`` without a checkpoint, or a ``config.yaml`` that is no uavrl run's config (a run killed before
+    its first checkpoint leaves its own, which a new run replaces)."""
+    import yaml
+
+    from uavrl.io import read_regular_text
+
+    for name in ("metrics.json", "config.yaml"):
+        path = run_dir / name
+        if not os.path.lexists(path):
+            continue
+        if name == "config.yaml":
+            try:
+                saved = yaml.safe_load(read_regular_text(path))
+            except (OSError, ValueError, yaml.YAMLError):
+                saved = None
+            if isinstance(saved, dict) and {"agent", "env", "train", "seed"} <= saved.keys():
+                continue
+        raise FileExistsError(
+            f"run_dir={quoted(run_dir)} holds {name}, which uavrl did not write there and a new run would replace: "
+            "give another run_dir (new or empty), or move that file away"
+        )
 
 
 def seed_everything(seed: int) -> None:

@@ -139,16 +139,22 @@ def can_write_mp4() -> bool:
     return importlib.util.find_spec("av") is not None
 
 
-def save_videos(frames: np.ndarray, out_dir, fps: int) -> list[Path]:
+VIDEO_RECORD = ".uavrl-video-files.json"  # the videos and figures render and evaluate wrote in a run directory
+
+
+def save_videos(frames: np.ndarray, out_dir, fps: int, manifest=None) -> list[Path]:
     """``video.gif`` in ``out_dir``, and ``video.mp4`` beside it where PyAV is installed; the paths written.
 
     Args:
         frames: ``[T, H, W, 3]`` uint8 frames (:func:`comparison_frames`).
         out_dir: the folder to write to.
         fps: frames (steps) per second.
+        manifest: a :class:`~uavrl.io.Manifest` of ``out_dir``: a file of those names that uavrl did not write stays,
+            and the video goes beside it (``video-2.gif``); None: the names as they are.
     """
     kinds = (".gif", ".mp4") if can_write_mp4() else (".gif",)
     paths = [Path(out_dir) / f"video{kind}" for kind in kinds]
+    paths = paths if manifest is None else [manifest.free(path) for path in paths]
     for path, kind in zip(paths, kinds, strict=True):
         save_bytes(encode(frames, fps, kind), path)
     return paths

@@ -60,7 +60,7 @@ from gymnasium.vector.utils import batch_space
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from ..config import ModelConfig, action_names, make_config
+from ..config import InvalidOption, InvalidType, ModelConfig, action_names, check_config_alone, make_config
 from ..physics.channel import fixed_layout
 from ..render import RENDER_MODES as DRAWN_MODES
 from ..render import render as render_world
@@ -84,14 +84,24 @@ RENDER_FPS = 4
 
 def model_config(config: ModelConfig | None, preset, grid, num_uavs, max_steps, overrides: dict) -> ModelConfig:
     """The model an adapter wraps, from a complete config or from ``UAVSpectrumEnv``'s arguments."""
-    if config is not None and overrides:
-        raise ValueError(f"give either config= or model options, not both (got {sorted(overrides)})")
+    if config is not None and not isinstance(config, ModelConfig):
+        raise InvalidType("config", config, "give a ModelConfig (uavrl.envs.make_config(...)) or None")
+    check_config_alone(config, overrides, grid=grid, num_uavs=num_uavs, preset=preset, max_steps=max_steps)
     return config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
+
+
+def check_no_options(options, note: str = "") -> None:
+    """Every adapter's ``reset(options=...)``: None or ``{}``, as no part of the model reads reset options; anything
+    else is refused in one line, so nothing given is ignored."""
+    if options is None or (isinstance(options, dict) and not options):
+        return
+    kind = InvalidOption if isinstance(options, dict) else InvalidType
+    raise kind("options", options, f"this env takes no reset options (give None or {{}}){note}")
 
 
 def check_render_mode(render_mode) -> None:
     if render_mode is not None and render_mode not in RENDER_MODES:
-        raise ValueError(f"render_mode={render_mode!r} is invalid: the render modes are {RENDER_MODES} or None")
+        raise InvalidOption("render_mode", render_mode, f"the render modes are {RENDER_MODES} or None")
 
 
 def render_frames(world: World, render_mode: str | None, indices: range) -> list[np.ndarray] | None:
@@ -180,15 +190,22 @@ def team_observation_space(cfg: ModelConfig) -> spaces.Box:
 def check_actions(actions, shape: tuple[int, ...], name: str, num_actions: int) -> np.ndarray:
     """``actions`` as an int64 array of ``shape``, each below ``num_actions``; a one-line error naming ``name``
     otherwise."""
-    array = np.asarray(actions)
+    if hasattr(actions, "device") and getattr(actions.device, "type", "cpu") != "cpu":  # a torch tensor elsewhere
+        raise InvalidOption(name, message=f"{name} is on device {actions.device}: give a NumPy array or a CPU tensor")
+    try:
+        array = np.asarray(actions)
+    except (TypeError, ValueError, RuntimeError) as err:  # ragged lists, objects NumPy cannot read
+        reason = " ".join(str(err).split())[:120]
+        raise InvalidType(name, message=f"{name} is no array of integers ({reason}): give {shape} integers") from None
     if array.shape != shape:
-        raise ValueError(f"{name} has shape {array.shape}: expected {shape} (one action per UAV)")
+        raise InvalidOption(name, message=f"{name} has shape {array.shape}: expected {shape} (one action per UAV)")
     if not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{name} has dtype {array.dtype}: expected integers {action_names(num_actions)}")
+        message = f"{name} has dtype {array.dtype}: expected integers {action_names(num_actions)}"
+        raise InvalidType(name, message=message)
     lo, hi = array.min(), array.max()
     if lo < 0 or hi >= num_actions:
         bad = lo if lo < 0 else hi
-        raise ValueError(f"{name} holds {bad}: actions are {action_names(num_actions)}")
+        raise InvalidOption(name, message=f"{name} holds {bad}: actions are {action_names(num_actions)}")
     return array.astype(np.int64, copy=False)
 
 
@@ -280,8 +297,7 @@ class UAVSpectrumGymEnv(gymnasium.Env):
         """Gymnasium's reset: ``(observation, info)`` of a new episode (``seed`` seeds it and those that follow;
         ``options`` must be None or empty: the env takes none)."""
         super().reset(seed=None if seed is None else check_seed(seed))
-        if options:
-            raise ValueError(f"options={options!r} is invalid: this env takes no reset options (give None or {{}})")
+        check_no_options(options)
         out = self._worlds.reset(seed)
         self._mask = out["action_mask"][0]
         return out["observation"][0], world_info(out, 0)
@@ -355,7 +371,9 @@ class UAVSpectrumVectorEnv(VectorEnv):
         **overrides,
     ):
         if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
-            raise ValueError(f"num_envs={num_envs!r} is invalid: give the number of worlds B >= 1")
+            raise (InvalidOption if isinstance(num_envs, int) else InvalidType)(
+                "num_envs", num_envs, "give the number of worlds B >= 1"
+            )
         check_render_mode(render_mode)
         self.render_mode = render_mode
         self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
@@ -380,13 +398,9 @@ class UAVSpectrumVectorEnv(VectorEnv):
         or empty (every reset starts all worlds).
         """
         if seed is not None and not isinstance(seed, int):
-            raise ValueError(f"seed={seed!r} is invalid: give one int (world i is seeded seed + i) or None")
+            raise InvalidType("seed", seed, "give one int (world i is seeded seed + i) or None")
         super().reset(seed=None if seed is None else check_seed(seed))
-        if options:
-            raise ValueError(
-                f"options={options!r} is invalid: this env takes no reset options (give None or {{}}); "
-                "every reset starts all worlds, so there is no reset_mask"
-            )
+        check_no_options(options, "; every reset starts all worlds, so there is no reset_mask")
         self._autoreset[:] = False
         out = self._worlds.reset(seed)
         return out["observation"], self._infos(out)

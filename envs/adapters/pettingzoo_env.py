@@ -33,8 +33,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from ..config import ModelConfig
-from ..world import World
+from ..config import InvalidOption, InvalidType, ModelConfig
+from ..world import World, check_seed
 from .gym_env import (
     RENDER_FPS,
     RENDER_MODES,
@@ -126,16 +126,25 @@ class UAVSpectrumParallelEnv(ParallelEnv):
 
     def observation_space(self, agent: str) -> spaces.Dict:
         """The observation space of ``agent`` (a UAV's name): its observation and its action mask."""
-        return self.observation_spaces[agent]
+        return self.observation_spaces[self._known(agent)]
 
     def action_space(self, agent: str) -> spaces.Discrete:
         """The action space of ``agent``: one of the model's actions (6, or 7 with recharging)."""
-        return self.action_spaces[agent]
+        return self.action_spaces[self._known(agent)]
+
+    def _known(self, agent) -> str:
+        if agent not in self.action_spaces:
+            raise InvalidOption("agent", agent, f"the agents are {self.possible_agents}")
+        return agent
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         """PettingZoo's reset: ``(observations, infos)`` of every UAV, by name, for a new episode (``seed`` seeds it
-        and those that follow; ``options`` is not read)."""
-        out = self._worlds.reset(seed)
+        and those that follow; ``options`` is not read).
+
+        ``options`` is read by no part of the model; unlike the Gymnasium adapters, which refuse any, it is accepted
+        whatever it holds, as PettingZoo's ``parallel_api_test`` requires of a parallel env (it resets with
+        ``options={"options": 1}``)."""
+        out = self._worlds.reset(None if seed is None else check_seed(seed))
         self.agents = self.possible_agents[:]
         return self._observations(out), self._infos(out)
 
@@ -144,12 +153,16 @@ class UAVSpectrumParallelEnv(ParallelEnv):
         terminations, truncations, infos)``; every UAV gets the team reward."""
         if not self.agents:
             raise RuntimeError("step() with no live agents: call reset() first (the episode ended or never began)")
+        if not isinstance(actions, dict):
+            message = f"actions is a {type(actions).__name__}: give a dict of one action per live agent, by name"
+            raise InvalidType("actions", message=message)
         unknown = sorted(set(actions) - set(self.agents), key=str)
         if unknown:
-            raise ValueError(f"actions names {unknown[0]!r}: the agents are {self.agents}")
+            raise InvalidOption("actions", message=f"actions names {unknown[0]!r}: the agents are {self.agents}")
         missing = [agent for agent in self.agents if agent not in actions]
         if missing:
-            raise ValueError(f"actions has no action for {missing[0]!r}: every live agent acts each step")
+            message = f"actions has no action for {missing[0]!r}: every live agent acts each step"
+            raise InvalidOption("actions", message=message)
         joint = check_actions(
             [actions[agent] for agent in self.possible_agents], (self.cfg.fleet_size,), "actions", self.cfg.num_actions
         )

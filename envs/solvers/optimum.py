@@ -39,7 +39,7 @@ import math
 import numpy as np
 import torch
 
-from ..config import RELAYING, SENSING, ModelConfig
+from ..config import RELAYING, SENSING, InvalidOption, ModelConfig
 from ..physics.channel import rates, rates_from_sums
 
 BRUTE_FORCE_LIMIT = 200_000  # candidate configurations per world
@@ -105,7 +105,7 @@ def solve(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, me
     N, C = cfg.num_uavs, cfg.num_cells
     brute_size = math.comb(C, N) * 2**N
     if method not in ("auto", "brute", "exchange", "search"):
-        raise ValueError(f"method={method!r} is invalid: allowed values are 'auto', 'brute', 'exchange', 'search'")
+        raise InvalidOption("method", method, "allowed values are 'auto', 'brute', 'exchange', 'search'")
     if method == "auto":
         method = "brute" if brute_size <= BRUTE_FORCE_LIMIT else "exchange" if N <= MAX_EXCHANGE_UAVS else "search"
     if method == "search":

@@ -1,0 +1,450 @@
+"""Hostile input to the Python API, the adapters and the commands' file handling, each case measured in a process.
+
+    python benchmarks/hostile_api.py [--jobs 2] [--timeout 120] [--only SURFACE] [--json PATH]
+
+About a hundred cases on ``load_policy``, ``UAVSpectrumEnv`` (construction, ``reset``, ``step``, ``to``,
+``rollout``), the Gymnasium and PettingZoo adapters, ``uavrl.evaluation.evaluate`` and the files that ``reproduce``,
+``evaluate`` and ``train`` read and write.  Each runs in its own process, forked from one that imported torch and
+uavrl once (address space capped at ``--memory-gib``, killed after ``--timeout`` seconds; the commands' cases start
+``python -m uavrl.<command>`` from there), and is classified as:
+
+- ``typed``: refused by a one-line error of uavrl's own (``InvalidOption``, ``InvalidType``, ``CheckpointError``, ...;
+  ``ValueError``/``TypeError`` subclasses) that names the argument;
+- ``one line``: refused in one line that names the argument, of Python's own type (``FileNotFoundError``,
+  ``FileExistsError``; ``RuntimeError`` for a step before any reset) or as a command's ``error:`` line;
+- ``honoured``: accepted, and the case checked that it did what was asked (a seed that seeds, a file written beside);
+- ``traceback``: a foreign exception, a message of several lines or one that does not name the argument;
+- ``hang``, ``OOM``, ``silent accept`` (accepted and ignored or wrong), ``data loss`` (a user's file gone or changed).
+
+The first run trains a tiny baseline run (3x3, the random agent) that the cases read; cases that change files work on
+copies.  Prints one line per case as it ends, then the table of counts.  Needs the [gym] extra for the adapters' cases.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+CLASSES = ("typed", "one line", "honoured", "traceback", "hang", "OOM", "silent accept", "data loss")
+
+# run in every case's process before the case: the names the cases use
+PRELUDE = """
+import json, os, shutil, subprocess, sys
+from pathlib import Path
+import numpy as np
+import torch
+from tensordict import TensorDict
+import uavrl
+from uavrl import load_policy
+from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.evaluation import evaluate
+
+RUN = Path(os.environ["HOSTILE_RUN"])
+CFG = make_config("paper", grid=(3, 3), num_uavs=2)
+OUTCOME = None
+
+def env(**options):
+    return UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_uavs=2, **options)
+
+def stepped(tensordict, environment=None):
+    environment = environment or env()
+    environment.reset()
+    return environment.step(tensordict)
+
+def action(a, device=None):
+    return TensorDict({"agents": TensorDict({"action": a}, batch_size=[2], device=device)}, [2], device=device)
+
+def fresh_run():
+    return Path(shutil.copytree(RUN, TMP / "run"))
+
+def policy():
+    return load_policy(RUN)[0]
+
+def gym(**kw):
+    from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv
+    return UAVSpectrumGymEnv(grid=(3, 3), **kw)
+
+def vector(n=2, **kw):
+    from uavrl.envs.adapters.gym_env import UAVSpectrumVectorEnv
+    return UAVSpectrumVectorEnv(n, grid=(3, 3), **kw)
+
+def parallel(**kw):
+    from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv
+    return UAVSpectrumParallelEnv(grid=(3, 3), **kw)
+
+def command(*args):
+    '''python -m uavrl.<args>, in TMP: its exit status and what it printed to stderr.'''
+    done = subprocess.run([sys.executable, "-m", *args, "progress=false"], cwd=TMP, capture_output=True, text=True)
+    global COMMAND
+    COMMAND = {"rc": done.returncode, "stderr": done.stderr[-3000:]}
+    return done.returncode
+
+def user_files(folder, names=("notes.txt", "fig_mine.png", "tensorboard/notes.txt")):
+    '''A user's files in ``folder``; returns a check that they are all still there, unchanged.'''
+    for name in names:
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text("mine: " + name)
+    return lambda: all((folder / n).is_file() and (folder / n).read_text() == "mine: " + n for n in names)
+
+def kept(check):
+    global OUTCOME
+    if OUTCOME is None and not check():
+        OUTCOME = "data loss"
+
+def verdict(ok):
+    global OUTCOME
+    OUTCOME = "honoured" if ok else "silent accept"
+
+SMALL = ["grids=[2]", "runs=1", "episodes=2", "eval_starts=4"]
+EVAL = ["eval.num_starts=2", "eval.horizon=6"]
+"""
+
+# (surface, what is typed, the argument the refusal must name, the case's code)
+CASES = [
+    # ------------------------------------------------------------------ load_policy
+    ("load_policy", "run_dir=b'bytes'", "run_dir", "load_policy(bytes(RUN))"),
+    ("load_policy", "run_dir=['run']", "run_dir", "load_policy([str(RUN)])"),
+    ("load_policy", "run_dir='' (the working directory)", "run_dir", "os.chdir(TMP); load_policy('')"),
+    ("load_policy", "run_dir=a folder with no checkpoint", "run_dir", "load_policy(TMP)"),
+    ("load_policy", "run_dir=the run's config.yaml", "run_dir", "load_policy(RUN / 'config.yaml')"),
+    ("load_policy", "checkpoint.pt a directory", "checkpoint.pt",
+     "r = fresh_run(); (r / 'checkpoint.pt').unlink(); (r / 'checkpoint.pt').mkdir(); load_policy(r)"),
+    ("load_policy", "checkpoint.pt -> /dev/zero", "checkpoint.pt",
+     "r = fresh_run(); (r / 'checkpoint.pt').unlink(); (r / 'checkpoint.pt').symlink_to('/dev/zero'); load_policy(r)"),
+    ("load_policy", "run_dir=a FIFO checkpoint.pt given as the file", "checkpoint.pt",
+     "os.mkfifo(TMP / 'checkpoint.pt'); load_policy(TMP / 'checkpoint.pt')"),
+    ("load_policy", "checkpoint.pt of 0 bytes", "checkpoint.pt",
+     "r = fresh_run(); (r / 'checkpoint.pt').write_bytes(b''); load_policy(r)"),
+    ("load_policy", "checkpoint.pt of random bytes", "checkpoint.pt",
+     "r = fresh_run(); (r / 'checkpoint.pt').write_bytes(os.urandom(4096)); load_policy(r)"),
+    ("load_policy", "checkpoint.pt holding a list", "checkpoint.pt",
+     "r = fresh_run(); torch.save([1, 2], r / 'checkpoint.pt'); load_policy(r)"),
+    ("load_policy", "checkpoint.pt whose agent is a str", "checkpoint.pt",
+     "r = fresh_run(); s = torch.load(r / 'checkpoint.pt', weights_only=False); s['agent'] = 'x'; "
+     "torch.save(s, r / 'checkpoint.pt'); load_policy(r)"),
+    ("load_policy", "checkpoint.pt whose config names agent 'nope'", "checkpoint.pt",
+     "r = fresh_run(); s = torch.load(r / 'checkpoint.pt', weights_only=False); s['config']['agent']['name'] = 'nope'; "
+     "torch.save(s, r / 'checkpoint.pt'); load_policy(r)"),
+    ("load_policy", "device=torch.device('meta')", "device", "load_policy(RUN, device=torch.device('meta'))"),
+    ("load_policy", "device=None", "device", "load_policy(RUN, device=None)"),
+    ("load_policy", "device='cuda:-1'", "device", "load_policy(RUN, device='cuda:-1')"),
+    ("load_policy", "device=[0]", "device", "load_policy(RUN, device=[0])"),
+    ("load_policy", "run=0.0", "run", "load_policy(RUN, run=0.0)"),
+    ("load_policy", "run=10**30", "run", "load_policy(RUN, run=10**30)"),
+    ("load_policy", "run=np.int64(0) (honoured)", "run",
+     "p, c = load_policy(RUN, run=np.int64(0)); verdict(c.grid == (3, 3))"),
+    ("load_policy", "env_config=4x4 for a baseline of 3x3", "env_config",
+     "load_policy(RUN, env_config=make_config('paper', grid=(4, 4)))"),
+    ("load_policy", "env_config=ModelConfig (the class)", "env_config",
+     "from uavrl.envs import ModelConfig; load_policy(RUN, env_config=ModelConfig)"),
+    ("load_policy", "env_config=(3, 3)", "env_config", "load_policy(RUN, env_config=(3, 3))"),
+    # ------------------------------------------------------------------ UAVSpectrumEnv: construction
+    ("UAVSpectrumEnv", "batch_size=0", "batch_size", "UAVSpectrumEnv(batch_size=0)"),
+    ("UAVSpectrumEnv", "batch_size=-1", "batch_size", "UAVSpectrumEnv(batch_size=-1)"),
+    ("UAVSpectrumEnv", "batch_size=(2, 2)", "batch_size", "UAVSpectrumEnv(batch_size=(2, 2))"),
+    ("UAVSpectrumEnv", "batch_size='4'", "batch_size", "UAVSpectrumEnv(batch_size='4')"),
+    ("UAVSpectrumEnv", "grid=(3,)", "grid", "UAVSpectrumEnv(grid=(3,))"),
+    ("UAVSpectrumEnv", "grid='3x3'", "grid", "UAVSpectrumEnv(grid='3x3')"),
+    ("UAVSpectrumEnv", "grid=(3.5, 3)", "grid", "UAVSpectrumEnv(grid=(3.5, 3))"),
+    ("UAVSpectrumEnv", "grid=(0, 3)", "grid", "UAVSpectrumEnv(grid=(0, 3))"),
+    ("UAVSpectrumEnv", "num_uavs=0", "num_uavs", "UAVSpectrumEnv(num_uavs=0)"),
+    ("UAVSpectrumEnv", "num_uavs=10 on 3x3", "num_uavs", "UAVSpectrumEnv(grid=(3, 3), num_uavs=10)"),
+    ("UAVSpectrumEnv", "num_uavs='2'", "num_uavs", "UAVSpectrumEnv(num_uavs='2')"),
+    ("UAVSpectrumEnv", "max_steps=0", "max_steps", "UAVSpectrumEnv(max_steps=0)"),
+    ("UAVSpectrumEnv", "max_steps=2.5", "max_steps", "UAVSpectrumEnv(max_steps=2.5)"),
+    ("UAVSpectrumEnv", "preset='nope'", "preset", "UAVSpectrumEnv(preset='nope')"),
+    ("UAVSpectrumEnv", "preset=None", "preset", "UAVSpectrumEnv(preset=None)"),
+    ("UAVSpectrumEnv", "seed=1.5", "seed", "UAVSpectrumEnv(seed=1.5)"),
+    ("UAVSpectrumEnv", "seed=2**64", "seed", "UAVSpectrumEnv(seed=2**64)"),
+    ("UAVSpectrumEnv", "device=torch.device('meta')", "device", "UAVSpectrumEnv(device=torch.device('meta'))"),
+    ("UAVSpectrumEnv", "memory_budget=-1", "memory_budget", "UAVSpectrumEnv(memory_budget=-1)"),
+    ("UAVSpectrumEnv", "memory_budget='1GB'", "memory_budget", "UAVSpectrumEnv(memory_budget='1GB')"),
+    ("UAVSpectrumEnv", "layout='circle'", "layout", "UAVSpectrumEnv(layout='circle')"),
+    ("UAVSpectrumEnv", "fading='nakagami'", "fading", "UAVSpectrumEnv(fading='nakagami')"),
+    ("UAVSpectrumEnv", "p_u=nan", "p_u", "UAVSpectrumEnv(p_u=float('nan'))"),
+    ("UAVSpectrumEnv", "channel=3", "channel", "UAVSpectrumEnv(channel=3)"),
+    ("UAVSpectrumEnv", "config= with grid=(4, 4)", "grid", "UAVSpectrumEnv(config=CFG, grid=(4, 4))"),
+    ("UAVSpectrumEnv", "config= with max_steps=7", "max_steps", "UAVSpectrumEnv(config=CFG, max_steps=7)"),
+    ("UAVSpectrumEnv", "diagnostics=None", "diagnostics", "UAVSpectrumEnv(diagnostics=None)"),
+    ("UAVSpectrumEnv", "agent_rewards='true'", "agent_rewards", "UAVSpectrumEnv(agent_rewards='true')"),
+    # ------------------------------------------------------------------ UAVSpectrumEnv: reset, step, to, rollout
+    ("reset/step/to", "reset(seed=-5)", "seed", "env().reset(seed=-5)"),
+    ("reset/step/to", "reset(seed=True)", "seed", "env().reset(seed=True)"),
+    ("reset/step/to", "reset(seed=3) twice (honoured)", "seed",
+     "e = env(); a = e.reset(seed=3)['positions']; e.rollout(3); "
+     "verdict(torch.equal(a, e.reset(seed=3)['positions']))"),
+    ("reset/step/to", "reset(tensordict=5)", "tensordict", "env().reset(5)"),
+    ("reset/step/to", "reset '_reset' of floats", "_reset",
+     "env().reset(TensorDict(_reset=torch.ones(2), batch_size=[2]))"),
+    ("reset/step/to", "reset '_reset' on meta", "_reset",
+     "env().reset(TensorDict(_reset=torch.ones(2, dtype=torch.bool, device='meta'), batch_size=[2]))"),
+    ("reset/step/to", "reset(options={})", "options", "env().reset(options={})"),
+    ("reset/step/to", "reset(max_steps=5)", "max_steps", "env().reset(max_steps=5)"),
+    ("reset/step/to", "step before reset", "reset", "env().step(action(torch.zeros(2, 2, dtype=torch.long)))"),
+    ("reset/step/to", "action int32 (honoured)", "action",
+     "td = stepped(action(torch.ones(2, 2, dtype=torch.int32))); verdict(td['next', 'positions'].shape == (2, 2, 2))"),
+    ("reset/step/to", "action uint8 255", "action", "stepped(action(torch.full((2, 2), 255, dtype=torch.uint8)))"),
+    ("reset/step/to", "action [2, 2, 1]", "action", "stepped(action(torch.zeros(2, 2, 1, dtype=torch.long)))"),
+    ("reset/step/to", "action [2]", "action", "stepped(action(torch.zeros(2, dtype=torch.long)))"),
+    ("reset/step/to", "action complex", "action", "stepped(action(torch.zeros(2, 2, dtype=torch.complex64)))"),
+    ("reset/step/to", "action nan", "action", "stepped(action(torch.full((2, 2), float('nan'))))"),
+    ("reset/step/to", "action a non-tensor", "action",
+     "td = TensorDict({'agents': TensorDict({}, [2])}, [2]); td['agents'].set_non_tensor('action', 'up'); stepped(td)"),
+    ("reset/step/to", "step(td of batch [])", "tensordict", "stepped(TensorDict({}, []))"),
+    ("reset/step/to", "step(td of batch [3])", "tensordict", "stepped(TensorDict({}, [3]))"),
+    ("reset/step/to", "step(None)", "tensordict", "stepped(None)"),
+    ("reset/step/to", "to(None)", "device", "env().to(None)"),
+    ("reset/step/to", "to(123)", "device", "env().to(123)"),
+    ("reset/step/to", "to('cpu:0') (honoured)", "device", "verdict(env().to('cpu:0').device.type == 'cpu')"),
+    ("reset/step/to", "rollout(0)", "max_steps", "env().rollout(0)"),
+    ("reset/step/to", "rollout(2.5)", "max_steps", "env().rollout(2.5)"),
+    ("reset/step/to", "optimum(method='nope')", "method", "env().optimum(method='nope')"),
+    ("reset/step/to", "render(env_index=5)", "env_index", "e = env(); e.reset(); e.render(env_index=5)"),
+    ("reset/step/to", "render(mode='human')", "mode", "e = env(); e.reset(); e.render(mode='human')"),
+    # ------------------------------------------------------------------ adapters
+    ("adapters", "Gymnasium step before reset", "reset", "gym().step([0, 0])"),
+    ("adapters", "Gymnasium step('01')", "action", "g = gym(); g.reset(); g.step('01')"),
+    ("adapters", "Gymnasium step(None)", "action", "g = gym(); g.reset(); g.step(None)"),
+    ("adapters", "Gymnasium step(uint64 [1, 1]) (honoured)", "action",
+     "g = gym(); g.reset(); out = g.step(np.array([1, 1], dtype=np.uint64)); verdict(len(out) == 5)"),
+    ("adapters", "Gymnasium reset(seed=-1)", "seed", "gym().reset(seed=-1)"),
+    ("adapters", "Gymnasium reset(seed=1.0)", "seed", "gym().reset(seed=1.0)"),
+    ("adapters", "Gymnasium num_uavs=20 on 3x3", "num_uavs", "gym(num_uavs=20)"),
+    ("adapters", "Gymnasium render_mode='rgb_array_list'", "render_mode", "gym(render_mode='rgb_array_list')"),
+    ("adapters", "Gymnasium config= with grid=(4, 4)", "grid",
+     "from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv; UAVSpectrumGymEnv(grid=(4, 4), config=CFG)"),
+    ("adapters", "vector num_envs=0", "num_envs", "vector(0)"),
+    ("adapters", "vector num_envs=2.0", "num_envs", "vector(2.0)"),
+    ("adapters", "vector step([2, 2, 1])", "actions", "v = vector(); v.reset(); v.step(np.zeros((2, 2, 1), int))"),
+    ("adapters", "vector reset(seed=[1, 2])", "seed", "vector().reset(seed=[1, 2])"),
+    ("adapters", "vector reset(options={'reset_mask': ...})", "options",
+     "vector().reset(options={'reset_mask': np.ones(2, bool)})"),
+    ("adapters", "PettingZoo step with 'up'", "actions",
+     "p = parallel(); p.reset(); p.step({'uav_0': 'up', 'uav_1': 0})"),
+    ("adapters", "PettingZoo step before reset", "reset", "parallel().step({'uav_0': 0, 'uav_1': 0})"),
+    ("adapters", "PettingZoo observation_space('uav_9')", "agent", "parallel().observation_space('uav_9')"),
+    ("adapters", "PettingZoo action_space(0)", "agent", "parallel().action_space(0)"),
+    ("adapters", "PettingZoo reset(seed='x')", "seed", "parallel().reset(seed='x')"),
+    ("adapters", "PettingZoo step(None)", "actions", "p = parallel(); p.reset(); p.step(None)"),
+    # ------------------------------------------------------------------ evaluate
+    ("evaluate()", "num_starts=10**9", "num_starts", "evaluate(policy(), CFG, num_starts=10**9)"),
+    ("evaluate()", "horizon=0", "horizon", "evaluate(policy(), CFG, horizon=0)"),
+    ("evaluate()", "gamma=nan", "gamma", "evaluate(policy(), CFG, gamma=float('nan'))"),
+    ("evaluate()", "memory_budget=0", "memory_budget", "evaluate(policy(), CFG, memory_budget=0)"),
+    ("evaluate()", "memory_budget='x'", "memory_budget", "evaluate(policy(), CFG, memory_budget='x')"),
+    ("evaluate()", "a policy that writes no action", "action", "evaluate(lambda td: td, CFG, num_starts=2)"),
+    ("evaluate()", "a 3x3 policy on 4x4", "grid", "evaluate(policy(), make_config('paper', grid=(4, 4)))"),
+    ("evaluate()", "seed=2**63", "seed", "evaluate(policy(), CFG, seed=2**63)"),
+    ("evaluate()", "device=None", "device", "evaluate(policy(), CFG, device=None)"),
+    ("evaluate()", "cfg='paper'", "cfg", "evaluate(policy(), 'paper')"),
+    # ------------------------------------------------------------------ files the commands read and write
+    ("files", "reproduce: variant.json -> /dev/zero", "variant.json",
+     "o = TMP / 'o'; o.mkdir(); (o / 'variant.json').symlink_to('/dev/zero'); "
+     "command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}')"),
+    ("files", "reproduce: variant.json {}", "out_dir",
+     "o = TMP / 'o'; o.mkdir(); (o / 'variant.json').write_text('{}'); "
+     "command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}')"),
+    ("files", "reproduce overwrite: a record naming ../victim", "uavrl-written",
+     "o = TMP / 'o'; o.mkdir(); v = TMP / 'victim'; v.write_text('mine: victim'); "
+     "(o / '.uavrl-written.json').write_text(json.dumps(['../victim'])); "
+     "command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}', 'overwrite=true'); "
+     "kept(lambda: v.read_text() == 'mine: victim')"),
+    ("files", "reproduce overwrite: tensorboard/ a link to a user's folder", "out_dir",
+     "o = TMP / 'o'; o.mkdir(); u = TMP / 'users'; ok = user_files(u, ('grid2x2/x',)); "
+     "(o / 'tensorboard').symlink_to(u); "
+     "(o / '.uavrl-written.json').write_text(json.dumps(['tensorboard/grid2x2/x'])); "
+     "rc = command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}', 'overwrite=true'); kept(ok); verdict(rc == 0)"),
+    ("files", "reproduce figures: a FIFO history_2x2.pt", "history_2x2.pt",
+     "o = TMP / 'o'; command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}'); (o / 'history_2x2.pt').unlink(); "
+     "os.mkfifo(o / 'history_2x2.pt'); command('uavrl.reproduce', 'figures', *SMALL, 'figure_grid=2', f'out_dir={o}')"),
+    ("files", "reproduce: a FIFO .uavrl-written.json", "uavrl-written",
+     "o = TMP / 'o'; o.mkdir(); os.mkfifo(o / '.uavrl-written.json'); (o / 'variant.json').write_text('{}'); "
+     "command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={o}', 'overwrite=true')"),
+    ("files", "reproduce overwrite into a run (honoured: its files kept)", "out_dir",
+     "r = fresh_run(); ok = user_files(r); "
+     "before = {p.name: p.read_bytes() for p in r.iterdir() if p.is_file() and not p.name.startswith('.')}; "
+     "rc = command('uavrl.reproduce', 'table2', *SMALL, f'out_dir={r}', 'overwrite=true'); "
+     "kept(lambda: ok() and all((r / n).read_bytes() == b for n, b in before.items())); verdict(rc == 0)"),
+    ("files", "evaluate: eval.json a directory (honoured: beside it)", "checkpoint",
+     "r = fresh_run(); (r / 'eval.json').mkdir(); rc = command('uavrl.evaluate', f'checkpoint={r}', *EVAL); "
+     "verdict(rc == 0 and (r / 'eval-2.json').is_file())"),
+    ("files", "evaluate: a damaged .uavrl-evaluations.json (honoured)", "checkpoint",
+     "r = fresh_run(); (r / 'eval.json').write_text('mine: eval.json'); "
+     "(r / '.uavrl-evaluations.json').write_text('['); rc = command('uavrl.evaluate', f'checkpoint={r}', *EVAL); "
+     "kept(lambda: (r / 'eval.json').read_text() == 'mine: eval.json'); verdict(rc == 0)"),
+    ("files", "evaluate: eval.json a link to a user's file", "checkpoint",
+     "r = fresh_run(); u = TMP / 'mine.json'; u.write_text('mine: json'); (r / 'eval.json').symlink_to(u); "
+     "rc = command('uavrl.evaluate', f'checkpoint={r}', *EVAL); kept(lambda: u.read_text() == 'mine: json'); "
+     "verdict(rc == 0)"),
+    ("files", "evaluate twice, other seeds (honoured: both kept)", "checkpoint",
+     "r = fresh_run(); command('uavrl.evaluate', f'checkpoint={r}', *EVAL); first = (r / 'eval.json').read_text(); "
+     "command('uavrl.evaluate', f'checkpoint={r}', *EVAL, 'eval.seed=9'); "
+     "kept(lambda: (r / 'eval.json').read_text() == first); verdict((r / 'eval-2.json').is_file())"),
+    ("files", "evaluate: checkpoint.pt -> /dev/zero", "checkpoint",
+     "r = fresh_run(); (r / 'checkpoint.pt').unlink(); (r / 'checkpoint.pt').symlink_to('/dev/zero'); "
+     "command('uavrl.evaluate', f'checkpoint={r}', *EVAL)"),
+    ("files", "evaluate: only a FIFO checkpoint.prev.pt", "checkpoint",
+     "r = fresh_run(); (r / 'checkpoint.pt').unlink(); os.mkfifo(r / 'checkpoint.prev.pt'); "
+     "command('uavrl.evaluate', f'checkpoint={r}', *EVAL)"),
+    ("files", "evaluate: checkpoint= a socket", "checkpoint",
+     "import socket; s = socket.socket(socket.AF_UNIX); s.bind(str(TMP / 'sock')); "
+     "command('uavrl.evaluate', f'checkpoint={TMP / \"sock\"}', *EVAL)"),
+    ("files", "train: run_dir a FIFO", "run_dir",
+     "os.mkfifo(TMP / 'f'); command('uavrl.train', 'agent=random', f'run_dir={TMP / \"f\"}', *EVAL)"),
+    ("files", "train: run_dir holding a user's metrics.json", "run_dir",
+     "d = TMP / 'd'; ok = user_files(d, ('metrics.json',)); "
+     "command('uavrl.train', 'agent=random', 'env.grid=[3,3]', f'run_dir={d}', *EVAL); kept(ok)"),
+    ("files", "train: run_dir holding a user's config.yaml", "run_dir",
+     "d = TMP / 'd'; ok = user_files(d, ('config.yaml',)); "
+     "command('uavrl.train', 'agent=random', 'env.grid=[3,3]', f'run_dir={d}', *EVAL); kept(ok)"),
+    ("files", "train: resume= a run whose .uavrl.lock.holder is a FIFO (honoured)", "resume",
+     "r = fresh_run(); os.mkfifo(r / '.uavrl.lock.holder'); rc = command('uavrl.train', f'resume={r}'); "
+     "verdict(rc == 0 and not os.path.lexists(r / '.uavrl.lock.holder'))"),
+]  # fmt: skip
+
+
+def classify(report: dict | None, names: str, timed_out: bool, returncode: int) -> tuple[str, str]:
+    """``(class, what was seen)`` of one case."""
+    if timed_out:
+        return "hang", "killed after the timeout"
+    if report is None:
+        return ("OOM" if returncode < 0 else "traceback"), f"exit status {returncode}, no report"
+    if report["raised"] == "MemoryError":
+        return "OOM", "MemoryError"
+    if report["raised"] is not None:
+        message = report["message"]
+        line = " ".join(message.split())[:160]
+        one_line = "\n" not in message.strip() and names.lower() in message.lower()
+        if one_line and report["own"] and {"ValueError", "TypeError"} & set(report["kinds"]):
+            return "typed", f"{report['raised']}: {line}"
+        if one_line and report["raised"] in (
+            "FileNotFoundError",
+            "FileExistsError",
+            "NotADirectoryError",
+            "RuntimeError",
+        ):
+            return "one line", f"{report['raised']}: {line}"
+        return "traceback", f"{report['raised']}: {line}"
+    outcome, command = report["outcome"], report["command"]
+    if outcome in ("data loss", "honoured", "silent accept"):
+        return outcome, command["stderr"].strip().splitlines()[-1][:160] if command and command["stderr"] else ""
+    if command is not None:
+        stderr = command["stderr"].strip()
+        if command["rc"] == 0:
+            return "silent accept", "exit status 0"
+        if "Traceback" in stderr or stderr.count("\n") > 0 or names.lower() not in stderr.lower():
+            return "traceback", " ".join(stderr.split())[-160:]
+        return "one line", stderr[:160]
+    return "silent accept", "no error"
+
+
+def case_process(code: str, base: dict, tmp: str, memory_gib: int, conn) -> None:
+    """One case, in a process forked from the one that imported the prelude: its report sent through ``conn``."""
+    import resource
+
+    limit = memory_gib * 2**30
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    os.chdir(tmp)
+    namespace = base  # this process's copy: the prelude's helpers read TMP, COMMAND and OUTCOME from it
+    namespace.update(TMP=Path(tmp), COMMAND=None, OUTCOME=None)
+    try:
+        exec(compile(textwrap.dedent(code), "case", "exec"), namespace)
+        report = {"raised": None, "outcome": namespace.get("OUTCOME"), "command": namespace.get("COMMAND")}
+    except MemoryError:
+        report = {"raised": "MemoryError"}
+    except BaseException as err:
+        own = any(kind.__module__.split(".")[0] == "uavrl" for kind in type(err).__mro__)
+        kinds = [kind.__name__ for kind in type(err).__mro__]
+        report = {"raised": type(err).__name__, "own": own, "kinds": kinds, "message": str(err)}
+    conn.send(report)
+    conn.close()
+
+
+def run_cases(cases, base: dict, args) -> list[dict]:
+    """Every case in its own forked process, ``args.jobs`` at a time, each killed after ``args.timeout`` s; the
+    results in the order of ``cases``, each printed as it ends."""
+    context = multiprocessing.get_context("fork")  # the prelude's imports, done once, shared by every case
+    waiting, running, results = list(enumerate(cases)), [], {}
+    while waiting or running:
+        while waiting and len(running) < args.jobs:
+            index, case = waiting.pop(0)
+            tmp = tempfile.mkdtemp(prefix="hostile-")
+            receive, send = context.Pipe(duplex=False)
+            process = context.Process(target=case_process, args=(case[3], base, tmp, args.memory_gib, send))
+            process.start()
+            send.close()
+            running.append((index, case, process, receive, tmp, time.perf_counter()))
+        time.sleep(0.05)
+        for entry in list(running):
+            index, case, process, receive, tmp, started = entry
+            report = receive.recv() if receive.poll() else None
+            timed_out = time.perf_counter() - started > args.timeout
+            if report is None and process.is_alive() and not timed_out:
+                continue
+            if report is None and process.is_alive():
+                process.kill()
+            process.join()
+            running.remove(entry)
+            shutil.rmtree(tmp, ignore_errors=True)
+            kind, seen = classify(report, case[2], timed_out and report is None, process.exitcode or 0)
+            surface, typed = case[0], case[1]
+            seconds = round(time.perf_counter() - started, 2)
+            results[index] = {"surface": surface, "case": typed, "class": kind, "seen": seen, "seconds": seconds}
+            print(f"{kind:>13}  {surface:<15} {typed:<55} {seen}", flush=True)
+    return [results[index] for index in range(len(cases))]
+
+
+def make_run(directory: Path) -> Path:
+    run_dir = directory / "run"
+    settings = ["agent=random", "env.grid=[3,3]", "eval.num_starts=2", "progress=false", f"run_dir={run_dir}"]
+    subprocess.run([sys.executable, "-m", "uavrl.train", *settings], check=True, capture_output=True)
+    return run_dir
+
+
+def table(results: list[dict]) -> str:
+    surfaces = list(dict.fromkeys(r["surface"] for r in results))
+    header = "| surface | cases | " + " | ".join(CLASSES) + " |"
+    rows = [header, "|" + "---|" * (len(CLASSES) + 2)]
+    for surface in [*surfaces, "all"]:
+        chosen = [r for r in results if surface in ("all", r["surface"])]
+        cells = [str(sum(1 for r in chosen if r["class"] == c)) for c in CLASSES]
+        name = f"**{surface}**" if surface == "all" else surface
+        rows.append(f"| {name} | {len(chosen)} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
+    parser.add_argument("--timeout", type=float, default=300, help="seconds before a case counts as a hang")
+    parser.add_argument("--memory-gib", type=int, default=16, help="address space of each case's process")
+    parser.add_argument("--only", help="run the cases of this surface only")
+    parser.add_argument("--json", type=Path, help="also write the results here")
+    args = parser.parse_args()
+    cases = [case for case in CASES if args.only in (None, case[0])]
+    with tempfile.TemporaryDirectory(prefix="hostile-run-") as tmp:
+        run_dir = make_run(Path(tmp))
+        os.environ["HOSTILE_RUN"] = str(run_dir)
+        base = {"__name__": "hostile_case"}
+        exec(compile(PRELUDE, "prelude", "exec"), base)
+        results = run_cases(cases, base, args)
+    seconds = sorted(r["seconds"] for r in results if r["class"] in ("typed", "one line"))
+    print(
+        f"\n{len(results)} cases; median time to a refusal {seconds[len(seconds) // 2]:.1f} s (in the forked process)\n"
+    )
+    print(table(results))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
