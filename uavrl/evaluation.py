@@ -110,9 +110,18 @@ def check_arguments(policy, cfg, **settings) -> None:
         raise InvalidOption("memory_budget", budget, "give the bytes the evaluation may take, a positive number")
 
 
-def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget) -> None:
+COMMAND_LINE_NAMES = {
+    "horizon": "eval.horizon",
+    "num_starts": "eval.num_starts",
+    "memory_budget": "agent.memory_budget",
+}
+
+
+def check_memory(
+    cfg: ModelConfig, num_starts: int, horizon: int, tables: int, memory_budget, names=COMMAND_LINE_NAMES
+) -> None:
     """A one-line refusal, before anything is allocated, when the evaluation would need more than ``memory_budget``
-    bytes (:func:`uavrl.envs.limits.evaluation_bytes`), named as on the command line.
+    bytes (:func:`uavrl.envs.limits.evaluation_bytes`), naming the settings as ``names`` has them.
 
     Args:
         cfg: the evaluated model.
@@ -121,15 +130,17 @@ def check_memory(cfg: ModelConfig, num_starts: int, horizon: int, tables: int, m
         tables: how many Q tables the tabular agent plays greedily, each from every start (0: a TorchRL policy's
             rollout).
         memory_budget: the bytes it may take.
+        names: how the refusal names ``horizon``, ``num_starts`` and ``memory_budget``: the command line's settings
+            (the default) or, from :func:`evaluate`, its keyword arguments.
     """
     need = evaluation_bytes(cfg, num_starts, horizon, tables)
     if need > memory_budget:
-        name, value = ("eval.horizon", horizon) if horizon > num_starts else ("eval.num_starts", num_starts)
+        name, value = ("horizon", horizon) if horizon > num_starts else ("num_starts", num_starts)
+        name, budget = names[name], names["memory_budget"]
         raise InvalidOption(
             name,
             message=f"{name}={value} is invalid: the evaluation of {num_starts:,} starts x {horizon:,} steps needs "
-            f"about {gib(need)}, over agent.memory_budget={int(memory_budget)}: lower {name}, or raise "
-            "agent.memory_budget=<bytes>",
+            f"about {gib(need)}, over {budget}={int(memory_budget)}: lower {name}, or raise {budget}=<bytes>",
         )
 
 
@@ -399,7 +410,7 @@ def evaluate(
         memory_budget=memory_budget,
     )
     horizon = horizon or evaluation_horizon(cfg)
-    check_memory(cfg, num_starts, horizon, 0, memory_budget)
+    check_memory(cfg, num_starts, horizon, 0, memory_budget, names={name: name for name in COMMAND_LINE_NAMES})
     env = UAVSpectrumEnv(
         batch_size=num_starts,
         config=cfg.replace(max_steps=horizon),

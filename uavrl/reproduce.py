@@ -114,8 +114,6 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
             raise ValueError(f"grids={shown(list(cfg.grids))} is invalid: {reason}")
         models.append(grid_model(size, cfg))
     check_reproduce_costs(cfg, models, overrides)
-    if cfg.out_dir and Path(cfg.out_dir).exists() and not Path(cfg.out_dir).is_dir():
-        raise NotADirectoryError(f"out_dir={quoted(cfg.out_dir)} is invalid: it is a file, not a directory")
     if cfg.command == "figures" and cfg.figure_grid not in cfg.grids:
         raise ValueError(f"figure_grid={cfg.figure_grid} is invalid: it must be one of grids={shown(list(cfg.grids))}")
     out_dir = output_dir(cfg)
