@@ -32,7 +32,9 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
+import weakref
 
 import torch
 
@@ -52,6 +54,33 @@ SEED_LIMIT = 2**63  # world seeds are int64
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
 # outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
 DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index")
+
+
+class _SharedTables(dict):
+    """A fixed layout's tables by attribute name, shared read-only by every World of that model and device, and
+    ``optima``: its exact optimum by method, once solved."""
+
+    def __init__(self, tables: dict):
+        super().__init__(tables)
+        self.optima: dict[str, tuple] = {}
+
+
+# what World._set_layout computes for a layout (and the two-UAV pair tables from them)
+_LAYOUT_TABLES = (
+    "_cell_contrib",
+    "_code_obs",
+    "_code_rate",
+    "_node_obs",
+    "_direct",
+    "_fading_table",
+    "_u_star",
+    "_pair_obs",
+    "_pair_state",
+    "_pair_rates",
+)
+# fixed layouts' tables by (model, device), kept while a World holds them: the environments of one command (training,
+# evaluation) build a layout's per-cell tables once
+_FIXED_LAYOUT_TABLES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
 
 
 def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
@@ -178,7 +207,7 @@ class World:
         # the parts (docs/architecture.md, The World's parts)
         self.layouts = Layouts(cfg, dev)
         self.fading = fading_part(cfg)
-        self.dynamics = Dynamics(cfg, B, dev)
+        self.dynamics = Dynamics(cfg, dev)
         self.reward = TeamReward(cfg, self.fading.random)
         self.energy = energy_part(cfg, dev)
         self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
@@ -222,9 +251,21 @@ class World:
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
-        if fixed is not None:
-            self._set_layout(torch.zeros(1, dtype=long, device=dev))
+        # a fixed layout's tables (and its optimum, once solved), shared with the other Worlds of the model
+        self._shared_tables = self._fixed_layout_tables() if fixed is not None else None
         self.set_seed(seed)
+
+    def _fixed_layout_tables(self) -> _SharedTables:
+        """The tables of the fixed layout, built here or taken from another World of the same model and device (the
+        episode length aside: no table depends on it)."""
+        key = (dataclasses.replace(self.cfg, max_steps=1), str(self.device))
+        tables = _FIXED_LAYOUT_TABLES.get(key)
+        if tables is None:
+            self._set_layout(torch.zeros(1, dtype=torch.long, device=self.device))
+            tables = _FIXED_LAYOUT_TABLES[key] = _SharedTables({name: getattr(self, name) for name in _LAYOUT_TABLES})
+        for name, value in tables.items():
+            setattr(self, name, value)
+        return tables
 
     def _build_geometry(self):
         """The static tables of the grid the observation reads: every cell's and every code's position."""
@@ -256,6 +297,8 @@ class World:
         they were and a step gives the same outputs on any device.
         """
         device = resolve_device(device)
+        if device != self.device:  # the moved tables are this World's own from now on
+            self._shared_tables = None
         for owner in (self, *self.parts.values()):
             for name, value in vars(owner).items():
                 if isinstance(value, torch.Tensor):
@@ -701,8 +744,14 @@ class World:
         deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum`.
         """
         self._require_layout()
-        # a fixed layout has one row of tables: solved once, the same answer for every world
-        u, cells, tasks = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+        # a fixed layout has one row of tables: solved once per method, the same answer for every world
+        shared = self._shared_tables
+        solved = None if shared is None else shared.optima.get(method)
+        if solved is None:
+            solved = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+            if shared is not None:
+                shared.optima[method] = solved
+        u, cells, tasks = solved
         B, L1 = self.num_worlds, self.cfg.grid[0]
         if len(u) != B:
             u, cells, tasks = u.expand(B), cells.expand(B, -1), tasks.expand(B, -1)

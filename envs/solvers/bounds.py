@@ -57,24 +57,48 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
 
     ``-inf`` where no cell of that task is within reach (a task change alone takes a step).  Per UAV, the best
     value at each cost (moves + task change) is bucketed, then the running maximum over the costs gives every ``k``:
-    a few ``[w, N, C]`` tensors for a chunk of worlds at a time, whatever ``K``.
+    a few ``[w, N, R]`` tensors for a chunk of worlds at a time, ``R`` the cells within ``K`` moves of a cell
+    (:func:`reach_offsets`) or, where the grid has fewer, every cell: the cost follows the horizon, not the grid.
     """
     W, N = cells.shape
     C, K = contributions.shape[-2], max_steps
-    every_cell = torch.arange(C, device=cells.device)
     contributions = contributions.expand(W, -1, -1)  # one shared layout, or one per world
-    chunk = max(1, _CHUNK_ELEMENTS // (N * C))
+    offsets = reach_offsets(K, cells.device) if reach_size(K) < C else None
+    chunk = max(1, _CHUNK_ELEMENTS // (N * (C if offsets is None else len(offsets))))
     best = {RELAYING: [], SENSING: []}
     for start in range(0, W, chunk):
         here, worlds = cells[start : start + chunk], slice(start, start + chunk)
-        distance = manhattan(here.unsqueeze(-1), every_cell, grid[0])  # [w, N, C]
+        if offsets is None:  # every cell
+            near, inside = None, None
+            distance = manhattan(here.unsqueeze(-1), torch.arange(C, device=cells.device), grid[0])
+        else:  # the cells within K moves: [w, N, R], off the grid masked
+            x = here.unsqueeze(-1) % grid[0] + offsets[:, 0]
+            y = here.unsqueeze(-1) // grid[0] + offsets[:, 1]
+            inside = (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
+            near, distance = (y * grid[0] + x).where(inside, 0), offsets.abs().sum(-1).expand_as(x)
         for task, column in ((RELAYING, 0), (SENSING, 1)):
-            cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp_(max=K + 1)  # beyond K: one bucket
-            value = contributions[worlds, :, column].unsqueeze(1).expand_as(cost)
+            cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp(max=K + 1)  # beyond K: one bucket
+            value = contributions[worlds, :, column]
+            if near is None:
+                value = value.unsqueeze(1).expand_as(cost)
+            else:
+                value = value.gather(1, near.flatten(1)).view_as(cost).masked_fill(~inside, -math.inf)
             at_cost = cost.new_full((*cost.shape[:-1], K + 2), -math.inf, dtype=value.dtype)
             at_cost.scatter_reduce_(-1, cost, value, "amax")
             best[task].append(at_cost[..., : K + 1].cummax(-1).values.transpose(1, 2))  # [w, K + 1, N]
     return torch.cat(best[RELAYING]), torch.cat(best[SENSING])
+
+
+def reach_size(max_steps: int) -> int:
+    """The cells within ``max_steps`` moves of a cell on an unbounded grid: ``2 K (K + 1) + 1``."""
+    return 2 * max_steps * (max_steps + 1) + 1
+
+
+def reach_offsets(max_steps: int, device=None) -> torch.Tensor:
+    """``[reach_size(K), 2]`` every (dx, dy) with ``|dx| + |dy| <= K``."""
+    span = torch.arange(-max_steps, max_steps + 1, device=device)
+    grid = torch.cartesian_prod(span, span)
+    return grid[grid.abs().sum(-1) <= max_steps]
 
 
 def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
