@@ -463,8 +463,9 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     split of up to ``MAX_SPLIT_UAVS`` UAVs, or a few ``[rows, N]`` tensors beyond), and the optimal sets (at most
     ``MAX_CANDIDATES`` candidates, or ``[N, C]`` moves per listed set where they are searched)."""
     N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
+    reach = min(C, 2 * horizon * (horizon + 1) + 1)  # the cells scanned per UAV: those within the horizon
     chunk = 1 << 22  # uavrl.envs.solvers.bounds._CHUNK_ELEMENTS
-    reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
+    reachable = 2 * rows * N * 8 + min(num_starts * N * reach, max(chunk, N * reach)) * 48
     if N <= 10:  # uavrl.envs.solvers.bounds.MAX_SPLIT_UAVS
         relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
         candidates = 2_000_000 * N * 8 * 4

@@ -32,6 +32,7 @@ Example:
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import numbers
 import weakref
@@ -57,13 +58,27 @@ DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index
 
 
 class _SharedTables(dict):
-    """A fixed layout's tables by attribute name, shared read-only by every World of that model and device, and
-    ``optima``: its exact optimum by method, once solved."""
+    """What every World of one model and device shares, read-only: the grid's tables and a fixed layout's by attribute
+    name, ``dynamics`` (the dynamics part, whose tables are per cell) and ``optima`` (a fixed layout's exact optimum by
+    method, once solved)."""
 
-    def __init__(self, tables: dict):
-        super().__init__(tables)
+    def __init__(self):
+        super().__init__()
+        self.dynamics: Dynamics | None = None
         self.optima: dict[str, tuple] = {}
 
+
+# what World._build_geometry computes for the grid
+_GRID_TABLES = (
+    "_cell_xyz",
+    "_state_base",
+    "_grid_scale",
+    "_node_scale",
+    "_cell_xy",
+    "_code_cell",
+    "_code_task",
+    "_code_xyt",
+)
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
 _LAYOUT_TABLES = (
@@ -78,9 +93,9 @@ _LAYOUT_TABLES = (
     "_pair_state",
     "_pair_rates",
 )
-# fixed layouts' tables by (model, device), kept while a World holds them: the environments of one command (training,
-# evaluation) build a layout's per-cell tables once
-_FIXED_LAYOUT_TABLES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+# the shared tables by (model, device), kept while a World holds them: the environments of one command (training,
+# evaluation) build the per-cell tables of a grid and of a fixed layout once
+_SHARED_TABLES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
 
 
 def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
@@ -207,11 +222,17 @@ class World:
         # the parts (docs/architecture.md, The World's parts)
         self.layouts = Layouts(cfg, dev)
         self.fading = fading_part(cfg)
-        self.dynamics = Dynamics(cfg, dev)
+        key = (dataclasses.replace(cfg, max_steps=1), str(dev))  # no table depends on the episode's length
+        self._shared_tables = shared = _SHARED_TABLES.get(key)
+        if shared is None:
+            self._shared_tables = shared = _SHARED_TABLES[key] = _SharedTables()
+            shared.dynamics = Dynamics(cfg, dev)
+        self.dynamics = copy.copy(shared.dynamics)  # its own part (World.to moves it), the same tables
+        self.dynamics.cfg = cfg
         self.reward = TeamReward(cfg, self.fading.random)
         self.energy = energy_part(cfg, dev)
         self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
-        self._build_geometry()
+        self._share(_GRID_TABLES, self._build_geometry)
         # per-layout tables: one shared row for a fixed layout, one per world for random ones (zeros until a reset)
         C, f64 = cfg.num_cells, torch.float64
         fixed = self.layouts.fixed
@@ -251,21 +272,19 @@ class World:
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
-        # a fixed layout's tables (and its optimum, once solved), shared with the other Worlds of the model
-        self._shared_tables = self._fixed_layout_tables() if fixed is not None else None
+        if fixed is not None:
+            self._share(_LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
         self.set_seed(seed)
 
-    def _fixed_layout_tables(self) -> _SharedTables:
-        """The tables of the fixed layout, built here or taken from another World of the same model and device (the
-        episode length aside: no table depends on it)."""
-        key = (dataclasses.replace(self.cfg, max_steps=1), str(self.device))
-        tables = _FIXED_LAYOUT_TABLES.get(key)
-        if tables is None:
-            self._set_layout(torch.zeros(1, dtype=torch.long, device=self.device))
-            tables = _FIXED_LAYOUT_TABLES[key] = _SharedTables({name: getattr(self, name) for name in _LAYOUT_TABLES})
-        for name, value in tables.items():
-            setattr(self, name, value)
-        return tables
+    def _share(self, names: tuple[str, ...], build) -> None:
+        """Set the attributes ``names`` from another World of the same model and device, or ``build()`` them here
+        and share them."""
+        shared = self._shared_tables
+        if names[0] not in shared:
+            build()
+            shared.update({name: getattr(self, name) for name in names})
+        for name in names:
+            setattr(self, name, shared[name])
 
     def _build_geometry(self):
         """The static tables of the grid the observation reads: every cell's and every code's position."""
@@ -298,7 +317,7 @@ class World:
         """
         device = resolve_device(device)
         if device != self.device:  # the moved tables are this World's own from now on
-            self._shared_tables = None
+            self._shared_tables = _SharedTables()
         for owner in (self, *self.parts.values()):
             for name, value in vars(owner).items():
                 if isinstance(value, torch.Tensor):
@@ -745,12 +764,10 @@ class World:
         """
         self._require_layout()
         # a fixed layout has one row of tables: solved once per method, the same answer for every world
-        shared = self._shared_tables
-        solved = None if shared is None else shared.optima.get(method)
+        optima = self._shared_tables.optima if self.layouts.fixed is not None else {}
+        solved = optima.get(method)
         if solved is None:
-            solved = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
-            if shared is not None:
-                shared.optima[method] = solved
+            solved = optima[method] = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
         u, cells, tasks = solved
         B, L1 = self.num_worlds, self.cfg.grid[0]
         if len(u) != B:

@@ -140,17 +140,20 @@ def test_the_greedy_rule_needs_no_per_cell_table(grid, num_uavs, away):
     )
 
 
-def test_worlds_of_one_fixed_layout_share_its_tables_and_they_are_the_ones_built_alone():
+def test_worlds_of_one_model_share_its_tables_and_they_are_the_ones_built_alone():
     cfg = make_config("paper", grid=(7, 5), num_uavs=3)
     first = World(cfg, batch_size=4)
     second = World(cfg.replace(max_steps=9), batch_size=2)  # the episode length changes no table
-    world_module._FIXED_LAYOUT_TABLES.clear()
+    world_module._SHARED_TABLES.clear()
     alone = World(cfg, batch_size=3)
     for name in ("_cell_contrib", "_code_obs", "_code_rate", "_node_obs", "_direct"):
         assert getattr(first, name) is getattr(second, name)
         assert getattr(alone, name) is not getattr(first, name) and torch.equal(
             getattr(alone, name), getattr(first, name)
         )
+    assert first._code_xyt is second._code_xyt and first.dynamics.move_to is second.dynamics.move_to
+    assert first.dynamics is not second.dynamics and second.dynamics.cfg is second.cfg  # each World moves its own
+    assert torch.equal(alone.dynamics.move_to, first.dynamics.move_to) and torch.equal(alone._cell_xy, first._cell_xy)
     assert first.optimum()[0][:3].equal(alone.optimum()[0])
     for world in (first, second, alone):  # the same outputs from the same seed, shared or not
         world.set_seed(2)
@@ -213,6 +216,23 @@ def test_the_worlds_memory_estimate_is_flat_in_the_grid_past_the_keyed_placement
         if isinstance(getattr(world._s, name), torch.Tensor)
     )
     assert state / 64 <= per_world[0]
-    tables = sum(t.nbytes for t in world._shared_tables.values() if t is not None)
+    tables = sum(t.nbytes for t in world._shared_tables.values() if isinstance(t, torch.Tensor))
     assert tables <= world_bytes(cfg, 0)
     assert world_bytes(make_config("paper", grid=(1000, 1000), num_uavs=2), 256) < 4 * 2**30  # the default budget
+
+
+@pytest.mark.parametrize("num_uavs", [1, 2, 3, 5])
+def test_the_assignment_bound_over_every_assignment_is_the_bottleneck_one(num_uavs):
+    generator = torch.Generator().manual_seed(num_uavs)
+    W, S, grid = 12, 4, (30, 17)
+    C = grid[0] * grid[1]
+    cells = torch.stack([torch.randperm(C, generator=generator)[:num_uavs] for _ in range(W)])
+    tasks = torch.randint(0, 2, (W, num_uavs), generator=generator)
+    targets = [torch.stack([torch.randperm(C, generator=generator)[:num_uavs] for _ in range(S)]) for _ in range(W)]
+    target_tasks = [torch.randint(0, 2, (S, num_uavs), generator=generator) for _ in range(W)]
+    fast = bounds.assignment_min_steps(cells, tasks, targets, target_tasks, grid)
+    by_assignment = [
+        bounds.best_assignment(bounds.assignment_costs(c, t, tc, tt, grid))[0]
+        for c, t, tc, tt in zip(cells, tasks, targets, target_tasks, strict=True)
+    ]
+    assert fast.tolist() == by_assignment

@@ -293,8 +293,23 @@ def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
     return int(values[low])
 
 
+MAX_PERMUTED_UAVS = 6  # assignment_min_steps tries every assignment of up to this many UAVs (720), in one tensor
+
+
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
-    """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists)."""
+    """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists).
+
+    The least, over the sets and the assignments of UAVs to their pairs, of the largest steps a UAV needs: up to
+    ``MAX_PERMUTED_UAVS`` UAVs over every assignment at once, beyond by :func:`best_assignment`."""
+    N = cells.shape[-1]
+    if N <= MAX_PERMUTED_UAVS:
+        orders = torch.tensor(list(itertools.permutations(range(N))), dtype=torch.long)  # [P, N]: UAV i takes pair p_i
+        return torch.stack(
+            [
+                assignment_costs(c, t, tc, tt, grid)[:, torch.arange(N), orders].amax(-1).min()  # [S, P, N] -> bound
+                for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks, strict=True)
+            ]
+        ).long()
     return torch.tensor(
         [
             best_assignment(assignment_costs(c, t, tc, tt, grid))[0]
