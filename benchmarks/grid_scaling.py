@@ -69,14 +69,21 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def child_cpu(command: list[str], cwd: str) -> float:
+TRANSIENT = "Resource temporarily unavailable"  # a loaded machine out of threads for a moment: run it again
+
+
+def child_cpu(command: list[str], cwd: str, tries: int = 3) -> float:
     """User + system CPU seconds of ``command`` run to completion as a child process (one line on failure)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
-    if done.returncode:
-        raise SystemExit(f"{' '.join(command)} failed: {done.stderr.strip().splitlines()[-1]}")
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    for _ in range(tries):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        env = {**os.environ, "OMP_NUM_THREADS": "1"}
+        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if not done.returncode:
+            return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        if TRANSIENT not in done.stderr:
+            break
+    raise SystemExit(f"{' '.join(command)} failed: {done.stderr.strip().splitlines()[-1]}")
 
 
 def env_figures(side: int, num_uavs: int, args) -> dict[str, float]:

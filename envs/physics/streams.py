@@ -66,28 +66,42 @@ def random_bits(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int
 UNIFORM_SCALE = 1.0 / 2**32  # a uniform is its 32 random bits times this
 
 
-def distinct_cells(keys: torch.Tensor, counters: torch.Tensor, purpose: int, num_cells: int, n: int) -> torch.Tensor:
-    """``[B, n]`` distinct cells of ``0 .. num_cells - 1`` per world, an ordered draw without replacement, uniform over
-    the ordered n-tuples, in O(n^2) work per world and none per cell.
+def _cells_of_draws(heads: torch.Tensor, draws: torch.Tensor, num_cells: int) -> torch.Tensor:
+    """Uniform cells ``[k, m]`` of draws ``draws`` ``[k, m]`` of the streams with heads ``heads`` ``[k]``: 62 random
+    bits (lanes ``2 d`` and ``2 d + 1``) modulo ``num_cells``, a bias below ``num_cells / 2^62``."""
+    high = lane_bits(heads.unsqueeze(-1), 2 * draws) & 0x7FFFFFFF
+    low = lane_bits(heads.unsqueeze(-1), 2 * draws + 1) & 0x7FFFFFFF
+    return ((high << 31) | low) % num_cells
 
-    Draw ``i`` takes rank ``r`` uniform in ``[0, C - i)`` (62 random bits from lanes ``2 i`` and ``2 i + 1``, so the
-    modulo's bias is below ``C / 2^62``) and picks the ``r``-th cell not yet taken: ``r`` plus the number of taken
-    cells ``s_j`` (sorted) with ``s_j - j <= r``, the count of free cells before ``s_j``.
+
+def distinct_cells(keys: torch.Tensor, counters: torch.Tensor, purpose: int, num_cells: int, n: int) -> torch.Tensor:
+    """``[B, n]`` distinct cells of ``0 .. num_cells - 1`` per world, uniform over the ordered n-tuples, with no work
+    per cell.
+
+    UAV ``i`` takes the first of its draws ``i, n + i, 2 n + i, ...`` (uniform cells) that no UAV before it took.
+    All first draws at once, then, only in the worlds where two of them coincide (rare while ``n^2`` is small
+    beside the cells), UAV by UAV until each cell is free.
 
     >>> cells = distinct_cells(world_keys(0, 2), torch.ones(2, dtype=torch.long), 1, num_cells=10**6, n=3)
     >>> cells.shape, bool((cells >= 0).all() and (cells < 10**6).all())
     (torch.Size([2, 3]), True)
     """
-    bits = random_bits(keys, counters, purpose, 2 * n).view(len(keys), n, 2) & 0x7FFFFFFF
-    ranks = (bits[..., 0] << 31) | bits[..., 1]  # [B, n] uniform in [0, 2^62)
-    taken = ranks.new_empty(len(keys), 0)
-    for i in range(n):
-        rank = (ranks[:, i : i + 1] % (num_cells - i)).squeeze(-1)
-        ordered = taken.sort(-1).values
-        free_before = ordered - torch.arange(i, device=keys.device)  # free cells before each taken one
-        cell = rank + (free_before <= rank.unsqueeze(-1)).sum(-1)
-        taken = torch.cat([taken, cell.unsqueeze(-1)], -1)
-    return taken
+    heads = stream_heads(keys, counters, purpose)
+    cells = _cells_of_draws(heads, torch.arange(n, device=keys.device).expand(len(keys), n), num_cells)
+    ordered = cells.sort(-1).values
+    clashing = (ordered[:, 1:] == ordered[:, :-1]).any(-1).nonzero().squeeze(-1)
+    if len(clashing):
+        redone, heads = cells[clashing], heads[clashing]
+        for i in range(1, n):
+            taken = (redone[:, i : i + 1] == redone[:, :i]).any(-1).nonzero().squeeze(-1)
+            draw = i
+            while len(taken):
+                draw += n
+                fresh = _cells_of_draws(heads[taken], taken.new_full((len(taken), 1), draw), num_cells)
+                redone[taken, i] = fresh.squeeze(-1)
+                taken = taken[(redone[taken, i : i + 1] == redone[taken, :i]).any(-1)]
+        cells[clashing] = redone
+    return cells
 
 
 def uniform(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int, dtype=torch.float64) -> torch.Tensor:
