@@ -117,7 +117,11 @@ def _greedy_by_occupancy(greedy: ValidGreedy, values, allowed, positions, tasks)
     return torch.tensor(out)
 
 
-@pytest.mark.parametrize(("grid", "num_uavs", "away"), [((3, 3), 2, False), ((5, 4), 6, True), ((2, 2), 4, False)])
+# by comparing the claims (grids of more cells than N^2 A) and by a per-row occupancy table (fewer)
+@pytest.mark.parametrize(
+    ("grid", "num_uavs", "away"),
+    [((12, 12), 2, False), ((30, 20), 4, True), ((3, 3), 2, False), ((5, 4), 6, True), ((2, 2), 4, False)],
+)
 def test_the_greedy_rule_needs_no_per_cell_table(grid, num_uavs, away):
     L1, L2 = grid
     generator = torch.Generator().manual_seed(num_uavs)

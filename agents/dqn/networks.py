@@ -164,31 +164,50 @@ class ValidGreedy(nn.Module):
         switches = (tasks.unsqueeze(-1) != self.task_ids).movedim(-2, 0)  # [N, *, 2]: actions 4, 5 change the task
         # claimed[..., j]: the cell UAV j holds or has claimed.  A target is blocked when another UAV claims it; the
         # cell C off the grid blocks no one (only masked moves and the UAVs out of service, whose one action is to
-        # stay there, lead to it).  O(N) per UAV and row, whatever the grid's size.
+        # stay there, lead to it).  Found by comparing each target with the N claims (no work per cell), or where
+        # the grid has fewer cells than that costs, read from a per-row occupancy table (a UAV's own claim released
+        # while it chooses).
+        N = len(values)
         claimed = cells.clone()
-        others = ~torch.eye(len(values), dtype=torch.bool, device=cells.device)  # [N, N]: row i leaves UAV i out
+        others = ~torch.eye(N, dtype=torch.bool, device=cells.device)  # [N, N]: row i leaves UAV i out
+        occupied = None
+        if C + 2 <= N * N * self.num_actions:
+            occupied = torch.zeros(*cells.shape[:-1], C + 2, dtype=torch.bool, device=cells.device)
+            occupied.scatter_(-1, cells, True)
 
         def taken(i: int, target: torch.Tensor) -> torch.Tensor:
-            hit = (target.unsqueeze(-1) == claimed.unsqueeze(-2)) & others[i]
-            return hit.any(-1) & (target < C)
+            if occupied is not None:
+                return occupied.gather(-1, target) & (target < C)
+            return ((target.unsqueeze(-1) == claimed.unsqueeze(-2)) & others[i]).any(-1) & (target < C)
+
+        def release(i: int) -> None:
+            if occupied is not None:
+                occupied.scatter_(-1, claimed[..., i : i + 1], False)
+
+        def claim(i: int, cell: torch.Tensor) -> None:
+            claimed[..., i : i + 1] = cell
+            if occupied is not None:
+                occupied.scatter_(-1, cell, True)
 
         switched_to = torch.zeros(*cells.shape[:-1], 2, dtype=torch.bool, device=cells.device)  # switched to this step
         actions = []
-        for i in range(len(values)):
+        for i in range(N):
+            release(i)
             blocked = taken(i, targets[i]) | ~allowed[i]
             blocked[..., 4:6] |= switches[i] & switched_to
             action = values[i].masked_fill(blocked, -math.inf).argmax(-1, keepdim=True)
-            claimed[..., i : i + 1] = targets[i].gather(-1, action)
+            claim(i, targets[i].gather(-1, action))
             switched_to |= switches[i] & (action == self.task_ids + 4)
             actions.append(action)
         # second pass: a UAV that kept its cell because a later UAV still held the cell it wanted takes that move
         # now if the holder has left it (UAVs following one another move together)
-        for i in range(len(values)):
+        for i in range(N):
+            release(i)
             blocked = taken(i, targets[i][..., :4]) | ~allowed[i][..., :4]
             value, move = values[i][..., :4].masked_fill(blocked, -math.inf).max(-1, keepdim=True)
             better = (actions[i] >= 4) & (value > values[i].gather(-1, actions[i]))
             actions[i] = torch.where(better, move, actions[i])
-            claimed[..., i : i + 1] = torch.where(better, targets[i].gather(-1, move), claimed[..., i : i + 1])
+            claim(i, torch.where(better, targets[i].gather(-1, move), claimed[..., i : i + 1]))
         return torch.cat(actions, -1)
 
 
