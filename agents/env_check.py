@@ -36,7 +36,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs.config import InvalidOption, ModelConfig
 from uavrl.envs.physics.channel import fixed_layout
-from uavrl.envs.physics.grid import cells_of, grid_neighbours, on_grid
+from uavrl.envs.physics.grid import on_grid
 from uavrl.envs.world import NODE_FEATURES
 
 ADVICE = (
@@ -55,7 +55,6 @@ class RunEnvironment:
     def __init__(self, cfg: ModelConfig):
         self.grid, self.num_uavs, self.layout = tuple(cfg.grid), int(cfg.fleet_size), cfg.layout  # spares act too
         L1, L2 = self.grid
-        self.neighbours = grid_neighbours(self.grid)
         self.xy_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=torch.float64)
         self.layout_nodes = fixed_layout(cfg)  # [4, 3], None for layout="random"
         scale = torch.tensor([L1, L2, cfg.height], dtype=torch.float64)
@@ -140,7 +139,8 @@ class RunEnvironment:
             if not torch.allclose(observation[..., :2], expected, atol=1e-5):
                 raise self._refuse("the tensordict's observed positions are scaled for another grid")
             leaves = observation[..., 5:_OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
-            edges = self.neighbours[cells_of(positions, L1).where(serving, 0)] < 0
+            # the moves up, down, left, right that leave the grid, from the positions (no per-cell table)
+            edges = torch.stack([y == 0, y == L2 - 1, x == 0, x == L1 - 1], -1)
             if not torch.equal(leaves[serving], edges[serving]):
                 raise self._refuse("the tensordict's observations mark the grid's edges elsewhere")
         state = td.get("state", None)

@@ -410,17 +410,30 @@ def world_bytes(cfg, batch_size: int) -> int:
     """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
     world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).
 
-    The geometry and the per-code tables cost ~500 bytes a cell, each layout's tables ~520 (while they are built);
-    each world ~440 bytes a UAV, and a reset draws 16 bytes of random keys per cell and world (a step of 3 or more
-    UAVs counts targets per cell and world: 8 more).
+    The geometry and the per-code tables cost ~500 bytes a cell, each layout's tables ~520 (while they are built:
+    one set for a fixed layout, shared by every world); each world ~440 bytes a UAV and what a reset takes to place
+    its UAVs (:func:`placement_bytes`).
     """
     C, N, B = cfg.num_cells, cfg.fleet_size, batch_size
     layouts = B if cfg.layout == "random" else 1
-    per_world = (16 + (8 if N >= 3 else 0)) * C + 440 * N + 64
+    per_world = placement_bytes(cfg) + 440 * N + 64
     if cfg.energy != "none":  # the batteries, status and timers, and a step's ~12 [B, N] temporaries of energy
         per_world += 120 * N
     pair_tables = (2 * C) ** 2 * 200 if N == 2 and layouts == 1 and (2 * C) ** 2 <= 1 << 16 else 0
     return 500 * C + 520 * C * layouts + B * per_world + pair_tables
+
+
+# grids of at most this many cells place a reset's UAVs as every published figure did (the N smallest of one random
+# key per cell); larger ones draw N distinct cells directly (uavrl.envs.physics.streams.distinct_cells), at no cost
+# per cell
+KEYED_PLACEMENT_CELLS = 10_000
+
+
+def placement_bytes(cfg) -> int:
+    """Bytes a reset takes per world to place its UAVs on distinct cells (:meth:`uavrl.envs.physics.dynamics.Dynamics.
+    start`): 16 a cell (a random key and its ordering) on grids of at most ``KEYED_PLACEMENT_CELLS`` cells, beyond
+    ~64 a UAV whatever the grid's size."""
+    return 16 * cfg.num_cells if cfg.num_cells <= KEYED_PLACEMENT_CELLS else 64 * cfg.fleet_size
 
 
 def frame_bytes(cfg) -> int:
@@ -450,8 +463,9 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     split of up to ``MAX_SPLIT_UAVS`` UAVs, or a few ``[rows, N]`` tensors beyond), and the optimal sets (at most
     ``MAX_CANDIDATES`` candidates, or ``[N, C]`` moves per listed set where they are searched)."""
     N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
+    reach = min(C, 2 * horizon * (horizon + 1) + 1)  # the cells scanned per UAV: those within the horizon
     chunk = 1 << 22  # uavrl.envs.solvers.bounds._CHUNK_ELEMENTS
-    reachable = 2 * rows * N * 8 + min(num_starts * N * C, max(chunk, N * C)) * 48
+    reachable = 2 * rows * N * 8 + min(num_starts * N * reach, max(chunk, N * reach)) * 48
     if N <= 10:  # uavrl.envs.solvers.bounds.MAX_SPLIT_UAVS
         relaxation = rows * 8 * 4 + max(chunk, 2**N) * 8 * 8
         candidates = 2_000_000 * N * 8 * 4

@@ -32,7 +32,10 @@ Example:
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import numbers
+import weakref
 
 import torch
 
@@ -52,6 +55,47 @@ SEED_LIMIT = 2**63  # world seeds are int64
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
 # outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
 DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index")
+
+
+class _SharedTables(dict):
+    """What every World of one model and device shares, read-only: the grid's tables and a fixed layout's by attribute
+    name, ``dynamics`` (the dynamics part, whose tables are per cell) and ``optima`` (a fixed layout's exact optimum by
+    method, once solved)."""
+
+    def __init__(self):
+        super().__init__()
+        self.dynamics: Dynamics | None = None
+        self.optima: dict[str, tuple] = {}
+
+
+# what World._build_geometry computes for the grid
+_GRID_TABLES = (
+    "_cell_xyz",
+    "_state_base",
+    "_grid_scale",
+    "_node_scale",
+    "_cell_xy",
+    "_code_cell",
+    "_code_task",
+    "_code_xyt",
+)
+
+# what World._set_layout computes for a layout (and the two-UAV pair tables from them)
+_LAYOUT_TABLES = (
+    "_cell_contrib",
+    "_code_obs",
+    "_code_rate",
+    "_node_obs",
+    "_direct",
+    "_fading_table",
+    "_u_star",
+    "_pair_obs",
+    "_pair_state",
+    "_pair_rates",
+)
+# the shared tables by (model, device), kept while a World holds them: the environments of one command (training,
+# evaluation) build the per-cell tables of a grid and of a fixed layout once
+_SHARED_TABLES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
 
 
 def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
@@ -198,11 +242,17 @@ class World:
         # the parts (docs/architecture.md, The World's parts)
         self.layouts = Layouts(cfg, dev)
         self.fading = fading_part(cfg)
-        self.dynamics = Dynamics(cfg, B, dev)
+        key = (dataclasses.replace(cfg, max_steps=1), str(dev))  # no table depends on the episode's length
+        self._shared_tables = shared = _SHARED_TABLES.get(key)
+        if shared is None:
+            self._shared_tables = shared = _SHARED_TABLES[key] = _SharedTables()
+            shared.dynamics = Dynamics(cfg, dev)
+        self.dynamics = copy.copy(shared.dynamics)  # its own part (World.to moves it), the same tables
+        self.dynamics.cfg = cfg
         self.reward = TeamReward(cfg, self.fading.random)
         self.energy = energy_part(cfg, dev)
         self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
-        self._build_geometry()
+        self._share(_GRID_TABLES, self._build_geometry)
         # per-layout tables: one shared row for a fixed layout, one per world for random ones (zeros until a reset)
         C, f64 = cfg.num_cells, torch.float64
         fixed = self.layouts.fixed
@@ -243,8 +293,18 @@ class World:
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
         if fixed is not None:
-            self._set_layout(torch.zeros(1, dtype=long, device=dev))
+            self._share(_LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
         self.set_seed(seed)
+
+    def _share(self, names: tuple[str, ...], build) -> None:
+        """Set the attributes ``names`` from another World of the same model and device, or ``build()`` them here
+        and share them."""
+        shared = self._shared_tables
+        if names[0] not in shared:
+            build()
+            shared.update({name: getattr(self, name) for name in names})
+        for name in names:
+            setattr(self, name, shared[name])
 
     def _build_geometry(self):
         """The static tables of the grid the observation reads: every cell's and every code's position."""
@@ -276,6 +336,8 @@ class World:
         they were and a step gives the same outputs on any device.
         """
         device = resolve_device(device)
+        if device != self.device:  # the moved tables are this World's own from now on
+            self._shared_tables = _SharedTables()
         for owner in (self, *self.parts.values()):
             for name, value in vars(owner).items():
                 if isinstance(value, torch.Tensor):
@@ -722,8 +784,12 @@ class World:
         deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum` (``method`` as its).
         """
         self._require_layout()
-        # a fixed layout has one row of tables: solved once, the same answer for every world
-        u, cells, tasks = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+        # a fixed layout has one row of tables: solved once per method, the same answer for every world
+        optima = self._shared_tables.optima if self.layouts.fixed is not None else {}
+        solved = optima.get(method)
+        if solved is None:
+            solved = optima[method] = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
+        u, cells, tasks = solved
         B, L1 = self.num_worlds, self.cfg.grid[0]
         if len(u) != B:
             u, cells, tasks = u.expand(B), cells.expand(B, -1), tasks.expand(B, -1)

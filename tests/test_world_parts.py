@@ -280,7 +280,7 @@ def test_the_dynamics_part_alone():
     """docs/model.md's moves on a 3x2 grid: off the grid stays, sense and relay set the task, clashing moves are
     cancelled (a stayer blocks a mover, two movers into one cell), swaps go through; a reset's cells are distinct."""
     cfg = make_config("paper", grid=(3, 2), num_uavs=3, init_tasks="relaying")
-    dynamics = Dynamics(cfg, num_worlds=4)
+    dynamics = Dynamics(cfg)
     state = SimpleNamespace(cell=torch.tensor([[0, 1, 5]] * 4), task=torch.tensor([[0, 1, 0]] * 4))
     actions = torch.tensor(
         [

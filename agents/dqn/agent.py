@@ -101,8 +101,9 @@ class DQNAgent(Agent):
             )
         # this episode's layouts; the exchange method where it runs (its results recorded), the search beyond
         u_star = self.env.optimum(method="exchange" if self.env_cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search")[0]
-        # kept: the collector's closing reset draws new random layouts before the batch is read
-        layout = (self.env.cell_contributions.clone(), self.env.direct.clone())
+        # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
+        # is read; a second clone would copy every world's [C, 2] rows of a shared layout
+        layout = (self.env.cell_contributions, self.env.direct)
         batch = next(self._batches)  # [worlds, steps]
 
         def mean_utility(td: TensorDictBase) -> torch.Tensor:

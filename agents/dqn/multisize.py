@@ -137,8 +137,9 @@ class SetDQNAgent(DQNAgent):
         group.collector.reset()
         u_star = group.optimum()
         env, cfg = group.env, group.cfg
-        # kept: the collector's closing reset draws new random layouts before the batch is read
-        layout = (env.cell_contributions.clone(), env.direct.clone())
+        # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
+        # is read; a second clone would copy every world's [C, 2] rows of a shared layout
+        layout = (env.cell_contributions, env.direct)
         batch = next(group.batches)  # [worlds, steps]
 
         def mean_utility(td: TensorDictBase) -> torch.Tensor:

@@ -148,50 +148,72 @@ class ValidGreedy(nn.Module):
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
 
-    def _target_table(self) -> torch.Tensor:
-        """``[C + 1, A]`` the cell each action leads to from each cell; off-grid moves lead to an extra cell C (masked
-        out, but two UAVs given it would still collide there), where a UAV out of service stays.  "return" keeps the
-        cell for the step, as the environment's dynamics do (its flight home is the energy part's)."""
-        cells = len(self.neighbours)
-        stay = torch.arange(cells, device=self.neighbours.device).unsqueeze(-1).expand(-1, self.num_actions - 4)
-        moves = torch.cat([torch.where(self.neighbours < 0, cells, self.neighbours), stay], -1)
-        return torch.cat([moves, moves.new_full((1, self.num_actions), cells)])
+    def _targets(self, cells: torch.Tensor) -> torch.Tensor:
+        """``[*, N, A]`` the cell each action leads to from ``cells`` ``[*, N]``: off-grid moves lead to the extra cell
+        C (masked out), where a UAV out of service stays.  "return" keeps the cell for the step, as the environment's
+        dynamics do (its flight home is the energy part's).  Read from the UAVs' own rows of ``neighbours``: no
+        per-cell table, so the cost does not grow with the grid."""
+        C = len(self.neighbours)
+        serving = cells < C
+        moves = self.neighbours.index_select(0, cells.where(serving, 0).reshape(-1)).view(*cells.shape, 4)
+        moves = torch.where((moves < 0) | ~serving.unsqueeze(-1), C, moves)
+        return torch.cat([moves, cells.unsqueeze(-1).expand(*cells.shape, self.num_actions - 4)], -1)
 
     def forward(
         self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
     ) -> torch.Tensor:
-        cells = cells_or_away(positions, (self.width, len(self.neighbours) // self.width))
-        batch = cells.shape[:-1]
+        C = len(self.neighbours)
+        cells = cells_or_away(positions, (self.width, C // self.width))
         # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
-        table = self._target_table()
-        targets = table.index_select(0, cells.reshape(-1)).view(*cells.shape, -1).movedim(-2, 0).contiguous()
+        targets = self._targets(cells).movedim(-2, 0).contiguous()
         values, allowed = action_value.movedim(-2, 0).contiguous(), action_mask.movedim(-2, 0).contiguous()
         switches = (tasks.unsqueeze(-1) != self.task_ids).movedim(-2, 0)  # [N, *, 2]: actions 4, 5 change the task
-        # occupied[..., c]: cell c is held or claimed by a UAV (while a UAV chooses, its own cell is left out)
-        occupied = torch.zeros(*batch, len(table) + 1, dtype=torch.bool, device=cells.device)
-        occupied.scatter_(-1, cells, True)
-        switched_to = torch.zeros(*batch, 2, dtype=torch.bool, device=cells.device)  # a task switched to this step
-        claimed = list(cells.movedim(-1, 0).unsqueeze(-1))  # [*, 1] per UAV
+        # claimed[..., j]: the cell UAV j holds or has claimed.  A target is blocked when another UAV claims it; the
+        # cell C off the grid blocks no one (only masked moves and the UAVs out of service, whose one action is to
+        # stay there, lead to it).  Found by comparing each target with the N claims (no work per cell), or where
+        # the grid has fewer cells than that costs, read from a per-row occupancy table (a UAV's own claim released
+        # while it chooses).
+        N = len(values)
+        claimed = cells.clone()
+        others = ~torch.eye(N, dtype=torch.bool, device=cells.device)  # [N, N]: row i leaves UAV i out
+        occupied = None
+        if C + 2 <= N * N * self.num_actions:
+            occupied = torch.zeros(*cells.shape[:-1], C + 2, dtype=torch.bool, device=cells.device)
+            occupied.scatter_(-1, cells, True)
+
+        def taken(i: int, target: torch.Tensor) -> torch.Tensor:
+            if occupied is not None:
+                return occupied.gather(-1, target) & (target < C)
+            return ((target.unsqueeze(-1) == claimed.unsqueeze(-2)) & others[i]).any(-1) & (target < C)
+
+        def release(i: int) -> None:
+            if occupied is not None:
+                occupied.scatter_(-1, claimed[..., i : i + 1], False)
+
+        def claim(i: int, cell: torch.Tensor) -> None:
+            claimed[..., i : i + 1] = cell
+            if occupied is not None:
+                occupied.scatter_(-1, cell, True)
+
+        switched_to = torch.zeros(*cells.shape[:-1], 2, dtype=torch.bool, device=cells.device)  # switched to this step
         actions = []
-        for i in range(len(values)):
-            occupied.scatter_(-1, claimed[i], False)
-            blocked = occupied.gather(-1, targets[i]) | ~allowed[i]
+        for i in range(N):
+            release(i)
+            blocked = taken(i, targets[i]) | ~allowed[i]
             blocked[..., 4:6] |= switches[i] & switched_to
             action = values[i].masked_fill(blocked, -math.inf).argmax(-1, keepdim=True)
-            claimed[i] = targets[i].gather(-1, action)
-            occupied.scatter_(-1, claimed[i], True)
+            claim(i, targets[i].gather(-1, action))
             switched_to |= switches[i] & (action == self.task_ids + 4)
             actions.append(action)
         # second pass: a UAV that kept its cell because a later UAV still held the cell it wanted takes that move
         # now if the holder has left it (UAVs following one another move together)
-        for i in range(len(values)):
-            occupied.scatter_(-1, claimed[i], False)
-            blocked = occupied.gather(-1, targets[i][..., :4]) | ~allowed[i][..., :4]
+        for i in range(N):
+            release(i)
+            blocked = taken(i, targets[i][..., :4]) | ~allowed[i][..., :4]
             value, move = values[i][..., :4].masked_fill(blocked, -math.inf).max(-1, keepdim=True)
             better = (actions[i] >= 4) & (value > values[i].gather(-1, actions[i]))
             actions[i] = torch.where(better, move, actions[i])
-            claimed[i] = torch.where(better, targets[i].gather(-1, move), claimed[i])
-            occupied.scatter_(-1, claimed[i], True)
+            claim(i, torch.where(better, targets[i].gather(-1, move), claimed[..., i : i + 1]))
         return torch.cat(actions, -1)
 
 

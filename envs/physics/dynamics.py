@@ -19,7 +19,7 @@ Example:
     >>> import torch
     >>> from types import SimpleNamespace
     >>> from uavrl.envs import make_config
-    >>> dynamics = Dynamics(make_config("paper", grid=(3, 2), num_uavs=2), num_worlds=1)
+    >>> dynamics = Dynamics(make_config("paper", grid=(3, 2), num_uavs=2))
     >>> now = SimpleNamespace(cell=torch.tensor([[0, 2]]), task=torch.tensor([[0, 0]]))
     >>> after = dynamics.step(now, torch.tensor([[3, 2]]))  # both move right/left into cell 1: both cancelled
     >>> after["cell"].tolist(), dynamics.step(now, torch.tensor([[3, 5]]))["cell"].tolist()
@@ -33,6 +33,7 @@ from __future__ import annotations
 import torch
 
 from ..config import RELAYING, SENSING, ModelConfig
+from ..limits import KEYED_PLACEMENT_CELLS
 from . import streams
 from .grid import grid_neighbours
 
@@ -46,9 +47,9 @@ def _lookup(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
 
 
 class Dynamics:
-    """The UAVs' dynamics for ``num_worlds`` worlds of the model ``cfg`` (the module's docstring)."""
+    """The UAVs' dynamics of the model ``cfg``, for any number of worlds (the module's docstring)."""
 
-    def __init__(self, cfg: ModelConfig, num_worlds: int, device="cpu"):
+    def __init__(self, cfg: ModelConfig, device="cpu"):
         self.cfg = cfg
         C, A = cfg.num_cells, cfg.num_actions
         self.num_actions = A
@@ -68,18 +69,23 @@ class Dynamics:
             self.move_to = torch.cat([self.move_to, self.move_to.new_full((A,), C)])
             away_mask = torch.arange(A, device=device) == NO_OP
             self.cell_mask = torch.cat([self.cell_mask, away_mask[None]])
-        self.cell_offset = torch.arange(num_worlds, device=device).unsqueeze(-1) * self.slots  # world w's cells
 
     def start(self, keys: torch.Tensor, counters: torch.Tensor) -> dict[str, torch.Tensor]:
         """The state of ``k`` worlds at a reset (``keys``, ``counters`` ``[k]``: their streams): distinct random
-        cells (the N smallest of C random keys) and tasks per ``init_tasks``; spares (``num_spares``) at the base."""
+        cells and tasks per ``init_tasks``; spares (``num_spares``) at the base.
+
+        The cells: on up to :data:`~uavrl.envs.limits.KEYED_PLACEMENT_CELLS` cells the N smallest of C random keys,
+        beyond it :func:`~.streams.distinct_cells` (both uniform over the ordered N-tuples of distinct cells)."""
         cfg, N = self.cfg, self.cfg.num_uavs
-        smallest = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells).topk(N, dim=-1, largest=False)
+        if cfg.num_cells <= KEYED_PLACEMENT_CELLS:
+            keyed = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells)
+            cell = keyed.topk(N, dim=-1, largest=False).indices
+        else:
+            cell = streams.distinct_cells(keys, counters, streams.POSITIONS, cfg.num_cells, N)
         if cfg.init_tasks == "random":
             task = streams.random_bits(keys, counters, streams.TASKS, N) & 1
         else:
             task = torch.full((len(keys), N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=keys.device)
-        cell = smallest.indices
         if cfg.num_spares:  # the spares wait at the base, sensing nothing, on the cell off the grid
             cell = torch.cat([cell, cell.new_full((len(keys), cfg.num_spares), cfg.num_cells)], -1)
             task = torch.cat([task, task.new_full((len(keys), cfg.num_spares), SENSING)], -1)
@@ -132,10 +138,13 @@ class Dynamics:
             active = active[clash.any(-1)]
         return target
 
-    def clashes(self, target: torch.Tensor) -> torch.Tensor:
-        """``[W, N]``: does another UAV of the same world target the same cell?  By counting targets per cell."""
-        offset = self.cell_offset[: len(target)]
-        if len(offset) < len(target):  # more rows than worlds (World.successors): each row its own cells
-            offset = torch.arange(len(target), device=target.device).unsqueeze(-1) * self.slots
-        flat = (target + offset).view(-1)
-        return (torch.bincount(flat, minlength=len(target) * self.slots).index_select(0, flat) > 1).view_as(target)
+    @staticmethod
+    def clashes(target: torch.Tensor) -> torch.Tensor:
+        """``[W, N]``: does another UAV of the same world target the same cell?  By sorting each world's N targets
+        (no work per cell)."""
+        ordered, order = target.sort(-1)
+        same = ordered[:, 1:] == ordered[:, :-1]
+        edge = same.new_zeros(len(target), 1)
+        return torch.zeros_like(target, dtype=torch.bool).scatter_(
+            -1, order, torch.cat([same, edge], -1) | torch.cat([edge, same], -1)
+        )

@@ -66,6 +66,44 @@ def random_bits(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int
 UNIFORM_SCALE = 1.0 / 2**32  # a uniform is its 32 random bits times this
 
 
+def _cells_of_draws(heads: torch.Tensor, draws: torch.Tensor, num_cells: int) -> torch.Tensor:
+    """Uniform cells ``[k, m]`` of draws ``draws`` ``[k, m]`` of the streams with heads ``heads`` ``[k]``: 62 random
+    bits (lanes ``2 d`` and ``2 d + 1``) modulo ``num_cells``, a bias below ``num_cells / 2^62``."""
+    high = lane_bits(heads.unsqueeze(-1), 2 * draws) & 0x7FFFFFFF
+    low = lane_bits(heads.unsqueeze(-1), 2 * draws + 1) & 0x7FFFFFFF
+    return ((high << 31) | low) % num_cells
+
+
+def distinct_cells(keys: torch.Tensor, counters: torch.Tensor, purpose: int, num_cells: int, n: int) -> torch.Tensor:
+    """``[B, n]`` distinct cells of ``0 .. num_cells - 1`` per world, uniform over the ordered n-tuples, with no work
+    per cell.
+
+    UAV ``i`` takes the first of its draws ``i, n + i, 2 n + i, ...`` (uniform cells) that no UAV before it took.
+    All first draws at once, then, only in the worlds where two of them coincide (rare while ``n^2`` is small
+    beside the cells), UAV by UAV until each cell is free.
+
+    >>> cells = distinct_cells(world_keys(0, 2), torch.ones(2, dtype=torch.long), 1, num_cells=10**6, n=3)
+    >>> cells.shape, bool((cells >= 0).all() and (cells < 10**6).all())
+    (torch.Size([2, 3]), True)
+    """
+    heads = stream_heads(keys, counters, purpose)
+    cells = _cells_of_draws(heads, torch.arange(n, device=keys.device).expand(len(keys), n), num_cells)
+    ordered = cells.sort(-1).values
+    clashing = (ordered[:, 1:] == ordered[:, :-1]).any(-1).nonzero().squeeze(-1)
+    if len(clashing):
+        redone, heads = cells[clashing], heads[clashing]
+        for i in range(1, n):
+            taken = (redone[:, i : i + 1] == redone[:, :i]).any(-1).nonzero().squeeze(-1)
+            draw = i
+            while len(taken):
+                draw += n
+                fresh = _cells_of_draws(heads[taken], taken.new_full((len(taken), 1), draw), num_cells)
+                redone[taken, i] = fresh.squeeze(-1)
+                taken = taken[(redone[taken, i : i + 1] == redone[taken, :i]).any(-1)]
+        cells[clashing] = redone
+    return cells
+
+
 def uniform(keys: torch.Tensor, counters: torch.Tensor, purpose: int, n: int, dtype=torch.float64) -> torch.Tensor:
     """``[B, n]`` uniforms in ``[0, 1)`` with 32 bits of resolution."""
     return random_bits(keys, counters, purpose, n).to(dtype) * UNIFORM_SCALE

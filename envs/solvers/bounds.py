@@ -57,7 +57,8 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
 
     ``-inf`` where no cell of that task is within reach (a task change alone takes a step).  Per UAV, the best
     value at each cost (moves + task change) is bucketed, then the running maximum over the costs gives every ``k``:
-    a few ``[w, N, C]`` tensors for a chunk of worlds at a time, whatever ``K``.
+    a few ``[w, N, R]`` tensors for a chunk of worlds at a time, ``R`` the cells within ``K`` moves of a cell
+    (:func:`reach_offsets`) or, where the grid has fewer, every cell: the cost follows the horizon, not the grid.
 
     Args:
         cells: the UAVs' cells ``[W, N]`` at the start.
@@ -71,20 +72,43 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
     """
     W, N = cells.shape
     C, K = contributions.shape[-2], max_steps
-    every_cell = torch.arange(C, device=cells.device)
     contributions = contributions.expand(W, -1, -1)  # one shared layout, or one per world
-    chunk = max(1, _CHUNK_ELEMENTS // (N * C))
+    offsets = reach_offsets(K, cells.device) if reach_size(K) < C else None
+    chunk = max(1, _CHUNK_ELEMENTS // (N * (C if offsets is None else len(offsets))))
     best = {RELAYING: [], SENSING: []}
     for start in range(0, W, chunk):
         here, worlds = cells[start : start + chunk], slice(start, start + chunk)
-        distance = manhattan(here.unsqueeze(-1), every_cell, grid[0])  # [w, N, C]
+        if offsets is None:  # every cell
+            near, inside = None, None
+            distance = manhattan(here.unsqueeze(-1), torch.arange(C, device=cells.device), grid[0])
+        else:  # the cells within K moves: [w, N, R], off the grid masked
+            x = here.unsqueeze(-1) % grid[0] + offsets[:, 0]
+            y = here.unsqueeze(-1) // grid[0] + offsets[:, 1]
+            inside = (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
+            near, distance = (y * grid[0] + x).where(inside, 0), offsets.abs().sum(-1).expand_as(x)
         for task, column in ((RELAYING, 0), (SENSING, 1)):
-            cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp_(max=K + 1)  # beyond K: one bucket
-            value = contributions[worlds, :, column].unsqueeze(1).expand_as(cost)
+            cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp(max=K + 1)  # beyond K: one bucket
+            value = contributions[worlds, :, column]
+            if near is None:
+                value = value.unsqueeze(1).expand_as(cost)
+            else:
+                value = value.gather(1, near.flatten(1)).view_as(cost).masked_fill(~inside, -math.inf)
             at_cost = cost.new_full((*cost.shape[:-1], K + 2), -math.inf, dtype=value.dtype)
             at_cost.scatter_reduce_(-1, cost, value, "amax")
             best[task].append(at_cost[..., : K + 1].cummax(-1).values.transpose(1, 2))  # [w, K + 1, N]
     return torch.cat(best[RELAYING]), torch.cat(best[SENSING])
+
+
+def reach_size(max_steps: int) -> int:
+    """The cells within ``max_steps`` moves of a cell on an unbounded grid: ``2 K (K + 1) + 1``."""
+    return 2 * max_steps * (max_steps + 1) + 1
+
+
+def reach_offsets(max_steps: int, device=None) -> torch.Tensor:
+    """``[reach_size(K), 2]`` every (dx, dy) with ``|dx| + |dy| <= K``."""
+    span = torch.arange(-max_steps, max_steps + 1, device=device)
+    grid = torch.cartesian_prod(span, span)
+    return grid[grid.abs().sum(-1) <= max_steps]
 
 
 def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
@@ -312,8 +336,14 @@ def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
     return int(values[low])
 
 
+MAX_PERMUTED_UAVS = 6  # assignment_min_steps tries every assignment of up to this many UAVs (720), in one tensor
+
+
 def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
     """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists).
+
+    The least, over the sets and the assignments of UAVs to their pairs, of the largest steps a UAV needs: up to
+    ``MAX_PERMUTED_UAVS`` UAVs over every assignment at once, beyond by :func:`best_assignment`.
 
     Args:
         cells: the UAVs' cells ``[W, N]``.
@@ -322,6 +352,15 @@ def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torc
         target_tasks: per world, their tasks ``[S, N]``.
         grid: ``(L1, L2)`` cells.
     """
+    N = cells.shape[-1]
+    if N <= MAX_PERMUTED_UAVS:
+        orders = torch.tensor(list(itertools.permutations(range(N))), dtype=torch.long)  # [P, N]: UAV i takes pair p_i
+        return torch.stack(
+            [
+                assignment_costs(c, t, tc, tt, grid)[:, torch.arange(N), orders].amax(-1).min()  # [S, P, N] -> bound
+                for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks, strict=True)
+            ]
+        ).long()
     return torch.tensor(
         [
             best_assignment(assignment_costs(c, t, tc, tt, grid))[0]

@@ -13,7 +13,7 @@ then do the same for E with the N cells of largest ``b``.  So an optimum has
 cells of largest ``b`` in ``top_b`` minus R.  Enumerating the ``2^N`` subsets R
 of ``top_a`` is therefore exact: 1,024 candidates for N = 10 on any grid.
 
-*Branch and bound* (``method="search"``, N > 20).  Order the cells by ``a`` and by ``b`` (ties by index).  Moving
+*Branch and bound* (``method="search"``, N > 10).  Order the cells by ``a`` and by ``b`` (ties by index).  Moving
 a relay to an unused cell earlier in the ``a`` order, or a sensor to one earlier in the ``b`` order, never lowers
 ``U``, and each move lowers the sum of the ranks, so some optimum has no unused cell before a relay (``a`` order) or
 before a sensor (``b`` order).  Its cells are then exactly a prefix of the ``a`` order plus a prefix of the ``b``
@@ -44,6 +44,9 @@ from ..physics.channel import rates, rates_from_sums
 
 BRUTE_FORCE_LIMIT = 200_000  # candidate configurations per world
 MAX_EXCHANGE_UAVS = 20
+# auto: the exchange method up to this many UAVs, the search beyond (measured per world, 20x20 and 100x100 grids:
+# both ~1 ms at N = 10; at N = 12 the exchange takes 2-5x, at N = 20 ~10 s against the search's ~0.02 s)
+AUTO_EXCHANGE_UAVS = 10
 SEARCH_NODE_LIMIT = 200_000  # branch-and-bound nodes per world before the search returns its best and a bound
 _CHUNK_ELEMENTS = 1 << 24
 
@@ -52,9 +55,11 @@ def optimum(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, 
     """``(U* [B], cells [B, N], tasks [B, N])`` for per-cell contributions ``[B, C, 2]`` and direct terms ``[B, 2]``.
 
     ``method``: ``"brute"`` (every configuration), ``"exchange"`` (the exact
-    subset method above, N <= 20), ``"search"`` (the branch and bound above) or ``"auto"`` (brute force when it has
-    at most ``BRUTE_FORCE_LIMIT`` candidates per world, else the exchange method up to ``MAX_EXCHANGE_UAVS``, else
-    the search).  Where the search stopped at its node limit, ``U*`` is the best found (:func:`optimum_bound`).
+    subset method above, N <= 20), ``"search"`` (the branch and bound above) or ``"auto"`` (the fastest exact one:
+    brute force when it has at most ``BRUTE_FORCE_LIMIT`` candidates per world, else the exchange method up to
+    ``AUTO_EXCHANGE_UAVS``, else the search, and the exchange method in the worlds where the search stopped at its
+    node limit, up to ``MAX_EXCHANGE_UAVS``).  Where the search stopped at its node limit beyond, ``U*`` is the best
+    found (:func:`optimum_bound`).
 
     Args:
         cell_contrib: each cell's contributions ``[B, C, 2]`` when relaying and when sensing
@@ -107,7 +112,9 @@ def solve(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, me
     if method not in ("auto", "brute", "exchange", "search"):
         raise InvalidOption("method", method, "allowed values are 'auto', 'brute', 'exchange', 'search'")
     if method == "auto":
-        method = "brute" if brute_size <= BRUTE_FORCE_LIMIT else "exchange" if N <= MAX_EXCHANGE_UAVS else "search"
+        method = "brute" if brute_size <= BRUTE_FORCE_LIMIT else "exchange" if N <= AUTO_EXCHANGE_UAVS else "search"
+        if method == "search":
+            return _search_or_exchange(cell_contrib, direct, cfg)
     if method == "search":
         return _search(cell_contrib, direct, cfg)
     if method == "brute":
@@ -124,6 +131,16 @@ def solve(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, me
         )
     u, cells, tasks = _exchange(cell_contrib, direct, cfg)
     return u, cells, tasks, u
+
+
+def _search_or_exchange(cell_contrib, direct, cfg):
+    """The search, then the exchange method in the worlds where the search stopped at its node limit (N <= 20)."""
+    u, cells, tasks, upper = _search(cell_contrib, direct, cfg)
+    stopped = (upper > u).nonzero().squeeze(-1)
+    if len(stopped) and cfg.num_uavs <= MAX_EXCHANGE_UAVS:
+        u[stopped], cells[stopped], tasks[stopped] = _exchange(cell_contrib[stopped], direct[stopped], cfg)
+        upper[stopped] = u[stopped]
+    return u, cells, tasks, upper
 
 
 def _all_configurations(C: int, N: int, device):
