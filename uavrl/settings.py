@@ -133,9 +133,10 @@ def check_scenario(cfg: DictConfig) -> None:
 START_BLOCK = 256  # agents/tabular/learner.py: episodes whose starts one World draws for all runs
 # The DQN's CPU time on one core of the machine of BENCHMARKS.md: a batched environment step and a gradient step cost
 # a fixed overhead and more per UAV (the greedy valid action picks UAV by UAV), the networks' multiply-adds at
-# MACS_PER_SECOND and the greedy action's per-cell work (its occupancy of the grid, per world and per sampled
-# transition) at CELLS_PER_SECOND.  Measured CPU seconds an iteration against this estimate: the defaults on 6x6
-# 0.56 (0.44), N = 6 on 10x10 with QMIX 0.63 idle, 0.86 loaded (0.82), 2 UAVs on 300x300 1.65 (1.58).
+# MACS_PER_SECOND and the greedy action's occupancy table (per world and per sampled transition: the grid's cells,
+# where it has fewer than N^2 A, else none; agents/dqn/networks.py ValidGreedy) at CELLS_PER_SECOND.  Measured CPU
+# seconds an iteration against this estimate: the defaults on 6x6 0.56 (0.44), N = 6 on 10x10 with QMIX 0.63 idle,
+# 0.86 loaded (0.82).
 STEP_SECONDS, UPDATE_SECONDS, UAV_SECONDS = 2e-3, 3e-3, 0.5e-3
 MACS_PER_SECOND, CELLS_PER_SECOND = 1.5e10, 8e8
 GROUPS = ("scenario", "env", "agent")  # config groups: a setting of one may come from the group's choice
@@ -480,7 +481,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         s, rows = agent(low), group_batch(low)
         return sum(
             rows * (frame_bytes(m) + FLOAT * costs.team_row_values(m.fleet_size, m.num_actions, _e(m), s))
-            + rows * (m.num_cells + 2)  # the greedy action's occupancy of every cell
+            + rows * greedy_cells(m)  # the greedy action's occupancy table
             for m in models(low)
         )
 
@@ -500,9 +501,9 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         for m in models(low):
             macs = costs.team_row_macs(m.fleet_size, m.num_actions, _e(m), s)
             per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
-            per_step += n["agent.worlds"] * (2 * macs / MACS_PER_SECOND + m.num_cells / CELLS_PER_SECOND)
+            per_step += n["agent.worlds"] * (2 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
             per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size
-            per_update += rows * (6 * macs / MACS_PER_SECOND + m.num_cells / CELLS_PER_SECOND)
+            per_update += rows * (6 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
             total_seconds += n["env.max_steps"] * per_step + n["agent.updates"] * per_update
         return math.ceil(n["agent.iterations"] * total_seconds)
 
@@ -530,16 +531,23 @@ def _e(model) -> bool:
     return model.energy != "none"
 
 
+def greedy_cells(model) -> int:
+    """The cells of the greedy valid action's occupancy table (``ValidGreedy``): the grid's and two more where that
+    is fewer than N^2 A comparisons of targets with claims, else none (its cost then follows the team, not the grid)."""
+    cells = model.num_cells + 2
+    return cells if cells <= model.fleet_size**2 * model.num_actions else 0
+
+
 def policy_pass(model, a, starts: Factor) -> Cost:
     """The DQN policy's forward pass over the evaluation's starts: its activations and the greedy action's
-    occupancy of every cell."""
+    occupancy table (:func:`greedy_cells`)."""
     settings = _Agent({k: a.get(k) for k in ("network", "head", "mixer", "hidden", "depth", "heads")})
     settings["mixing_embed_dim"] = a.get("mixing_embed_dim")
 
     def estimate(low):
         m, rows = _Resized(model, low), (starts.least if starts.name in low else starts.size)
         values = costs.team_row_values(m.fleet_size, m.num_actions, _e(m), settings)
-        return rows * (FLOAT * values + m.num_cells + 2)
+        return rows * (FLOAT * values + greedy_cells(m))
 
     return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
 
