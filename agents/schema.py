@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from uavrl.envs.config import ModelConfig
 
 METHODS = ("q_learning", "value_iteration")
+DEMONSTRATIONS = ("none", "oracle")
+CURRICULA = ("none", "loss")
 MEMORY_BUDGET = positive()
 
 
@@ -115,6 +117,23 @@ class DQNSchema:
         factory=list,
     )
     heads: int = setting(4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)")
+    demonstrations: str = setting(
+        "none",
+        one_of(*DEMONSTRATIONS, what="demonstrations"),
+        "agent.network=set: oracle keeps the oracle planner's trajectories in the replay and adds DQfD's margin loss "
+        "(agents/dqn/demonstrations.py); none: pure RL",
+    )
+    demo_transitions: int = setting(20000, whole(1), "agent.demonstrations=oracle: transitions, split over the teams")
+    demo_batch_share: REAL = setting(
+        0.25, interval(0.0, 0.9, low_open=True), "agent.demonstrations=oracle: the demonstrations' share of a batch"
+    )
+    margin: REAL = setting(0.8, positive(), "agent.demonstrations=oracle: the margin of DQfD's supervised loss")
+    curriculum: str = setting(
+        "none",
+        one_of(*CURRICULA, what="curricula"),
+        "agent.network=set: loss gives each team and layout a share of every batch by its recent TD loss "
+        "(agents/dqn/curriculum.py); none: equal shares",
+    )
     worlds: int = setting(64, whole(1), "parallel worlds, each plays one episode per iteration")
     hidden: int = setting(128, whole(1), "units per hidden layer")
     depth: int = setting(

@@ -18,11 +18,21 @@ def check_settings(env_cfg: ModelConfig, a) -> None:
             raise ValueError(
                 "agent.mixer='mean' is invalid with agent.network='team': use vdn or qmix, or agent.network=set"
             )
+        for lever, off in (("demonstrations", "none"), ("curriculum", "none")):
+            if a.get(lever, off) != off:
+                raise ValueError(
+                    f"agent.{lever}={a[lever]!r} is invalid with agent.network='team': use agent.network=set"
+                )
         if a.get("sizes"):
             raise ValueError(
                 f"agent.sizes={list(a.sizes)} is invalid with agent.network='team', which is sized by the run's env: "
                 "use agent.network=set"
             )
+    if a.get("demonstrations", "none") != "none" and env_cfg.energy != "none":
+        raise ValueError(
+            f"agent.demonstrations={a.demonstrations!r} is invalid with env.energy={env_cfg.energy!r}: the oracle's "
+            "demonstrations ignore the batteries; use agent.demonstrations=none"
+        )
     if a.head == "joint" and env_cfg.num_joint_actions > MAX_JOINT_ACTIONS:
         raise ValueError(
             f"agent.head='joint' with num_uavs={env_cfg.num_uavs} needs 6^{env_cfg.num_uavs} = "
