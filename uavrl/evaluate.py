@@ -120,6 +120,7 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     check_settings(cfg)
     import torch  # the heavy modules, once the settings are known to be good
 
+    from uavrl.agents.lookahead import lookahead_settings
     from uavrl.envs.world import resolve_device
     from uavrl.evaluation import evaluate_agent
 
@@ -131,7 +132,7 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     evaluated = evaluated_config(saved, cfg, overrides, f"checkpoint={quoted(cfg.checkpoint)}")
     if cfg.eval.video:  # refused before the evaluation's work, not after it
         check_video_cost(cfg, model_config(evaluated))
-    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
+    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device), **lookahead_settings(cfg))
     out_dir = output_dir(cfg.checkpoint)
     path = out_dir / evaluation_file(saved, evaluated)
     save_json(metrics, path)

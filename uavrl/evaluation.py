@@ -525,9 +525,14 @@ def _references(world, start, u_star, horizon, gamma) -> dict:
     return _REFERENCE_CACHE[key]
 
 
-def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
+def evaluate_agent(agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width: int = 8, **kwargs) -> dict[str, float]:
     """Average :func:`evaluate` over an agent's greedy policies (one per independent run; ``agent.evaluate``);
-    the worst start's optimality."""
+    the worst start's optimality.  ``lookahead`` > 0 (``eval.lookahead``): its depth-``lookahead`` search instead
+    (:mod:`uavrl.agents.lookahead`)."""
+    if lookahead:
+        from uavrl.agents.lookahead import evaluate_with_lookahead
+
+        return evaluate_with_lookahead(agent, cfg, lookahead, lookahead_width, **kwargs)
     results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):
