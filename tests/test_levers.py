@@ -86,9 +86,10 @@ def test_agent_with_demonstrations_and_curriculum_trains_and_resumes():
     cfg = compose_cfg("agent.layouts=[line,random]", "agent.demonstrations=oracle", "agent.demo_transitions=80")
     cfg.agent.curriculum = "loss"
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
-    assert [len(buffer) for buffer in agent.demonstrations.buffers] == [20] * 4
+    assert agent.demonstrations is None  # built at the first gradient step, never for an evaluation
     for _ in range(2):
         metrics = agent.train_iteration()
+    assert [len(buffer) for buffer in agent.demonstrations.buffers] == [20] * 4
     assert "train/loss" in metrics
     shares = agent.curriculum.shares()
     assert float(shares.sum()) == pytest.approx(1.0) and bool((shares >= 0.5 / 4 - 1e-12).all())
@@ -96,9 +97,9 @@ def test_agent_with_demonstrations_and_curriculum_trains_and_resumes():
     again = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     again.load_state_dict(state)
     assert torch.equal(again.curriculum.average, agent.curriculum.average)
+    assert "train/loss" in again.train_iteration()
     for rebuilt, kept in zip(again.demonstrations.buffers, agent.demonstrations.buffers, strict=True):
         assert (rebuilt[:] == kept[:]).all()  # the demonstrations are rebuilt from the seed, not saved
-    assert "train/loss" in again.train_iteration()
 
 
 def test_curriculum_shares_follow_the_recent_losses():

@@ -1,7 +1,7 @@
 """Learning from the oracle's demonstrations (``agent.demonstrations=oracle``): DQfD (Hester et al., "Deep
 Q-learning from Demonstrations", AAAI 2018) for the size-free DQN.
 
-Before the first iteration the oracle planner (:class:`~uavrl.agents.baselines.OraclePolicy`, which knows U*'s
+At the first gradient step the oracle planner (:class:`~uavrl.agents.baselines.OraclePolicy`, which knows U*'s
 configurations) plays episodes of ``env.max_steps`` steps from random starts in every team and layout of the run
 (``agent.sizes`` x ``agent.layouts``); ``agent.demo_transitions`` of its transitions, split evenly over the teams, are
 kept for the whole run beside the agent's own replay (never overwritten), with the rewards of the agent's objective.

@@ -142,9 +142,7 @@ class SetDQNAgent(DQNAgent):
         self.groups = [_Group(self, model, self._group_seed(0, g), frames) for g, model in enumerate(models)]
         # the sample-efficiency levers (off: pure RL): the oracle's demonstrations, a curriculum over the groups
         self.curriculum = Curriculum(a.get("curriculum", "none"), len(self.groups), self.batch_size * len(self.groups))
-        self.demonstrations = None
-        if a.get("demonstrations", "none") == "oracle":
-            self.demonstrations = Demonstrations(self, self.groups)
+        self.demonstrations = None  # built at the first gradient step: an evaluation of the checkpoint needs none
 
     @staticmethod
     def _check(env_cfg: ModelConfig, a) -> None:
@@ -208,6 +206,8 @@ class SetDQNAgent(DQNAgent):
         )
 
     def _update(self) -> torch.Tensor:
+        if self.demonstrations is None and self.settings.get("demonstrations", "none") == "oracle":
+            self.demonstrations = Demonstrations(self, self.groups)
         sizes, losses, margins = self.curriculum.batch_sizes(), [], []
         for g, (group, size) in enumerate(zip(self.groups, sizes, strict=True)):
             if self.demonstrations is None:
