@@ -10,7 +10,8 @@ policy, and the pure-RL and the combined checkpoints also with ``eval.lookahead=
 ratio (N = 2 on 6x6) or the share of starts reaching 0.999 U* and the quotient of the policy's and the oracle's
 mean steps over the fewest ("x oracle", each over its own reaching starts); means over the seeds.  Train CPU s: the
 whole ``uavrl.train`` process (start-up, the oracle's demonstrations, training and its own 8-start evaluation);
-lookahead: its CPU seconds per world and step at the largest team.  Runs and evaluations already in ``--out`` are
+last, each learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the
+lookahead's search).  Runs and evaluations already in ``--out`` are
 reused, so an interrupted benchmark continues.
 """
 
@@ -85,6 +86,24 @@ def train(out: Path, policy: str, seed: int, args) -> dict:
     return result
 
 
+class TimedPolicy:
+    """A policy's CPU seconds and the world-steps it chose (``bind_env`` passed on)."""
+
+    def __init__(self, policy):
+        self.policy, self.seconds, self.world_steps = policy, 0.0, 0
+
+    def bind_env(self, env):
+        self.policy.bind_env(env)
+        return self
+
+    def __call__(self, td):
+        began = time.process_time()
+        out = self.policy(td)
+        self.seconds += time.process_time() - began
+        self.world_steps += td.batch_size.numel()
+        return out
+
+
 def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
     """Every policy's metrics on one team (cached in ``out``), from the same held-out starts."""
     import torch
@@ -119,8 +138,10 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
                 metrics = evaluate(RandomPolicy(seed=0), cfg, num_starts=args.starts)
             elif policy in LOOKAHEAD_OF.values():
                 metrics = evaluate_with_lookahead(agent, cfg, args.lookahead, args.width, num_starts=args.starts)
-            else:
-                metrics = agent.evaluate(cfg, num_starts=args.starts)[0]
+            else:  # agent.evaluate's evaluation, with the greedy policy's own CPU time
+                policy = TimedPolicy(agent.policy_for(cfg))
+                metrics = evaluate(policy, cfg, num_starts=args.starts)
+                metrics["eval/policy_cpu_s_per_step"] = policy.seconds / max(1, policy.world_steps)
             metrics["cpu_s"] = time.process_time() - began
             done[key] = metrics
             path.write_text(json.dumps(done, indent=1))
@@ -168,14 +189,14 @@ def main() -> None:
     with ProcessPoolExecutor(args.jobs) as pool:
         done = {team: pool.submit(evaluate_team, args.out, team, runs, args) for team in args.teams}
         per_team = {team: future.result() for team, future in done.items()}
+    largest = max(args.teams, key=lambda t: int(t.split(":")[0]))
     header = ["policy", "oracle's knowledge", "train CPU s"]
     header += [
         f"N = {t.split(':')[0]}, {t.split(':')[1]}{' random' if t.endswith('random') else ''}" for t in args.teams
     ]
-    header.append("lookahead CPU s / step")
+    header.append(f"policy CPU s / world-step, N = {largest.split(':')[0]}")
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
-    largest = max(args.teams, key=lambda t: int(t.split(":")[0]))
     for policy, seeds in runs.items():
         trained = next((p for p, la in LOOKAHEAD_OF.items() if la == policy), policy)
         cpu = [costs[(trained, s)]["cpu_s"] for s, _ in seeds] if trained in TRAINED else []
@@ -183,7 +204,12 @@ def main() -> None:
         for team in args.teams:
             results = [per_team[team][f"{policy}|{s}"] for s, _ in seeds]
             row.append(cell(team, results, [per_team[team]["oracle|0"]]))
-        step_cost = [per_team[largest][f"{policy}|{s}"].get("eval/lookahead_cpu_s_per_step") for s, _ in seeds]
+        step_cost = [
+            per_team[largest][f"{policy}|{s}"].get(
+                "eval/lookahead_cpu_s_per_step", per_team[largest][f"{policy}|{s}"].get("eval/policy_cpu_s_per_step")
+            )
+            for s, _ in seeds
+        ]
         row.append(f"{sum(step_cost) / len(step_cost):.4f}" if None not in step_cost else "-")
         print("| " + " | ".join(row) + " |", flush=True)
 
