@@ -222,13 +222,7 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     """The depth-``depth`` lookahead of a Q-network agent (``agent=dqn``, factored head, ``vdn`` or ``mean`` mixer)
     in environments of ``env_cfg``; a one-line ValueError for any other agent."""
     a = getattr(agent, "settings", None)
-    if a is None or a.get("name") != "dqn":
-        raise ValueError(f"eval.lookahead={depth} needs a Q-network agent (agent=dqn): {type(agent).__name__} has none")
-    if a.head != "factored" or a.mixer not in ("vdn", "mean"):
-        raise ValueError(
-            f"eval.lookahead={depth} is invalid with agent.head={a.head!r} agent.mixer={a.mixer!r}: it reads per-UAV "
-            "values mixed by their sum or mean (agent.head=factored, agent.mixer=vdn or mean)"
-        )
+    check_lookahead(a, depth, type(agent).__name__)
     if hasattr(agent, "core"):  # the size-free network: any grid and team
         from uavrl.agents.dqn.setnet import SetQNet
 
@@ -253,9 +247,23 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     return checked
 
 
+def check_lookahead(a, depth: int, agent_name: str) -> None:
+    """One-line errors for ``eval.lookahead=depth`` with agent settings ``a`` (None: an agent without settings)."""
+    if a is None or a.get("name") != "dqn":
+        raise ValueError(f"eval.lookahead={depth} needs a Q-network agent (agent=dqn): {agent_name} has none")
+    if a.head != "factored" or a.mixer not in ("vdn", "mean"):
+        raise ValueError(
+            f"eval.lookahead={depth} is invalid with agent.head={a.head!r} agent.mixer={a.mixer!r}: it reads per-UAV "
+            "values mixed by their sum or mean (agent.head=factored, agent.mixer=vdn or mean)"
+        )
+
+
 def lookahead_settings(cfg) -> dict:
-    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent)."""
+    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); a
+    training run's agent is checked at once, before it trains."""
     depth = int(cfg.eval.get("lookahead", 0) or 0)
+    if depth and "agent" in cfg:
+        check_lookahead(cfg.agent, depth, f"agent={cfg.agent.name}")
     return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}
 
 

@@ -211,3 +211,20 @@ def test_eval_lookahead_is_refused_for_an_agent_without_q_values():
     cfg = make_config("paper", grid=(4, 4), num_uavs=2)
     with pytest.raises(ValueError, match="needs a Q-network agent"):
         lookahead_policy(RandomAgent(cfg, None, "cpu", 0), cfg, 2, 8)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "words"),
+    [
+        (["agent=tabular"], "needs a Q-network agent"),
+        (["agent=dqn", "agent.mixer=qmix"], "agent.mixer='qmix'"),
+    ],
+)
+def test_eval_lookahead_is_refused_before_training(overrides, words):
+    from uavrl.agents.lookahead import lookahead_settings
+
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        cfg = compose("config", overrides=[*overrides, "eval.lookahead=2"])
+    with pytest.raises(ValueError, match=words):
+        lookahead_settings(cfg)
+    assert lookahead_settings(compose_cfg()) == {}
