@@ -1,18 +1,20 @@
 """The size-free DQN's sample-efficiency levers, each against pure RL: one table for BENCHMARKS.md.
 
     python benchmarks/size_free_levers.py --out <dir> [--iterations 420] [--seeds 0 1 2] [--starts 200] [--jobs 2]
-        [--lookahead 1] [--width 8] [--scenario size_free] [--teams N:L1xL2[:layout] ...] [-- <train overrides>]
+        [--lookahead 1] [--width 8] [--scenario size_free] [--teams N:L1xL2[:layout] ...] [--levers NAME ...]
+        [-- <train overrides>]
 
-Trains ``python -m uavrl.train agent=dqn scenario=<scenario>`` (``agent.iterations=<iterations>``) four ways per
-seed: pure RL, ``agent.demonstrations=oracle``, ``agent.curriculum=loss``, and both; then evaluates every checkpoint
-zero-shot on the same held-out starts (``eval.seed``'s default) of every team, beside the oracle and the random
-policy, and the pure-RL and the combined checkpoints also with ``eval.lookahead=<lookahead>``.  Per team: the return
-ratio (N = 2 on 6x6) or the share of starts reaching 0.999 U* and the quotient of the policy's and the oracle's
-mean steps over the fewest ("x oracle", each over its own reaching starts); means over the seeds.  Train CPU s: the
-whole ``uavrl.train`` process (start-up, the oracle's demonstrations, training and its own 8-start evaluation);
-last, each learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the
-lookahead's search).  Runs and evaluations already in ``--out`` are
-reused, so an interrupted benchmark continues.
+Trains ``python -m uavrl.train agent=dqn scenario=<scenario>`` (``agent.iterations=<iterations>``) per seed and
+combination of ``--levers`` (default all four: pure RL, ``agent.demonstrations=oracle``, ``agent.curriculum=loss``,
+and both), at most ``--jobs`` at a time; then evaluates every checkpoint zero-shot on the same held-out starts
+(``eval.seed``'s default) of every team, beside the oracle and the random policy, and the pure-RL, demonstrations and
+combined checkpoints also with ``eval.lookahead=<lookahead>`` (``eval.lookahead_width=<width>``).  Per team: the
+return ratio (N = 2 on 6x6) or the share of starts reaching 0.999 U* and the quotient of the policy's and the
+oracle's mean steps over the fewest ("x oracle", each over its own reaching starts); means over the seeds.  Train
+CPU s: the run's training clock (``time/train_cpu_seconds``: the oracle's demonstrations, collection and updates),
+in brackets the whole ``uavrl.train`` process where the benchmark ran it (start-up and its 8-start evaluation too).
+Last, each learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the
+lookahead's search).  Runs and evaluations already in ``--out`` are reused, so an interrupted benchmark continues.
 """
 
 from __future__ import annotations
@@ -33,7 +35,11 @@ TRAINED = {  # the levers each checkpoint trains with (the oracle's knowledge: d
     "+curriculum": ["agent.curriculum=loss"],
     "+demonstrations +curriculum": ["agent.demonstrations=oracle", "agent.curriculum=loss"],
 }
-LOOKAHEAD_OF = {"pure RL": "pure RL +lookahead", "+demonstrations +curriculum": "all three"}
+LOOKAHEAD_OF = {  # the checkpoints also evaluated with eval.lookahead
+    "pure RL": "pure RL +lookahead",
+    "+demonstrations": "+demonstrations +lookahead",
+    "+demonstrations +curriculum": "all three",
+}
 USES_ORACLE = {
     "oracle": "is the oracle",
     "random": "no",
@@ -42,6 +48,7 @@ USES_ORACLE = {
     "+curriculum": "no",
     "+demonstrations +curriculum": "U*'s configurations (training)",
     "pure RL +lookahead": "the model (evaluation)",
+    "+demonstrations +lookahead": "both",
     "all three": "both",
 }
 
@@ -56,8 +63,10 @@ def train(out: Path, policy: str, seed: int, args) -> dict:
     record = run_dir / "benchmark_train.json"
     if record.exists():
         return json.loads(record.read_text())
+    if (run_dir / "metrics.json").exists():  # trained outside this benchmark: its training clock only
+        metrics = json.loads((run_dir / "metrics.json").read_text())
+        return {"wall_s": None, "cpu_s": None, "train_cpu_s": metrics.get("time/train_cpu_seconds")}
     command = [
-        "nice",
         sys.executable,
         "-m",
         "uavrl.train",
@@ -149,6 +158,17 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
     return done
 
 
+def train_cost(costs: list[dict]) -> str:
+    """Mean training CPU s (its clock: the oracle's demonstrations, collection and updates), and of the whole
+    process where the benchmark ran it."""
+    if not costs:
+        return "-"
+    text = f"{sum(c['train_cpu_s'] for c in costs) / len(costs):.0f}"
+    if all(c["cpu_s"] is not None for c in costs):
+        text += f" ({sum(c['cpu_s'] for c in costs) / len(costs):.0f})"
+    return text
+
+
 def cell(team: str, results: list[dict], oracle: list[dict]) -> str:
     def mean(key, rows):
         values = [r[key] for r in rows if key in r]
@@ -174,15 +194,16 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=8)
     parser.add_argument("--scenario", default="size_free")
     parser.add_argument("--teams", nargs="+", default=DEFAULT_TEAMS)
+    parser.add_argument("--levers", nargs="+", default=list(TRAINED), choices=list(TRAINED), help="combinations")
     parser.add_argument("overrides", nargs="*", help="more uavrl.train overrides, after --")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    jobs = [(policy, seed) for seed in args.seeds for policy in TRAINED]
+    jobs = [(policy, seed) for seed in args.seeds for policy in args.levers]
     with ProcessPoolExecutor(args.jobs) as pool:
         done = [pool.submit(train, args.out, policy, seed, args) for policy, seed in jobs]
         costs = {job: future.result() for job, future in zip(jobs, done, strict=True)}
     runs = {"oracle": [(0, None)], "random": [(0, None)]}
-    for policy in TRAINED:
+    for policy in args.levers:
         runs[policy] = [(seed, args.out / run_name(policy, seed)) for seed in args.seeds]
         if policy in LOOKAHEAD_OF:
             runs[LOOKAHEAD_OF[policy]] = runs[policy]
@@ -190,7 +211,7 @@ def main() -> None:
         done = {team: pool.submit(evaluate_team, args.out, team, runs, args) for team in args.teams}
         per_team = {team: future.result() for team, future in done.items()}
     largest = max(args.teams, key=lambda t: int(t.split(":")[0]))
-    header = ["policy", "oracle's knowledge", "train CPU s"]
+    header = ["policy", "oracle's knowledge", "train CPU s (process)"]
     header += [
         f"N = {t.split(':')[0]}, {t.split(':')[1]}{' random' if t.endswith('random') else ''}" for t in args.teams
     ]
@@ -199,8 +220,8 @@ def main() -> None:
     print("|" + "---|" * len(header))
     for policy, seeds in runs.items():
         trained = next((p for p, la in LOOKAHEAD_OF.items() if la == policy), policy)
-        cpu = [costs[(trained, s)]["cpu_s"] for s, _ in seeds] if trained in TRAINED else []
-        row = [policy, USES_ORACLE[policy], f"{sum(cpu) / len(cpu):.0f}" if cpu else "-"]
+        cost = [costs[(trained, s)] for s, _ in seeds] if trained in TRAINED else []
+        row = [policy, USES_ORACLE[policy], train_cost(cost)]
         for team in args.teams:
             results = [per_team[team][f"{policy}|{s}"] for s, _ in seeds]
             row.append(cell(team, results, [per_team[team]["oracle|0"]]))
