@@ -11,8 +11,9 @@ and both), at most ``--jobs`` at a time; then evaluates every checkpoint zero-sh
 combined checkpoints also with ``eval.lookahead=<lookahead>`` (``eval.lookahead_width=<width>``).  Per team: the
 return ratio (N = 2 on 6x6) or the share of starts reaching 0.999 U* and the quotient of the policy's and the
 oracle's mean steps over the fewest ("x oracle", each over its own reaching starts); means over the seeds.  Train
-CPU s: the run's training clock (``time/train_cpu_seconds``: the oracle's demonstrations, collection and updates),
-in brackets the whole ``uavrl.train`` process where the benchmark ran it (start-up and its 8-start evaluation too).
+CPU s: the run's training clock (``train_cpu_seconds`` of its ``metrics.json``: the oracle's demonstrations,
+collection and updates), in brackets the whole ``uavrl.train`` process where the benchmark ran it (start-up and its
+8-start evaluation too).
 Last, each learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the
 lookahead's search).  Runs and evaluations already in ``--out`` are reused, so an interrupted benchmark continues.
 """
@@ -65,7 +66,7 @@ def train(out: Path, policy: str, seed: int, args) -> dict:
         return json.loads(record.read_text())
     if (run_dir / "metrics.json").exists():  # trained outside this benchmark: its training clock only
         metrics = json.loads((run_dir / "metrics.json").read_text())
-        return {"wall_s": None, "cpu_s": None, "train_cpu_s": metrics.get("time/train_cpu_seconds")}
+        return {"wall_s": None, "cpu_s": None, "train_cpu_s": metrics.get("train_cpu_seconds")}
     command = [
         sys.executable,
         "-m",
@@ -89,7 +90,7 @@ def train(out: Path, policy: str, seed: int, args) -> dict:
     result = {
         "wall_s": time.perf_counter() - began,
         "cpu_s": usage.ru_utime + usage.ru_stime,
-        "train_cpu_s": metrics.get("time/train_cpu_seconds"),
+        "train_cpu_s": metrics.get("train_cpu_seconds"),
     }
     record.write_text(json.dumps(result))
     return result
