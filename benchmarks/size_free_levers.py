@@ -136,7 +136,7 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
                 continue
             began = time.process_time()
             if policy in ("oracle", "random"):
-                agent, saved, _ = load_agent(next(iter(runs["pure RL"]))[1])
+                agent, saved, _ = load_agent(runs[args.levers[0]][0][1])  # the runs' model
             else:
                 agent, saved, _ = load_agent(run_dir)
             cfg = model_config(saved).replace(
