@@ -228,3 +228,14 @@ def test_eval_lookahead_is_refused_before_training(overrides, words):
     with pytest.raises(ValueError, match=words):
         lookahead_settings(cfg)
     assert lookahead_settings(compose_cfg()) == {}
+
+
+def test_eval_lookahead_on_a_per_size_dqn_in_its_own_model():
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        overrides = ["agent=dqn", "agent.mixer=vdn", "agent.worlds=2", "agent.buffer_size=100", "env.grid=[4,4]"]
+        cfg = compose("config", overrides=[*overrides, "env.num_uavs=2", "env.max_steps=5"])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    metrics = evaluate_with_lookahead(agent, model_config(cfg), 2, 3, num_starts=3)
+    assert metrics["eval/lookahead"] == 2.0 and 0 < metrics["eval/optimality"] <= 1
+    with pytest.raises(ValueError, match="its run's model"):
+        lookahead_policy(agent, make_config("paper", grid=(5, 5), num_uavs=2), 1, 3)
