@@ -7,15 +7,14 @@
 Trains ``python -m uavrl.train agent=dqn scenario=<scenario>`` (``agent.iterations=<iterations>``) per seed and
 combination of ``--levers`` (default all four: pure RL, ``agent.demonstrations=oracle``, ``agent.curriculum=loss``,
 and both), at most ``--jobs`` at a time; then evaluates every checkpoint zero-shot on the same held-out starts
-(``eval.seed``'s default) of every team, beside the oracle and the random policy, and the pure-RL, demonstrations and
-combined checkpoints also with ``eval.lookahead=<lookahead>`` (``eval.lookahead_width=<width>``).  Per team: the
-return ratio (N = 2 on 6x6) or the share of starts reaching 0.999 U* and the quotient of the policy's and the
-oracle's mean steps over the fewest ("x oracle", each over its own reaching starts); means over the seeds.  Train
-CPU s: the run's training clock (``train_cpu_seconds`` of its ``metrics.json``: the oracle's demonstrations,
-collection and updates), in brackets the whole ``uavrl.train`` process where the benchmark ran it (start-up and its
-8-start evaluation too).
-Last, each learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the
-lookahead's search).  Runs and evaluations already in ``--out`` are reused, so an interrupted benchmark continues.
+(``eval.seed``'s default) of every team, beside the oracle and the random policy, and every checkpoint also with
+``eval.lookahead=<lookahead>`` (``eval.lookahead_width=<width>``).  Per team: the return ratio (N = 2 on 6x6) or
+the share of starts reaching 0.999 U* and the quotient of the policy's and the oracle's mean steps over the fewest
+("x oracle", each over its own reaching starts); means over the seeds.  Train CPU s: the run's training clock
+(``train_cpu_seconds`` of its ``metrics.json``: the oracle's demonstrations, collection and updates), in brackets the
+whole ``uavrl.train`` process where the benchmark ran it (start-up and its 8-start evaluation too).  Last, each
+learned policy's own CPU seconds per world and step at the largest team (the greedy policy's, or the lookahead's
+search).  Runs and evaluations already in ``--out`` are reused, so an interrupted benchmark continues.
 """
 
 from __future__ import annotations
@@ -39,6 +38,7 @@ TRAINED = {  # the levers each checkpoint trains with (the oracle's knowledge: d
 LOOKAHEAD_OF = {  # the checkpoints also evaluated with eval.lookahead
     "pure RL": "pure RL +lookahead",
     "+demonstrations": "+demonstrations +lookahead",
+    "+curriculum": "+curriculum +lookahead",
     "+demonstrations +curriculum": "all three",
 }
 USES_ORACLE = {
@@ -50,6 +50,7 @@ USES_ORACLE = {
     "+demonstrations +curriculum": "U*'s configurations (training)",
     "pure RL +lookahead": "the model (evaluation)",
     "+demonstrations +lookahead": "both",
+    "+curriculum +lookahead": "the model (evaluation)",
     "all three": "both",
 }
 
