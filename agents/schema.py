@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from uavrl.envs.config import ModelConfig
 
 METHODS = ("q_learning", "value_iteration")
+DEMONSTRATIONS = ("none", "oracle")
+CURRICULA = ("none", "loss")
 MEMORY_BUDGET = positive()
 
 
@@ -115,6 +117,23 @@ class DQNSchema:
         factory=list,
     )
     heads: int = setting(4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)")
+    demonstrations: str = setting(
+        "none",
+        one_of(*DEMONSTRATIONS, what="demonstrations"),
+        "agent.network=set: oracle keeps the oracle planner's trajectories in the replay and adds DQfD's margin loss "
+        "(agents/dqn/demonstrations.py); none: pure RL",
+    )
+    demo_transitions: int = setting(20000, whole(1), "agent.demonstrations=oracle: transitions, split over the teams")
+    demo_batch_share: REAL = setting(
+        0.25, interval(0.0, 0.9, low_open=True), "agent.demonstrations=oracle: the demonstrations' share of a batch"
+    )
+    margin: REAL = setting(0.8, positive(), "agent.demonstrations=oracle: the margin of DQfD's supervised loss")
+    curriculum: str = setting(
+        "none",
+        one_of(*CURRICULA, what="curricula"),
+        "agent.network=set: loss gives each team and layout a share of every batch by its recent TD loss "
+        "(agents/dqn/curriculum.py); none: equal shares",
+    )
     worlds: int = setting(64, whole(1), "parallel worlds, each plays one episode per iteration")
     hidden: int = setting(128, whole(1), "units per hidden layer")
     depth: int = setting(
@@ -194,6 +213,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
             raise ValueError(
                 "agent.mixer='mean' is invalid with agent.network='team': use vdn or qmix, or agent.network=set"
             )
+        for lever, off in (("demonstrations", "none"), ("curriculum", "none")):
+            if a.get(lever, off) != off:
+                raise ValueError(
+                    f"agent.{lever}={a[lever]!r} is invalid with agent.network='team': use agent.network=set"
+                )
         for name in ("sizes", "layouts"):
             if a.get(name):
                 value = shown(_plain(a.get(name)), label=True)
@@ -213,6 +237,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
                 "out of service; use agent.head=factored"
             )
         return
+    if a.get("demonstrations", "none") != "none" and env_cfg.energy != "none":
+        raise ValueError(
+            f"agent.demonstrations={a.demonstrations!r} is invalid with env.energy={env_cfg.energy!r}: the oracle's "
+            "demonstrations ignore the batteries; use agent.demonstrations=none"
+        )
     if a.head != "factored":
         raise ValueError(f"agent.head={a.head!r} is invalid with agent.network='set': use agent.head=factored")
     if a.mixer not in ("vdn", "mean"):

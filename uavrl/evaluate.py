@@ -195,6 +195,7 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     check_settings(cfg, overrides=list(overrides) or None)
     import torch  # the heavy modules, once the settings are known to be good
 
+    from uavrl.agents.lookahead import lookahead_settings
     from uavrl.envs.world import resolve_device
     from uavrl.evaluation import evaluate_agent
 
@@ -206,7 +207,7 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     evaluated = evaluated_config(saved, cfg, overrides, f"checkpoint={quoted(cfg.checkpoint)}")
     # refused before the evaluation's work, not after it (a checkpoint without its run's config.yaml is known now)
     check_evaluation_costs(cfg, saved, model_config(evaluated), bool(cfg.eval.video), list(overrides) or None)
-    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device))
+    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device), **lookahead_settings(cfg))
     out_dir = output_dir(cfg.checkpoint)
     made_with = {
         **{key: OmegaConf.select(cfg, f"eval.{key}") for key in EVALUATION_KEYS},

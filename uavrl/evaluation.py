@@ -665,13 +665,17 @@ def _references(world, start, u_star, horizon, gamma) -> dict:
     return _REFERENCE_CACHE[key]
 
 
-def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
+def evaluate_agent(agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width: int = 8, **kwargs) -> dict[str, float]:
     """Average :func:`evaluate` over an agent's greedy policies (one per independent run; ``agent.evaluate``);
-    the worst start's optimality.
+    the worst start's optimality.  ``lookahead`` > 0 (``eval.lookahead``): its depth-``lookahead`` search instead
+    (:mod:`uavrl.agents.lookahead`).
 
     Args:
         agent: an :class:`~uavrl.agents.base.Agent` (trained, or loaded from a run).
         cfg: the model to evaluate in (the agent's own, or another size for a size-free agent).
+        lookahead: the depth of the search over joint actions (``eval.lookahead``; 0: the greedy policy).
+        lookahead_width: how many joint actions, the best by the learned team value, the search expands at each
+            node (``eval.lookahead_width``; 0: all).
         **kwargs: the settings of :func:`evaluate` (``num_starts``, ``horizon``, ``seed``, ...).
 
     Example:
@@ -682,6 +686,10 @@ def evaluate_agent(agent, cfg: ModelConfig, **kwargs) -> dict[str, float]:
         >>> metrics["eval/optimality"] > 0.99
         True
     """
+    if lookahead:
+        from uavrl.agents.lookahead import evaluate_with_lookahead
+
+        return evaluate_with_lookahead(agent, cfg, lookahead, lookahead_width, **kwargs)
     results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):

@@ -109,6 +109,15 @@ class RunEvalSchema(EvalSchema):
     )
     video_starts: int = setting(3, whole(1), "the evaluation's first starts, one row each")
     video_fps: int = setting(4, whole(1), "frames (steps) per second")
+    lookahead: int = setting(
+        0,
+        whole(0),
+        "agent=dqn: depth of a search over joint actions through the model (mean channel), the learned team value at "
+        "the leaves (uavrl/agents/lookahead.py); 0: the greedy policy",
+    )
+    lookahead_width: int = setting(
+        8, whole(0), "eval.lookahead: candidates played per node, best by the values; 0: all"
+    )
 
 
 def _option_type(hint) -> Any:

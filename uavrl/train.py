@@ -274,7 +274,9 @@ class Training:
             resume_step = self.agent.env_steps if self.checkpoint is not None else 0
             self.logger = RunLogger(self.run_dir, resume_step=resume_step)
         self.checkpoints = CheckpointWriter(self.run_dir, self.newest_is_readable)
-        self.eval_kwargs = eval_settings(self.cfg, self.device)
+        from uavrl.agents.lookahead import lookahead_settings
+
+        self.eval_kwargs = {**eval_settings(self.cfg, self.device), **lookahead_settings(self.cfg)}
 
     def train_and_evaluate(self) -> dict:
         """The iterations, then the final evaluation; writes ``metrics.json`` and returns it.

@@ -42,6 +42,8 @@ from uavrl.evaluation import episode_metrics
 
 from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
+from .curriculum import Curriculum, uniform_sample
+from .demonstrations import Demonstrations
 from .networks import Q_INPUTS
 from .setnet import SetDoubleQLoss, SetQCore, SetQNet
 from .transitions import CompactTransitions, transition_keys
@@ -101,6 +103,9 @@ class SetDQNAgent(DQNAgent):
         models = training_models(env_cfg, a)
         self.batch_size = max(1, int(a.batch_size) // len(models))
         self.groups = [_Group(self, model, self._group_seed(0, g), frames) for g, model in enumerate(models)]
+        # the sample-efficiency levers (off: pure RL): the oracle's demonstrations, a curriculum over the groups
+        self.curriculum = Curriculum(a.get("curriculum", "none"), len(self.groups), self.batch_size * len(self.groups))
+        self.demonstrations = None  # built at the first gradient step: an evaluation of the checkpoint needs none
 
     @staticmethod
     def _check(env_cfg: ModelConfig, a) -> None:
@@ -165,7 +170,19 @@ class SetDQNAgent(DQNAgent):
         )
 
     def _update(self) -> torch.Tensor:
-        loss = sum(self.loss(group.buffer.sample(), group.grid)["loss"] for group in self.groups)
+        if self.demonstrations is None and self.settings.get("demonstrations", "none") == "oracle":
+            self.demonstrations = Demonstrations(self, self.groups)
+        sizes, losses, margins = self.curriculum.batch_sizes(), [], []
+        for g, (group, size) in enumerate(zip(self.groups, sizes, strict=True)):
+            if self.demonstrations is None:
+                batch = group.buffer.sample() if size == self.batch_size else uniform_sample(group.buffer, size)
+            else:  # DQfD: the demonstrations' share of the batch gets the TD loss and the margin loss
+                demos = self.demonstrations.sample(g, self.demonstrations.demo_size(size))
+                batch = torch.cat([uniform_sample(group.buffer, max(1, size - len(demos))), demos])
+                margins.append(self.demonstrations.loss(self.core, demos, group.grid))
+            losses.append(self.loss(batch, group.grid)["loss"])
+        self.curriculum.record(torch.stack(losses))
+        loss = self.curriculum.total(losses, sizes) + sum(margins)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm))
@@ -203,11 +220,14 @@ class SetDQNAgent(DQNAgent):
         return {
             "exploration": [group.exploration.state_dict() for group in self.groups],
             "buffer": [group.buffer.state_dict() for group in self.groups],
+            "curriculum": self.curriculum.state_dict(),
         }
 
     def _load_experience(self, state: dict) -> None:
         if len(state["buffer"]) != len(self.groups):
             raise ValueError(f"the state holds {len(state['buffer'])} team sizes, the agent {len(self.groups)}")
+        if "curriculum" in state:  # checkpoints saved before the curriculum: none
+            self.curriculum.load_state_dict(state["curriculum"])
         for g, group in enumerate(self.groups):
             group.exploration.load_state_dict(state["exploration"][g])
             layouts_of = partial(self._group_layouts, g)
