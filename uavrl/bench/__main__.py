@@ -10,6 +10,7 @@ Settings (``key=value``): ``checkpoint`` (a run directory of ``python -m uavrl.t
 or ``agent`` (a baseline by name); ``name`` (the submission's name; default the agent and run); ``out`` (the results
 JSON; default ``bench/<suite>/<name>.json``, the table ``.md`` and figure ``.png`` beside it); the training budget
 ``budget.env_steps``, ``budget.cpu_seconds``, ``budget.gpu_seconds`` (a run directory's own env steps by default);
+``train_command`` (the command that trained the policy, carried into the results and the leaderboard);
 ``tasks=[a,b]`` (a subset of the suite: a partial protocol); ``cache_dir`` (the references' cache); ``num_threads``
 (torch's CPU threads, default 1: the same scores bit for bit).  A bad setting is refused in one line before torch is
 imported.
@@ -34,6 +35,7 @@ SETTINGS = (
     "tasks",
     "cache_dir",
     "num_threads",
+    "train_command",
 )
 USAGE = (
     f"usage: python -m uavrl.bench <suite: {SUITES_TEXT}> checkpoint=<run dir> | agent=<{'|'.join(BASELINES)}>; "
@@ -122,6 +124,19 @@ def checkpoint_factory(path):
     return factory, saved, agent
 
 
+def run_costs(checkpoint) -> dict:
+    """The training CPU seconds a run directory recorded (``metrics.json``'s ``train_cpu_seconds``), or nothing."""
+    import json
+
+    from uavrl.evaluate import output_dir
+
+    try:
+        metrics = json.loads((output_dir(checkpoint) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return {"cpu_seconds": float(metrics["train_cpu_seconds"])} if "train_cpu_seconds" in metrics else {}
+
+
 def score_command(suite: str, settings: dict) -> None:
     """``python -m uavrl.bench <suite> ...`` (module doc)."""
     import torch
@@ -141,6 +156,8 @@ def score_command(suite: str, settings: dict) -> None:
         factory, saved, agent = checkpoint_factory(settings["checkpoint"])
         name = f"{agent_label(saved)}:{Path(settings['checkpoint']).name}"
         budget.setdefault("env_steps", int(agent.env_steps))
+        for key, value in run_costs(settings["checkpoint"]).items():
+            budget.setdefault(key, value)
         source = f"python -m uavrl.bench {suite} checkpoint={settings['checkpoint']}"
     if "tasks" in settings:
         source += f" tasks=[{','.join(settings['tasks'])}]"
@@ -153,6 +170,7 @@ def score_command(suite: str, settings: dict) -> None:
         source=source,
         cache_dir=Path(settings["cache_dir"]) if "cache_dir" in settings else cache.default_dir(),
         tasks=settings.get("tasks"),
+        train_command=settings.get("train_command"),
         progress=lambda line: print(line, file=sys.stderr, flush=True),
     )
     out = Path(settings.get("out") or Path("bench") / suite / f"{name.replace(':', '-').replace('/', '-')}.json")

@@ -241,6 +241,7 @@ def score_suite(
     source: str = "python",
     cache_dir: Path | None = cache.default_dir(),
     tasks: list[str] | None = None,
+    train_command: str | None = None,
     progress=None,
 ) -> dict:
     """Score the policies ``policy_factory`` makes (module doc) on every task of ``suite``: the results as a dict
@@ -255,6 +256,7 @@ def score_suite(
         source: how the policies were obtained (the command that reproduces the results).
         cache_dir: where the references are kept (None: computed, not kept).
         tasks: score only these tasks of the suite (the results then say the protocol is partial).
+        train_command: the command that trained the policies, if any (carried into the results).
         progress: a callable given one line per task scored.
     """
     from uavrl.bench.results import new_results
@@ -266,6 +268,8 @@ def score_suite(
             raise ValueError(f"tasks={unknown[0]} is invalid: suite {suite} has {', '.join(t.name for t in chosen)}")
         chosen = [task for task in chosen if task.name in tasks]
     results = new_results(suite, name, budget or {}, source, partial=tasks is not None)
+    if train_command:
+        results["submission"]["train_command"] = train_command
     for task in chosen:
         references = task_references(task, cache_dir)
         entry = {"task": task.name, "spec": task.spec(), "horizon": horizon(task)}
