@@ -184,13 +184,21 @@ def task_references(task: Task, cache_dir: Path | None) -> dict:
     return cache.cached(cache_dir, cache.entry_key(task), lambda: compute_references(task))
 
 
+FLOOR = 0.1  # a start's gap from random to the reference counts as at least this share of the task's mean gap
+
+
 def normalised(values, random_values, reference_values) -> list[float]:
-    """``(value - mean random) / (mean reference - mean random)`` per start (module doc of :mod:`uavrl.bench.tasks`)."""
-    low = sum(random_values) / len(random_values)
-    high = sum(reference_values) / len(reference_values)
-    if not high > low:
-        raise ValueError(f"the reference ({high}) does not beat the random policy ({low}): no score can be normalised")
-    return [(v - low) / (high - low) for v in values]
+    """Per start ``(value - random) / (reference - random)``, with the random policy's and the reference's values
+    of that start, so the random policy scores 0 and the reference 1 on every start.  A start where random comes
+    within :data:`FLOOR` of the task's mean gap of the reference (the start is at or near U* already) is divided by
+    that floor instead, so no start's score explodes."""
+    gaps = [high - low for low, high in zip(random_values, reference_values, strict=True)]
+    mean_gap = sum(gaps) / len(gaps)
+    if not mean_gap > 0:
+        raise ValueError(
+            f"the reference does not beat the random policy (mean gap {mean_gap}): no score can be normalised"
+        )
+    return [(v - low) / max(gap, FLOOR * mean_gap) for v, low, gap in zip(values, random_values, gaps, strict=True)]
 
 
 def score_task(task: Task, policies, references: dict) -> dict:

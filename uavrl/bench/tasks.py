@@ -11,12 +11,12 @@ Each start gets a raw value and a normalised score (docs/leaderboard.md):
 
 - without an energy model the raw value is the discounted gain ``J = sum_t gamma^(t-1) (U_t - U_{t-1})`` of
   docs/yardstick.md; with one it is the data the mission delivers (bit/Hz, mean channels).
-- ``score = (value - random) / (reference - random)``, where ``random`` is the mean value of the uniform random
-  policy (seed 0) over the task's starts and ``reference`` the mean of the task's reference: the exact best return
-  ``V*_H`` or the exact mission optimum where the exact solvers fit, else the best planner (the oracle; under an
-  energy model the energy-aware planner), whose distance to the certified bounds (U*, the fewest steps or their
-  lower bound, the mission's upper bound) each results file records.  So 0 is random, 1 is exact optimal control or
-  the planner, per task.
+- ``score = (value - random) / (reference - random)`` per start, where ``random`` is the uniform random policy's
+  (seed 0) value from that start and ``reference`` the task's reference there: the exact best return ``V*_H`` or the
+  exact mission optimum where the exact solvers fit, else the best planner (the oracle; under an energy model the
+  energy-aware planner), whose distance to the certified bounds (U*, the fewest steps or their lower bound, the
+  mission's upper bound) each results file records.  So 0 is random, 1 is exact optimal control or the planner, on
+  every start (one where random comes close to the reference is divided by a floor: :func:`.run.normalised`).
 
 Example:
     >>> [task.name for task in SUITES["energy"]]
