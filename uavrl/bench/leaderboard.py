@@ -2,11 +2,12 @@
 
     python -m uavrl.bench leaderboard [results=benchmarks/results/leaderboard] [out=docs/leaderboard.md]
 
-One table per suite, a row per results file of that suite (best IQM first): the IQM of the normalised scores with its
-95% stratified bootstrap CI, the mean score per task (n/a where the policy cannot act), the training budget and the
-command that reproduces the row; a figure per suite (``docs/figures/leaderboard-<suite>.png``) beside it.  Entries
-that are not scored yet are listed with the command that would score them (:data:`NOT_YET_SCORED`).  The page's
-text before the generated part (:data:`MARKER`) is kept as written.
+One table per suite, a row per results file of that suite (best IQM first): the IQM of the normalised scores with
+its 95% stratified bootstrap CI (over the tasks the policy can act in, their number given when not all), the mean
+score per task (n/a where the policy cannot act), the training budget and the command that reproduces the row; a
+figure per suite (``docs/figures/leaderboard-<suite>.png``) beside it.  Entries that are not scored yet are listed
+with the command that would score them (:data:`NOT_YET_SCORED`).  The page's text before the generated part
+(:data:`MARKER`) is kept as written.
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ def suite_table(suite: str, files: list[dict]) -> list[str]:
         for name in tasks:
             task = by_task.get(name)
             cells.append("-" if task is None else "n/a" if task["status"] != "scored" else f"{task['mean_score']:.3f}")
-        iqm = interval(agg["iqm"], agg["iqm_ci"]) if agg.get("tasks") else "n/a"
+        scored = f" ({len(agg['tasks'])} of {len(tasks)} tasks)" if 0 < len(agg.get("tasks", [])) < len(tasks) else ""
+        iqm = interval(agg["iqm"], agg["iqm_ci"]) + scored if agg.get("tasks") else "n/a"
         sub = results["submission"]
         command = f"`{sub['train_command']}`, then " if sub.get("train_command") else ""
         lines.append(
