@@ -163,7 +163,9 @@ def test_rescoring_a_checkpoint_reproduces_its_results_bit_for_bit(tmp_path, sco
     tasks = {t["task"]: t for t in outputs[0]["tasks"]}
     assert tasks["tiny_energy"]["status"] == "n/a" and tasks["tiny_3x3"]["status"] == "scored"
     assert len(tasks["tiny_3x3"]["values"]) == 2  # one row per independent run of the tabular agent
-    assert outputs[0]["submission"]["budget"]["env_steps"] == 4 * 2 * 50
+    assert (
+        outputs[0]["submission"]["budget"]["env_steps"] == json.loads((run / "metrics.json").read_text())["env_steps"]
+    )
     compared = subprocess.run(
         [python, "-m", "uavrl.bench", "compare", str(tmp_path / "r0.json"), str(tmp_path / "r1.json")],
         check=True, capture_output=True, text=True,

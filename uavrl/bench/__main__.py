@@ -196,7 +196,8 @@ def compare_command(args: list[str]) -> None:
         print(f"{r['submission']['name']} ({path}): IQM {iqm}")
     print(
         f"P({a['submission']['name']} > {b['submission']['name']}) = {interval(p['probability'], p['ci'])} over "
-        f"{len(p['tasks'])} tasks of suite {a['suite']} (95% stratified bootstrap CI, rliable)"
+        f"{len(p['tasks'])} task{'s' if len(p['tasks']) > 1 else ''} of suite {a['suite']} (95% stratified bootstrap "
+        "CI, rliable)"
     )
 
 
