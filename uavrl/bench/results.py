@@ -123,7 +123,7 @@ def figure(results_list: list[dict], path) -> None:
     from uavrl.plots import pyplot
 
     plt = pyplot()
-    fig, (bars, profile) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [3, 2]})
+    fig, (bars, profile) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [3, 2]})
     names = list(dict.fromkeys(t["task"] for r in results_list for t in r["tasks"]))
     width = 0.8 / max(1, len(results_list))
     for k, results in enumerate(results_list):
@@ -142,7 +142,7 @@ def figure(results_list: list[dict], path) -> None:
     bars.axhline(0.0, color="grey", lw=0.8)
     bars.set_ylabel("normalised score (0 random, 1 reference)")
     bars.set_title(f"suite {results_list[0]['suite']}: mean score per task")
-    bars.legend(fontsize=8)
+    bars.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.45), ncol=3)
     profile.set_xlabel("normalised score threshold tau")
     profile.set_ylabel("fraction of (start, task) with score > tau")
     profile.set_title("performance profile (95% CI)")
