@@ -48,6 +48,7 @@ EXTRAS = {
     "gym (stable-baselines3)": ("stable_baselines3", re.compile(r"stable_baselines3|sb3_contrib")),
     "gym (sb3-contrib)": ("sb3_contrib", re.compile(r"sb3_contrib")),
     "benchmarl": ("benchmarl", re.compile(r"benchmarl")),
+    "bench": ("rliable", re.compile(r"uavrl\.bench\b")),
 }
 
 # the smoke overrides: small sizes of the settings that set a command's length, later than the reader's so they win

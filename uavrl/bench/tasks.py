@@ -1,0 +1,158 @@
+"""The benchmark's tasks and suites: a scenario, the starts it is scored from, and how a score is normalised.
+
+A task (:class:`Task`) is a model (a scenario of ``configs/scenario/``, optionally resized for the zero-shot suite)
+plus its evaluation protocol: ``num_starts`` greedy rollouts of ``horizon`` steps (the scenario's evaluation
+horizon: ``max(20, 2 (L1 + L2))``, or the whole mission under an energy model) from held-out starts, measured
+as :mod:`uavrl.evaluation` measures every policy.  Start ``b`` of a task is the world whose random stream is seeded
+``task.seed + b``; every task's seeds lie in ``[2^62, 2^63)``, where no training command draws a world (a test
+proves it: :func:`training_seed_bound`), and apart from ``eval.seed``, which checkpoints may have been selected on.
+
+Each start gets a raw value and a normalised score (docs/leaderboard.md):
+
+- without an energy model the raw value is the discounted gain ``J = sum_t gamma^(t-1) (U_t - U_{t-1})`` of
+  docs/yardstick.md; with one it is the data the mission delivers (bit/Hz, mean channels).
+- ``score = (value - random) / (reference - random)`` per start, where ``random`` is the uniform random policy's
+  (seed 0) value from that start and ``reference`` the task's reference there: the exact best return ``V*_H`` or the
+  exact mission optimum where the exact solvers fit, else the best planner (the oracle; under an energy model the
+  energy-aware planner), whose distance to the certified bounds (U*, the fewest steps or their lower bound, the
+  mission's upper bound) each results file records.  So 0 is random, 1 is exact optimal control or the planner, on
+  every start (one where random comes close to the reference is divided by a floor: :func:`.run.normalised`).
+
+Example:
+    >>> [task.name for task in SUITES["energy"]]
+    ['energy_4x4', 'energy_6x6', 'persistent_10x10']
+    >>> TASKS["zs_n50_50x50"].options
+    (('grid', (50, 50)), ('num_uavs', 50), ('layout', 'line'))
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from functools import lru_cache
+
+SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
+TASK_SEED_STRIDE = 2**24  # each task's starts: seeds task.seed .. task.seed + num_starts - 1
+NUM_STARTS = 32
+GAMMA = 0.9
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """A benchmark task (module doc): the model, its starts and its protocol.
+
+    ``scenario`` names a scenario of ``configs/scenario/`` (its model and evaluation horizon), ``options`` the
+    model options changed from it (``grid``, ``num_uavs``, ``layout``: the zero-shot suite's teams), ``seed`` the
+    stream of start 0.
+    """
+
+    name: str
+    scenario: str
+    seed: int
+    options: tuple = ()
+    num_starts: int = NUM_STARTS
+    gamma: float = GAMMA
+    about: str = ""
+
+    def spec(self) -> dict:
+        """The task as JSON: what its references and every results file are keyed by."""
+        out = dataclasses.asdict(self)
+        out["options"] = {key: list(value) if isinstance(value, tuple) else value for key, value in self.options}
+        return out
+
+    def digest(self) -> str:
+        """A content hash of :meth:`spec` (sha256, hex)."""
+        return hashlib.sha256(json.dumps(self.spec(), sort_keys=True).encode()).hexdigest()
+
+
+def _task(index: int, name: str, scenario: str, about: str, **options) -> Task:
+    return Task(
+        name=name,
+        scenario=scenario,
+        seed=SEED_BASE + index * TASK_SEED_STRIDE,
+        options=tuple(options.items()),
+        about=about,
+    )
+
+
+def _zero_shot(index: int, num_uavs: int, side: int, layout: str) -> Task:
+    suffix = "" if layout == "line" else f"_{layout}"
+    return _task(
+        index,
+        f"zs_n{num_uavs}_{side}x{side}{suffix}",
+        "paper_6x6",
+        f"the paper's model, N = {num_uavs} on {side}x{side}, layout {layout!r}",
+        grid=(side, side),
+        num_uavs=num_uavs,
+        layout=layout,
+    )
+
+
+# the index fixes a task's seeds: a new task takes a new index, an old one keeps its own
+_ALL = [
+    _task(0, "paper_6x6", "paper_6x6", "the paper's 6x6 grid with 2 UAVs"),
+    _task(1, "reference_code", "reference_code", "the authors' published code's model, 6x6 with 2 UAVs"),
+    _task(2, "n6_10x10", "n6_10x10", "6 UAVs on 10x10"),
+    _task(3, "large_20x20", "large_20x20", "10 UAVs on 20x20"),
+    _task(4, "random_layouts", "random_layouts", "6 UAVs on 10x10, a new layout of the nodes per start"),
+    _task(5, "rayleigh", "rayleigh", "the paper's 6x6 under Rayleigh fading"),
+    _task(6, "a2g_urban", "a2g_urban", "6 UAVs on 10x10, the urban air-to-ground channel"),
+    _task(7, "energy_4x4", "energy_4x4", "2 UAVs with 1.2 Wh batteries on 4x4: the exact mission optimum"),
+    _task(8, "energy_6x6", "energy_6x6", "2 UAVs with 5 Wh batteries on 6x6, no recharge"),
+    _task(9, "persistent_10x10", "persistent_10x10", "6 UAVs and 2 spares recharging, a 500-step mission"),
+    _zero_shot(10, 2, 6, "line"),
+    _zero_shot(11, 6, 10, "line"),
+    _zero_shot(12, 10, 20, "line"),
+    _zero_shot(13, 20, 30, "line"),
+    _zero_shot(14, 50, 50, "line"),
+    _zero_shot(15, 6, 10, "random"),
+    _zero_shot(16, 10, 20, "random"),
+    # smoke-sized: the tests and the documentation's runnable examples
+    _task(17, "tiny_3x3", "paper_6x6", "2 UAVs on 3x3 (smoke-sized)", grid=(3, 3), num_uavs=2),
+    _task(18, "tiny_energy", "energy_4x4", "energy_4x4 on 3x3 (smoke-sized)", grid=(3, 3)),
+]
+TASKS = {task.name: task for task in _ALL}
+SUITES = {
+    "paper": [TASKS[name] for name in ("paper_6x6", "reference_code")],
+    "core": [TASKS[name] for name in ("n6_10x10", "large_20x20", "random_layouts", "rayleigh", "a2g_urban")],
+    "energy": [TASKS[name] for name in ("energy_4x4", "energy_6x6", "persistent_10x10")],
+    "zero_shot": [task for task in _ALL if task.name.startswith("zs_")],
+    "tiny": [TASKS["tiny_3x3"], TASKS["tiny_energy"]],
+}
+SUITES_TEXT = ", ".join(SUITES)
+
+
+@lru_cache(maxsize=None)
+def _scenario(name: str):
+    """``(model config, evaluation horizon or None)`` of a scenario, as ``python -m uavrl.train scenario=<name>``
+    composes it."""
+    from uavrl.cli import compose_config
+    from uavrl.config import model_config
+
+    cfg = compose_config("config", [f"scenario={name}", "agent=random"])
+    return model_config(cfg), cfg.eval.horizon
+
+
+def model(task: Task):
+    """The task's :class:`~uavrl.envs.ModelConfig`, its episodes as long as its horizon."""
+    cfg, _ = _scenario(task.scenario)
+    cfg = cfg.replace(**dict(task.options))
+    return cfg.replace(max_steps=horizon(task, cfg))
+
+
+def horizon(task: Task, cfg=None) -> int:
+    """Steps per rollout: the scenario's ``eval.horizon``, else the evaluation's default for the task's model."""
+    from uavrl.envs.limits import evaluation_horizon
+
+    base, steps = _scenario(task.scenario)
+    return int(steps) if steps is not None else evaluation_horizon(cfg or base.replace(**dict(task.options)))
+
+
+def training_seed_bound(max_training_seed: int, step_budget: int) -> int:
+    """An upper bound on the world seeds a training command draws with ``seed < max_training_seed`` and at most
+    ``step_budget`` team steps (``train.step_budget``): the DQN's iteration ``k`` seeds its worlds ``seed * 2^44 +
+    (k + 1) * 2^24 + world`` (agents/dqn/agent.py), the tabular learner's episode ``e`` of run ``r`` the world
+    ``seed + e R + r``, BenchMARL's and the adapters' worlds ``seed + world``: every one below the bound, at least
+    one step per iteration or episode, and fewer than 2^24 worlds."""
+    return max_training_seed * 2**44 + (step_budget + 1) * 2**24 + max_training_seed + step_budget
