@@ -38,20 +38,19 @@ _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length;
-    ``agent.network=set`` builds the size-free :class:`~.multisize.SetDQNAgent` instead.
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  The
+    size-free network (``agent.network=set``) is :class:`~.multisize.SetDQNAgent`, the class
+    :func:`uavrl.agents.agent_class` gives for those settings.
     """
-
-    def __new__(cls, env_cfg: ModelConfig, cfg, device, seed: int):
-        if cls is DQNAgent and cfg.agent.get("network", "team") == "set":  # run configs saved before: no setting
-            from .multisize import SetDQNAgent
-
-            cls = SetDQNAgent
-        return super().__new__(cls)
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
         check_settings(env_cfg, a)
+        if a.get("network", "team") != "team":  # run configs saved before: no setting
+            raise ValueError(
+                f"agent.network={a.network!r} is invalid for DQNAgent, the per-size network: build "
+                "uavrl.agents.agent_class('dqn', cfg.agent), SetDQNAgent for agent.network='set'"
+            )
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
         self.num_iterations = int(a.iterations)

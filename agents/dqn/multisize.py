@@ -44,6 +44,7 @@ from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
 from .networks import Q_INPUTS
 from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
+from .settings import check_settings
 from .transitions import CompactTransitions, transition_keys
 
 
@@ -117,13 +118,18 @@ class _Group:
 
 
 class SetDQNAgent(DQNAgent):
-    """:class:`DQNAgent` with a size-free network (``agent.network=set``, module doc); built by ``DQNAgent(...)``
-    when the settings ask for it.  The greedy rule (:class:`~.networks.ValidGreedy`), the double-DQN targets, the
-    objective and the ``train/...`` tags are the factored DQN's; the tags are means over the sizes' worlds."""
+    """:class:`DQNAgent` with a size-free network (``agent.network=set``, module doc), the class
+    :func:`uavrl.agents.agent_class` gives for those settings.  The greedy rule (:class:`~.networks.ValidGreedy`),
+    the double-DQN targets, the objective and the ``train/...`` tags are the factored DQN's; the tags are means over
+    the sizes' worlds."""
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        self._check(env_cfg, a)
+        check_settings(env_cfg, a)
+        if a.get("network", "team") != "set":
+            raise ValueError(
+                f"agent.network={a.get('network', 'team')!r} is invalid for SetDQNAgent: use agent.network=set"
+            )
         check_set_settings(env_cfg, a)
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
@@ -138,12 +144,6 @@ class SetDQNAgent(DQNAgent):
         models = training_models(env_cfg, a)
         self.batch_size = max(1, int(a.batch_size) // len(models))
         self.groups = [_Group(self, model, self._group_seed(0, g), frames) for g, model in enumerate(models)]
-
-    @staticmethod
-    def _check(env_cfg: ModelConfig, a) -> None:
-        from .settings import check_settings
-
-        check_settings(env_cfg, a)
 
     def _group_seed(self, iteration: int, group: int) -> int:
         return (self._world_seed(iteration) + group * int(self.settings.worlds)) % _SEED_MODULUS
