@@ -40,7 +40,7 @@ from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.evaluation import episode_metrics
 
-from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
+from .agent import _SEED_MODULUS, DQNAgent, adam, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
 from .networks import Q_INPUTS
 from .setnet import MIXERS, SetDoubleQLoss, SetQCore, SetQNet
@@ -139,7 +139,7 @@ class SetDQNAgent(DQNAgent):
         energy = env_cfg.energy != "none"
         self.core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth)).to(self.device)
         self.loss = SetDoubleQLoss(self.core, a.mixer, float(a.gamma), env_cfg.num_actions)
-        self.optimizer = torch.optim.Adam(self.core.parameters(), lr=float(a.lr))
+        self.optimizer = adam(list(self.core.parameters()), float(a.lr))
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
         models = training_models(env_cfg, a)
         self.batch_size = max(1, int(a.batch_size) // len(models))
@@ -204,7 +204,7 @@ class SetDQNAgent(DQNAgent):
         loss = sum(self.loss(group.buffer.sample(), group.grid)["loss"] for group in self.groups)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm))
+        nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm), foreach=True)
         self.optimizer.step()
         self.loss.update_target(float(self.settings.tau))
         return loss.detach()
