@@ -135,8 +135,8 @@ def sizes_table(args) -> None:
         print(f"load average at start: {os.getloadavg()[0]:.1f}")
         print("| network | N | " + " | ".join(f"{name} CPU s" for name in checkouts) + " | ratio |")
         print("|---|---|" + "---|" * len(checkouts) + "---|")
-        for network in args.networks:
-            for n in args.sizes:
+        for n in args.sizes:
+            for network in args.networks:
                 overrides = [f"env.num_uavs={n}", *NETWORKS[network]]
                 cpu = {name: [] for name in checkouts}
                 for _ in range(args.rounds):

@@ -199,7 +199,7 @@ class DQNAgent(Agent):
 
 
 def adam(parameters: list[torch.nn.Parameter], lr: float) -> torch.optim.Adam:
-    """Adam with its fused kernel (one pass over every parameter, CPU and CUDA): a quarter of a gradient step's cost
+    """Adam with its fused kernel (one pass over every parameter, CPU and CUDA): about a tenth of a gradient step
     below the per-parameter loop (BENCHMARKS.md, DQN iteration)."""
     return torch.optim.Adam(parameters, lr=lr, fused=True)
 

@@ -30,11 +30,13 @@ class DoubleQMixerLoss(QMixerLoss):
         # steps them in place), the target ones are handed to the network and the mixer as arguments.
         net, greedy = (m.module for m in self.local_value_network.module)
         mixer, k, nxt = self.mixer_network.module, self.tensor_keys, td.get("next")
-        # one online pass over the states and their successors: the values now and the greedy rule's next values
-        values = net(*(torch.cat([td.get(key), nxt.get(key)]) for key in Q_INPUTS))
-        now, after = values.split(len(values) // 2)
-        value = _mixed(mixer, now.gather(-1, td.get(k.action).unsqueeze(-1)), td.get("state"))
+        # the successors' online pass stays apart from the states': one pass over both costs ~10% more a gradient
+        # step on CPU, its backward running over the successors' rows too (BENCHMARKS.md, DQN iteration)
+        value = _mixed(
+            mixer, net(*(td.get(key) for key in Q_INPUTS)).gather(-1, td.get(k.action).unsqueeze(-1)), td.get("state")
+        )
         with torch.no_grad():
+            after = net(*(nxt.get(key) for key in Q_INPUTS))
             next_action = greedy(after, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
             target_values = net(*(nxt.get(key) for key in Q_INPUTS), params=self._target_net)
             chosen = target_values.gather(-1, next_action.unsqueeze(-1))  # the online greedy action, target-valued

@@ -166,12 +166,11 @@ class SetDoubleQLoss(nn.Module):
     def forward(self, td: TensorDictBase, grid: tuple[int, int]) -> TensorDictBase:
         online, target, greedy = self._views(tuple(grid))
         nxt = td.get("next")
-        # one online pass over the states and their successors: the values now and the greedy rule's next values
-        values = online(*(torch.cat([td.get(k), nxt.get(k)]) for k in Q_INPUTS))
-        now, after = values.split(len(values) // 2)
-        value = team_value(now.gather(-1, td.get(("agents", "action")).unsqueeze(-1)), self.mixer)
+        chosen = online(*(td.get(k) for k in Q_INPUTS)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
+        value = team_value(chosen, self.mixer)
         with torch.no_grad():
-            action = greedy(after, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
+            next_values = online(*(nxt.get(k) for k in Q_INPUTS))
+            action = greedy(next_values, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
             next_value = team_value(
                 target(*(nxt.get(k) for k in Q_INPUTS)).gather(-1, action.unsqueeze(-1)), self.mixer
             )
