@@ -1,15 +1,19 @@
-"""Cost of one DQN training iteration (N = 6 on 10x10, the defaults) beside the same at an earlier commit.
+"""Cost of one DQN training iteration (the defaults on 10x10, N = 6 unless ``--sizes``) beside an earlier commit.
 
 Each measurement is a whole process: build the agent, 3 warm-up iterations,
 then ``--iterations`` timed ones; it prints the median CPU and wall seconds per
 iteration.  ``--baseline REV`` checks REV out in a temporary git worktree and
 measures it the same way, alternating with this checkout ``--rounds`` times,
 so both see the same machine load; the ratio of the medians is the figure.
-One torch thread.
+``--sizes`` and ``--networks`` measure every team size with each network
+(``team``: the per-size network, QMIX as ``scenario=n6_10x10``; ``set``: the
+size-free one, ``agent.mixer=mean``), all on 10x10.  One torch thread.
 
 Usage::
 
     python benchmarks/dqn_iteration.py --baseline 3ffece7 --rounds 3
+    python benchmarks/dqn_iteration.py --baseline 206506a --rounds 1 --iterations 3 --sizes 2 6 10 20 50 \
+        --networks team set
 """
 
 from __future__ import annotations
@@ -29,10 +33,14 @@ import statistics, sys, time, torch
 torch.set_num_threads(1)
 from hydra import compose, initialize_config_dir
 from uavrl.config import config_dir, model_config
-from uavrl.agents.dqn import DQNAgent
+from uavrl.agents import agent_class
 with initialize_config_dir(config_dir=config_dir(), version_base=None):
-    cfg = compose("config", overrides=["agent=dqn", "env.grid=[10,10]", "env.num_uavs=6"])
-agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    cfg = compose("config", overrides=["agent=dqn", "env.grid=[10,10]", *sys.argv[2:]])
+try:
+    cls = agent_class("dqn", cfg.agent)
+except TypeError:  # commits before the registry chose the network: DQNAgent built the size-free agent itself
+    cls = agent_class("dqn")
+agent = cls(model_config(cfg), cfg, torch.device("cpu"), seed=0)
 for _ in range(3):
     agent.train_iteration()
 cpu, wall = [], []
@@ -45,11 +53,15 @@ print(statistics.median(cpu), statistics.median(wall))
 """
 
 
-def measure(checkout: Path, iterations: int) -> tuple[float, float]:
-    """Median (CPU, wall) seconds per iteration of the code in ``checkout`` (its folders on the import path)."""
+NETWORKS = {"team": ["agent.mixer=qmix"], "set": ["agent.network=set", "agent.mixer=mean"]}
+
+
+def measure(checkout: Path, iterations: int, overrides: list[str] = ("env.num_uavs=6",)) -> tuple[float, float]:
+    """Median (CPU, wall) seconds per iteration of the code in ``checkout`` (its folders on the import path) with
+    the Hydra ``overrides``."""
     code = "import sys\n" + _installed_names(checkout) + MEASURE
     done = subprocess.run(
-        [sys.executable, "-c", code, str(iterations)], capture_output=True, text=True, env={**os.environ}
+        [sys.executable, "-c", code, str(iterations), *overrides], capture_output=True, text=True, env={**os.environ}
     )
     if done.returncode != 0:
         raise SystemExit(f"measuring {checkout} failed:\n{done.stderr}")
@@ -95,7 +107,11 @@ def main():
     parser.add_argument("--baseline", help="a git revision to measure beside this checkout")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--iterations", type=int, default=12)
+    parser.add_argument("--sizes", nargs="+", type=int, help="team sizes N on 10x10: one table row per N and network")
+    parser.add_argument("--networks", nargs="+", choices=list(NETWORKS), default=["team"])
     args = parser.parse_args()
+    if args.sizes:
+        return sizes_table(args)
     with checkouts_beside(args.baseline) as checkouts:
         print(f"load average at start: {os.getloadavg()[0]:.1f}")
         results = {name: [] for name in checkouts}
@@ -110,6 +126,25 @@ def main():
         if args.baseline:
             base, this = medians[f"baseline {args.baseline}"], medians["this checkout"]
             print(f"this checkout / baseline: {this / base:.2f}x CPU per iteration")
+        print(f"load average at end: {os.getloadavg()[0]:.1f}")
+
+
+def sizes_table(args) -> None:
+    """One Markdown row per network and team size: the median CPU seconds per iteration of each checkout."""
+    with checkouts_beside(args.baseline) as checkouts:
+        print(f"load average at start: {os.getloadavg()[0]:.1f}")
+        print("| network | N | " + " | ".join(f"{name} CPU s" for name in checkouts) + " | ratio |")
+        print("|---|---|" + "---|" * len(checkouts) + "---|")
+        for n in args.sizes:
+            for network in args.networks:
+                overrides = [f"env.num_uavs={n}", *NETWORKS[network]]
+                cpu = {name: [] for name in checkouts}
+                for _ in range(args.rounds):
+                    for name, checkout in checkouts.items():
+                        cpu[name].append(measure(checkout, args.iterations, overrides)[0])
+                medians = [statistics.median(c) for c in cpu.values()]
+                ratio = f"{medians[-1] / medians[0]:.2f}x" if len(medians) > 1 else "-"
+                print(f"| {network} | {n} | " + " | ".join(f"{m:.3f}" for m in medians) + f" | {ratio} |", flush=True)
         print(f"load average at end: {os.getloadavg()[0]:.1f}")
 
 

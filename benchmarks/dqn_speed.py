@@ -9,7 +9,9 @@ time, so they share the machine's load.  Printed per run: the training's wall
 and CPU seconds (the periodic evaluations left out: ``train_seconds``, ``train_cpu_seconds`` of metrics.json),
 the share of the 200 held-out starts that reach 0.999 U*, and the steps to
 reach it over the oracle planner's from the same starts (those both reach),
-as ``benchmarks/yardstick.py --paired`` computes them.
+as ``benchmarks/yardstick.py --paired`` computes them.  With ``--out``, a run
+that already finished there (its ``metrics.json`` written) is read instead of
+trained again, so an interrupted comparison continues where it stopped.
 
 Usage::
 
@@ -73,9 +75,10 @@ def main():
             runs = {}
             for name, (checkout, overrides) in variants.items():
                 run_dir = out / f"{name.replace(' ', '_')}-seed{seed}"
-                runs[name] = (run_dir, start(checkout, [*overrides, f"seed={seed}"], run_dir))
+                done = (run_dir / "metrics.json").exists()
+                runs[name] = (run_dir, None if done else start(checkout, [*overrides, f"seed={seed}"], run_dir))
             for name, (run_dir, process) in runs.items():
-                if process.wait() != 0:
+                if process is not None and process.wait() != 0:
                     raise SystemExit(f"{name} seed {seed} failed")
                 m = json.loads((run_dir / "metrics.json").read_text())
                 print(

@@ -202,7 +202,7 @@ def agent_case(overrides: list[str]) -> dict[str, str]:
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
         cfg = compose(config_name="config", overrides=[*COMMON, *overrides])
     env_cfg = model_config(cfg)
-    agent = agent_class(cfg.agent.name)(env_cfg, cfg, torch.device("cpu"), 5)
+    agent = agent_class(cfg.agent.name, cfg.agent)(env_cfg, cfg, torch.device("cpu"), 5)
     metrics = [agent.train_iteration() for _ in range(agent.num_iterations)]
     checkpoint = digest(agent.state_dict())  # before the evaluation, as a checkpoint is written
     evaluation = agent.evaluate(env_cfg, num_starts=4, horizon=12, seed=11, device="cpu", gamma=0.9)

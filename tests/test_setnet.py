@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from uavrl import load_policy
+from uavrl.agents import agent_class
 from uavrl.agents.dqn import DQNAgent
 from uavrl.agents.dqn.multisize import SetDQNAgent
 from uavrl.agents.dqn.setnet import Q_INPUTS, SetQCore, SetQNet
@@ -81,7 +82,7 @@ def test_the_network_reads_the_batteries():
 
 def test_one_set_of_parameters_acts_on_small_and_large_teams(set_cfg):
     cfg = set_cfg()
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), 0)
     assert isinstance(agent, SetDQNAgent)
     for grid, n in (((6, 6), 2), ((50, 50), 50)):
         env_cfg = make_config("paper", grid=grid, num_uavs=n)
@@ -189,8 +190,21 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
 def test_bad_set_settings_are_refused_in_one_line(set_cfg, overrides, message):
     cfg = set_cfg(*overrides)
     with pytest.raises(ValueError, match=None) as err:
-        DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+        agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), 0)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_registry_picks_the_network_and_each_class_refuses_the_other(set_cfg):
+    """agent=dqn is one name with two classes: the settings choose, and neither class turns into the other."""
+    cfg = set_cfg()
+    assert agent_class("dqn", cfg.agent) is SetDQNAgent
+    assert agent_class("dqn", set_cfg("agent.network=team", "agent.mixer=vdn").agent) is DQNAgent
+    assert agent_class("dqn") is DQNAgent
+    with pytest.raises(ValueError, match="agent.network='set' is invalid for DQNAgent, the per-size network"):
+        DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    team = set_cfg("agent.network=team", "agent.mixer=vdn", "agent.sizes=[]")
+    with pytest.raises(ValueError, match="agent.network='team' is invalid for SetDQNAgent"):
+        SetDQNAgent(model_config(team), team, torch.device("cpu"), 0)
 
 
 def test_the_cost_check_counts_every_team_and_layout_of_a_size_free_run(tmp_path, compose_cfg):

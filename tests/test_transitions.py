@@ -6,7 +6,7 @@ import pytest
 import torch
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
-from uavrl.agents.dqn import DQNAgent
+from uavrl.agents import agent_class
 from uavrl.config import model_config
 from uavrl.envs.limits import stored_transition_bytes
 
@@ -63,7 +63,7 @@ SET_CASES = {
 def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
     """Every replay buffer: the per-size agent's, and each team and layout's of the size-free one."""
     cfg = compose_cfg(*TINY, *CASES.get(case, ["env.grid=[3,3]"]), *SET_CASES.get(case, []))
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=1)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=1)
     buffers = [group.buffer for group in agent.groups] if case in SET_CASES else [agent.buffer]
     # a buffer of the full transitions beside each of the agent's, extended with the same batches
     fulls = [TensorDictReplayBuffer(storage=LazyTensorStorage(100), batch_size=b.batch_size) for b in buffers]
@@ -91,7 +91,7 @@ def test_sampled_transitions_are_the_full_ones_bit_for_bit(case, compose_cfg):
 def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
     """Bytes per transition kept, N = 6 on 10x10: the full transitions' against the compact ones'."""
     cfg = compose_cfg(*TINY, "env.grid=[10,10]", "env.num_uavs=6", "agent.mixer=qmix", "agent.learning_starts=1000")
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     agent.train_iteration()
     stored, full = agent.buffer.storage._storage, agent.buffer[:]
     per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
@@ -131,11 +131,11 @@ def full_buffer_state(buffer, transitions, saved: dict) -> dict:
 def test_a_checkpoint_of_full_transitions_is_compacted_and_resumes_exactly(case, compose_cfg):
     """Random layouts: the nodes of each stored transition are those its iteration's worlds were reset to."""
     cfg = compose_cfg(*TINY, *CASES.get(case, ["env.grid=[3,3]"]), *SET_CASES.get(case, []))
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     for _ in range(3):
         agent.train_iteration()
     state = full_transitions_checkpoint(agent)
-    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    restored = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     restored.load_state_dict(state)
     for group, again in zip(getattr(agent, "groups", [agent]), getattr(restored, "groups", [restored]), strict=True):
         assert (again.buffer.storage._storage == group.buffer.storage._storage).all()
@@ -147,11 +147,11 @@ def test_a_checkpoint_of_full_transitions_is_compacted_and_resumes_exactly(case,
 
 def test_full_transitions_of_unknown_layouts_are_refused_in_one_line(compose_cfg):
     cfg = compose_cfg(*TINY, *CASES["n3-random-layouts"])
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     agent.train_iteration()
     state = full_transitions_checkpoint(agent)
     state["buffer"]["_storage"]["_storage"]["agents.observation"][5, 0, 4] += 0.25  # no layout of its iteration's
-    restored = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+    restored = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=3)
     with pytest.raises(ValueError, match="holds transitions of layouts that cannot be recovered") as refused:
         restored.load_state_dict(state)
     assert "\n" not in str(refused.value)
@@ -162,7 +162,7 @@ def test_two_runs_of_one_seed_save_the_same_bytes_before_the_buffer_fills(compos
     cfg = compose_cfg(*TINY, "env.grid=[3,3]", "agent.buffer_size=1000")
     saved = []
     for _ in range(2):
-        agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=3)
+        agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=3)
         agent.train_iteration()
         assert len(agent.buffer) < 1000
         file = io.BytesIO()

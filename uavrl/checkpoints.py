@@ -218,7 +218,7 @@ def saved_agent(cfg, env_cfg, device, file: Path):
 
     source = quoted(file)
     try:
-        return agent_class(cfg.agent.name)(env_cfg, cfg, device, int(cfg.seed))
+        return agent_class(cfg.agent.name, cfg.agent)(env_cfg, cfg, device, int(cfg.seed))
     except (OmegaConfBaseException, KeyError, TypeError) as err:
         reason = " ".join(f"{type(err).__name__}: {err}".split())
         raise CheckpointError(f"{source}: its saved config does not fit a {cfg.agent.name} agent ({reason})") from None

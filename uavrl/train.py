@@ -249,7 +249,7 @@ class Training:
 
         cfg = self.cfg
         if self.checkpoint is None:
-            self.agent = agent_class(cfg.agent.name)(self.env_cfg, cfg, self.device, int(cfg.seed))
+            self.agent = agent_class(cfg.agent.name, cfg.agent)(self.env_cfg, cfg, self.device, int(cfg.seed))
         else:
             self.agent = saved_agent(cfg, self.env_cfg, self.device, self.checkpoint_file)
 

@@ -38,8 +38,9 @@ _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length;
-    ``agent.network=set`` builds the size-free :class:`~.multisize.SetDQNAgent` instead.
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  The
+    size-free network (``agent.network=set``) is :class:`~.multisize.SetDQNAgent`, the class
+    :func:`uavrl.agents.agent_class` gives for those settings.
 
     Args:
         env_cfg: the run's :class:`~uavrl.envs.ModelConfig` (its ``max_steps`` the episode length).
@@ -48,16 +49,14 @@ class DQNAgent(Agent):
         seed: seeds the networks' initial weights and every iteration's worlds.
     """
 
-    def __new__(cls, env_cfg: ModelConfig, cfg, device, seed: int):
-        if cls is DQNAgent and cfg.agent.get("network", "team") == "set":  # run configs saved before: no setting
-            from .multisize import SetDQNAgent
-
-            cls = SetDQNAgent
-        return super().__new__(cls)
-
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
         check_settings(env_cfg, a)
+        if a.get("network", "team") != "team":  # run configs saved before: no setting
+            raise ValueError(
+                f"agent.network={a.network!r} is invalid for DQNAgent, the per-size network: build "
+                "uavrl.agents.agent_class('dqn', cfg.agent), SetDQNAgent for agent.network='set'"
+            )
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
         self.num_iterations = int(a.iterations)
@@ -75,7 +74,7 @@ class DQNAgent(Agent):
         policies = build_policies(self.env, a, q, exploration_schedule(a, frames, self.device))
         self.greedy, self.exploration = policies.greedy, policies.exploration
         self.loss = build_loss(self.env, a, policies)
-        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(a.lr))
+        self.optimizer = adam(list(self.loss.parameters()), float(a.lr))
         self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
         self.transitions = CompactTransitions(self.env.world, policies.action_keys)  # what the buffer keeps of each
         self.buffer = build_replay_buffer(a, self.transitions)
@@ -154,7 +153,7 @@ class DQNAgent(Agent):
         loss = self.loss(self.buffer.sample())["loss"]
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        nn.utils.clip_grad_norm_(self.loss.parameters(), float(self.settings.max_grad_norm))
+        nn.utils.clip_grad_norm_(self.loss.parameters(), float(self.settings.max_grad_norm), foreach=True)
         self.optimizer.step()
         self.target_update.step()
         return loss.detach()
@@ -204,6 +203,12 @@ class DQNAgent(Agent):
         layouts = layouts_of if env.cfg.layout == "random" else None
         frames = env.num_worlds * env.cfg.max_steps
         load_replay_buffer(buffer, transitions, state, env.observation_size, self.device, layouts, frames)
+
+
+def adam(parameters: list[torch.nn.Parameter], lr: float) -> torch.optim.Adam:
+    """Adam with its fused kernel (one pass over every parameter, CPU and CUDA): about a tenth of a gradient step
+    below the per-parameter loop (BENCHMARKS.md, DQN iteration)."""
+    return torch.optim.Adam(parameters, lr=lr, fused=True)
 
 
 def reset_layouts(cfg: ModelConfig, worlds: int, device, seed: int) -> torch.Tensor:

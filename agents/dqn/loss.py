@@ -10,8 +10,6 @@ from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.objectives import QMixerLoss
 
-from uavrl.compat import written_into
-
 from .networks import Q_INPUTS
 
 
@@ -35,25 +33,46 @@ class DoubleQMixerLoss(QMixerLoss):
         self.gamma = gamma
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
-        # The online parameters are the modules' own (the optimizer steps them in place): called directly, without
-        # the parameter swap of to_module.  The target parameters are swapped in.
+        # Parameters are read, never swapped into the modules: the online ones are the modules' own (the optimizer
+        # steps them in place), the target ones are handed to the network and the mixer as arguments.
         net, greedy = (m.module for m in self.local_value_network.module)
         mixer, k, nxt = self.mixer_network.module, self.tensor_keys, td.get("next")
-
-        def team_value(td: TensorDictBase, action: torch.Tensor) -> torch.Tensor:
-            chosen = net(*(td.get(key) for key in Q_INPUTS)).gather(-1, action.unsqueeze(-1))
-            return mixer(chosen, td.get("state")) if mixer.needs_state else mixer(chosen)
-
-        value = team_value(td, td.get(k.action))
+        # the successors' online pass stays apart from the states': one pass over both costs ~10% more a gradient
+        # step on CPU, its backward running over the successors' rows too (BENCHMARKS.md, DQN iteration)
+        value = _mixed(
+            mixer, net(*(td.get(key) for key in Q_INPUTS)).gather(-1, td.get(k.action).unsqueeze(-1)), td.get("state")
+        )
         with torch.no_grad():
-            next_values = net(*(nxt.get(key) for key in Q_INPUTS))
-            next_action = greedy(
-                next_values, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks")
-            )
-            with (
-                written_into(self.target_local_value_network_params, self.local_value_network),
-                written_into(self.target_mixer_network_params, self.mixer_network),
-            ):
-                next_value = team_value(nxt, next_action)  # the online greedy valid action, valued by the target
+            after = net(*(nxt.get(key) for key in Q_INPUTS))
+            next_action = greedy(after, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
+            target_values = net(*(nxt.get(key) for key in Q_INPUTS), params=self._target_net)
+            chosen = target_values.gather(-1, next_action.unsqueeze(-1))  # the online greedy action, target-valued
+            next_value = _mixed(mixer, chosen, nxt.get("state"), self.target_mixer_network_params.get("module"))
             target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
+
+    @property
+    def _target_net(self) -> TensorDictBase:
+        """The target copy of :class:`~.networks.TeamQNet`'s parameters (the first module of the greedy policy)."""
+        return self.target_local_value_network_params.get(("module", "0", "module"))
+
+
+def _mixed(mixer: nn.Module, chosen: torch.Tensor, state: torch.Tensor, params: TensorDictBase = None) -> torch.Tensor:
+    """``[*, 1]`` the team value of the chosen per-UAV values ``[*, N, 1]``: VDN's sum, or QMIX's monotonic mix with
+    the mixer's own parameters or ``params`` (TorchRL's ``QMixer.mix``, here with parameters as arguments)."""
+    if not mixer.needs_state:
+        return mixer(chosen)
+    if params is None:
+        return mixer(chosen, state)
+
+    def layer(name: str, x: torch.Tensor) -> torch.Tensor:  # "V.0": the first layer of the state value V
+        return nn.functional.linear(x, params.get((*name.split("."), "weight")), params.get((*name.split("."), "bias")))
+
+    state = state.reshape(-1, mixer.state_dim)
+    w1 = layer("hyper_w_1", state).abs().view(-1, mixer.n_agents, mixer.embed_dim)
+    hidden = nn.functional.elu(
+        torch.bmm(chosen.reshape(-1, 1, mixer.n_agents), w1) + layer("hyper_b_1", state)[:, None]
+    )
+    w_final = layer("hyper_w_final", state).abs().view(-1, mixer.embed_dim, 1)
+    v = layer("V.2", torch.relu(layer("V.0", state))).view(-1, 1, 1)
+    return (torch.bmm(hidden, w_final) + v).view(*chosen.shape[:-2], 1)

@@ -40,12 +40,13 @@ from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.evaluation import episode_metrics
 
-from .agent import _SEED_MODULUS, DQNAgent, reset_layouts
+from .agent import _SEED_MODULUS, DQNAgent, adam, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
 from .curriculum import Curriculum, uniform_sample
 from .demonstrations import Demonstrations
 from .networks import Q_INPUTS
 from .setnet import SetDoubleQLoss, SetQCore, SetQNet
+from .settings import check_settings
 from .transitions import CompactTransitions, transition_keys
 
 
@@ -83,13 +84,18 @@ class _Group:
 
 
 class SetDQNAgent(DQNAgent):
-    """:class:`DQNAgent` with a size-free network (``agent.network=set``, module doc); built by ``DQNAgent(...)``
-    when the settings ask for it.  The greedy rule (:class:`~.networks.ValidGreedy`), the double-DQN targets, the
-    objective and the ``train/...`` tags are the factored DQN's; the tags are means over the sizes' worlds."""
+    """:class:`DQNAgent` with a size-free network (``agent.network=set``, module doc), the class
+    :func:`uavrl.agents.agent_class` gives for those settings.  The greedy rule (:class:`~.networks.ValidGreedy`),
+    the double-DQN targets, the objective and the ``train/...`` tags are the factored DQN's; the tags are means over
+    the sizes' worlds."""
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        self._check(env_cfg, a)  # the size-free network's checks too (agents/schema.py)
+        check_settings(env_cfg, a)  # the size-free network's checks too (agents/schema.py)
+        if a.get("network", "team") != "set":
+            raise ValueError(
+                f"agent.network={a.get('network', 'team')!r} is invalid for SetDQNAgent: use agent.network=set"
+            )
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
         self.num_iterations = int(a.iterations)
@@ -98,7 +104,7 @@ class SetDQNAgent(DQNAgent):
         energy = env_cfg.energy != "none"
         self.core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth)).to(self.device)
         self.loss = SetDoubleQLoss(self.core, a.mixer, float(a.gamma), env_cfg.num_actions)
-        self.optimizer = torch.optim.Adam(self.core.parameters(), lr=float(a.lr))
+        self.optimizer = adam(list(self.core.parameters()), float(a.lr))
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
         models = training_models(env_cfg, a)
         self.batch_size = max(1, int(a.batch_size) // len(models))
@@ -106,12 +112,6 @@ class SetDQNAgent(DQNAgent):
         # the sample-efficiency levers (off: pure RL): the oracle's demonstrations, a curriculum over the groups
         self.curriculum = Curriculum(a.get("curriculum", "none"), len(self.groups), self.batch_size * len(self.groups))
         self.demonstrations = None  # built at the first gradient step: an evaluation of the checkpoint needs none
-
-    @staticmethod
-    def _check(env_cfg: ModelConfig, a) -> None:
-        from .settings import check_settings
-
-        check_settings(env_cfg, a)
 
     def _group_seed(self, iteration: int, group: int) -> int:
         return (self._world_seed(iteration) + group * int(self.settings.worlds)) % _SEED_MODULUS
@@ -185,7 +185,7 @@ class SetDQNAgent(DQNAgent):
         loss = self.curriculum.total(losses, sizes) + sum(margins)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm))
+        nn.utils.clip_grad_norm_(self.core.parameters(), float(self.settings.max_grad_norm), foreach=True)
         self.optimizer.step()
         self.loss.update_target(float(self.settings.tau))
         return loss.detach()

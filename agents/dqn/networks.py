@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import torch
+from tensordict import TensorDictBase
 from torch import nn
 from torchrl.modules import MultiAgentMLP
 
@@ -88,21 +89,34 @@ class TeamQNet(nn.Module):
             )
         self.register_buffer("ids", torch.eye(N, device=dev))
         self.register_buffer("neighbours", env.neighbours.clone())
+        self._torso_layers = sorted(self.torso.params.keys(), key=int)  # "0", "2", ...: the Linear layers
 
-    def forward(self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor, params: TensorDictBase = None
+    ) -> torch.Tensor:
+        """The values; ``params`` (the structure of ``TensorDict.from_module(self)``, the target network's copy in
+        the loss) replace the module's own parameters, which keeps the factored head free of any parameter swap."""
         observation = observation_with_nodes(observation, state)
-        embedding = self.torso(observation)  # [*, N, hidden], the same row for every UAV
         if self.joint:
-            return self.head(embedding[..., 0, :])
+            return self.head(self.torso(observation)[..., 0, :])
+        if params is None:
+            torso, head = self.torso.params, self.head.params
+        else:
+            torso, head = params["torso", "params"], params["head", "params"]
+        # the centralised torso once per world on the flattened joint observation: MultiAgentMLP's function without
+        # its per-call parameter plumbing; every layer is followed by a ReLU
+        embedding = observation.flatten(-2).unsqueeze(-2)  # [*, 1, N F]
+        for layer in self._torso_layers:
+            embedding = torch.relu(nn.functional.linear(embedding, torso[layer, "weight"], torso[layer, "bias"]))
         C = len(self.neighbours)
         cells = cells_or_away(positions, (self.width, C // self.width))
         # [*, N, 4]: which of its neighbouring cells another UAV holds (none, for a UAV out of service)
         held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
         held &= (cells < C).unsqueeze(-1)
         own = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1), held.to(observation.dtype)], -1)
-        first, last = self.head.params["0"], self.head.params["2"]  # the head's layers (Linear, ReLU, Linear)
+        first, last = head["0"], head["2"]  # the head's layers (Linear, ReLU, Linear)
         split = embedding.shape[-1]
-        hidden = nn.functional.linear(embedding[..., :1, :], first["weight"][:, :split], first["bias"])
+        hidden = nn.functional.linear(embedding, first["weight"][:, :split], first["bias"])
         hidden = torch.relu(hidden + nn.functional.linear(own, first["weight"][:, split:]))
         return nn.functional.linear(hidden, last["weight"], last["bias"])
 
