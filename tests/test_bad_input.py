@@ -95,7 +95,7 @@ CLI_CASES = [
     ("evaluate checkpoint={run} train.log_every=3", "train.log_every=3 is invalid for python -m uavrl.evaluate"),
     ("reproduce table2 +foo=1", "foo=1 is invalid: no such setting"),
     ("reproduce table2 state_includes_tasks=2", "state_includes_tasks=2 is invalid: it must be true or false"),
-    ("reproduce table2 grids=[2] out_dir={garbage}", "is invalid: it is a file, not a directory"),
+    ("reproduce table2 grids=[2] out_dir={garbage}", "is a file, not a directory"),
     ("reproduce table2 episdoes=5", "episdoes"),
 ]
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from uavrl.agents.dqn import DQNAgent
+from uavrl.agents import agent_class
 from uavrl.agents.dqn.curriculum import Curriculum
 from uavrl.agents.dqn.demonstrations import margin_loss, oracle_transitions
 from uavrl.agents.dqn.setnet import SetQCore, SetQNet
@@ -85,7 +85,7 @@ def test_demonstrations_reach_u_star_with_the_objectives_rewards(layout):
 def test_agent_with_demonstrations_and_curriculum_trains_and_resumes():
     cfg = compose_cfg("agent.layouts=[line,random]", "agent.demonstrations=oracle", "agent.demo_transitions=80")
     cfg.agent.curriculum = "loss"
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     assert agent.demonstrations is None  # built at the first gradient step, never for an evaluation
     for _ in range(2):
         metrics = agent.train_iteration()
@@ -94,7 +94,7 @@ def test_agent_with_demonstrations_and_curriculum_trains_and_resumes():
     shares = agent.curriculum.shares()
     assert float(shares.sum()) == pytest.approx(1.0) and bool((shares >= 0.5 / 4 - 1e-12).all())
     state = agent.state_dict()
-    again = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    again = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     again.load_state_dict(state)
     assert torch.equal(again.curriculum.average, agent.curriculum.average)
     assert "train/loss" in again.train_iteration()
@@ -129,7 +129,7 @@ def test_curriculum_shares_follow_the_recent_losses():
 def test_bad_lever_settings_are_refused_in_one_line(overrides, words):
     cfg = compose_cfg(*overrides)
     with pytest.raises(ValueError, match=words) as refused:
-        DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+        agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     assert "\n" not in str(refused.value)
 
 
@@ -198,7 +198,7 @@ def test_lookahead_reads_the_mean_channel_model():
 
 def test_eval_lookahead_on_a_size_free_agent_reports_its_cost():
     cfg = compose_cfg("agent.layouts=[random]")
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     env_cfg = make_config("paper", grid=(6, 6), num_uavs=4, layout="random")
     metrics = evaluate_with_lookahead(agent, env_cfg, 1, 4, num_starts=4)
     assert metrics["eval/lookahead"] == 1.0 and metrics["eval/lookahead_cpu_s_per_step"] > 0
@@ -234,7 +234,7 @@ def test_eval_lookahead_on_a_per_size_dqn_in_its_own_model():
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
         overrides = ["agent=dqn", "agent.mixer=vdn", "agent.worlds=2", "agent.buffer_size=100", "env.grid=[4,4]"]
         cfg = compose("config", overrides=[*overrides, "env.num_uavs=2", "env.max_steps=5"])
-    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     metrics = evaluate_with_lookahead(agent, model_config(cfg), 2, 3, num_starts=3)
     assert metrics["eval/lookahead"] == 2.0 and 0 < metrics["eval/optimality"] <= 1
     with pytest.raises(ValueError, match="its run's model"):
