@@ -290,7 +290,7 @@ def test_a_mission_horizon_over_the_memory_budget_is_refused_in_one_line():
     cfg = make_config("paper", grid=(6, 6), num_uavs=2, energy="follow_up", base=(-1, 0))  # 10,000 steps of 0.5
     with pytest.raises(ValueError) as error:
         evaluate(RandomPolicy(seed=0), cfg, num_starts=64, memory_budget=10**8)
-    assert str(error.value).startswith(f"eval.horizon={mission_steps(cfg)} is invalid") and "\n" not in str(error.value)
+    assert str(error.value).startswith(f"horizon={mission_steps(cfg)} is invalid") and "\n" not in str(error.value)
 
 
 def test_the_joint_action_mask_of_uavs_out_of_service():

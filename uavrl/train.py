@@ -274,9 +274,11 @@ class Training:
             resume_step = self.agent.env_steps if self.checkpoint is not None else 0
             self.logger = RunLogger(self.run_dir, resume_step=resume_step)
         self.checkpoints = CheckpointWriter(self.run_dir, self.newest_is_readable)
-        from uavrl.agents.lookahead import lookahead_settings
+        self.eval_kwargs = eval_settings(self.cfg, self.device)
+        if self.cfg.eval.get("lookahead", 0):  # the search needs TensorDict: a tabular run imports none
+            from uavrl.agents.lookahead import lookahead_settings
 
-        self.eval_kwargs = {**eval_settings(self.cfg, self.device), **lookahead_settings(self.cfg)}
+            self.eval_kwargs.update(lookahead_settings(self.cfg))
 
     def train_and_evaluate(self) -> dict:
         """The iterations, then the final evaluation; writes ``metrics.json`` and returns it.

@@ -94,8 +94,16 @@ class TeamQNet(nn.Module):
     def forward(
         self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor, params: TensorDictBase = None
     ) -> torch.Tensor:
-        """The values; ``params`` (the structure of ``TensorDict.from_module(self)``, the target network's copy in
-        the loss) replace the module's own parameters, which keeps the factored head free of any parameter swap."""
+        """The values: ``[*, N, A]`` per UAV (factored head), or ``[*, 6^N]`` per joint action (joint head).
+
+        Args:
+            observation: the UAVs' observations ``[*, N, F]``.
+            positions: their cells ``[*, N, 2]`` (the greedy rule's neighbours and the masked moves read them).
+            state: the worlds' state ``[*, S]``; its last 12 entries, the node positions, join each observation.
+            params: the structure of ``TensorDict.from_module(self)`` (the target network's copy in the loss),
+                replacing the module's own parameters, which keeps the factored head free of any parameter swap;
+                None: the module's own.
+        """
         observation = observation_with_nodes(observation, state)
         if self.joint:
             return self.head(self.torso(observation)[..., 0, :])
