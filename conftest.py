@@ -30,8 +30,10 @@ ROOT = Path(__file__).resolve().parent
 _PACKAGE_DIRS = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
 FOLDERS = {ROOT / folder: package for package, folder in _PACKAGE_DIRS.items() if package.count(".") <= 1}
 # modules of an optional extra: their examples run where the extra is installed (pip install -e ".[benchmarl]",
-# pip install -e ".[gym]")
+# pip install -e ".[gym]", pip install -e ".[bench]")
 NEEDS = {
+    "uavrl.bench.run": "rliable",
+    "uavrl.bench.stats": "rliable",
     "uavrl.agents.benchmarl": "benchmarl",
     "uavrl.benchmarl": "benchmarl",
     "uavrl.envs.adapters.gym_env": "gymnasium",
