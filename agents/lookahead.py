@@ -258,12 +258,14 @@ def check_lookahead(a, depth: int, agent_name: str) -> None:
         )
 
 
-def lookahead_settings(cfg) -> dict:
-    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); a
-    training run's agent is checked at once, before it trains."""
+def lookahead_settings(cfg, agent_settings=None) -> dict:
+    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); the
+    agent is checked at once: ``agent_settings`` (an evaluated checkpoint's saved ``agent``), else ``cfg.agent`` (a
+    training run's, before it trains)."""
     depth = int(cfg.eval.get("lookahead", 0) or 0)
-    if depth and "agent" in cfg:
-        check_lookahead(cfg.agent, depth, f"agent={cfg.agent.name}")
+    a = agent_settings if agent_settings is not None else cfg.get("agent")
+    if depth and a is not None:
+        check_lookahead(a, depth, f"agent={a.name}")
     return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}
 
 

@@ -239,3 +239,16 @@ def test_eval_lookahead_on_a_per_size_dqn_in_its_own_model():
     assert metrics["eval/lookahead"] == 2.0 and 0 < metrics["eval/optimality"] <= 1
     with pytest.raises(ValueError, match="its run's model"):
         lookahead_policy(agent, make_config("paper", grid=(5, 5), num_uavs=2), 1, 3)
+
+
+def test_evaluate_checks_the_lookahead_against_the_checkpoints_agent_not_its_own_default():
+    """``python -m uavrl.evaluate checkpoint=<dqn run> eval.lookahead=1``: evaluate's own config holds the default
+    agent (tabular); the saved run's agent is the one that must have a Q-network."""
+    from uavrl.agents.lookahead import lookahead_settings
+
+    with initialize_config_dir(config_dir=config_dir(), version_base=None):
+        evaluate_cfg = compose("config", overrides=["agent=tabular", "eval.lookahead=1"])
+    saved = compose_cfg()
+    assert lookahead_settings(evaluate_cfg, saved.agent) == {"lookahead": 1, "lookahead_width": 8}
+    with pytest.raises(ValueError, match="agent=tabular"):
+        lookahead_settings(evaluate_cfg, evaluate_cfg.agent)

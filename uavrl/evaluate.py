@@ -207,7 +207,9 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     evaluated = evaluated_config(saved, cfg, overrides, f"checkpoint={quoted(cfg.checkpoint)}")
     # refused before the evaluation's work, not after it (a checkpoint without its run's config.yaml is known now)
     check_evaluation_costs(cfg, saved, model_config(evaluated), bool(cfg.eval.video), list(overrides) or None)
-    metrics = evaluate_agent(agent, model_config(evaluated), **eval_settings(cfg, device), **lookahead_settings(cfg))
+    metrics = evaluate_agent(
+        agent, model_config(evaluated), **eval_settings(cfg, device), **lookahead_settings(cfg, saved.get("agent"))
+    )
     out_dir = output_dir(cfg.checkpoint)
     made_with = {
         **{key: OmegaConf.select(cfg, f"eval.{key}") for key in EVALUATION_KEYS},
