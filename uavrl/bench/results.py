@@ -54,7 +54,7 @@ def new_results(suite: str, name: str, budget: dict, source: str, partial: bool 
 
 
 def read(path) -> dict:
-    """A results file, refused in one line when it is not one this version reads."""
+    """The results file at ``path``, refused in one line when it is not one this version reads."""
     try:
         results = json.loads(Path(path).read_text())
     except (OSError, ValueError) as err:

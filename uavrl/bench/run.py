@@ -38,7 +38,7 @@ def _untensor(entry):
 
 
 def task_env(task: Task, device="cpu"):
-    """The task's environment, one world per start, seeded at its starts (not yet reset)."""
+    """The task's environment, one world per start, seeded at its starts (not yet reset), on the torch ``device``."""
     from uavrl.envs.env import UAVSpectrumEnv
 
     return UAVSpectrumEnv(batch_size=task.num_starts, config=model(task), seed=task.seed, device=device)

@@ -75,7 +75,8 @@ def aggregates(metrics):
 
 def aggregate(results: dict, reps: int = REPS) -> dict:
     """The suite's aggregate of a results file: each of :data:`METRICS` with its 95% stratified bootstrap CI, and the
-    score distribution (performance profile) at :data:`PROFILE_TAUS` with its CIs; empty when no task was scored."""
+    score distribution (performance profile) at :data:`PROFILE_TAUS` with its CIs, from ``reps`` bootstrap
+    replications; empty when no task was scored."""
 
     matrix, names = score_matrix(results)
     if not names:
@@ -112,7 +113,8 @@ def aggregate(results: dict, reps: int = REPS) -> dict:
 
 def probability_of_improvement(a: dict, b: dict, reps: int = REPS) -> dict:
     """P(A > B) (rliable's ``probability_of_improvement``: the mean over tasks of the Mann-Whitney statistic of A's
-    scores against B's) over the tasks both files scored, with its 95% stratified bootstrap CI."""
+    scores against B's) over the tasks both results ``a`` and ``b`` scored, with its 95% stratified bootstrap CI from
+    ``reps`` replications."""
     import numpy as np
 
     if a["suite"] != b["suite"]:

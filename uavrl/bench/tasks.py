@@ -42,9 +42,11 @@ GAMMA = 0.9
 class Task:
     """A benchmark task (module doc): the model, its starts and its protocol.
 
-    ``scenario`` names a scenario of ``configs/scenario/`` (its model and evaluation horizon), ``options`` the
-    model options changed from it (``grid``, ``num_uavs``, ``layout``: the zero-shot suite's teams), ``seed`` the
-    stream of start 0.
+    ``name`` is the task's name in a suite and a results file; ``scenario`` names a scenario of
+    ``configs/scenario/`` (its model and evaluation horizon), ``options`` the model options changed from it
+    (``grid``, ``num_uavs``, ``layout``: the zero-shot suite's teams), ``seed`` the stream of start 0,
+    ``num_starts`` the starts (one greedy rollout each), ``gamma`` the yardstick's discount and ``about`` one line
+    for the tables.
     """
 
     name: str
