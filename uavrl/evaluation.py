@@ -421,9 +421,18 @@ def evaluate(
     start = env.reset()
     u_star = env.optimum()[0]
     references = _references(env.world, start, u_star, horizon, gamma)
+    steps, batteries = greedy_rollout(env, policy, start, horizon)
+    return greedy_metrics(env.world, start, steps, u_star, references, gamma, batteries)
+
+
+def greedy_rollout(env, policy, start, horizon: int) -> tuple[dict, list | None]:
+    """``horizon`` steps of ``policy`` from ``start``, each world once: ``(steps, batteries)``, ``steps`` the
+    ``[B, H]`` outputs :func:`greedy_metrics` reads (``r_pu``, ``r_se``, ``task_switches``, ``moves``, and
+    ``positions``, ``tasks``), ``batteries`` the worlds' batteries before and after under an energy model (else
+    None)."""
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
-    if cfg.energy == "none":
+    if env.cfg.energy == "none":
         rollout = env.rollout(horizon, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
         batteries = None
     else:
@@ -432,7 +441,7 @@ def evaluate(
         batteries.append(env.world.battery)
     steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
     steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
-    return greedy_metrics(env.world, start, steps, u_star, references, gamma, batteries)
+    return steps, batteries
 
 
 def mission_rollout(env, policy, start, horizon: int, after_step=None):

@@ -55,22 +55,11 @@ def _rollout(task: Task, policy, device="cpu") -> dict:
     """One greedy rollout per start of ``policy``: the world, start, U*, the steps' outputs and the batteries."""
     import torch
 
-    from uavrl.evaluation import mission_rollout
+    from uavrl.evaluation import greedy_rollout
 
     env, start, u_star = _started(task, device)
-    if hasattr(policy, "bind_env"):
-        policy.bind_env(env)
-    H = env.cfg.max_steps
     with torch.no_grad():
-        if env.cfg.energy == "none":
-            rollout = env.rollout(H, policy, auto_reset=False, tensordict=start, break_when_any_done=False)
-            batteries = None
-        else:
-            batteries = [env.world.battery]
-            rollout = mission_rollout(env, policy, start, H)
-            batteries.append(env.world.battery)
-    steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}
-    steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
+        steps, batteries = greedy_rollout(env, policy, start, env.cfg.max_steps)
     return {"world": env.world, "start": start, "u_star": u_star, "steps": steps, "batteries": batteries}
 
 
