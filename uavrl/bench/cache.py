@@ -14,6 +14,8 @@ import json
 import os
 from pathlib import Path
 
+from uavrl.io import save_text
+
 REFERENCES_VERSION = 1  # bump when what a reference means changes: every entry is then recomputed
 
 
@@ -53,10 +55,7 @@ def store(directory: Path, key: str, payload: dict) -> None:
     """Write ``payload`` under ``key`` atomically (a reader sees the old entry or the new one, never half)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    path = directory / f"{key}.json"
-    partial = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    partial.write_text(json.dumps({"key": key, "sha256": _checksum(payload), "payload": payload}))
-    os.replace(partial, path)
+    save_text(json.dumps({"key": key, "sha256": _checksum(payload), "payload": payload}), directory / f"{key}.json")
 
 
 def cached(directory: Path | None, key: str, compute) -> dict:

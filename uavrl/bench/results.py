@@ -13,6 +13,8 @@ import json
 import platform
 from pathlib import Path
 
+from uavrl.io import save_text
+
 FORMAT, VERSION = "uavrl-bench-results", 1
 
 
@@ -120,7 +122,7 @@ def markdown(results: dict) -> str:
 def figure(results_list: list[dict], path) -> None:
     """Per task the mean normalised score of each results file, and the performance profiles (score distributions
     with their CIs), side by side, as a PNG."""
-    from uavrl.plots import pyplot
+    from uavrl.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, (bars, profile) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [3, 2]})
@@ -135,7 +137,9 @@ def figure(results_list: list[dict], path) -> None:
         agg = results.get("aggregate", {})
         if agg.get("profile"):
             p = agg["profile"]
-            profile.plot(p["taus"], p["fraction"], label=f"{label} (IQM {agg['iqm']:.2f})")
+            scored = len(agg["tasks"])
+            tasks = "" if scored == len(names) else f" over {scored} of {len(names)} tasks"
+            profile.plot(p["taus"], p["fraction"], label=f"{label} (IQM {agg['iqm']:.2f}{tasks})")
             profile.fill_between(p["taus"], p["ci_low"], p["ci_high"], alpha=0.2)
     bars.set_xticks([i + width * (len(results_list) - 1) / 2 for i in range(len(names))], names, rotation=30)
     bars.axhline(1.0, color="grey", lw=0.8, ls="--")
@@ -146,19 +150,17 @@ def figure(results_list: list[dict], path) -> None:
     profile.set_xlabel("normalised score threshold tau")
     profile.set_ylabel("fraction of (start, task) with score > tau")
     profile.set_title("performance profile (95% CI)")
-    profile.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    profile.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))  # below: the curves stay visible
+    save_figure(fig, Path(path))
 
 
 def save(results: dict, path) -> list[Path]:
     """Write ``path`` (the JSON) and beside it ``.md`` (the table) and ``.png`` (the figure); the paths written."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+    save_text(json.dumps(results, indent=1, sort_keys=True) + "\n", path)  # atomic: a reader never sees half a file
     table = path.with_suffix(".md")
-    table.write_text(markdown(results))
+    save_text(markdown(results), table)
     png = path.with_suffix(".png")
     figure([results], png)
     return [path, table, png]
