@@ -268,7 +268,8 @@ class ModelConfig:
             if not (_is_real(self.altitude_m) and math.isfinite(self.altitude_m) and self.altitude_m > 0):
                 raise InvalidOption("altitude_m", self.altitude_m, "give a finite positive height in metres, or None")
             if self.altitude is not None:
-                raise InvalidOption("altitude_m", self.altitude_m, "give the height once: altitude (cells) is set too")
+                reason = f"give the height once: altitude={self.altitude:g} (in cells) is set too"
+                raise InvalidOption("altitude_m", self.altitude_m, reason)
         if self.is_physical:
             self._check_radio()
         self._check_physics()

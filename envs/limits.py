@@ -212,6 +212,15 @@ def radio_problem(values: dict) -> tuple[str, str] | None:
     for name, (low, high, what) in ranges.items():
         if not (_is_number(v[name]) and low <= v[name] <= high):
             return name, f"{what} in [{low:g}, {high:g}]"
+    if channel == "al_hourani":
+        low, high = radio.AL_HOURANI_HEIGHT_M
+        metres = v["altitude"] * v["cell_size"]
+        if not low < metres < high:
+            reason = (
+                f"the UAVs fly at {metres:g} m, and Al-Hourani's model is of low-altitude platforms: heights below "
+                f"{high:g} m, where ITU-R's high-altitude platforms begin (altitude_m sets the height in metres)"
+            )
+            return ("altitude_m" if v["altitude_m"] is not None else "altitude"), reason
     if channel in radio.TR36777:
         scenario = radio.TR36777[channel]
         low, high = scenario.height_m
@@ -384,6 +393,14 @@ def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
     return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + (1 << 23) * 16
 
 
+def exact_solver_fits(grid: tuple[int, int], num_uavs: int, memory_budget: int = EXACT_SOLVER_BUDGET) -> bool:
+    """Whether :func:`required_bytes` is within ``memory_budget``; a team whose joint actions alone are over it is
+    answered without counting the configurations (a binomial that takes seconds for 10^5 UAVs)."""
+    if num_uavs * math.log(6) + math.log(4) > math.log(max(memory_budget, 1)):
+        return False
+    return required_bytes(grid, num_uavs) <= memory_budget
+
+
 def table_bytes(cfg, num_tables: int) -> int:
     """Bytes of the tabular learner's Q tables plus the model tables it keeps beside them
     (:mod:`uavrl.agents.tabular.tables`), in plain integers so the commands check it before torch is imported."""
@@ -508,10 +525,13 @@ def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int
         play = world_bytes(cfg, rows) + rows * horizon * (6 * 8 + 24 * cfg.num_uavs)
     else:
         play = num_starts * horizon * frame_bytes(cfg)
-    exact = required_bytes(cfg.grid, cfg.num_uavs)
     layouts = num_starts if cfg.layout == "random" else 1
-    if exact <= EXACT_SOLVER_BUDGET:  # the solver's tables and each layout's values over its configurations
-        references = exact + layouts * num_configurations(cfg.grid, cfg.num_uavs) * 8 * 4
+    if exact_solver_fits(
+        cfg.grid, cfg.num_uavs
+    ):  # the solver's tables and each layout's values over its configurations
+        references = (
+            required_bytes(cfg.grid, cfg.num_uavs) + layouts * num_configurations(cfg.grid, cfg.num_uavs) * 8 * 4
+        )
     else:
         references = bounds_bytes(cfg, num_starts, horizon)
     return world_bytes(cfg, num_starts) + play + references

@@ -205,10 +205,23 @@ def test_enough_bad_inputs_are_checked():
     assert len(CLI_CASES) + len(API_CASES) >= 40
 
 
+WITHOUT_BENCHMARL = [
+    (["algorithm=qmix"], "error: algorithm=qmix needs BenchMARL, which is not installed: pip install torch==2.13.0"),
+    (["algorithm=vdn", "experiment.max_n_frames=10"], "error: algorithm=vdn experiment.max_n_frames=10 need BenchMARL"),
+    ([], 'error: BenchMARL is not installed: pip install torch==2.13.0 -e ".[benchmarl]"'),
+    # our own settings are checked first, and named as typed
+    (["algorithm=qmix", "env.grid=[0,0]"], "error: env.grid=(0, 0) is invalid"),
+    (["algorithm=qmix", "seed=-1"], "error: seed=-1 is invalid"),
+    (["env.num_uavs=100000", "env.grid=[1000,1000]"], "error: env.num_uavs=100000 is invalid: the evaluation"),
+    (["eval.horizon=100000000000"], "error: eval.horizon=100000000000 is invalid: the evaluation"),
+    (["task=uavrl/nope"], "error: task=uavrl/nope is invalid: allowed tasks are"),
+]
+
+
 @pytest.mark.skipif(importlib.util.find_spec("benchmarl") is not None, reason="BenchMARL is installed here")
-def test_benchmarl_command_without_the_extra_says_how_to_install(tmp_path):
+@pytest.mark.parametrize("arguments, begins", WITHOUT_BENCHMARL, ids=str)
+def test_benchmarl_command_without_the_extra_checks_ours_then_says_how_to_install(arguments, begins, tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "uavrl.benchmarl", "algorithm=qmix"], capture_output=True, text=True, cwd=tmp_path
+        [sys.executable, "-m", "uavrl.benchmarl", *arguments], capture_output=True, text=True, cwd=tmp_path
     )
-    assert done.returncode == 1
-    assert done.stderr.strip() == 'error: BenchMARL is not installed: pip install torch==2.13.0 -e ".[benchmarl]"'
+    assert done.returncode == 1 and done.stderr.startswith(begins) and done.stderr.count("\n") == 1, done.stderr

@@ -84,12 +84,14 @@ def test_same_seed_same_result(tmp_path):
         ("algorithm=maddpg", "algorithm=maddpg is invalid: it acts in continuous action spaces only"),
         ("env.num_uavs=0", "num_uavs=0"),
         ("eval.num_starts=0", "eval.num_starts=0 is invalid"),
+        ("eval.horizon=100000000000", "eval.horizon=100000000000 is invalid: the evaluation .* over memory_budget="),
+        ("experiment.off_policy_n_envs_per_worker=100000000", "experiment.off_policy_n_envs_per_worker=100000000 is"),
     ],
 )
 def test_bad_settings_are_refused_in_one_line(override, message):
     overrides = ["algorithm=iql", override] if not override.startswith("algorithm") else [override]
     with pytest.raises(ValueError, match=message):
-        check_settings(compose_config("benchmarl", overrides))
+        check_settings(compose_config("benchmarl", overrides), overrides)
 
 
 @pytest.mark.parametrize(

@@ -149,6 +149,15 @@ def test_settings_that_cannot_go_together_are_refused_with_both_named(overrides,
     assert line is not None and line.startswith(begins) and "\n" not in line, line
 
 
+def test_parts_within_the_budget_one_by_one_are_refused_together():
+    """The evaluation (137 MB: the exact solver's tables) and the replay buffers (104 MB) each fit 160 MB, but they
+    are held at once, with the worlds, the batches and the networks (249 MB in all)."""
+    line = refusal("agent=dqn", "agent.buffer_size=4000000", "agent.memory_budget=160000000")
+    begins = "agent.buffer_size=4000000 is invalid: 7 parts held at once (the evaluation the largest) needs about 249"
+    assert line is not None and line.startswith(begins) and "lower agent.buffer_size" in line, line
+    assert refusal("agent=dqn", "agent.buffer_size=4000000", "agent.memory_budget=250000000") is None
+
+
 def test_what_a_run_within_its_budgets_needs_passes():
     """The budgets' defaults let the shipped scenarios run, and a large grid at a small team (its cost does not grow
     with the area)."""

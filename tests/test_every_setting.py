@@ -116,6 +116,7 @@ BAD = {
     (BENCHMARL, "eval.seed"): "eval.seed=-1",
     (BENCHMARL, "eval.every"): "eval.every=-1",
     (BENCHMARL, "task.name"): "task.name=[1]",
+    (BENCHMARL, "memory_budget"): "memory_budget=0",
     (BENCHMARL, "scenario"): "scenario.agents=[qlearner]",
 }
 # the model's options, as uavrl.train reads them (env.<option>)

@@ -13,6 +13,7 @@ seconds at which it was taken), and BenchMARL's own folder (its logs and final c
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
 import time
 from pathlib import Path
@@ -25,9 +26,11 @@ from uavrl.io import save_json, save_text
 from uavrl.rules import check
 from uavrl.rundir import RunDirectory
 from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
-from uavrl.settings import BENCHMARL_SETTINGS
+from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
+# BenchMARL's own config groups (pkg://benchmarl.conf); everything else on the command line is ours
+BENCHMARL_GROUPS = ("experiment", "algorithm", "model", "critic_model")
 
 
 def algorithm_name(cfg: DictConfig) -> str:
@@ -38,12 +41,18 @@ def algorithm_name(cfg: DictConfig) -> str:
     return next(name for name, config in algorithm_config_registry.items() if config is kind)
 
 
-def check_settings(cfg: DictConfig) -> str:
-    """Every setting refused in one line before anything is built; returns the algorithm's name."""
+def check_ours(cfg: DictConfig, overrides=None) -> None:
+    """Our settings (not BenchMARL's own) refused in one line, the costs of our part of the run included."""
+    check(cfg, BENCHMARL_SETTINGS)
+    check_benchmarl_costs(cfg, model_config(cfg), overrides)
+
+
+def check_settings(cfg: DictConfig, overrides=None) -> str:
+    """Every setting refused in one line before anything is built; returns the algorithm's name.  ``overrides``:
+    the command line's, so that a refusal names what was typed."""
     from benchmarl.algorithms import algorithm_config_registry
 
-    check(cfg, BENCHMARL_SETTINGS)
-    model_config(cfg)
+    check_ours(cfg, overrides)
     name = algorithm_name(cfg)
     if not algorithm_config_registry[name].supports_discrete_actions():
         discrete = [n for n, c in algorithm_config_registry.items() if c.supports_discrete_actions()]
@@ -73,7 +82,7 @@ def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
 
 def train(cfg: DictConfig, overrides=()) -> Path:
     """Run BenchMARL's experiment as configured, evaluate its policy with ours; returns the run directory."""
-    algorithm = check_settings(cfg)
+    algorithm = check_settings(cfg, overrides)
     held = hold_run_dir(cfg, algorithm)
     try:  # released, never removed: BenchMARL's own folder may hold its checkpoints
         return run_experiment(cfg, algorithm, held.path)
@@ -148,10 +157,40 @@ def check_task(arguments: list[str]) -> None:
             raise SystemExit(f"error: {argument} is invalid: allowed tasks are {', '.join(tasks())}")
 
 
+def benchmarl_group(argument: str) -> bool:
+    """Whether a command-line argument sets one of BenchMARL's groups (``algorithm=qmix``, ``model@critic_model=...``,
+    ``experiment.max_n_frames=...``)."""
+    key = argument.split("=", 1)[0].lstrip("+~")
+    return re.split(r"[.@]", key)[0] in BENCHMARL_GROUPS
+
+
+def refuse_without_benchmarl(arguments: list[str]) -> None:
+    """Without the extra, our own settings are still checked and a bad one named as typed; then what needs BenchMARL
+    is named with the line that installs it."""
+    import warnings
+
+    from hydra.core.config_store import ConfigStore
+
+    # empty stand-ins for the defaults BenchMARL's package would bring, so that our part of the config composes
+    for group, name in (("experiment", "base_experiment"), ("model/layers", "mlp"), ("algorithm", "unchecked")):
+        ConfigStore.instance().store(group=group, name=name, node={})
+    theirs = [argument for argument in arguments if benchmarl_group(argument)]
+    ours = [argument for argument in arguments if argument not in theirs]
+    if not any(argument.startswith("-") for argument in ours):  # a sweep's jobs are checked once it can run
+        sys.argv[1:] = [*ours, "algorithm=unchecked"]
+        with warnings.catch_warnings():  # Hydra warns that pkg://benchmarl.conf is missing: said below, once
+            warnings.simplefilter("ignore", UserWarning)
+            run_command("benchmarl", check_ours, RUN_OPTION_SETTINGS)
+    needs = (
+        f"{' '.join(theirs)} need{'s' if len(theirs) == 1 else ''} BenchMARL, which is" if theirs else "BenchMARL is"
+    )
+    raise SystemExit(f"error: {needs} not installed: {INSTALL}")
+
+
 def main() -> None:
-    if importlib.util.find_spec("benchmarl") is None:
-        raise SystemExit(f"error: BenchMARL is not installed: {INSTALL}")
     check_task(sys.argv[1:])
+    if importlib.util.find_spec("benchmarl") is None:
+        refuse_without_benchmarl(sys.argv[1:])
     import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
 
     run_command("benchmarl", train, RUN_OPTION_SETTINGS)

@@ -45,8 +45,14 @@ def eval_settings(cfg: DictConfig, device) -> dict:
         seed=int(cfg.eval.seed),
         device=device,
         gamma=cfg.eval.gamma,
-        memory_budget=OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET),  # BenchMARL: none
+        memory_budget=run_memory_budget(cfg),
     )
+
+
+def run_memory_budget(cfg: DictConfig):
+    """``agent.memory_budget``, or a BenchMARL run's ``memory_budget`` (it has no agent group)."""
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=None)
+    return budget if budget is not None else OmegaConf.select(cfg, "memory_budget", default=DEFAULT_MEMORY_BUDGET)
 
 
 def flat_settings(config: dict, prefix: str = "") -> dict:

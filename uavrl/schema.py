@@ -231,6 +231,9 @@ class BenchmarlSchema:
     env: EnvSchema = section(EnvSchema)
     task: BenchmarlTaskSchema = section(BenchmarlTaskSchema)
     scenario: Optional[ScenarioSchema] = section(ScenarioSchema, "the task's scenario", optional=True)
+    memory_budget: REAL = setting(
+        DEFAULT_MEMORY_BUDGET, positive(), "bytes of our part of the run (the training worlds, the evaluation)"
+    )
     experiment: Any = None
     algorithm: Any = None
     model: Any = None

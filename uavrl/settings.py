@@ -200,6 +200,7 @@ class Cost:
     factors: tuple[Factor, ...]
     estimate: Callable[[frozenset], int]
     hint: str = ""  # another change that helps, in words
+    summed: bool = False  # parts added up: the formula of no single part describes it
 
     @property
     def amount(self) -> int:
@@ -207,6 +208,8 @@ class Cost:
 
     def formula(self) -> str:
         """``what (a x b = 2 x 3; with c 4)``: the factors it is proportional to, then the others."""
+        if self.summed:
+            return self.what
         product = [f for f in self.factors if f.multiplies and (f.size != 1 or not f.fixed)]
         names = " x ".join(f.label or f.name for f in product)
         parts = [f"{names} = {' x '.join(count(f.size) for f in product)}"] if product else []
@@ -234,9 +237,9 @@ UNITS = {"bytes": "<bytes>", "steps": "<steps>", "seconds": "<hours>"}
 
 
 def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str, typed: Typed) -> None:
-    """A one-line ValueError for the first part over ``budget``: the setting typed that grows it, the estimate and
-    the changes that would bring it within the budget."""
-    for cost in costs:
+    """A one-line ValueError for the first part over ``budget``, or for the parts together (they are held at once):
+    the setting typed that grows it, the estimate and the changes that would bring it within the budget."""
+    for cost in [*costs, *([together(costs)] if len(costs) > 1 else [])]:
         amount = cost.amount
         limit = budget * 3600 if unit == "seconds" else budget
         if amount > limit:
@@ -638,6 +641,36 @@ def total(parts: list[Cost]) -> Cost:
         return sum(part.estimate(low) for part in parts)
 
     return Cost(largest.what, largest.factors, estimate)
+
+
+def together(parts: list[Cost]) -> Cost:
+    """The parts held at once, added up: every part's factors, named by the largest part."""
+    largest = max(parts, key=lambda part: part.amount)
+    factors = {f.name: f for part in sorted(parts, key=lambda part: part is not largest) for f in part.factors}
+    what = f"{len(parts)} parts held at once ({largest.what} the largest)"
+    return Cost(what, tuple(factors.values()), lambda low: sum(part.estimate(low) for part in parts), summed=True)
+
+
+def check_benchmarl_costs(cfg: DictConfig, model, overrides=None) -> None:
+    """A one-line refusal, before BenchMARL builds anything, when our part of ``python -m uavrl.benchmarl`` would need
+    more than ``memory_budget``: the batched worlds BenchMARL collects from (the larger of its on- and off-policy
+    ``experiment.*_n_envs_per_worker``) and the evaluation at each of its evaluations.  BenchMARL's own networks
+    and buffers are its experiment's to size."""
+    typed = Typed(cfg, overrides)
+    check_optimum_exists(model, "env.num_uavs")
+    counts = {f"experiment.{kind}_n_envs_per_worker": kind for kind in ("on_policy", "off_policy")}
+    name = max(counts, key=lambda n: int(OmegaConf.select(cfg, n, default=1)))
+    worlds = Factor(name, int(OmegaConf.select(cfg, name, default=1)))
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    memory = [
+        Cost(
+            "the training worlds",
+            (worlds, *model_factors(model)),
+            lambda low: world_bytes(_Resized(model, low), worlds.least if worlds.name in low else worlds.size),
+        ),
+        evaluation_costs(model, starts, horizon_factor(cfg, model), None),
+    ]
+    refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes", typed)
 
 
 def check_optimum_exists(model, num_uavs_name: str) -> None:

@@ -33,6 +33,9 @@ AL_HOURANI = {
     "highrise": (27.23, 0.08, 2.3, 34.0),
 }
 ENVIRONMENTS = tuple(AL_HOURANI)
+# The letter models low-altitude platforms and names no height range (its fits are in the elevation angle alone);
+# ITU Radio Regulations No. 1.66A puts high-altitude platform stations at 20 to 50 km: below 20 km (our choice)
+AL_HOURANI_HEIGHT_M = (0.0, 20_000.0)  # (low, high): h in it
 
 # Where each model holds (docs/model.md, Channel models): the option's range and the reason given when it is left.
 # The carrier ranges are our choices (Al-Hourani's letter uses 2 GHz; TR 36.777 studies LTE bands below 6 GHz).

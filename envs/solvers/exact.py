@@ -40,7 +40,7 @@ import math
 import torch
 
 from ..config import NUM_ACTIONS, ModelConfig
-from ..limits import EXACT_SOLVER_BUDGET, num_configurations, required_bytes
+from ..limits import EXACT_SOLVER_BUDGET, exact_solver_fits, num_configurations, required_bytes
 from ..physics.channel import cell_xyz, direct_terms, fixed_layout, link_gains, rates, relay_contributions
 from ..physics.grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
 
@@ -54,7 +54,7 @@ UNREACHABLE = torch.iinfo(torch.int32).max
 
 def fits(cfg: ModelConfig, memory_budget: int = MEMORY_BUDGET) -> bool:
     """Whether :class:`ConfigurationSpace` of ``cfg``'s grid and team fits ``memory_budget``."""
-    return required_bytes(cfg.grid, cfg.num_uavs) <= memory_budget
+    return exact_solver_fits(cfg.grid, cfg.num_uavs, memory_budget)
 
 
 def fixed_layout_tables(cfg: ModelConfig, device=None) -> tuple[torch.Tensor, torch.Tensor]:
