@@ -57,7 +57,7 @@ CASES = [
     ("train", "agent=dqn agent.mixer=qmix agent.mixing_embed_dim=1000000000"),
     ("train", "agent=dqn agent.network=set agent.sizes=[[3,1000000,1000000]]"),
     ("train", "agent=dqn env.grid=[3000,3000]"),
-    ("train", "agent=dqn env.grid=[300,300] agent.worlds=10000"),
+    ("train", "agent=dqn env.grid=[300,300] agent.worlds=1000000"),
     ("train", "agent=dqn env.num_uavs=500 env.grid=[30,30]"),
     ("train", f"agent=dqn {F} env.recharge_steps=1 env.num_spares=100000"),
     ("train", "agent=dqn agent.buffer_size=100000000000"),
@@ -303,7 +303,7 @@ def run_case(command: str, args: list[str], cwd: Path, timeout: float) -> dict:
     """The case as a process of its own (its CPU time read by ``/usr/bin/time``), killed with its children at
     ``timeout``."""
     argv = [sys.executable, "-m", f"uavrl.{command}", *args]
-    if command in ("train", "evaluate", "render", "reproduce", "benchmarl"):
+    if command in ("train", "evaluate", "render", "reproduce"):
         argv.append("progress=false")
     with tempfile.NamedTemporaryFile("r", suffix=".time") as clock:
         started = time.perf_counter()

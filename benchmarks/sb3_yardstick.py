@@ -10,6 +10,9 @@ Usage::
 
     python benchmarks/sb3_yardstick.py                                # N = 2 on 6x6, 50,000 steps, seed 0
     python benchmarks/sb3_yardstick.py --timesteps 200000 --seeds 0 1 2 --reward log_gap
+    python benchmarks/sb3_yardstick.py --save runs/sb3     # also keeps each model: runs/sb3/ppo_seed<k>.zip
+
+A kept model is scored on a benchmark suite by ``python benchmarks/score_outside.py sb3 runs/sb3/ppo_seed0.zip``.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ def parse_args(argv=None):
     p.add_argument("--uavs", type=int, default=2)
     p.add_argument("--max-steps", type=int, default=30, help="training episode length (the DQN's on 6x6)")
     p.add_argument("--reward", default="delta", help="the model's reward option PPO trains on")
+    p.add_argument("--save", help="a folder to keep each trained model in, as ppo_seed<k>.zip")
     return p.parse_args(argv)
 
 
@@ -69,6 +73,8 @@ def main(argv=None):
         model = PPO("MlpPolicy", env, seed=seed, device="cpu")
         model.learn(total_timesteps=args.timesteps)
         seconds = time.perf_counter() - started
+        if args.save:
+            model.save(f"{args.save}/ppo_seed{seed}.zip")
         cfg = env.cfg.replace(reward="delta")  # the yardstick reads utilities, not the training reward
         policy = TeamActionPolicy(lambda obs, mask, model=model: model.predict(obs, deterministic=True)[0])
         name = f"SB3 PPO, defaults, {args.timesteps:,} steps (`UAVSpectrumGymEnv`, reward={args.reward})"

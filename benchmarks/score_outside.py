@@ -1,0 +1,114 @@
+"""Policies trained outside uavrl's commands scored on a benchmark suite, by the routes of docs/leaderboard.md.
+
+    python benchmarks/score_outside.py benchmarl RUN_DIR [RUN_DIR ...] [--suite paper] [--out DIR]
+    python benchmarks/score_outside.py sb3 MODEL.zip [--suite paper] [--out DIR]
+
+``benchmarl``: each ``RUN_DIR`` is a directory of ``python -m uavrl.benchmarl ... run_dir=RUN_DIR`` (needs the
+``[benchmarl]`` extra); its experiment's last checkpoint is reloaded with BenchMARL's
+``reload_experiment_from_file`` and its deterministic policy scored where it can act (the model it trained on),
+n/a elsewhere.  The budget is the experiment's frames and its training CPU seconds (``metrics.json``).
+
+``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
+through ``TeamActionPolicy`` on the paper's 6x6 model only.  The budget is its ``num_timesteps``.
+
+Each results file goes to ``DIR/<suite>-<name>.json`` (default ``benchmarks/results/leaderboard``) with its table
+and figure beside it; ``python -m uavrl.bench leaderboard`` then puts it on the site's page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+DEFAULT_OUT = Path("benchmarks/results/leaderboard")
+
+
+def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
+    """The results of a BenchMARL run directory on ``suite``, and the file name they go under."""
+    from benchmarl.hydra_config import reload_experiment_from_file
+    from omegaconf import OmegaConf
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from uavrl.bench.run import NotApplicable, score_suite
+
+    checkpoints = sorted(run_dir.glob("*/checkpoints/checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[-1]))
+    if not checkpoints:
+        raise SystemExit(f"error: {run_dir} holds no BenchMARL checkpoint (*/checkpoints/checkpoint_<frames>.pt)")
+    saved = OmegaConf.load(run_dir / "config.yaml")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    experiment = reload_experiment_from_file(str(checkpoints[-1]))
+    trained_on = experiment.task.model_config()
+
+    def factory(env):
+        if env.cfg.replace(max_steps=trained_on.max_steps) != trained_on:
+            raise NotApplicable("the experiment's networks act in its own model only")
+        return experiment.policy
+
+    algorithm = metrics["agent"].removeprefix("benchmarl_")
+    frames = saved.experiment.max_n_frames
+    train_command = (
+        f"python -m uavrl.benchmarl algorithm={algorithm} task={metrics['task']} seed={saved.seed} "
+        f"experiment.max_n_frames={frames} run_dir=runs/benchmarl-{algorithm}"
+    )
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        results = score_suite(
+            suite,
+            factory,
+            name=f"BenchMARL {algorithm.upper()}, {frames:,} frames",
+            budget={"env_steps": int(experiment.total_frames), "cpu_seconds": round(metrics["train_cpu_seconds"])},
+            source=f"python benchmarks/score_outside.py benchmarl runs/benchmarl-{algorithm} --suite {suite}",
+            train_command=train_command,
+            progress=print,
+        )
+    return results, f"{suite}-benchmarl-{algorithm}"
+
+
+def sb3_submission(path: Path, suite: str) -> tuple[dict, str]:
+    """The results of an SB3 model on ``suite``, and the file name they go under."""
+    from stable_baselines3 import PPO
+
+    from uavrl.bench.run import NotApplicable, score_suite
+    from uavrl.envs.adapters.gym_env import TeamActionPolicy
+
+    model = PPO.load(str(path), device="cpu")
+
+    def factory(env):
+        if (env.cfg.num_uavs, env.cfg.grid, env.cfg.energy, env.cfg.rate_model) != (2, (6, 6), "none", "paper"):
+            raise NotApplicable("trained on the paper's 6x6 model")
+        return TeamActionPolicy(lambda obs, mask: model.predict(obs, deterministic=True)[0])
+
+    steps = int(model.num_timesteps)
+    results = score_suite(
+        suite,
+        factory,
+        name=f"SB3 PPO (Gymnasium adapter), {steps:,} steps",
+        budget={"env_steps": steps},
+        source=f"python benchmarks/score_outside.py sb3 runs/sb3/{path.name} --suite {suite}",
+        train_command=f"python benchmarks/sb3_yardstick.py --timesteps {steps} --save runs/sb3",
+        progress=print,
+    )
+    return results, f"{suite}-sb3-ppo"
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("kind", choices=("benchmarl", "sb3"))
+    parser.add_argument("paths", nargs="+", type=Path, help="BenchMARL run directories, or SB3 model files")
+    parser.add_argument("--suite", default="paper")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the folder of the results files")
+    args = parser.parse_args(argv)
+    import torch
+
+    from uavrl.bench.results import save
+
+    torch.set_num_threads(1)
+    for path in args.paths:
+        submission = benchmarl_submission if args.kind == "benchmarl" else sb3_submission
+        results, name = submission(path, args.suite)
+        for written in save(results, args.out / f"{name}.json"):
+            print(f"wrote {written}")
+
+
+if __name__ == "__main__":
+    main()
