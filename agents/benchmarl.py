@@ -91,8 +91,8 @@ class YardstickCallback(Callback):
     """At each of BenchMARL's evaluations, the shared evaluation (:func:`uavrl.evaluation.evaluate`) of its greedy
     policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had trained by
     then (``time/...``, :class:`~uavrl.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
-    point.  The TensorBoard writer opens in ``on_setup``: BenchMARL pickles its callbacks with the experiment's
-    config before.
+    point.  The TensorBoard writer opens at the first evaluation: BenchMARL pickles its callbacks with the
+    experiment's config, and an experiment reloaded to be scored sets them up again, writing nothing.
 
     Args:
         env_cfg: the model the greedy policy is evaluated in (the task's).
@@ -107,8 +107,15 @@ class YardstickCallback(Callback):
         self.curve: list[dict] = []
         self.clock = TrainingClock()
 
-    def on_setup(self) -> None:
-        self.logger = RunLogger(self.run_dir, resume_step=0)
+    def log(self, metrics: dict, frames: int) -> None:
+        """``metrics`` at ``frames`` collected, to the run directory's TensorBoard events."""
+        if self.logger is None:
+            self.logger = RunLogger(self.run_dir, resume_step=0)
+        self.logger.log(metrics, frames)
+
+    def close(self) -> None:
+        if self.logger is not None:
+            self.logger.close()
 
     def measure(self) -> dict[str, float]:
         """The shared evaluation of BenchMARL's greedy policy now, and the training seconds so far."""
@@ -119,5 +126,5 @@ class YardstickCallback(Callback):
 
     def on_evaluation_end(self, rollouts) -> None:
         frames, metrics = self.experiment.total_frames, self.measure()
-        self.logger.log(metrics, frames)
+        self.log(metrics, frames)
         self.curve.append({"frames": frames, **metrics})

@@ -4,9 +4,9 @@
     python benchmarks/score_outside.py sb3 MODEL.zip [--suite paper] [--out DIR]
 
 ``benchmarl``: each ``RUN_DIR`` is a directory of ``python -m uavrl.benchmarl ... run_dir=RUN_DIR`` (needs the
-``[benchmarl]`` extra); its experiment's last checkpoint is reloaded with BenchMARL's
-``reload_experiment_from_file`` and its deterministic policy scored where it can act (the model it trained on),
-n/a elsewhere.  The budget is the experiment's frames and its training CPU seconds (``metrics.json``).
+``[benchmarl]`` extra); its experiment at its last checkpoint (``uavrl.benchmarl.load_experiment``) acts with its
+deterministic policy where it can (the model it trained on), n/a elsewhere.  The budget is the experiment's frames
+and its training CPU seconds (``metrics.json``).
 
 ``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
 through ``TeamActionPolicy`` on the paper's 6x6 model only.  The budget is its ``num_timesteps``.
@@ -26,19 +26,16 @@ DEFAULT_OUT = Path("benchmarks/results/leaderboard")
 
 def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
     """The results of a BenchMARL run directory on ``suite``, and the file name they go under."""
-    from benchmarl.hydra_config import reload_experiment_from_file
     from omegaconf import OmegaConf
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from uavrl.bench.run import NotApplicable, score_suite
+    from uavrl.benchmarl import load_experiment
 
-    checkpoints = sorted(run_dir.glob("*/checkpoints/checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[-1]))
-    if not checkpoints:
-        raise SystemExit(f"error: {run_dir} holds no BenchMARL checkpoint (*/checkpoints/checkpoint_<frames>.pt)")
     saved = OmegaConf.load(run_dir / "config.yaml")
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    experiment = reload_experiment_from_file(str(checkpoints[-1]))
-    trained_on = experiment.task.model_config()
+    experiment = load_experiment(run_dir)
+    trained_on = experiment.task.model_config
 
     def factory(env):
         if env.cfg.replace(max_steps=trained_on.max_steps) != trained_on:

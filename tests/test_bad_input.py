@@ -215,12 +215,14 @@ WITHOUT_BENCHMARL = [
     (["env.num_uavs=100000", "env.grid=[1000,1000]"], "error: env.num_uavs=100000 is invalid: the evaluation"),
     (["eval.horizon=100000000000"], "error: eval.horizon=100000000000 is invalid: the evaluation"),
     (["task=uavrl/nope"], "error: task=uavrl/nope is invalid: allowed tasks are"),
+    (["run_dir=notes.txt"], "error: run_dir=notes.txt is a file, not a directory"),
 ]
 
 
 @pytest.mark.skipif(importlib.util.find_spec("benchmarl") is not None, reason="BenchMARL is installed here")
 @pytest.mark.parametrize("arguments, begins", WITHOUT_BENCHMARL, ids=str)
 def test_benchmarl_command_without_the_extra_checks_ours_then_says_how_to_install(arguments, begins, tmp_path):
+    (tmp_path / "notes.txt").write_text("a user's notes\n")
     done = subprocess.run(
         [sys.executable, "-m", "uavrl.benchmarl", *arguments], capture_output=True, text=True, cwd=tmp_path
     )

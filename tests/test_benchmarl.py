@@ -9,10 +9,12 @@ import pytest
 pytest.importorskip("benchmarl")
 
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
+from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
 from uavrl.agents.benchmarl import YardstickCallback  # noqa: E402
-from uavrl.benchmarl import check_settings, train  # noqa: E402
+from uavrl.benchmarl import check_settings, load_experiment, train  # noqa: E402
 from uavrl.cli import compose_config  # noqa: E402
+from uavrl.evaluation import evaluate  # noqa: E402
 
 # a few thousand frames: two batches of 1,200 (40 worlds x 30 steps), evaluated after each
 TINY = [
@@ -63,6 +65,31 @@ def test_short_run_completes_masked_and_reported(tmp_path, algorithm, masked_cho
     tags = set(EventAccumulator(str(run_dir)).Reload().Tags()["scalars"])
     assert {"eval/return_ratio", "eval/optimality", "eval/reach_999"} <= tags
     assert any(path.name.startswith(f"{algorithm}_tiny_4x4") for path in run_dir.iterdir())  # BenchMARL's folder
+
+
+def test_a_finished_run_reloads_to_act_as_it_was_evaluated_writing_nothing(tmp_path):
+    run_dir = train(compose_config("benchmarl", ["algorithm=iql", *TINY, f"run_dir={tmp_path / 'run'}"]))
+    before = {path: path.stat().st_mtime_ns for path in run_dir.rglob("*")}
+    experiment = load_experiment(run_dir)
+    assert {path: path.stat().st_mtime_ns for path in run_dir.rglob("*")} == before
+    assert experiment.total_frames == 2400
+    saved = json.loads((run_dir / "metrics.json").read_text())
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        again = evaluate(experiment.policy, experiment.task.model_config, num_starts=8)
+    assert again["eval/return_ratio"] == saved["eval/return_ratio"]  # the final weights, not a fresh network
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (lambda d: d, "is no finished run of python -m uavrl.benchmarl: its metrics.json and config.yaml"),
+        (lambda d: (d / "metrics.json").write_text("[1, 2]") and d, "cannot be read as the command writes them"),
+        (lambda d: (d / "file").touch() or d / "file", "is a file, not a directory"),
+    ],
+)
+def test_a_directory_that_is_no_run_is_refused_in_one_line(tmp_path, make, words):
+    with pytest.raises((ValueError, OSError), match=words):
+        load_experiment(make(tmp_path))
 
 
 def test_same_seed_same_result(tmp_path):

@@ -20,11 +20,11 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.cli import run_command
+from uavrl.cli import one_line, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
-from uavrl.io import save_json, save_text
+from uavrl.io import quoted, save_json, save_text
 from uavrl.rules import check
-from uavrl.rundir import RunDirectory
+from uavrl.rundir import RunDirectory, check_directory
 from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
 from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
 
@@ -45,6 +45,10 @@ def check_ours(cfg: DictConfig, overrides=None) -> None:
     """Our settings (not BenchMARL's own) refused in one line, the costs of our part of the run included."""
     check(cfg, BENCHMARL_SETTINGS)
     check_benchmarl_costs(cfg, model_config(cfg), overrides)
+    if cfg.run_dir:
+        check_directory(cfg.run_dir, "run_dir")
+        if finished(Path(cfg.run_dir)):
+            raise FileExistsError(already_finished(cfg.run_dir))
 
 
 def check_settings(cfg: DictConfig, overrides=None) -> str:
@@ -60,8 +64,6 @@ def check_settings(cfg: DictConfig, overrides=None) -> str:
             f"algorithm={name} is invalid: it acts in continuous action spaces only, and the UAVs' actions are "
             f"discrete; allowed algorithms are {', '.join(discrete)}"
         )
-    if cfg.run_dir and finished(Path(cfg.run_dir)):
-        raise FileExistsError(already_finished(cfg.run_dir))
     return name
 
 
@@ -90,8 +92,9 @@ def train(cfg: DictConfig, overrides=()) -> Path:
         held.release()
 
 
-def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
-    import torch
+def build_experiment(cfg: DictConfig, save_folder: Path, callbacks=(), **experiment_settings):
+    """BenchMARL's :class:`~benchmarl.experiment.Experiment` of ``cfg`` (its task, algorithm, models and seed),
+    keeping its folders under ``save_folder``; ``experiment_settings`` replace those of ``cfg.experiment``."""
     from benchmarl.experiment import Experiment
     from benchmarl.hydra_config import (
         load_algorithm_config_from_hydra,
@@ -99,28 +102,84 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
         load_model_config_from_hydra,
     )
 
-    from uavrl.agents.benchmarl import UAVTask, YardstickCallback
+    from uavrl.agents.benchmarl import UAVTask
 
-    torch.set_num_threads(int(cfg.num_threads))
-    env_cfg = model_config(cfg)
-    save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
     experiment_config = load_experiment_config_from_hydra(cfg.experiment)
-    experiment_config.save_folder = str(run_dir.resolve())
-    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), run_dir)
-    experiment = Experiment(
-        task=UAVTask.from_model_config(cfg.task.name, env_cfg),
+    experiment_config.save_folder = str(save_folder.resolve())
+    for name, value in experiment_settings.items():
+        setattr(experiment_config, name, value)
+    return Experiment(
+        task=UAVTask.from_model_config(cfg.task.name, model_config(cfg)),
         algorithm_config=load_algorithm_config_from_hydra(cfg.algorithm),
         model_config=load_model_config_from_hydra(cfg.model),
         critic_model_config=load_model_config_from_hydra(cfg.critic_model),
         seed=int(cfg.seed),
         config=experiment_config,
-        callbacks=[yardstick],
+        callbacks=list(callbacks),
     )
+
+
+def load_experiment(run_dir):
+    """The experiment of a ``python -m uavrl.benchmarl`` run directory at its last checkpoint, to act or be scored
+    (``experiment.policy``; docs/leaderboard.md).
+
+    It is rebuilt from the run's ``config.yaml`` as the command built it, in a temporary folder, and the checkpoint's
+    weights are read with ``torch.load(weights_only=True)``: nothing in the run directory is written, and nothing
+    read from it runs code (BenchMARL's own ``Experiment.reload_from_file`` unpickles the experiment's
+    ``config.pkl``).  A directory that is no finished run of the command is refused in one line.
+
+    Args:
+        run_dir: the run directory (``run_dir=`` of the command).
+    """
+    import json
+    import tempfile
+
+    import torch
+    import yaml
+
+    from uavrl.cli import compose_config
+    from uavrl.report import DamagedRun, SavedYamlLoader, read_small_text
+
+    run_dir = Path(run_dir)
+    check_directory(run_dir, "run_dir")
+    no_run = f"run_dir={quoted(run_dir)} is no finished run of python -m uavrl.benchmarl"
+    try:
+        metrics = json.loads(read_small_text(run_dir / "metrics.json"))
+        saved = yaml.load(read_small_text(run_dir / "config.yaml"), Loader=SavedYamlLoader)
+        algorithm, task = metrics["agent"].removeprefix("benchmarl_"), saved["task"]["name"]
+    except (DamagedRun, OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
+        raise ValueError(
+            f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
+        ) from None
+    found = run_dir.glob("*/checkpoints/checkpoint_*.pt")
+    checkpoints = sorted((p for p in found if p.stem.rpartition("_")[2].isdigit()), key=lambda p: int(p.stem[11:]))
+    if not checkpoints:
+        raise ValueError(f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
+    cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
+    try:
+        state = torch.load(checkpoints[-1], map_location="cpu", weights_only=True)
+    except Exception as err:  # torch's unpickler refuses anything but tensors and plain containers
+        raise ValueError(f"{quoted(checkpoints[-1])} cannot be read as weights ({one_line(err)[:200]})") from None
+    experiment = build_experiment(cfg, Path(tempfile.mkdtemp(prefix="uavrl-benchmarl-")), loggers=[])
+    experiment.load_state_dict(state)
+    return experiment
+
+
+def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
+    import torch
+
+    from uavrl.agents.benchmarl import YardstickCallback
+
+    torch.set_num_threads(int(cfg.num_threads))
+    env_cfg = model_config(cfg)
+    save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
+    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), run_dir)
+    experiment = build_experiment(cfg, run_dir, [yardstick])
     started = time.perf_counter()
     experiment.run()
     final = yardstick.measure()
-    yardstick.logger.log(final, experiment.total_frames)
-    yardstick.logger.close()
+    yardstick.log(final, experiment.total_frames)
+    yardstick.close()
     result = {
         "agent": f"benchmarl_{algorithm}",
         "env": cfg.env.name,

@@ -77,6 +77,14 @@ class RunDirectory:
         self.release()
 
 
+def check_directory(path, setting: str) -> None:
+    """A one-line NotADirectoryError when ``path`` (given as ``setting``: ``run_dir``, ``resume``) is a file."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        advice = f"resume={quoted(path.parent)}" if setting == "resume" else "a directory (new, or without a run)"
+        raise NotADirectoryError(f"{setting}={quoted(path)} is a file, not a directory: give {advice}")
+
+
 def hold(path, setting: str, created: bool = False, created_parents=()) -> RunDirectory:
     """Create ``path`` if missing, lock it, record the holder and remove orphaned temporary files.
 
@@ -88,9 +96,7 @@ def hold(path, setting: str, created: bool = False, created_parents=()) -> RunDi
 
     path = Path(path)
     given = f"{setting}={quoted(path)}"
-    if path.exists() and not path.is_dir():
-        advice = f"resume={quoted(path.parent)}" if setting == "resume" else "a directory (new, or without a run)"
-        raise NotADirectoryError(f"{given} is a file, not a directory: give {advice}")
+    check_directory(path, setting)
     if not path.exists():
         created, created_parents = True, missing_parents(path)
     make_dirs(path)
