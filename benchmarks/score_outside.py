@@ -66,12 +66,14 @@ def sb3_submission(path: Path, suite: str) -> tuple[dict, str]:
     from stable_baselines3 import PPO
 
     from uavrl.bench.run import NotApplicable, score_suite
+    from uavrl.envs import make_config
     from uavrl.envs.adapters.gym_env import TeamActionPolicy
 
     model = PPO.load(str(path), device="cpu")
+    trained_on = make_config("paper", grid=(6, 6), num_uavs=2)  # sb3_yardstick.py's model
 
     def factory(env):
-        if (env.cfg.num_uavs, env.cfg.grid, env.cfg.energy, env.cfg.rate_model) != (2, (6, 6), "none", "paper"):
+        if env.cfg.replace(max_steps=trained_on.max_steps) != trained_on:
             raise NotApplicable("trained on the paper's 6x6 model")
         return TeamActionPolicy(lambda obs, mask: model.predict(obs, deterministic=True)[0])
 

@@ -150,7 +150,10 @@ def figure(results_list: list[dict], path) -> None:
     profile.set_xlabel("normalised score threshold tau")
     profile.set_ylabel("fraction of (start, task) with score > tau")
     profile.set_title("performance profile (95% CI)")
-    profile.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))  # below: the curves stay visible
+    if profile.lines:
+        profile.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))  # below: the curves stay visible
+    else:
+        profile.text(0.5, 0.5, "no task scored", ha="center", va="center", transform=profile.transAxes)
     save_figure(fig, Path(path))
 
 
