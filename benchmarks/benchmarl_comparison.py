@@ -139,7 +139,7 @@ def verdict(task: str, results: dict) -> None:
                 print(f"  {row} seed {seed}: never reached it")
 
 
-def plot(task: str, results: dict, path: Path) -> None:
+def plot(task: str, results: dict, path: Path, starts: int) -> None:
     """Each run's score against its training CPU seconds (log scale), one colour per row, one line per seed; at N = 6
     (no exact return) a second panel with the steps to 0.999 U* over all starts.  Every point is inside its axes: a
     score panel whose values fall below -1 (BenchMARL's early evaluations) is drawn on a symmetric-log scale, linear
@@ -188,7 +188,9 @@ def plot(task: str, results: dict, path: Path) -> None:
         axes[0, 0].set_ylabel(f"{panels[0][1]}\n(symmetric log scale below -1)")
     for ax in axes[0]:
         ax.margins(y=0.04)  # no point on an edge
-    fig.suptitle(f"{task}: the yardstick during training, every seed (200 held-out starts)")
+    seeds = sorted({seed for _, seed in results})
+    seeds_text = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))}, a line each"
+    fig.suptitle(f"{task}: the yardstick during training, {seeds_text} ({starts} held-out starts)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.savefig(path)
@@ -248,7 +250,7 @@ def main():
         verdict(task, results)
         if args.plot and results:
             args.plot.mkdir(parents=True, exist_ok=True)
-            plot(task, results, args.plot / f"benchmarl_{task}.png")
+            plot(task, results, args.plot / f"benchmarl_{task}.png", args.starts)
 
 
 if __name__ == "__main__":
