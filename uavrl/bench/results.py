@@ -134,6 +134,9 @@ def figure(results_list: list[dict], path) -> None:
         xs = [i + k * width for i, n in enumerate(names) if by_task.get(n, {}).get("status") == "scored"]
         ys = [by_task[n]["mean_score"] for n in names if by_task.get(n, {}).get("status") == "scored"]
         bars.bar(xs, ys, width=width, label=label)
+        for i, n in enumerate(names):  # a task it cannot act in: said where its bar would be
+            if by_task.get(n, {}).get("status") == "n/a":
+                bars.text(i + k * width, 0.02, "n/a", ha="center", va="bottom", fontsize=8, color="grey")
         agg = results.get("aggregate", {})
         if agg.get("profile"):
             p = agg["profile"]
@@ -142,6 +145,7 @@ def figure(results_list: list[dict], path) -> None:
             profile.plot(p["taus"], p["fraction"], label=f"{label} (IQM {agg['iqm']:.2f}{tasks})")
             profile.fill_between(p["taus"], p["ci_low"], p["ci_high"], alpha=0.2)
     bars.set_xticks([i + width * (len(results_list) - 1) / 2 for i in range(len(names))], names, rotation=30)
+    bars.set_xlim(-0.6, len(names) - 0.4 + width * (len(results_list) - 1))  # every task's place, scored or not
     bars.axhline(1.0, color="grey", lw=0.8, ls="--")
     bars.axhline(0.0, color="grey", lw=0.8)
     bars.set_ylabel("normalised score (0 random, 1 reference)")
