@@ -44,9 +44,10 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
 
     algorithm = metrics["agent"].removeprefix("benchmarl_")
     frames = saved.experiment.max_n_frames
-    train_command = (
+    train_command = (  # as benchmarks/benchmarl_comparison.py runs it: its evaluations draw on BenchMARL's seeds too
         f"python -m uavrl.benchmarl algorithm={algorithm} task={metrics['task']} seed={saved.seed} "
-        f"experiment.max_n_frames={frames} run_dir=runs/benchmarl-{algorithm}"
+        f"experiment.max_n_frames={frames} experiment.evaluation_interval={saved.experiment.evaluation_interval} "
+        f"eval.num_starts={saved.eval.num_starts} run_dir=runs/benchmarl-{algorithm}"
     )
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         results = score_suite(

@@ -57,12 +57,6 @@ NOT_YET_SCORED = [
         )
         for algorithm in ("mappo", "ippo", "qmix", "vdn", "iql")
     ],
-    (
-        "SB3 PPO (Gymnasium adapter)",
-        "paper",
-        "pip install 'uavrl[gym]', train PPO on uavrl.envs.adapters.gym_env's environment of the task's model, then "
-        "the Python route of docs/leaderboard.md (Score an SB3 model)",
-    ),
 ]
 
 
