@@ -19,6 +19,16 @@ from uavrl.io import save_text
 REFERENCES_VERSION = 1  # bump when what a reference means changes: every entry is then recomputed
 
 
+class DefaultDir:
+    """The default place of the cache, found when it is used (:func:`default_dir`), not when uavrl is imported."""
+
+    def __repr__(self) -> str:
+        return "$UAVRL_BENCH_CACHE or ~/.cache/uavrl/bench"
+
+
+DEFAULT_DIR = DefaultDir()
+
+
 def default_dir() -> Path:
     """``$UAVRL_BENCH_CACHE``, else ``~/.cache/uavrl/bench``."""
     return Path(os.environ.get("UAVRL_BENCH_CACHE") or Path.home() / ".cache" / "uavrl" / "bench")

@@ -234,7 +234,7 @@ def score_suite(
     name: str,
     budget: dict | None = None,
     source: str = "python",
-    cache_dir: Path | None = cache.default_dir(),
+    cache_dir: Path | None | cache.DefaultDir = cache.DEFAULT_DIR,
     tasks: list[str] | None = None,
     train_command: str | None = None,
     progress=None,
@@ -249,13 +249,16 @@ def score_suite(
         name: the submission's name in tables and the leaderboard.
         budget: what training cost, as the submitter states it (``env_steps``, ``cpu_seconds``, ``gpu_seconds``).
         source: how the policies were obtained (the command that reproduces the results).
-        cache_dir: where the references are kept (None: computed, not kept).
+        cache_dir: where the references are kept (None: computed, not kept; by default ``$UAVRL_BENCH_CACHE``, else
+            ``~/.cache/uavrl/bench``).
         tasks: score only these tasks of the suite (the results then say the protocol is partial).
         train_command: the command that trained the policies, if any (carried into the results).
         progress: a callable given one line per task scored.
     """
     from uavrl.bench.results import new_results
 
+    if isinstance(cache_dir, cache.DefaultDir):
+        cache_dir = cache.default_dir()
     chosen = suite_tasks(suite)
     if tasks is not None:
         unknown = [t for t in tasks if t not in {task.name for task in chosen}]
