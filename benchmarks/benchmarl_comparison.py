@@ -192,7 +192,8 @@ def plot(task: str, results: dict, path: Path, starts: int) -> None:
     seeds_text = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))}, a line each"
     fig.suptitle(f"{task}: the yardstick during training, {seeds_text} ({starts} held-out starts)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
+    columns = len(handles) if len(panels) > 1 else 3  # one panel is too narrow for six entries in a row
+    fig.legend(handles, labels, loc="outside lower center", ncol=columns, fontsize=8, frameon=False)
     fig.savefig(path)
     plt.close(fig)
     print(f"{task}: curves in {path}")

@@ -40,6 +40,8 @@ def test_every_point_is_inside_its_axes_with_one_legend(tmp_path, monkeypatch, t
     results = {
         ("qmix", 0): {"curve": curve(benchmarl_scores, key, reach=0.0)},
         ("dqn", 0): {"curve": curve([0.3, 0.38, 0.39], key)},
+        **{(row, 0): {"curve": curve([0.1, 0.2, 0.3], key, reach=0.0)} for row in ("vdn", "iql", "mappo")},
+        ("dqn-qmix", 0): {"curve": curve([0.3, 0.38, 0.39], key)},
     }
     comparison().plot(task, results, tmp_path / f"benchmarl_{task}.png", 200)
     (figure,) = saved
@@ -50,7 +52,15 @@ def test_every_point_is_inside_its_axes_with_one_legend(tmp_path, monkeypatch, t
         low, high = sorted(ax.get_ylim())
         values = [y for line in ax.get_lines() for y in line.get_ydata()]
         assert values and all(low < y < high for y in values)
-    assert [t.get_text() for t in figure.legends[0].get_texts()] == ["BenchMARL qmix", "ours: DQN, VDN"]
+    labels = [
+        "BenchMARL qmix",
+        "ours: DQN, VDN",
+        "BenchMARL vdn",
+        "BenchMARL iql",
+        "BenchMARL mappo",
+        "ours: DQN, QMIX",
+    ]
+    assert [t.get_text() for t in figure.legends[0].get_texts()] == labels
     assert figure.get_suptitle().endswith("seed 0 (200 held-out starts)")
     drawn, frame = figure.get_tightbbox(figure.canvas.get_renderer()), figure.bbox_inches
     assert drawn.x0 >= -0.01 and drawn.y0 >= -0.01 and drawn.x1 <= frame.x1 + 0.01 and drawn.y1 <= frame.y1 + 0.01
