@@ -123,6 +123,9 @@ def verdict(task: str, results: dict) -> None:
     for criterion, (value, shown) in list(criteria.items())[: 1 if exact else 2]:
         best, best_row, best_seed = max(theirs, key=lambda t: (value(t[0]), -t[0][TIME_TAGS[1]]))
         seconds, best_value = best[TIME_TAGS[1]], value(best)
+        if criterion.startswith("steps") and -best_value >= horizon:
+            print(f"{task}: no BenchMARL evaluation reaches 0.999 U* from any start: no steps to compare")
+            continue
         print(
             f"{task}: BenchMARL's best {criterion}: {shown.format(abs(best_value))} ({best_row}, seed {best_seed}) "
             f"after {seconds:.0f} CPU s"
@@ -142,7 +145,7 @@ def verdict(task: str, results: dict) -> None:
 def plot(task: str, results: dict, path: Path, starts: int) -> None:
     """Each run's score against its training CPU seconds (log scale), one colour per row, one line per seed; at N = 6
     (no exact return) a second panel with the steps to 0.999 U* over all starts.  Every point is inside its axes: a
-    score panel whose values fall below -1 (BenchMARL's early evaluations) is drawn on a symmetric-log scale, linear
+    score panel whose values fall below -5 (BenchMARL's early evaluations) is drawn on a symmetric-log scale, linear
     over [-1, 1]; one legend for the figure, under the panels."""
     import matplotlib
 
@@ -183,8 +186,9 @@ def plot(task: str, results: dict, path: Path, starts: int) -> None:
         ax.set(xlabel="training CPU seconds (one thread; evaluations left out)", ylabel=ylabel)
         ax.grid(alpha=0.3, which="both")
     lowest = min(y for line in axes[0, 0].get_lines() for y in line.get_ydata())
-    if lowest < -1:  # the far-below early evaluations and the differences near the top, both in view
+    if lowest < -5:  # the far-below early evaluations and the differences near the top, both in view
         axes[0, 0].set_yscale("symlog", linthresh=1.0, linscale=2.0)
+        axes[0, 0].yaxis.set_major_formatter(ScalarFormatter())
         axes[0, 0].set_ylabel(f"{panels[0][1]}\n(symmetric log scale below -1)")
     for ax in axes[0]:
         ax.margins(y=0.04)  # no point on an edge
