@@ -48,15 +48,6 @@ NOT_YET_SCORED = [
             ("persistent_10x10", "energy"),
         )
     ],
-    *[
-        (
-            f"BenchMARL {algorithm.upper()}",
-            "paper",
-            f"python -m uavrl.benchmarl algorithm={algorithm} task=uavrl/paper_6x6 seed=0, then the Python route of "
-            "docs/leaderboard.md (Score a BenchMARL experiment) on its checkpoint",
-        )
-        for algorithm in ("mappo", "ippo", "qmix", "vdn", "iql")
-    ],
 ]
 
 

@@ -121,43 +121,49 @@ def markdown(results: dict) -> str:
 
 def figure(results_list: list[dict], path) -> None:
     """Per task the mean normalised score of each results file, and the performance profiles (score distributions
-    with their CIs), side by side, as a PNG."""
+    with their CIs), side by side, as a PNG: one colour per results file in both panels, one legend under them (with
+    each file's IQM), n/a where a policy cannot act."""
+    from matplotlib.patches import Patch
+
     from uavrl.plots import pyplot, save_figure
 
     plt = pyplot()
-    fig, (bars, profile) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [3, 2]})
+    count = len(results_list)
+    colours = plt.get_cmap("tab10" if count <= 10 else "tab20")
+    fig = plt.figure(figsize=(11, 4.4 + 0.16 * count), layout="constrained")
+    bars, profile = fig.subplots(1, 2, width_ratios=[3, 2])
     names = list(dict.fromkeys(t["task"] for r in results_list for t in r["tasks"]))
-    width = 0.8 / max(1, len(results_list))
+    width = 0.8 / max(1, count)
+    handles = []
     for k, results in enumerate(results_list):
-        label = results["submission"]["name"]
+        colour, label = colours(k % colours.N), results["submission"]["name"]
         by_task = {t["task"]: t for t in results["tasks"]}
-        xs = [i + k * width for i, n in enumerate(names) if by_task.get(n, {}).get("status") == "scored"]
-        ys = [by_task[n]["mean_score"] for n in names if by_task.get(n, {}).get("status") == "scored"]
-        bars.bar(xs, ys, width=width, label=label)
-        for i, n in enumerate(names):  # a task it cannot act in: said where its bar would be
-            if by_task.get(n, {}).get("status") == "n/a":
-                bars.text(i + k * width, 0.02, "n/a", ha="center", va="bottom", fontsize=8, color="grey")
+        for i, name in enumerate(names):
+            task = by_task.get(name, {})
+            if task.get("status") == "scored":
+                bars.bar(i + k * width, task["mean_score"], width=width, color=colour)
+            elif task.get("status") == "n/a":  # a task it cannot act in: said where its bar would be
+                bars.text(i + k * width, 0.02, "n/a", ha="center", va="bottom", fontsize=6, color=colour, rotation=90)
         agg = results.get("aggregate", {})
         if agg.get("profile"):
             p = agg["profile"]
             scored = len(agg["tasks"])
-            tasks = "" if scored == len(names) else f" over {scored} of {len(names)} tasks"
-            profile.plot(p["taus"], p["fraction"], label=f"{label} (IQM {agg['iqm']:.2f}{tasks})")
-            profile.fill_between(p["taus"], p["ci_low"], p["ci_high"], alpha=0.2)
-    bars.set_xticks([i + width * (len(results_list) - 1) / 2 for i in range(len(names))], names, rotation=30)
-    bars.set_xlim(-0.6, len(names) - 0.4 + width * (len(results_list) - 1))  # every task's place, scored or not
+            label += f" (IQM {agg['iqm']:.2f}{'' if scored == len(names) else f' over {scored} of {len(names)} tasks'})"
+            profile.plot(p["taus"], p["fraction"], color=colour)
+            profile.fill_between(p["taus"], p["ci_low"], p["ci_high"], color=colour, alpha=0.15)
+        handles.append(Patch(color=colour, label=label))
+    bars.set_xticks([i + width * (count - 1) / 2 for i in range(len(names))], names, rotation=30, ha="right")
+    bars.set_xlim(-0.6, len(names) - 0.4 + width * (count - 1))  # every task's place, scored or not
     bars.axhline(1.0, color="grey", lw=0.8, ls="--")
     bars.axhline(0.0, color="grey", lw=0.8)
     bars.set_ylabel("normalised score (0 random, 1 reference)")
     bars.set_title(f"suite {results_list[0]['suite']}: mean score per task")
-    bars.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.45), ncol=3)
     profile.set_xlabel("normalised score threshold tau")
     profile.set_ylabel("fraction of (start, task) with score > tau")
     profile.set_title("performance profile (95% CI)")
-    if profile.lines:
-        profile.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))  # below: the curves stay visible
-    else:
+    if not profile.lines:
         profile.text(0.5, 0.5, "no task scored", ha="center", va="center", transform=profile.transAxes)
+    fig.legend(handles=handles, loc="outside lower center", ncol=2 if count > 1 else 1, fontsize=7, frameon=False)
     save_figure(fig, Path(path))
 
 
