@@ -526,12 +526,10 @@ def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int
     else:
         play = num_starts * horizon * frame_bytes(cfg)
     layouts = num_starts if cfg.layout == "random" else 1
-    if exact_solver_fits(
-        cfg.grid, cfg.num_uavs
-    ):  # the solver's tables and each layout's values over its configurations
-        references = (
-            required_bytes(cfg.grid, cfg.num_uavs) + layouts * num_configurations(cfg.grid, cfg.num_uavs) * 8 * 4
-        )
+    if exact_solver_fits(cfg.grid, cfg.num_uavs):
+        # the solver's tables and each layout's values over its configurations
+        solver, configurations = required_bytes(cfg.grid, cfg.num_uavs), num_configurations(cfg.grid, cfg.num_uavs)
+        references = solver + layouts * configurations * 8 * 4
     else:
         references = bounds_bytes(cfg, num_starts, horizon)
     return world_bytes(cfg, num_starts) + play + references

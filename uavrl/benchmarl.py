@@ -123,16 +123,18 @@ def load_experiment(run_dir):
     """The experiment of a ``python -m uavrl.benchmarl`` run directory at its last checkpoint, to act or be scored
     (``experiment.policy``; docs/leaderboard.md).
 
-    It is rebuilt from the run's ``config.yaml`` as the command built it, in a temporary folder, and the checkpoint's
-    weights are read with ``torch.load(weights_only=True)``: nothing in the run directory is written, and nothing
-    read from it runs code (BenchMARL's own ``Experiment.reload_from_file`` unpickles the experiment's
-    ``config.pkl``).  A directory that is no finished run of the command is refused in one line.
+    It is rebuilt from the run's ``config.yaml`` as the command built it, in a temporary folder removed with it, and
+    the checkpoint's weights are read with ``torch.load(weights_only=True)``: nothing in the run directory is
+    written, and nothing read from it runs code (BenchMARL's own ``Experiment.reload_from_file`` unpickles the
+    experiment's ``config.pkl``).  A directory that is no finished run of the command is refused in one line.
 
     Args:
         run_dir: the run directory (``run_dir=`` of the command).
     """
     import json
+    import shutil
     import tempfile
+    import weakref
 
     import torch
     import yaml
@@ -151,8 +153,8 @@ def load_experiment(run_dir):
         raise ValueError(
             f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
         ) from None
-    found = run_dir.glob("*/checkpoints/checkpoint_*.pt")
-    checkpoints = sorted((p for p in found if p.stem.rpartition("_")[2].isdigit()), key=lambda p: int(p.stem[11:]))
+    frames = {p: p.stem.rpartition("_")[2] for p in run_dir.glob("*/checkpoints/checkpoint_*.pt")}
+    checkpoints = sorted((p for p, n in frames.items() if n.isdigit()), key=lambda p: int(frames[p]))
     if not checkpoints:
         raise ValueError(f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
     cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
@@ -160,7 +162,9 @@ def load_experiment(run_dir):
         state = torch.load(checkpoints[-1], map_location="cpu", weights_only=True)
     except Exception as err:  # torch's unpickler refuses anything but tensors and plain containers
         raise ValueError(f"{quoted(checkpoints[-1])} cannot be read as weights ({one_line(err)[:200]})") from None
-    experiment = build_experiment(cfg, Path(tempfile.mkdtemp(prefix="uavrl-benchmarl-")), loggers=[])
+    folder = tempfile.mkdtemp(prefix="uavrl-benchmarl-")
+    experiment = build_experiment(cfg, Path(folder), loggers=[])
+    weakref.finalize(experiment, shutil.rmtree, folder, ignore_errors=True)  # the folder goes with the experiment
     experiment.load_state_dict(state)
     return experiment
 

@@ -658,7 +658,7 @@ def check_benchmarl_costs(cfg: DictConfig, model, overrides=None) -> None:
     and buffers are its experiment's to size."""
     typed = Typed(cfg, overrides)
     check_optimum_exists(model, "env.num_uavs")
-    counts = {f"experiment.{kind}_n_envs_per_worker": kind for kind in ("on_policy", "off_policy")}
+    counts = [f"experiment.{kind}_n_envs_per_worker" for kind in ("on_policy", "off_policy")]
     name = max(counts, key=lambda n: int(OmegaConf.select(cfg, n, default=1)))
     worlds = Factor(name, int(OmegaConf.select(cfg, name, default=1)))
     starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
