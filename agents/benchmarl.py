@@ -108,12 +108,18 @@ class YardstickCallback(Callback):
         self.clock = TrainingClock()
 
     def log(self, metrics: dict, frames: int) -> None:
-        """``metrics`` at ``frames`` collected, to the run directory's TensorBoard events."""
+        """Write ``metrics`` to the run directory's TensorBoard events, opening them on the first call.
+
+        Args:
+            metrics: the scalars by tag (``eval/...``, ``time/...``).
+            frames: the frames BenchMARL had collected, the events' step.
+        """
         if self.logger is None:
             self.logger = RunLogger(self.run_dir, resume_step=0)
         self.logger.log(metrics, frames)
 
     def close(self) -> None:
+        """Flush and close the TensorBoard events, if any were written."""
         if self.logger is not None:
             self.logger.close()
 
