@@ -94,19 +94,36 @@ def page(results_files: list[dict], figures: dict[str, str]) -> str:
         lines += [f"### Suite `{suite}`", "", *suite_table(suite, files), ""]
         if suite in figures:
             lines += [f"![suite {suite}: scores per task and performance profiles]({figures[suite]})", ""]
-    env = results_files[0]["environment"] if results_files else {}
-    if env:
-        lines += [
-            f"Scored with uavrl {env['uavrl']}, torch {env['torch']}, torchrl {env['torchrl']} on {env['cpus']} CPUs "
-            f"({env['machine']}), {env['torch_threads']} torch thread.",
-            "",
-        ]
-    lines += ["### Not yet scored", "", "| submission | suites | the command that would score it |", "|---|---|---|"]
+    lines += _environments(results_files)
     scored = {r["submission"]["name"] for r in results_files}
-    for name, suites, command in NOT_YET_SCORED:
-        if name not in scored:
-            lines.append(f"| {name} | {suites} | `{command}` |")
+    left = [(name, suites, command) for name, suites, command in NOT_YET_SCORED if name not in scored]
+    if left:
+        lines += [
+            "### Not yet scored",
+            "",
+            "| submission | suites | the command that would score it |",
+            "|---|---|---|",
+        ]
+        lines += [f"| {name} | {suites} | `{command}` |" for name, suites, command in left]
     return "\n".join(lines) + "\n"
+
+
+def _environments(results_files: list[dict]) -> list[str]:
+    """Where the rows were scored: the versions and machine most rows share, then the rows scored with others (the
+    BenchMARL rows need its torchrl release)."""
+    groups: dict[str, list[str]] = {}
+    for results in results_files:
+        env = results["environment"]
+        where = (
+            f"uavrl {env['uavrl']}, torch {env['torch']}, torchrl {env['torchrl']} on {env['cpus']} CPUs "
+            f"({env['machine']}), {env['torch_threads']} torch thread"
+        )
+        groups.setdefault(where, []).append(results["submission"]["name"])
+    if not groups:
+        return []
+    ranked = sorted(groups, key=lambda where: -len(groups[where]))
+    others = [f"with {where}: {', '.join(sorted(set(groups[where])))}" for where in ranked[1:]]
+    return [f"Scored with {ranked[0]}{'; ' if others else ''}{'; '.join(others)}.", ""]
 
 
 def write(results_dir: Path = DEFAULT_RESULTS, out: Path = DEFAULT_OUT) -> Path:
