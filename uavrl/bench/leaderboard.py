@@ -22,33 +22,7 @@ DEFAULT_RESULTS = Path("benchmarks/results/leaderboard")
 DEFAULT_OUT = Path("docs/leaderboard.md")
 
 # rows the leaderboard names but no committed results file scores yet: (name, suites, the commands that would)
-NOT_YET_SCORED = [
-    (
-        "size-free DQN at its scenario's full budget (420 iterations)",
-        "paper, core, zero_shot",
-        "python -m uavrl.train agent=dqn scenario=size_free seed=0 run_dir=runs/size_free && "
-        "python -m uavrl.bench zero_shot checkpoint=runs/size_free",
-    ),
-    *[
-        (
-            f"per-size DQN of scenario {scenario}",
-            suite,
-            f"python -m uavrl.train agent=dqn scenario={scenario} seed=0 run_dir=runs/dqn-{scenario} && "
-            f"python -m uavrl.bench {suite} checkpoint=runs/dqn-{scenario}",
-        )
-        for scenario, suite in (
-            ("reference_code", "paper"),
-            ("n6_10x10", "core"),
-            ("large_20x20", "core"),
-            ("random_layouts", "core"),
-            ("rayleigh", "core"),
-            ("a2g_urban", "core"),
-            ("energy_4x4", "energy"),
-            ("energy_6x6", "energy"),
-            ("persistent_10x10", "energy"),
-        )
-    ],
-]
+NOT_YET_SCORED: list[tuple[str, str, str]] = []
 
 
 def _budget(budget: dict) -> str:
