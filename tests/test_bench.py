@@ -195,7 +195,8 @@ def test_bad_input_is_one_line_before_torch(args, message):
     assert message in line and torch_loaded == "False"
 
 
-def test_leaderboard_page_from_results_files(tmp_path, scored):
+def test_leaderboard_page_from_results_files(tmp_path, scored, monkeypatch):
+    from uavrl.bench import leaderboard
     from uavrl.bench.leaderboard import MARKER, suite_table, write
     from uavrl.bench.results import save
 
@@ -208,4 +209,11 @@ def test_leaderboard_page_from_results_files(tmp_path, scored):
     page.write_text("# Leaderboard\n\nkept\n\n" + MARKER + "\nold\n")
     write(tmp_path / "results", page)
     text = page.read_text()
-    assert text.startswith("# Leaderboard\n\nkept") and "old" not in text and "### Not yet scored" in text
+    assert text.startswith("# Leaderboard\n\nkept") and "\nold\n" not in text and "### Not yet scored" not in text
+    threads = scored["oracle"]["environment"]["torch_threads"]
+    assert f"{threads} torch thread{'' if threads == 1 else 's'}." in text  # where the rows were scored
+    waiting = [("oracle", "tiny", "already scored"), ("an agent to come", "tiny", "python -m uavrl.bench tiny ...")]
+    monkeypatch.setattr(leaderboard, "NOT_YET_SCORED", waiting)
+    write(tmp_path / "results", page)
+    text = page.read_text()
+    assert "### Not yet scored" in text and "| an agent to come |" in text and "already scored" not in text

@@ -90,7 +90,7 @@ def _environments(results_files: list[dict]) -> list[str]:
         env = results["environment"]
         where = (
             f"uavrl {env['uavrl']}, torch {env['torch']}, torchrl {env['torchrl']} on {env['cpus']} CPUs "
-            f"({env['machine']}), {env['torch_threads']} torch thread"
+            f"({env['machine']}), {env['torch_threads']} torch thread{'' if env['torch_threads'] == 1 else 's'}"
         )
         groups.setdefault(where, []).append(results["submission"]["name"])
     if not groups:
