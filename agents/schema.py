@@ -148,6 +148,9 @@ class DQNSchema:
     )
     gap_floor: REAL = setting(0.0001, positive(), "log_gap only: gaps below this fraction of U* count as closed")
     gamma: REAL = setting(0.7, UNIT, "the discount; 0.9 left greedy policies oscillating near U* (BENCHMARKS.md)")
+    n_step: int = setting(
+        1, whole(1), "n-step returns: a target sums up to this many rewards of its episode before it bootstraps"
+    )
     lr: REAL = setting(0.0005, positive(), "Adam's learning rate, annealed linearly over the run to agent.lr_end")
     lr_end: REAL = setting(0.00005, positive(), "the learning rate at the end of the run")
     batch_size: int = setting(256, whole(1), "transitions per gradient step")

@@ -7,9 +7,10 @@ import math
 import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensordict import TensorDict
 
 from uavrl.agents.baselines import RandomPolicy
-from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy
+from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy, n_step_returns
 from uavrl.agents.dqn.migration import _stored_entry
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
@@ -183,6 +184,65 @@ def test_factored_target_is_double_dqn_over_valid_actions(make_agent):
     assert not torch.allclose(y, nxt["reward"] + 0.7 * target(nxt).max(-1).values.sum(-1, keepdim=True))
 
 
+def n_step_reference(rewards, terminated, n, gamma):
+    """Per step of one episode: (the discounted sum of up to n rewards, stopping after a terminal step or the
+    episode's end; the index of the step whose successor bootstraps; how many rewards were summed)."""
+    T, out = len(rewards), []
+    for t in range(T):
+        total, k = 0.0, 0
+        while k < n and t + k < T:
+            total += gamma**k * rewards[t + k]
+            k += 1
+            if terminated[t + k - 1]:
+                break
+        out.append((total, t + k - 1, k))
+    return out
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_n_step_returns_sum_rewards_within_the_episode_and_stop_at_termination(n):
+    T, W = 7, 3
+    torch.manual_seed(n)
+    rewards = torch.randn(W, T, 1)
+    terminated = torch.zeros(W, T, 1, dtype=torch.bool)
+    terminated[1, 4] = True  # world 1's episode ends at its fifth step; the rest is a new episode
+    done = terminated.clone()
+    done[:, -1] = True
+    episodes = TensorDict(
+        {
+            "x": torch.arange(T).expand(W, T).unsqueeze(-1),
+            "next": {"x": torch.arange(1, T + 1).expand(W, T).unsqueeze(-1), "reward": rewards, "done": done},
+        },
+        batch_size=[W, T],
+    ).set(("next", "terminated"), terminated)
+    out = n_step_returns(episodes.clone(), n, 0.7)
+    for w in range(W):
+        # a termination ends the sum as the episode's end does (done), both in the reference
+        expected = n_step_reference(rewards[w, :, 0].tolist(), done[w, :, 0].tolist(), n, 0.7)
+        for t, (total, last, k) in enumerate(expected):
+            assert out["next", "reward"][w, t, 0].item() == pytest.approx(total, abs=1e-6)
+            assert out["next", "x"][w, t, 0].item() == last + 1
+            assert out["next", "terminated"][w, t, 0].item() == terminated[w, last, 0].item()
+            if n > 1:
+                assert out["steps_to_next_obs"][w, t].item() == k
+
+
+def test_n_step_target_discounts_by_the_steps_summed(make_agent):
+    agent, data, online, target = online_and_target(make_agent, "agent.mixer=vdn", "agent.gamma=0.7", "agent.n_step=3")
+    nxt, steps = data["next"], data["steps_to_next_obs"]
+    assert set(steps.unique().tolist()) == {1, 2, 3}  # the episodes' last two steps sum fewer
+    best = ValidGreedy(agent.env.neighbours, 3)(
+        online(nxt), nxt["agents", "action_mask"], nxt["positions"], nxt["tasks"]
+    )
+    y = nxt["reward"] + 0.7 ** steps.unsqueeze(-1) * (~nxt["terminated"]) * target(nxt).gather(
+        -1, best.unsqueeze(-1)
+    ).sum(-2)
+    value = online(data).gather(-1, data["agents", "action"].unsqueeze(-1)).sum(-2)
+    assert agent.loss(data)["loss"].item() == pytest.approx(
+        torch.nn.functional.smooth_l1_loss(value, y).item(), rel=1e-5
+    )
+
+
 @torch.no_grad()
 def test_joint_target_masks_invalid_joint_actions_in_the_max(make_agent):
     agent, data, online, target = online_and_target(make_agent, "agent.head=joint", "agent.gamma=0.5")
@@ -215,7 +275,8 @@ def test_policies_take_valid_actions(head, make_agent):
 
 
 @pytest.mark.parametrize(
-    "overrides", [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix"], ["agent.head=joint"]]
+    "overrides",
+    [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix", "agent.n_step=3"], ["agent.head=joint"]],
 )
 def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
     """state_dict -> disk -> load_state_dict: same Q values, then the same training and the same greedy actions.

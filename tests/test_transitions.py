@@ -29,6 +29,7 @@ CASES = {
     "n3-random-layouts": ["env.grid=[4,4]", "env.num_uavs=3", "env.layout=random", "agent.mixer=qmix"],
     "n2-rayleigh": ["env.grid=[3,3]", "env.fading=rayleigh"],
     "n3-energy-terminating": ["env.grid=[3,3]", "env.num_uavs=3", *ENERGY],
+    "n3-energy-terminating-3-step": ["env.grid=[3,3]", "env.num_uavs=3", *ENERGY, "agent.n_step=3"],
     "n2-energy-recharge-spare-random": [
         *("env.grid=[3,3]", *ENERGY, "env.recharge_steps=2", "env.num_spares=1", "env.layout=random"),
     ],
@@ -49,6 +50,7 @@ def assert_identical(rebuilt, full):
 SET = ["agent.network=set", "agent.mixer=mean", "agent.heads=2"]  # two groups: 16 of the 32 a sample each
 SET_CASES = {
     "set-sizes": [*SET, "agent.sizes=[[2,3,3],[3,4,4]]"],
+    "set-sizes-2-step": [*SET, "agent.sizes=[[2,3,3],[3,4,4]]", "agent.n_step=2"],
     "set-layouts-energy": [
         *SET,
         "agent.sizes=[[2,3,3]]",

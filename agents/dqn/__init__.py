@@ -67,7 +67,7 @@ from .builders import (
 from .loss import DoubleQMixerLoss
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
 from .settings import MAX_JOINT_ACTIONS, check_settings
-from .transitions import CompactTransitions, transition_keys
+from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 __all__ = [
     "MAX_JOINT_ACTIONS",
@@ -88,5 +88,6 @@ __all__ = [
     "build_replay_buffer",
     "check_settings",
     "exploration_schedule",
+    "n_step_returns",
     "transition_keys",
 ]

@@ -29,7 +29,7 @@ from .builders import (
 )
 from .migration import load_replay_buffer
 from .settings import check_settings
-from .transitions import CompactTransitions, transition_keys
+from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
@@ -78,7 +78,7 @@ class DQNAgent(Agent):
         self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
         self.transitions = CompactTransitions(self.env.world, policies.action_keys)  # what the buffer keeps of each
         self.buffer = build_replay_buffer(a, self.transitions)
-        self._keys = transition_keys(self.env.world, policies.action_keys)
+        self._keys = transition_keys(self.env.world, policies.action_keys, int(a.get("n_step", 1)))
         self.collector = build_collector(self.env, policies.explore)
         self._batches = iter(self.collector)
 
@@ -116,7 +116,8 @@ class DQNAgent(Agent):
 
         if self.settings.objective == "log_gap":
             batch.set(("next", "reward"), self._log_gap_reward(batch, u_star, mean_utility))
-        self.buffer.extend(batch.reshape(-1).select(*self._keys))
+        stored = n_step_returns(batch, int(self.settings.get("n_step", 1)), float(self.settings.gamma))
+        self.buffer.extend(stored.reshape(-1).select(*self._keys))
         losses = (
             [self._update() for _ in range(int(self.settings.updates))]
             if len(self.buffer) >= int(self.settings.learning_starts)

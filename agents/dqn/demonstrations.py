@@ -40,6 +40,7 @@ from .builders import ZeroedStorage
 from .curriculum import uniform_sample
 from .networks import Q_INPUTS
 from .setnet import SetQNet, team_value
+from .transitions import n_step_returns
 
 _DEMO_SEED_OFFSET = 2**43  # demonstration worlds: seed * 2^44 + 2^43 + group * 2^20, clear of the training iterations'
 
@@ -56,10 +57,13 @@ def margin_loss(
 
 
 @torch.no_grad()
-def oracle_transitions(cfg: ModelConfig, worlds: int, seed: int, objective: str, gap_floor: float) -> TensorDictBase:
+def oracle_transitions(
+    cfg: ModelConfig, worlds: int, seed: int, objective: str, gap_floor: float, n_step: int = 1, gamma: float = 1.0
+) -> TensorDictBase:
     """``[worlds * cfg.max_steps]`` the oracle's transitions from ``worlds`` random starts of ``cfg`` (seeded by
     ``seed``), one episode each, with the rewards of ``objective`` (``log_gap``: the change of
-    ``-log(1 - U / U* + gap_floor)``, mean channels; ``delta``: the env's)."""
+    ``-log(1 - U / U* + gap_floor)``, mean channels; ``delta``: the env's), as ``n_step`` returns discounted by
+    ``gamma`` (:func:`~.transitions.n_step_returns`)."""
     env = UAVSpectrumEnv(batch_size=worlds, config=cfg, seed=seed)
     oracle = OraclePolicy(cfg)
     td = env.reset()
@@ -73,7 +77,7 @@ def oracle_transitions(cfg: ModelConfig, worlds: int, seed: int, objective: str,
         now, after = (env.world.utility(step["positions"], step["tasks"])[2] for step in (batch, batch["next"]))
         change = log_gap_reward(after, now, u_star.unsqueeze(-1), gap_floor)
         batch.set(("next", "reward"), change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype))
-    return batch.reshape(-1)
+    return n_step_returns(batch, n_step, gamma).reshape(-1)
 
 
 class Demonstrations:
@@ -90,7 +94,9 @@ class Demonstrations:
             cfg = group.cfg
             worlds = max(1, math.ceil(per_group / cfg.max_steps))
             seed = (agent.seed * 2**44 + _DEMO_SEED_OFFSET + g * 2**20) % 2**63
-            found = oracle_transitions(cfg, worlds, seed, a.objective, float(a.gap_floor))[:per_group]
+            found = oracle_transitions(
+                cfg, worlds, seed, a.objective, float(a.gap_floor), int(a.get("n_step", 1)), float(a.gamma)
+            )[:per_group]
             storage = ZeroedStorage(per_group, device=group.transitions.world.device)
             buffer = TensorDictReplayBuffer(storage=storage, transform=group.transitions)
             buffer.extend(found.select(*group.keys))

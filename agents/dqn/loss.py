@@ -11,12 +11,14 @@ from torch import nn
 from torchrl.objectives import QMixerLoss
 
 from .networks import Q_INPUTS
+from .transitions import STEPS
 
 
 class DoubleQMixerLoss(QMixerLoss):
     """``QMixerLoss`` with double-DQN targets over valid joint actions.
 
-    ``y = r + gamma (1 - terminated) Mix_target(Q_target(s', a'), s')`` where the
+    ``y = r + gamma^n (1 - terminated) Mix_target(Q_target(s', a'), s')`` (``n``: the transition's
+    ``"steps_to_next_obs"``, 1 without n-step returns) where the
     online network's :class:`ValidGreedy` picks ``a'``; the loss is the Huber
     distance to ``Mix(Q(s, a), s)``.
 
@@ -48,13 +50,19 @@ class DoubleQMixerLoss(QMixerLoss):
             target_values = net(*(nxt.get(key) for key in Q_INPUTS), params=self._target_net)
             chosen = target_values.gather(-1, next_action.unsqueeze(-1))  # the online greedy action, target-valued
             next_value = _mixed(mixer, chosen, nxt.get("state"), self.target_mixer_network_params.get("module"))
-            target = nxt.get(k.reward) + self.gamma * (~nxt.get(k.terminated)) * next_value
+            target = nxt.get(k.reward) + discount(td, self.gamma) * (~nxt.get(k.terminated)) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
 
     @property
     def _target_net(self) -> TensorDictBase:
         """The target copy of :class:`~.networks.TeamQNet`'s parameters (the first module of the greedy policy)."""
         return self.target_local_value_network_params.get(("module", "0", "module"))
+
+
+def discount(td: TensorDictBase, gamma: float) -> torch.Tensor | float:
+    """``gamma`` to the power of the steps the transitions' rewards sum (``[B, 1]``), or ``gamma`` for one step."""
+    steps = td.get(STEPS, None)
+    return gamma if steps is None else gamma ** steps.unsqueeze(-1).to(td.get(("next", "reward")).dtype)
 
 
 def _mixed(mixer: nn.Module, chosen: torch.Tensor, state: torch.Tensor, params: TensorDictBase = None) -> torch.Tensor:

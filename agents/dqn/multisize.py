@@ -47,7 +47,7 @@ from .demonstrations import Demonstrations
 from .networks import Q_INPUTS
 from .setnet import SetDoubleQLoss, SetQCore, SetQNet
 from .settings import check_settings
-from .transitions import CompactTransitions, transition_keys
+from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 
 class _Group:
@@ -68,7 +68,7 @@ class _Group:
         )
         policies = build_policies(self.env, a, values, exploration_schedule(a, frames, agent.device))
         self.greedy, self.exploration = policies.greedy, policies.exploration
-        self.keys = transition_keys(self.env.world, policies.action_keys)
+        self.keys = transition_keys(self.env.world, policies.action_keys, int(a.get("n_step", 1)))
         # agent.buffer_size transitions of this size, kept compact; samples of its share of agent.batch_size
         self.transitions = CompactTransitions(self.env.world, policies.action_keys)
         self.buffer = build_replay_buffer(a, self.transitions, agent.batch_size)
@@ -162,7 +162,8 @@ class SetDQNAgent(DQNAgent):
                 mean_utility(nxt), mean_utility(batch), u_star.unsqueeze(-1), float(self.settings.gap_floor)
             )
             batch.set(("next", "reward"), change.unsqueeze(-1).to(nxt.get("reward").dtype))
-        group.buffer.extend(batch.reshape(-1).select(*group.keys))
+        stored = n_step_returns(batch, int(self.settings.get("n_step", 1)), float(self.settings.gamma))
+        group.buffer.extend(stored.reshape(-1).select(*group.keys))
         group.exploration.step(batch.numel())
         reach_utility = mean_utility(nxt) if fading_part(cfg).random else None
         return episode_metrics(

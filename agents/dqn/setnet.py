@@ -32,6 +32,7 @@ from torch import nn
 from uavrl.envs import NODE_FEATURES
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
 
+from .loss import discount
 from .networks import Q_INPUTS, ValidGreedy
 
 OWN_FEATURES = 13  # (x, y, task) and the contributions at the own cell and its 4 neighbours (envs/world.py)
@@ -142,9 +143,10 @@ def team_value(chosen: torch.Tensor, mixer: str) -> torch.Tensor:
 class SetDoubleQLoss(nn.Module):
     """The factored head's double-DQN loss (as :class:`~.loss.DoubleQMixerLoss`) for a size-free core.
 
-    ``y = r + gamma (1 - terminated) Mix(Q_target(s', a'))`` where the online core's :class:`ValidGreedy` picks the
-    valid joint action ``a'``; the loss is the Huber distance to ``Mix(Q(s, a))``.  ``Mix`` is the sum or mean of
-    :func:`team_value`, so one loss module serves every team size and grid (``grid``: the batch's).
+    ``y = r + gamma^n (1 - terminated) Mix(Q_target(s', a'))`` (``n``: the steps an n-step reward sums) where the
+    online core's :class:`ValidGreedy` picks the valid joint action ``a'``; the loss is the Huber distance to
+    ``Mix(Q(s, a))``.  ``Mix`` is the sum or mean of :func:`team_value`, so one loss module serves every team size
+    and grid (``grid``: the batch's).
     """
 
     def __init__(self, core: SetQCore, mixer: str, gamma: float, num_actions: int):
@@ -174,7 +176,7 @@ class SetDoubleQLoss(nn.Module):
             next_value = team_value(
                 target(*(nxt.get(k) for k in Q_INPUTS)).gather(-1, action.unsqueeze(-1)), self.mixer
             )
-            y = nxt.get("reward") + self.gamma * (~nxt.get("terminated")) * next_value
+            y = nxt.get("reward") + discount(td, self.gamma) * (~nxt.get("terminated")) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, y)})
 
     @torch.no_grad()

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDict, TensorDictBase
+from torchrl.data.postprocs import MultiStep
 from torchrl.envs import Transform
 
 from uavrl.envs.physics.grid import cells_or_away
@@ -36,12 +37,44 @@ from uavrl.envs.world import World
 
 _OBSERVED = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
 _OUTCOME = ["reward", "done", "terminated"]  # of "next", stored as they are
+STEPS = "steps_to_next_obs"  # n-step returns: the steps a reward sums (TorchRL's key, its losses read it)
 
 
-def transition_keys(world: World, action_keys: list) -> list:
-    """The entries of a full transition (what the loss reads), and ``"nodes"`` with random layouts."""
+def transition_keys(world: World, action_keys: list, n_step: int = 1) -> list:
+    """The entries of a full transition (what the loss reads), ``"nodes"`` with random layouts and
+    ``"steps_to_next_obs"`` with n-step returns (``n_step > 1``)."""
     layout = ["nodes"] if world.layouts.fixed is None else []
-    return _OBSERVED + layout + action_keys + [("next", k) for k in _OBSERVED + _OUTCOME]
+    steps = [STEPS] if n_step > 1 else []
+    return _OBSERVED + layout + steps + action_keys + [("next", k) for k in _OBSERVED + _OUTCOME]
+
+
+def n_step_returns(episodes: TensorDictBase, n_step: int, gamma: float) -> TensorDictBase:
+    """``[W, T]`` episodes with n-step returns (TorchRL's ``MultiStep``): each step's reward the discounted sum of up to
+    ``n_step`` rewards within its episode, ``"next"`` the state after the last of them, ``"steps_to_next_obs"`` how many
+    they are (the target discounts by ``gamma`` to that power), and ``("next", "terminated")`` that last step's.
+    ``n_step=1``: ``episodes`` as they are.
+
+    Example:
+        >>> from tensordict import TensorDict
+        >>> T = 4
+        >>> episodes = TensorDict({"x": torch.arange(T)[None, :, None], "next": {
+        ...     "x": torch.arange(1, T + 1)[None, :, None], "reward": torch.ones(1, T, 1),
+        ...     "done": (torch.arange(T) == T - 1)[None, :, None], "terminated": torch.zeros(1, T, 1, dtype=bool)}},
+        ...     batch_size=[1, T])
+        >>> out = n_step_returns(episodes, 2, 0.5)
+        >>> out["next", "reward"].flatten().tolist(), out["next", "x"].flatten().tolist()
+        ([1.5, 1.5, 1.5, 1.0], [2, 3, 4, 4])
+        >>> out["steps_to_next_obs"].flatten().tolist()
+        [2, 2, 2, 1]
+    """
+    if n_step == 1:
+        return episodes
+    out = MultiStep(gamma, n_step)(episodes)
+    steps = out.get(STEPS)
+    last = torch.arange(episodes.shape[-1], device=steps.device) + steps - 1  # the step whose successor "next" now is
+    terminated = episodes.get(("next", "terminated"))  # MultiStep leaves the done flags where they were
+    out.set(("next", "terminated"), terminated.gather(1, last.unsqueeze(-1).expand_as(terminated)))
+    return out.exclude("gamma", "nonterminal", ("next", "original_reward"))
 
 
 class CompactTransitions(Transform):
@@ -51,7 +84,8 @@ class CompactTransitions(Transform):
     Kept per transition: ``code`` and ``("next", "code")`` ``[N]`` (int16 while the codes fit), under an energy
     model ``energy`` and ``("next", "energy")`` ``[N, 2]`` float32 (:meth:`World.energy_features`), with random
     layouts ``nodes`` ``[4, 3]`` float64 (a step keeps its layout), the actions (``action`` ``[N]`` int8;
-    ``joint_action`` int16 for the joint head) and ``reward``, ``done``, ``terminated`` of ``"next"``.
+    ``joint_action`` int16 for the joint head), with n-step returns ``"steps_to_next_obs"`` (int8), and ``reward``,
+    ``done``, ``terminated`` of ``"next"``.
 
     Args:
         world: the training env's :class:`~uavrl.envs.World`.
@@ -72,6 +106,8 @@ class CompactTransitions(Transform):
             stored["joint_action"] = td.get("joint_action").to(torch.int16)
         if world.layouts.fixed is None:
             stored["nodes"] = td.get("nodes")
+        if STEPS in td.keys():
+            stored[STEPS] = td.get(STEPS).to(torch.int8)
         nxt = {key: td.get(("next", key)) for key in _OUTCOME}
         for holder, step in ((stored, td), (nxt, td.get("next"))):
             code = 2 * cells_or_away(step.get("positions"), grid) + step.get("tasks")
@@ -98,6 +134,8 @@ class CompactTransitions(Transform):
             full.set("joint_action", td.get("joint_action").long())
         if nodes is not None:
             full.set("nodes", nodes)
+        if STEPS in td.keys():
+            full.set(STEPS, td.get(STEPS).long())
         following = self._step(after, B, td.device)
         for key in _OUTCOME:
             following.set(key, nxt.get(key))
