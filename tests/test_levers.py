@@ -17,6 +17,7 @@ from uavrl.agents.lookahead import LookaheadPolicy, evaluate_with_lookahead, loo
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.solvers import exact
+from uavrl.runs import optimality_line
 
 SMALL = [
     "agent=dqn",
@@ -237,6 +238,7 @@ def test_eval_lookahead_on_a_per_size_dqn_in_its_own_model():
     agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
     metrics = evaluate_with_lookahead(agent, model_config(cfg), 2, 3, num_starts=3)
     assert metrics["eval/lookahead"] == 2.0 and 0 < metrics["eval/optimality"] <= 1
+    assert "fixed starts, the greedy policy with a depth-2 lookahead ends at" in optimality_line(cfg, metrics, "dqn")
     with pytest.raises(ValueError, match="its run's model"):
         lookahead_policy(agent, make_config("paper", grid=(5, 5), num_uavs=2), 1, 3)
 

@@ -263,7 +263,7 @@ def summary(cfg: DictConfig, saved: DictConfig, evaluated: DictConfig, metrics: 
     return "\n".join(
         [
             *lines,
-            optimality_line(cfg, metrics),
+            optimality_line(cfg, metrics, saved.agent.name),
             yardstick_line(cfg, metrics),
             f"metrics: {quoted(path)} (all {len(metrics)}, as JSON; print_json=true prints them in place of this "
             "summary)",

@@ -169,11 +169,28 @@ def size_free_teams(cfg: DictConfig, env_cfg) -> str:
     return f"{count} ({teams}) in layout{'s' if len(layouts) > 1 else ''} {in_layouts}"
 
 
-def optimality_line(cfg: DictConfig, result: dict) -> str:
-    """The final configuration's utility against U*, in words."""
+def policy_words(agent_name: str, result: dict) -> str:
+    """The policy an evaluation played: the baselines', a lookahead's (``eval/lookahead`` in ``result``), else the
+    greedy one.
+
+    Example:
+        >>> policy_words("dqn", {"eval/lookahead": 2.0}), policy_words("random", {})
+        ('the greedy policy with a depth-2 lookahead', 'the random policy')
+    """
+    if agent_name == "random":
+        return "the random policy"
+    if agent_name in ("oracle", "planner"):
+        return "the oracle planner"
+    depth = int(result.get("eval/lookahead", 0))
+    return f"the greedy policy with a depth-{depth} lookahead" if depth else "the greedy policy"
+
+
+def optimality_line(cfg: DictConfig, result: dict, agent_name: str) -> str:
+    """The final configuration's utility against U*, in words (``agent_name``: the run's ``agent.name``)."""
     optimality, worst = result["eval/optimality"], result["eval/optimality_min"]
+    policy = policy_words(agent_name, result)
     return (
-        f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, the greedy policy ends at "
-        f"{optimality:.1%} of the best possible utility U* on average (worst start {worst:.1%}; "
+        f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, {policy} ends at {optimality:.1%} "
+        f"of the best possible utility U* on average (worst start {worst:.1%}; "
         f"{share_of_starts(result['eval/optimal_fraction'])} of starts within 1% of U*)"
     )

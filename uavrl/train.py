@@ -441,7 +441,7 @@ def summary(cfg: DictConfig, env_cfg, result: dict, run_dir: Path) -> str:
     return "\n".join(
         [
             *lines,
-            optimality_line(cfg, result),
+            optimality_line(cfg, result, cfg.agent.name),
             yardstick_line(cfg, result),
             f"run directory: {run_dir} (config.yaml, checkpoint.pt, metrics.json, TensorBoard events)",
             f"look at it: tensorboard --logdir {quoted(run_dir)}   "
