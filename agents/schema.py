@@ -155,6 +155,18 @@ class DQNSchema:
     lr_end: REAL = setting(0.00005, positive(), "the learning rate at the end of the run")
     batch_size: int = setting(256, whole(1), "transitions per gradient step")
     buffer_size: int = setting(50000, whole(1), "transitions (the checkpoint keeps them: ~3 MB for N = 6 on 10x10)")
+    replay: str = setting(
+        "uniform",
+        one_of("uniform", "prioritized", what="replays"),
+        "prioritized: each transition drawn by its last TD error (Schaul et al. 2016, agents/dqn/priorities.py), "
+        "agent.network=team only",
+    )
+    priority_alpha: REAL = setting(
+        0.6, interval(0.0, 1.0, low_open=True), "agent.replay=prioritized: how much the TD errors count"
+    )
+    priority_beta: REAL = setting(
+        0.4, UNIT, "agent.replay=prioritized: the importance weights' exponent, annealed linearly to 1 over the run"
+    )
     updates: int = setting(32, whole(1), "gradient steps per iteration")
     learning_starts: int = setting(2000, whole(0), "transitions in the buffer before the first gradient step")
     tau: REAL = setting(0.01, UNIT, "soft target update per gradient step")
@@ -240,6 +252,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
                 "out of service; use agent.head=factored"
             )
         return
+    if a.get("replay", "uniform") != "uniform":
+        raise ValueError(
+            f"agent.replay={a.replay!r} is invalid with agent.network='set': each team's share of a batch is drawn "
+            "uniformly from its own buffer (agent.curriculum sets the shares); use agent.replay=uniform"
+        )
     if a.get("demonstrations", "none") != "none" and env_cfg.energy != "none":
         raise ValueError(
             f"agent.demonstrations={a.demonstrations!r} is invalid with env.energy={env_cfg.energy!r}: the oracle's "

@@ -243,6 +243,38 @@ def test_n_step_target_discounts_by_the_steps_summed(make_agent):
     )
 
 
+def test_prioritized_replay_draws_by_td_error_and_weights_the_loss(make_agent):
+    agent = make_agent("agent.mixer=vdn", "agent.replay=prioritized", "agent.priority_alpha=0.5")
+    for _ in range(2):
+        agent.train_iteration()
+    sampler, filled = agent.buffer.sampler, len(agent.buffer)
+    errors = torch.rand(filled, dtype=torch.float64) * (torch.arange(filled) % 4 == 0)  # 3 of 4 slots: error 0
+    agent.buffer.update_priority(torch.arange(filled), errors)
+    sampler.beta = 0.7
+    torch.manual_seed(0)
+    batch = agent.buffer.sample(20000)
+    # drawn in proportion to (|error| + 1e-6)^alpha, each slot's weight (p_i / min p)^-beta: Schaul et al.'s
+    # importance weight over its largest, computed here from the errors
+    p = (errors + 1e-6) ** 0.5
+    counts = torch.bincount(batch["index"], minlength=filled).double()
+    assert counts[errors == 0].sum() < 0.01 * len(batch["index"])
+    assert torch.allclose(counts / counts.sum(), p / p.sum(), atol=0.01)
+    expected = ((p / p.min()) ** -0.7)[batch["index"]]
+    torch.testing.assert_close(batch["priority_weight"], expected.float())
+    # the loss is the weighted mean of the Huber terms, and writes each transition's |TD error| for the priorities
+    small = batch[:64]
+    weighted = agent.loss(small)["loss"]
+    td_error = small["td_error"]
+    unweighted = agent.loss(small.exclude("priority_weight"))["loss"]
+    huber = torch.where(td_error < 1, 0.5 * td_error**2, td_error - 0.5)
+    assert weighted.item() == pytest.approx((small["priority_weight"] * huber).mean().item(), rel=1e-5)
+    assert unweighted.item() == pytest.approx(huber.mean().item(), rel=1e-5)
+    # the agent's gradient step sets the priorities of the transitions it drew
+    before = sampler.priorities.clone()
+    agent._update()
+    assert (sampler.priorities != before).sum() > 0
+
+
 @torch.no_grad()
 def test_joint_target_masks_invalid_joint_actions_in_the_max(make_agent):
     agent, data, online, target = online_and_target(make_agent, "agent.head=joint", "agent.gamma=0.5")
@@ -276,7 +308,12 @@ def test_policies_take_valid_actions(head, make_agent):
 
 @pytest.mark.parametrize(
     "overrides",
-    [["agent.mixer=vdn", "agent.buffer_size=300"], ["agent.mixer=qmix", "agent.n_step=3"], ["agent.head=joint"]],
+    [
+        ["agent.mixer=vdn", "agent.buffer_size=300"],
+        ["agent.mixer=qmix", "agent.n_step=3"],
+        ["agent.head=joint", "agent.replay=prioritized"],
+        ["agent.mixer=vdn", "agent.replay=prioritized", "agent.buffer_size=300"],
+    ],
 )
 def test_checkpoint_round_trip_continues_identically(overrides, make_agent):
     """state_dict -> disk -> load_state_dict: same Q values, then the same training and the same greedy actions.

@@ -180,6 +180,7 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
         (["agent.network=team", "agent.mixer=vdn"], "agent.sizes=[[2,3,3],[3,4,4]] is invalid with agent.network"),
         (["agent.mixer=qmix"], "agent.mixer='qmix' is invalid with agent.network='set'"),
         (["agent.head=joint"], "agent.head='joint' is invalid with agent.network='set'"),
+        (["agent.replay=prioritized"], "agent.replay='prioritized' is invalid with agent.network='set'"),
         (["agent.heads=3"], "agent.heads=3 is invalid with agent.hidden=16: the heads split the hidden units"),
         (["agent.sizes=[[10,3,3]]"], "agent.sizes=[[10,3,3]] is invalid: its team [10, 3, 3] has 10 UAVs for the 9"),
         (["agent.sizes=[[2,3]]"], "agent.sizes=[[2, 3]] is invalid: give a list of teams [num_uavs, L1, L2]"),

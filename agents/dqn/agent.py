@@ -94,10 +94,12 @@ class DQNAgent(Agent):
         """One episode in every world, then ``agent.updates`` gradient steps."""
         self.collector.set_seed(self._world_seed(self.iteration), static_seed=True)
         self.collector.reset()
+        progress = min(1.0, self.iteration / self.num_iterations)
         for group in self.optimizer.param_groups:  # annealed linearly from agent.lr to agent.lr_end over the run
-            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * min(
-                1.0, self.iteration / self.num_iterations
-            )
+            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * progress
+        if self.settings.get("replay", "uniform") == "prioritized":  # importance weights annealed to full correction
+            beta = float(self.settings.priority_beta)
+            self.buffer.sampler.beta = beta + (1.0 - beta) * progress
         # this episode's layouts; the exchange method where it runs (its results recorded), the search beyond
         u_star = self.env.optimum(method="exchange" if self.env_cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search")[0]
         # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
@@ -151,7 +153,10 @@ class DQNAgent(Agent):
         return change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
 
     def _update(self) -> torch.Tensor:
-        loss = self.loss(self.buffer.sample())["loss"]
+        batch = self.buffer.sample()
+        loss = self.loss(batch)["loss"]
+        if self.settings.get("replay", "uniform") == "prioritized":
+            self.buffer.update_priority(batch.get("index"), batch.get("td_error"))
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(self.loss.parameters(), float(self.settings.max_grad_norm), foreach=True)

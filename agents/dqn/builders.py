@@ -19,6 +19,7 @@ from uavrl.envs import UAVSpectrumEnv
 
 from .loss import DoubleQMixerLoss
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
+from .priorities import ProportionalSampler
 from .transitions import CompactTransitions
 
 
@@ -213,8 +214,8 @@ class ZeroedStorage(LazyTensorStorage):
 
 
 def build_replay_buffer(a, transitions: CompactTransitions, batch_size: int | None = None) -> TensorDictReplayBuffer:
-    """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), uniform samples of
-    ``batch_size`` (``agent.batch_size`` unless given).
+    """``agent.buffer_size`` transitions kept compact by ``transitions`` (:mod:`.transitions`), samples of
+    ``batch_size`` (``agent.batch_size`` unless given), uniform or by priority (``agent.replay``, :mod:`.priorities`).
 
     Args:
         a: the agent's settings ``cfg.agent`` (``buffer_size``, ``batch_size``).
@@ -223,6 +224,9 @@ def build_replay_buffer(a, transitions: CompactTransitions, batch_size: int | No
     """
     storage = ZeroedStorage(int(a.buffer_size), device=transitions.world.device)
     batch_size = int(a.batch_size) if batch_size is None else batch_size
+    if a.get("replay", "uniform") == "prioritized":  # run configs saved before: no setting
+        sampler = ProportionalSampler(int(a.buffer_size), float(a.priority_alpha), float(a.priority_beta))
+        return TensorDictReplayBuffer(storage=storage, sampler=sampler, batch_size=batch_size, transform=transitions)
     return TensorDictReplayBuffer(storage=storage, batch_size=batch_size, transform=transitions)
 
 

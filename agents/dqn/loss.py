@@ -51,7 +51,14 @@ class DoubleQMixerLoss(QMixerLoss):
             chosen = target_values.gather(-1, next_action.unsqueeze(-1))  # the online greedy action, target-valued
             next_value = _mixed(mixer, chosen, nxt.get("state"), self.target_mixer_network_params.get("module"))
             target = nxt.get(k.reward) + discount(td, self.gamma) * (~nxt.get(k.terminated)) * next_value
-        return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
+        # prioritized replay (agents/dqn/priorities.py): the TD errors for the priorities, as TorchRL's DQNLoss writes
+        # them into the batch, and each transition's importance weight
+        td.set(k.priority, (value - target).detach().abs().squeeze(-1))
+        weight = td.get("priority_weight", None)
+        if weight is None:
+            return TensorDict({"loss": nn.functional.smooth_l1_loss(value, target)})
+        huber = nn.functional.smooth_l1_loss(value, target, reduction="none").squeeze(-1)
+        return TensorDict({"loss": (weight * huber).mean()})
 
     @property
     def _target_net(self) -> TensorDictBase:
