@@ -1,6 +1,7 @@
 """The training command: run directory contents, resume, evaluation of a checkpoint, errors."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -140,3 +141,21 @@ def test_bad_overrides_fail_with_one_line(override, message, tmp_path):
     assert result.returncode != 0
     assert message in result.stderr
     assert result.stderr.strip().count("\n") == 0, result.stderr
+
+
+@pytest.mark.slow  # two whole training commands
+def test_the_train_command_keeps_torchrls_info_lines_out_unless_asked(tmp_path):
+    """TorchRL logs each replay buffer it allocates at INFO; the commands lower that to WARNING, and a user's
+    ``RL_LOGGING_LEVEL`` still wins."""
+    argv = [sys.executable, "-m", "uavrl.train", "agent=dqn", "env.grid=[3,3]", "env.max_steps=4", "agent.worlds=2"]
+    argv += ["agent.iterations=1", "agent.hidden=8", "eval.num_starts=2", "progress=false"]
+    outputs = {}
+    for level in (None, "INFO"):
+        env = {k: v for k, v in os.environ.items() if k != "RL_LOGGING_LEVEL"} | (
+            {"RL_LOGGING_LEVEL": level} if level else {}
+        )
+        result = subprocess.run([*argv, f"run_dir={tmp_path / str(level)}"], capture_output=True, text=True, env=env)
+        assert result.returncode == 0, result.stderr[-2000:]
+        outputs[level] = result.stdout + result.stderr
+    assert "Initialized LazyTensorStorage" not in outputs[None]
+    assert "Initialized LazyTensorStorage" in outputs["INFO"]

@@ -14,6 +14,7 @@ for the same overrides whatever the launcher (basic, joblib, Ray).
 from __future__ import annotations
 
 import functools
+import os
 import re
 import shlex
 import sys
@@ -52,6 +53,8 @@ def run_command(
     checked before any starts.
     """
     overrides = sys.argv[1:] = readable(sys.argv[1:])
+    # TorchRL logs every buffer it allocates at INFO; a user's RL_LOGGING_LEVEL still wins (read when it is imported)
+    os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")
     if any(arg.startswith("-") for arg in overrides):
         import hydra
         from hydra.core.hydra_config import HydraConfig
