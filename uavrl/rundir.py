@@ -178,6 +178,9 @@ class Interrupts:
     else, and for a second signal, :class:`Interrupted` is raised at once,
     except inside :meth:`shielded` (logging, the progress bar: code holding
     locks that an exception would leave held), which acts on it when it ends.
+    Once :class:`Interrupted` is on its way (:meth:`stop`), further signals are
+    dropped: the run is already stopping, and a new exception raised in its
+    handlers would lose what they report.
     Handlers are installed only in the main thread (Python's rule); elsewhere
     (a launcher's worker thread) signals keep their default effect.
     """
@@ -189,7 +192,7 @@ class Interrupts:
         self.notify = notify or (lambda line: print(line, file=sys.stderr, flush=True))
         self.received: int | None = None
         self.working_on = "the current iteration"  # for the notice: ``iteration 7 of 50``
-        self._deferring, self._shielded, self._pending = False, 0, None
+        self._deferring, self._shielded, self._pending, self._stopping = False, 0, None, False
         self._previous = {}
 
     def __enter__(self) -> Interrupts:
@@ -223,7 +226,15 @@ class Interrupts:
         if pending is not None and act_after and not self._shielded:
             self._act(pending)
 
+    def stop(self, signum: int) -> Interrupted:
+        """The exception that stops the run for ``signum``; signals after it are dropped."""
+        self.received = self.received or signum
+        self._stopping = True
+        return Interrupted(signum)
+
     def _handle(self, signum, frame) -> None:
+        if self._stopping:
+            return
         if self._shielded:
             self._pending = signum
             return
@@ -237,5 +248,4 @@ class Interrupts:
                 "Ctrl-C or SIGTERM stops at once, keeping the checkpoints already saved)"
             )
             return
-        self.received = self.received or signum
-        raise Interrupted(signum)
+        raise self.stop(signum)

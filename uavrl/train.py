@@ -364,7 +364,7 @@ class Training:
                 if interrupts.received:
                     if self.saved != done:
                         self.save_checkpoint(done)
-                    raise Interrupted(interrupts.received)
+                    raise interrupts.stop(interrupts.received)
 
     def evaluate_and_save(self, trained: dict) -> dict:
         """The final evaluation, logged and saved with the final checkpoint (a run resumed after it: the saved one)."""
