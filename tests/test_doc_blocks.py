@@ -235,10 +235,12 @@ def markdown_files() -> list[Path]:
 
 
 def bash_prelude() -> str:
-    """``python`` of the bash blocks: this interpreter, with the smoke overrides appended to ``-m uavrl.X``."""
+    """``python`` of the bash blocks: this interpreter, with the smoke overrides appended to ``-m uavrl.X``; the
+    blocks' tools (``ruff``, ``pre-commit``) from this interpreter's environment, activated or not."""
     return f"""
 set -eo pipefail
 export MPLBACKEND=Agg
+export PATH={shlex.quote(str(Path(sys.executable).parent))}:"$PATH"
 python() {{
     if [ "$1" = -m ] && [[ "$2" == uavrl.* ]]; then
         local extra
