@@ -150,9 +150,9 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
             elif policy in LOOKAHEAD_OF.values():
                 metrics = evaluate_with_lookahead(agent, cfg, args.lookahead, args.width, num_starts=args.starts)
             else:  # agent.evaluate's evaluation, with the greedy policy's own CPU time
-                policy = TimedPolicy(agent.policy_for(cfg))
-                metrics = evaluate(policy, cfg, num_starts=args.starts)
-                metrics["eval/policy_cpu_s_per_step"] = policy.seconds / max(1, policy.world_steps)
+                timed = TimedPolicy(agent.policy_for(cfg))
+                metrics = evaluate(timed, cfg, num_starts=args.starts)
+                metrics["eval/policy_cpu_s_per_step"] = timed.seconds / max(1, timed.world_steps)
             metrics["cpu_s"] = time.process_time() - began
             done[key] = metrics
             path.write_text(json.dumps(done, indent=1))
