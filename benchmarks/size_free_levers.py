@@ -29,10 +29,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 DEFAULT_TEAMS = ["2:6x6", "6:10x10", "10:20x20", "20:30x30", "50:50x50", "6:10x10:random", "20:30x30:random"]
-TRAINED = {  # the levers each checkpoint trains with (the oracle's knowledge: demonstrations need U*'s configuration)
-    "pure RL": [],
-    "+demonstrations": ["agent.demonstrations=oracle"],
-    "+curriculum": ["agent.curriculum=loss"],
+TRAINED = {  # each lever on or off whatever the scenario's default (the oracle's knowledge: demonstrations need U*)
+    "pure RL": ["agent.demonstrations=none", "agent.curriculum=none"],
+    "+demonstrations": ["agent.demonstrations=oracle", "agent.curriculum=none"],
+    "+curriculum": ["agent.demonstrations=none", "agent.curriculum=loss"],
     "+demonstrations +curriculum": ["agent.demonstrations=oracle", "agent.curriculum=loss"],
 }
 LOOKAHEAD_OF = {  # the checkpoints also evaluated with eval.lookahead

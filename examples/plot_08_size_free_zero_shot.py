@@ -9,7 +9,7 @@ it never saw.
 Here a tiny size-free run (teams of 2 and 4 UAVs, 20 iterations, a few seconds) is trained and evaluated zero-shot
 with 50 UAVs on a 50x50 grid, beside the oracle planner and random actions.  A tiny run does not beat random actions
 there: a real checkpoint comes from ``python -m uavrl.train agent=dqn scenario=size_free`` (teams of 2 to 16 UAVs,
-about 30 minutes on one core), which reaches 0.999 ``U*`` from 99-100% of the starts of 50 UAVs on 50x50.  Point
+about 20 minutes on one core), which reaches 0.999 ``U*`` from 97-100% of the starts of 50 UAVs on 50x50.  Point
 ``run_dir`` at such a run (``runs/dqn/size_free/<stamp>``) to evaluate it instead.
 
 The run is written to ``runs/examples/size_free`` under the current directory.
