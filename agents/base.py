@@ -43,7 +43,7 @@ class Agent(abc.ABC):
 
     @abc.abstractmethod
     def train_iteration(self) -> dict[str, float]:
-        """One unit of training; ``train/...`` scalars (see :func:`uavrl.evaluation.episode_metrics`)."""
+        """One unit of training; ``train/...`` scalars (see :func:`uavrl.agents.evaluation.episode_metrics`)."""
 
     @abc.abstractmethod
     def policies(self) -> list:
@@ -55,13 +55,13 @@ class Agent(abc.ABC):
         return self.policies()[run]
 
     def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
-        """:func:`uavrl.evaluation.evaluate` in the model ``env_cfg`` (``kwargs``: its settings) of each of
+        """:func:`uavrl.agents.evaluation.evaluate` in the model ``env_cfg`` (``kwargs``: its settings) of each of
         :meth:`policies`.
 
         An agent may override it with a faster evaluation of the same greedy
         policies that gives the same numbers (the tabular agent reads its tables).
         """
-        from uavrl.evaluation import evaluate
+        from uavrl.agents.evaluation import evaluate
 
         return [evaluate(policy, env_cfg, **kwargs) for policy in self.policies()]
 

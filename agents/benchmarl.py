@@ -15,9 +15,8 @@ from benchmarl.experiment.callback import Callback
 from torchrl.data import Composite
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from uavrl.agents.evaluation import TrainingClock, evaluate
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
-from uavrl.evaluation import TrainingClock, evaluate
-from uavrl.logger import RunLogger
 
 GROUP = "agents"
 
@@ -88,21 +87,23 @@ class UAVTask(TaskClass):
 
 
 class YardstickCallback(Callback):
-    """At each of BenchMARL's evaluations, the shared evaluation (:func:`uavrl.evaluation.evaluate`) of its greedy
-    policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had trained by
-    then (``time/...``, :class:`~uavrl.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
+    """At each of BenchMARL's evaluations, the shared evaluation (:func:`~uavrl.agents.evaluation.evaluate`) of its
+    greedy policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had
+    trained by
+    then (``time/...``, :class:`~uavrl.agents.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
     point.  The TensorBoard writer opens at the first evaluation: BenchMARL pickles its callbacks with the
     experiment's config, and an experiment reloaded to be scored sets them up again, writing nothing.
 
     Args:
         env_cfg: the model the greedy policy is evaluated in (the task's).
-        eval_kwargs: the settings of :func:`uavrl.evaluation.evaluate` (``num_starts``, ``horizon``, ``seed``, ...).
-        run_dir: the run directory its TensorBoard events go to.
+        eval_kwargs: the settings of :func:`~uavrl.agents.evaluation.evaluate` (``num_starts``, ``horizon``, ...).
+        open_log: opens the run's TensorBoard events when first called (``functools.partial(RunLogger, run_dir)`` of
+            :mod:`uavrl.logger`): an object with ``log(metrics, step)`` and ``close()``.
     """
 
-    def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, run_dir):
+    def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, open_log):
         super().__init__()
-        self.env_cfg, self.eval_kwargs, self.run_dir = env_cfg, eval_kwargs, run_dir
+        self.env_cfg, self.eval_kwargs, self.open_log = env_cfg, eval_kwargs, open_log
         self.logger = None
         self.curve: list[dict] = []
         self.clock = TrainingClock()
@@ -115,7 +116,7 @@ class YardstickCallback(Callback):
             frames: the frames BenchMARL had collected, the events' step.
         """
         if self.logger is None:
-            self.logger = RunLogger(self.run_dir, resume_step=0)
+            self.logger = self.open_log()
         self.logger.log(metrics, frames)
 
     def close(self) -> None:

@@ -267,17 +267,3 @@ def lookahead_settings(cfg, agent_settings=None) -> dict:
     if depth and a is not None:
         check_lookahead(a, depth, f"agent={a.name}")
     return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}
-
-
-def evaluate_with_lookahead(agent, cfg: ModelConfig, lookahead: int, lookahead_width: int, **kwargs) -> dict:
-    """:func:`uavrl.evaluation.evaluate` of the agent's lookahead policy, with ``eval/lookahead`` (its depth),
-    ``eval/lookahead_width`` and ``eval/lookahead_cpu_s_per_step`` (its CPU seconds per world and step)."""
-    from uavrl.evaluation import evaluate
-
-    policy = lookahead_policy(agent, cfg, lookahead, lookahead_width)
-    metrics = evaluate(policy, cfg, **kwargs)
-    search = policy.lookahead
-    metrics["eval/lookahead"] = float(lookahead)
-    metrics["eval/lookahead_width"] = float(lookahead_width)
-    metrics["eval/lookahead_cpu_s_per_step"] = search.seconds / max(1, search.world_steps)
-    return metrics

@@ -1,5 +1,5 @@
 """Every agent's settings (``agent.*``): each one's default, type, rule and meaning, declared once in the agent's
-schema (standard library and :mod:`uavrl.rules` only).
+schema (standard library and :mod:`uavrl.envs.rules` only).
 
 Hydra starts ``configs/agent/<name>.yaml`` from the agent's schema (registered by :mod:`uavrl.schema`), the commands
 check ``agent.*`` against the rules of the chosen agent's schema only (a new agent's ``agent.alpha`` follows its own
@@ -16,11 +16,24 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Optional
 
 from uavrl.envs.config import LAYOUTS
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.rules import REAL, UNIT, Rule, flag, interval, one_of, positive, rules_of, setting, whole
+from uavrl.envs.rules import (
+    REAL,
+    SEED,
+    UNIT,
+    Rule,
+    flag,
+    interval,
+    one_of,
+    optional,
+    positive,
+    rules_of,
+    setting,
+    whole,
+)
 
 if TYPE_CHECKING:
     from uavrl.envs.config import ModelConfig
@@ -219,7 +232,7 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
     each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
     from uavrl.envs.config import InvalidOption
-    from uavrl.rules import check, shown
+    from uavrl.envs.rules import check, shown
 
     check(a, agent_rules("dqn"), section="agent")
     network = a.get("network", "team")  # run configs saved before: no setting
@@ -307,3 +320,23 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
         f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
         "(agent=dqn agent.network=set) acts on any size"
     )
+
+
+@dataclass
+class EvalSchema:
+    """The shared evaluation (:mod:`uavrl.agents.evaluation`, ``eval.*``), whose library defaults these are too."""
+
+    num_starts: int = setting(64, whole(1), "fixed, seeded starts of the greedy evaluation")
+    horizon: Optional[int] = setting(
+        None,
+        optional(whole(1), "max(20, 2 (L1 + L2)) steps, or the mission's under an energy model"),
+        "steps per greedy rollout; null: max(20, 2 (L1 + L2)), or under an energy model the steps by which every UAV "
+        "is home (docs/model.md, What the numbers mean)",
+    )
+    gamma: REAL = setting(
+        0.9,
+        interval(0.0, 1.0, low_open=True),
+        "the yardstick's discount (eval/return, eval/return_ratio), whatever the agent trains with",
+    )
+    seed: int = setting(1_000_003, SEED, "held out from training seeds (and layouts)")
+    every: int = setting(0, whole(0), "iterations between evaluations during training; 0: only at the end")

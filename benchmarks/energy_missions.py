@@ -86,9 +86,9 @@ def rule_ablation(scenario: str) -> None:
     from hydra import compose, initialize_config_dir
 
     from uavrl.agents.baselines import OraclePolicy
+    from uavrl.agents.evaluation import evaluate
     from uavrl.agents.planner import PlannerPolicy
     from uavrl.config import config_dir, model_config
-    from uavrl.evaluation import evaluate
 
     class HoveringPlanner(PlannerPolicy):  # rule 1 off: the team hovers on A
         def _partners(self, world, nodes, cells, tasks):

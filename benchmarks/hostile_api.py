@@ -3,7 +3,8 @@
     python benchmarks/hostile_api.py [--jobs 2] [--timeout 120] [--only SURFACE] [--json PATH]
 
 About a hundred cases on ``load_policy``, ``UAVSpectrumEnv`` (construction, ``reset``, ``step``, ``to``,
-``rollout``), the Gymnasium and PettingZoo adapters, ``uavrl.evaluation.evaluate`` and the files that ``reproduce``,
+``rollout``), the Gymnasium and PettingZoo adapters, ``uavrl.agents.evaluation.evaluate`` and the files that
+``reproduce``,
 ``evaluate`` and ``train`` read and write.  Each runs in its own process, forked from one that imported torch and
 uavrl once (address space capped at ``--memory-gib``, killed after ``--timeout`` seconds; the commands' cases start
 ``python -m uavrl.<command>`` from there), and is classified as:
@@ -46,7 +47,7 @@ from tensordict import TensorDict
 import uavrl
 from uavrl import load_policy
 from uavrl.envs import UAVSpectrumEnv, make_config
-from uavrl.evaluation import evaluate
+from uavrl.agents.evaluation import evaluate
 
 RUN = Path(os.environ["HOSTILE_RUN"])
 CFG = make_config("paper", grid=(3, 3), num_uavs=2)

@@ -28,11 +28,11 @@ import time
 import torch
 
 from uavrl import evaluation
+from uavrl.agents.evaluation import EVAL_SEED, evaluate
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon
 from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
-from uavrl.evaluation import EVAL_SEED, evaluate
 
 CASES = [(grid, n, wh) for grid in ((3, 3), (4, 4)) for n in (1, 2) for wh in (1.0, 1.5, 2.0)]
 NUM_STARTS = 64

@@ -1,7 +1,7 @@
 """Stable-Baselines3's PPO trained on the Gymnasium adapter, measured by the yardstick beside random and the oracle.
 
 A user's code: ``PPO("MlpPolicy", UAVSpectrumGymEnv(...))`` with SB3's defaults, ``learn(--timesteps)``, then the
-deterministic policy evaluated through ``uavrl.evaluation.evaluate`` (``TeamActionPolicy``), the evaluation of
+deterministic policy evaluated through ``uavrl.agents.evaluation.evaluate`` (``TeamActionPolicy``), the evaluation of
 every agent: ``--starts`` held-out starts, the default horizon (24 greedy steps on 6x6), ``eval.gamma`` 0.9.
 The random policy (``agent=random``'s, seeded like the PPO run) and the oracle planner are evaluated on the same
 starts.  Prints one BENCHMARKS.md row per policy and seed.
@@ -51,8 +51,8 @@ def main(argv=None):
     from stable_baselines3 import PPO
 
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+    from uavrl.agents.evaluation import evaluate
     from uavrl.envs.adapters.gym_env import TeamActionPolicy, UAVSpectrumGymEnv
-    from uavrl.evaluation import evaluate
 
     torch.set_num_threads(1)
     print(

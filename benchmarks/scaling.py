@@ -28,9 +28,9 @@ from pathlib import Path
 import torch
 
 from uavrl.agents.baselines import OraclePolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.config import model_config
 from uavrl.evaluate import load_agent
-from uavrl.evaluation import evaluate
 
 # (N, grid, the specialist's overrides): the scenarios' budgets where one exists, else about 15-20 minutes of one core
 SIZES = [

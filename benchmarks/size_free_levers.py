@@ -120,10 +120,9 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
     import torch
 
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-    from uavrl.agents.lookahead import evaluate_with_lookahead
+    from uavrl.agents.evaluation import evaluate, evaluate_with_lookahead
     from uavrl.config import model_config
     from uavrl.evaluate import load_agent
-    from uavrl.evaluation import evaluate
 
     torch.set_num_threads(1)
     path = out / f"eval-{team.replace(':', '_')}.json"

@@ -85,8 +85,8 @@ def steps_to_level(policy, cfg, starts: int, level: float = 0.999):
     (``-1``: never within the horizon), and whether it did."""
     import torch
 
+    from uavrl.agents.evaluation import EVAL_SEED, default_horizon
     from uavrl.envs import UAVSpectrumEnv
-    from uavrl.evaluation import EVAL_SEED, default_horizon
 
     horizon = default_horizon(cfg.grid)
     env = UAVSpectrumEnv(batch_size=starts, config=cfg.replace(max_steps=horizon), seed=EVAL_SEED)

@@ -517,7 +517,7 @@ def evaluation_horizon(cfg) -> int:
 
 
 def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int:
-    """Peak bytes of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``
+    """Peak bytes of an evaluation (:mod:`uavrl.agents.evaluation`): the starts' worlds, the greedy rollouts (``tables``
     > 0: the tabular agent's ``tables x num_starts`` worlds stepped together, keeping each step's outputs; else a
     TorchRL rollout of every transition) and the references: the exact solver where it fits, else the bounds."""
     if tables:

@@ -20,9 +20,9 @@ import numpy as np
 from sb3_contrib import MaskablePPO
 
 from uavrl.agents.baselines import RandomPolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs.gym_env import TeamActionPolicy, UAVSpectrumGymEnv  # importing it registers "uavrl/UAVSpectrum-v0"
 from uavrl.envs.pettingzoo_env import UAVSpectrumParallelEnv
-from uavrl.evaluation import evaluate
 
 TIMESTEPS, NUM_STARTS = 4_096, 64  # the README's PPO run: 50,000 steps; the evaluation's default: 200 starts
 
@@ -37,7 +37,7 @@ print("256 worlds:", obs.shape)
 # Stable-Baselines3: MaskablePPO, scored by the yardstick
 # -------------------------------------------------------
 # ``env.action_masks()`` is the flat mask MaskablePPO reads; ``TeamActionPolicy`` turns the trained model into a
-# TorchRL policy that :func:`uavrl.evaluation.evaluate` measures on the same held-out starts as every agent.
+# TorchRL policy that :func:`uavrl.agents.evaluation.evaluate` measures on the same held-out starts as every agent.
 team_env = UAVSpectrumGymEnv(grid=(6, 6), num_uavs=2, max_steps=30)
 model = MaskablePPO("MlpPolicy", team_env, n_steps=1_024, batch_size=256, seed=0, verbose=0)
 model.learn(total_timesteps=TIMESTEPS)

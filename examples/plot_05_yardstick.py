@@ -3,7 +3,8 @@ Scoring your own policy against exact optimal control
 =====================================================
 
 The final utility after a long horizon cannot tell policies apart (random actions already end at 0.6 of the
-optimum ``U*`` with two UAVs).  :func:`uavrl.evaluation.evaluate` measures any TorchRL policy against exact optimal
+optimum ``U*`` with two UAVs).  :func:`uavrl.agents.evaluation.evaluate` measures any TorchRL policy against exact
+optimal
 control instead: from fixed, seeded starts it compares the discounted return with the exact best ``V*_H``
 (backward induction on the whole configuration graph, :mod:`uavrl.envs.exact`), and the steps a policy takes to
 0.999 ``U*`` with the fewest possible.
@@ -23,8 +24,8 @@ import torch
 from tensordict.nn import TensorDictModule
 
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import ACTION_NAMES, exact, make_config
-from uavrl.evaluation import evaluate
 
 NUM_STARTS = 64  # the evaluation's default is 200 starts
 SENSE, RELAY = ACTION_NAMES.index("sense"), ACTION_NAMES.index("relay")

@@ -7,7 +7,7 @@ cost energy, a UAV at its reserve flies back to the base, and with spares and re
 place.  One start is then one *mission*, scored by the data it delivers against an upper bound.
 
 This example plays a persistent mission (three UAVs in service, one spare, recharging at the base) with the
-energy-aware planner and with the oracle that ignores energy, scores both with :func:`uavrl.evaluation.evaluate`,
+energy-aware planner and with the oracle that ignores energy, scores both with :func:`uavrl.agents.evaluation.evaluate`,
 and draws the planner's batteries with :func:`uavrl.plots.battery_figure`.  ``scenario=persistent_10x10`` is the
 same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a real run.
 """
@@ -18,9 +18,9 @@ same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a re
 import matplotlib.pyplot as plt
 
 from uavrl.agents.baselines import OraclePolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.envs import make_config
-from uavrl.evaluation import evaluate
 from uavrl.plots import battery_figure, mission_history
 
 HORIZON, NUM_STARTS = 240, 16  # scenario=persistent_10x10: 500 steps, 200 starts

@@ -29,8 +29,8 @@ import numpy as np
 
 from uavrl import load_policy
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import make_config
-from uavrl.evaluation import evaluate
 
 run_dir = Path("runs/examples/size_free")
 shutil.rmtree(run_dir, ignore_errors=True)  # this example's own run of an earlier time

@@ -26,8 +26,8 @@ import matplotlib.pyplot as plt
 import torch
 
 from uavrl import load_policy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import ACTION_NAMES, UAVSpectrumEnv
-from uavrl.evaluation import evaluate
 
 env = UAVSpectrumEnv(batch_size=512, grid=(6, 6), num_uavs=2, max_steps=40, seed=0)
 print("actions:", ACTION_NAMES)

@@ -24,10 +24,10 @@ from gymnasium.vector.utils import batch_space  # noqa: E402
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, render_test, state_test  # noqa: E402
 from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 
+from uavrl.agents.evaluation import EVAL_SEED, evaluate  # noqa: E402
 from uavrl.envs import UAVSpectrumEnv, make_config, observation_with_nodes  # noqa: E402
 from uavrl.envs.adapters.gym_env import ENV_ID, TeamActionPolicy, UAVSpectrumGymEnv, UAVSpectrumVectorEnv  # noqa: E402
 from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv  # noqa: E402
-from uavrl.evaluation import EVAL_SEED, evaluate  # noqa: E402
 
 # the paper's preset, a team of 3 on random layouts with fading (per-world layouts and fading draws), the
 # authors' absolute layout (its nodes lie outside the grid's span on a 6x6 grid)

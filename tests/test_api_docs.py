@@ -174,7 +174,7 @@ def test_the_pages_list_the_api():
     with_autosummary = {page.name for page in API_PAGES if ".. autosummary::" in page.read_text()}
     assert with_autosummary and pages == with_autosummary
     assert len(objects) > 100
-    assert ApiObject("evaluation.md", "uavrl.evaluation", "evaluate") in objects
+    assert ApiObject("evaluation.md", "uavrl.agents.evaluation", "evaluate") in objects
 
 
 @pytest.mark.parametrize("item", all_api_objects(), ids=lambda item: item.path)
@@ -186,7 +186,7 @@ def test_every_argument_is_documented(item: ApiObject):
 def test_an_undocumented_function_fails(monkeypatch):
     """A public function added to a page without its arguments in the docstring is caught, as is one without a
     docstring, and a documented one passes."""
-    import uavrl.evaluation
+    import uavrl.agents.evaluation
 
     def half_documented(policy, horizon: int = 5):
         """Plays ``policy``."""
@@ -198,8 +198,8 @@ def test_an_undocumented_function_fails(monkeypatch):
         """Plays ``policy`` for ``horizon`` steps; ``kwargs``: more settings."""
 
     for function in (half_documented, undocumented, documented):
-        monkeypatch.setattr(uavrl.evaluation, function.__name__, function, raising=False)
-    page = "```{eval-rst}\n.. currentmodule:: uavrl.evaluation\n\n.. autosummary::\n   :toctree: generated\n\n"
+        monkeypatch.setattr(uavrl.agents.evaluation, function.__name__, function, raising=False)
+    page = "```{eval-rst}\n.. currentmodule:: uavrl.agents.evaluation\n\n.. autosummary::\n   :toctree: generated\n\n"
     page += "   evaluate\n   half_documented\n   undocumented\n   documented\n```\n"
     problems = {item.name: check(item) for item in api_objects("planted.md", page)}
     assert problems == {

@@ -2,7 +2,8 @@
 
 ``InvalidOption`` (a ``ValueError``) for a wrong value, ``InvalidType`` (also a ``TypeError``) for a wrong type:
 ``load_policy``, ``UAVSpectrumEnv`` (construction, ``reset``, ``step``, ``to``), the Gymnasium and PettingZoo adapters
-and ``uavrl.evaluation.evaluate``.  What a part does not read is refused the same way by every part; a ``seed`` given
+and ``uavrl.agents.evaluation.evaluate``.  What a part does not read is refused the same way by every part; a
+``seed`` given
 to ``UAVSpectrumEnv.reset`` seeds as ``set_seed`` does.
 """
 
@@ -15,8 +16,8 @@ import torch
 from tensordict import TensorDict
 
 from uavrl import load_policy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import InvalidOption, InvalidType, UAVSpectrumEnv, make_config
-from uavrl.evaluation import evaluate
 from uavrl.train import train
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py

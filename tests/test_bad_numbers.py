@@ -14,9 +14,9 @@ import torch
 from tensordict import TensorDict
 
 from uavrl.agents.baselines import RandomPolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import InvalidOption, UAVSpectrumEnv, World, make_config
 from uavrl.envs.limits import world_bytes
-from uavrl.evaluation import evaluate
 
 # (command and overrides, words the one-line error must contain)
 CLI_CASES = [

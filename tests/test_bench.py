@@ -43,7 +43,7 @@ def test_held_out_starts_are_disjoint_from_every_training_seed():
     """Every task's start streams lie in [2^62, 2^63), one block per task, above every world seed a training command
     draws (seed < 2^17, within the step budget) and apart from the evaluation's eval.seed."""
     from uavrl.agents.dqn.agent import DQNAgent
-    from uavrl.evaluation import EVAL_SEED, NUM_STARTS
+    from uavrl.agents.evaluation import EVAL_SEED, NUM_STARTS
     from uavrl.schema import STEP_BUDGET
 
     blocks = sorted((task.seed, task.seed + task.num_starts) for task in TASKS.values())

@@ -206,7 +206,7 @@ def check_command(arguments: list[str]) -> None:
     """Compose ``python -m uavrl.<command> <overrides>`` with its smoke overrides and check its settings as the command
     does before torch is imported (a one-line SystemExit or ValueError when one is invalid)."""
     from uavrl.cli import compose_config, readable, sweep_jobs
-    from uavrl.rules import check
+    from uavrl.envs.rules import check
     from uavrl.settings import REPRODUCE_SETTINGS, check_run, check_scenario
 
     command = arguments[0].removeprefix("uavrl.")

@@ -12,9 +12,9 @@ from tensordict import TensorDict
 from uavrl.agents.baselines import RandomPolicy
 from uavrl.agents.dqn import Q_INPUTS, DQNAgent, TeamQNet, ValidGreedy, n_step_returns
 from uavrl.agents.dqn.migration import _stored_entry
+from uavrl.agents.evaluation import evaluate
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, joint_action_valid, observation_with_nodes
-from uavrl.evaluation import evaluate
 from uavrl.train import train
 
 TINY = [

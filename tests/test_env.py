@@ -731,7 +731,7 @@ def test_rollout_shapes_and_transforms():
 
 def test_collector_with_partial_resets():
     """torchrl Collector: worlds end episodes at different times and are reset alone."""
-    from uavrl.compat import make_collector
+    from uavrl.envs.compat import make_collector
 
     B, T = 3, 4
     base = UAVSpectrumEnv(batch_size=B, grid=(3, 3), num_uavs=2, max_steps=T, seed=5)

@@ -195,7 +195,7 @@ def refused(section: str, overrides: list[str]) -> str | None:
 
     try:
         if section == BENCHMARL:  # BenchMARL's own groups need BenchMARL: uavrl's settings against their rules
-            from uavrl.rules import check
+            from uavrl.envs.rules import check
             from uavrl.schema import BenchmarlSchema
 
             cfg = OmegaConf.merge(OmegaConf.structured(BenchmarlSchema), OmegaConf.from_dotlist(overrides))

@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from uavrl.agents.baselines import OraclePolicy
+from uavrl.agents.evaluation import LEVELS, episode_metrics, evaluate, yardstick_metrics
+from uavrl.agents.evaluation import check_settings as check_eval_settings
 from uavrl.agents.tabular import exact_q_table
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.physics.grid import cells_of
 from uavrl.envs.solvers.bounds import assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.solvers.exact import ConfigurationSpace, fixed_layout_tables, min_steps, optimal_values
-from uavrl.evaluation import LEVELS, episode_metrics, evaluate, yardstick_metrics
-from uavrl.evaluation import check_settings as check_eval_settings
 
 MOVES = {0: (0, -1), 1: (0, 1), 2: (-1, 0), 3: (1, 0)}
 

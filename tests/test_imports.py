@@ -91,7 +91,7 @@ def test_no_module_imports_upward():
 
 # envs/'s layers in import order (docs/architecture.md): a module imports only earlier layers, or its own subpackage
 ENVS_LAYERS = [
-    {"physics.radio", "physics.power"},
+    {"rules", "compat", "physics.radio", "physics.power"},  # rules: standard library; compat: TorchRL only
     {"limits"},
     {"config"},
     {"physics"},
@@ -114,7 +114,8 @@ def envs_layer(module: str) -> tuple[int, str]:
 
 
 def test_envs_layers_import_only_earlier_layers():
-    """physics/radio and power, limits, config (standard library only), the rest of physics, the solvers, the World,
+    """rules, compat, physics/radio and power, limits, config (standard library only), the rest of physics, the
+    solvers, the World,
     drawing, then the TorchRL env and the other frameworks' adapters: no module of envs/ imports a later layer, nor
     a module of its own layer outside its subpackage."""
     import ast
@@ -160,3 +161,71 @@ def test_the_0_1_module_paths_name_the_moved_modules():
         assert old is new and new.__spec__.name == f"uavrl.envs.{package}.{name}", name
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module("uavrl.envs.no_such_module")
+
+
+def project_imports() -> dict[str, set[str]]:
+    """Each module of the package (by installed name) and the package's modules it imports, at the top or inside a
+    function."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    modules = {}
+    for package, folder in (
+        ("uavrl", "uavrl"),
+        ("uavrl.envs", "envs"),
+        ("uavrl.agents", "agents"),
+        ("uavrl.configs", "configs"),
+    ):
+        for file in (root / folder).rglob("*.py"):
+            parts = [p for p in file.relative_to(root / folder).with_suffix("").parts if p != "__init__"]
+            modules[".".join([package, *parts])] = file
+    graph = {}
+    for name, file in modules.items():
+        here = name.split(".") if file.name == "__init__.py" else name.split(".")[:-1]
+        graph[name] = set()
+        for node in ast.walk(ast.parse(file.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = ".".join(here[: len(here) - node.level + 1] + [node.module or ""]) if node.level else node.module
+                base = base.rstrip(".")
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            else:
+                continue
+            for target in targets:
+                while target and target not in modules:
+                    target = target.rpartition(".")[0]
+                if target and target != name:
+                    graph[name].add(target)
+    return graph
+
+
+def test_the_agents_import_nothing_of_the_commands_layer():
+    """agents/ (uavrl.agents) imports only itself and envs/, inside functions too: the commands and their library
+    (uavrl.*) sit above it."""
+    upward = sorted(
+        f"{m} -> {t}"
+        for m, targets in project_imports().items()
+        for t in targets
+        if m.startswith("uavrl.agents") and not t.startswith(("uavrl.agents", "uavrl.envs"))
+    )
+    assert upward == []
+
+
+def test_no_import_cycle_counting_imports_inside_functions():
+    graph = project_imports()
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+
+    def visit(module, path):
+        state[module] = 1
+        for target in sorted(graph[module]):
+            if state.get(target) == 1:
+                raise AssertionError("import cycle: " + " -> ".join([*path[path.index(target) :], target]))
+            if target not in state:
+                visit(target, [*path, target])
+        state[module] = 2
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module, [module])

@@ -13,7 +13,8 @@ from uavrl.agents import agent_class
 from uavrl.agents.dqn.curriculum import Curriculum
 from uavrl.agents.dqn.demonstrations import margin_loss, oracle_transitions
 from uavrl.agents.dqn.setnet import SetQCore, SetQNet
-from uavrl.agents.lookahead import LookaheadPolicy, evaluate_with_lookahead, lookahead_policy
+from uavrl.agents.evaluation import evaluate_with_lookahead
+from uavrl.agents.lookahead import LookaheadPolicy, lookahead_policy
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.solvers import exact

@@ -243,7 +243,7 @@ def independent_mission_metrics(cfg, policy, num_starts, seed):
 
 def test_the_mission_metrics_against_a_rollout_computed_here():
     from uavrl.agents.baselines import RandomPolicy
-    from uavrl.evaluation import evaluate
+    from uavrl.agents.evaluation import evaluate
 
     cfg = rotary(battery_wh=0.6, battery_init="uniform")
     metrics = evaluate(RandomPolicy(seed=4), cfg, num_starts=6, seed=9)
@@ -257,7 +257,7 @@ def test_the_mission_metrics_against_a_rollout_computed_here():
 @pytest.mark.parametrize("agent", ["random", "oracle"])
 def test_baselines_under_rotary_wing_report_every_mission_metric(agent):
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-    from uavrl.evaluation import evaluate
+    from uavrl.agents.evaluation import evaluate
 
     cfg = make_config(
         "a2g_urban", grid=(4, 4), num_uavs=2, energy="rotary_wing", base=(-1, 0), battery_wh=8.0, fading="rayleigh"
@@ -277,7 +277,7 @@ def test_baselines_under_rotary_wing_report_every_mission_metric(agent):
 
 def test_without_energy_the_evaluation_has_no_mission_metric():
     from uavrl.agents.baselines import RandomPolicy
-    from uavrl.evaluation import evaluate
+    from uavrl.agents.evaluation import evaluate
 
     metrics = evaluate(RandomPolicy(seed=0), make_config("paper", grid=(3, 3), num_uavs=2), num_starts=4)
     assert not set(MISSION_KEYS) & set(metrics) and "eval/return" in metrics and "eval/return_ratio" in metrics
@@ -285,7 +285,7 @@ def test_without_energy_the_evaluation_has_no_mission_metric():
 
 def test_a_mission_horizon_over_the_memory_budget_is_refused_in_one_line():
     from uavrl.agents.baselines import RandomPolicy
-    from uavrl.evaluation import evaluate
+    from uavrl.agents.evaluation import evaluate
 
     cfg = make_config("paper", grid=(6, 6), num_uavs=2, energy="follow_up", base=(-1, 0))  # 10,000 steps of 0.5
     with pytest.raises(ValueError) as error:

@@ -10,12 +10,12 @@ import torch
 from test_mission import Mission, rotary  # brute force over joint actions, written independently of envs/
 
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon
 from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
 from uavrl.envs.solvers.mission_exact import MissionTooLarge, NotCovered, mission_size, optimal_mission
 from uavrl.envs.world import World
-from uavrl.evaluation import evaluate
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 

@@ -182,7 +182,7 @@ def test_split_relaxation_bound_is_at_least_every_split_beyond_ten_uavs():
 
 def test_oracle_evaluation_at_fifty_uavs():
     from uavrl.agents.baselines import OraclePolicy
-    from uavrl.evaluation import evaluate
+    from uavrl.agents.evaluation import evaluate
 
     cfg = make_config("paper", grid=(50, 50), num_uavs=50)
     metrics = evaluate(OraclePolicy(cfg), cfg, num_starts=2, horizon=120)
@@ -192,7 +192,7 @@ def test_oracle_evaluation_at_fifty_uavs():
 
 def test_the_evaluation_reports_the_gap_where_the_search_stopped(monkeypatch):
     import uavrl.envs.solvers.optimum as optimum_module
-    from uavrl.evaluation import u_star_gap
+    from uavrl.agents.evaluation import u_star_gap
 
     w = world("paper", (5, 5), 22, {"layout": "random"}, 8, 1)  # crowded: the best cells of both networks overlap
     exact = w.optimum()[0]

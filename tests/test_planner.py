@@ -7,11 +7,11 @@ import pytest
 import torch
 
 from uavrl.agents.baselines import OraclePolicy
+from uavrl.agents.evaluation import evaluate
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.config import RETURN
 from uavrl.envs.physics.energy import Energy
-from uavrl.evaluation import evaluate
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 

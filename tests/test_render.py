@@ -316,7 +316,7 @@ def test_a_batched_env_records_its_workers_side_by_side(tmp_path):
 
 def test_comparison_frames_are_the_policy_beside_the_oracle_from_the_evaluation_starts():
     from uavrl.agents.baselines import OraclePolicy
-    from uavrl.evaluation import EVAL_SEED
+    from uavrl.agents.evaluation import EVAL_SEED
 
     cfg = make_config("paper", grid=(3, 3))
     frames = comparison_frames(OraclePolicy(cfg), cfg, starts=2, horizon=3, label="oracle")

@@ -110,9 +110,9 @@ def test_the_library_defaults_are_the_schemas():
     """``TeamQLearner(cfg)`` and ``evaluate(policy, cfg)`` without settings run as the command line's defaults."""
     import inspect
 
+    from uavrl.agents.evaluation import evaluate
     from uavrl.agents.schema import TabularSchema
     from uavrl.agents.tabular import TeamQLearner
-    from uavrl.evaluation import evaluate
     from uavrl.schema import EvalSchema
 
     learner = inspect.signature(TeamQLearner).parameters

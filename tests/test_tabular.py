@@ -5,11 +5,11 @@ import math
 import pytest
 import torch
 
+from uavrl.agents.evaluation import EPISODE_METRICS, episode_metrics, evaluate
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
-from uavrl.compat import make_collector
 from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs.compat import make_collector
 from uavrl.envs.physics import streams
-from uavrl.evaluation import EPISODE_METRICS, episode_metrics, evaluate
 
 
 def test_q_update_matches_hand_worked_step():

@@ -32,9 +32,9 @@ from torchrl.record import PixelRenderTransform
 from torchrl.record.loggers import CSVLogger
 
 from uavrl.agents import agent_class
-from uavrl.compat import make_collector
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs.compat import make_collector
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 

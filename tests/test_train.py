@@ -41,15 +41,15 @@ def test_periodic_evaluations_come_with_the_training_time_they_leave_out(tmp_pat
     training between evaluations and leave the evaluations out (here made to take 0.3 s each)."""
     import time
 
-    import uavrl.evaluation
+    import uavrl.agents.evaluation
 
-    evaluate_agent = uavrl.evaluation.evaluate_agent
+    evaluate_agent = uavrl.agents.evaluation.evaluate_agent
 
     def slow_evaluation(*args, **kwargs):
         time.sleep(0.3)
         return evaluate_agent(*args, **kwargs)
 
-    monkeypatch.setattr(uavrl.evaluation, "evaluate_agent", slow_evaluation)
+    monkeypatch.setattr(uavrl.agents.evaluation, "evaluate_agent", slow_evaluation)
     run_dir = train(compose_cfg(*SMALL, "eval.every=2", f"run_dir={tmp_path / 'run'}"))
     events = EventAccumulator(str(run_dir)).Reload()
     wall = [e.value for e in events.Scalars("time/train_seconds")]

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import torch
 
+from uavrl.agents.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_metrics, episode_start, episode_step
 from uavrl.agents.tabular import kernels  # noqa: F401  (registers the written-once functions with numba)
 from uavrl.envs.physics.rewards import episode_best, team_reward
-from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_metrics, episode_start, episode_step
 
 
 @numba.njit

@@ -12,6 +12,7 @@ seconds at which it was taken), and BenchMARL's own folder (its logs and final c
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
 import sys
@@ -22,8 +23,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.cli import one_line, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
+from uavrl.envs.rules import check
 from uavrl.io import quoted, save_json, save_text
-from uavrl.rules import check
 from uavrl.rundir import RunDirectory, check_directory
 from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
 from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
@@ -173,11 +174,13 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     import torch
 
     from uavrl.agents.benchmarl import YardstickCallback
+    from uavrl.logger import RunLogger
 
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)
     save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
-    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), run_dir)
+    open_log = functools.partial(RunLogger, run_dir, resume_step=0)
+    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), open_log)
     experiment = build_experiment(cfg, run_dir, [yardstick])
     started = time.perf_counter()
     experiment.run()

@@ -195,9 +195,9 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
     check_settings(cfg, overrides=list(overrides) or None)
     import torch  # the heavy modules, once the settings are known to be good
 
+    from uavrl.agents.evaluation import evaluate_agent
     from uavrl.agents.lookahead import lookahead_settings
     from uavrl.envs.world import resolve_device
-    from uavrl.evaluation import evaluate_agent
 
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)

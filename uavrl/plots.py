@@ -190,8 +190,8 @@ def mission_history(policy, cfg, horizon: int, seed: int, device="cpu") -> tuple
     """
     import torch
 
+    from uavrl.agents.evaluation import mission_rollout
     from uavrl.envs.env import UAVSpectrumEnv
-    from uavrl.evaluation import mission_rollout
 
     env = UAVSpectrumEnv(batch_size=1, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     start = env.reset()

@@ -44,13 +44,13 @@ import numpy as np
 import yaml
 
 from uavrl.envs.limits import default_horizon
+from uavrl.envs.rules import Rule, rules_of, shown, whole
 from uavrl.io import Manifest, make_dirs, quoted, save_text, special_kind
 from uavrl.plots import pyplot, save_figure
-from uavrl.rules import Rule, rules_of, shown, whole
 from uavrl.runs import BASELINE_AGENTS, flat_settings
 from uavrl.schema import RunSchema
 
-# the yardstick first (uavrl/evaluation.py), then the paper's final utility and the cost
+# the yardstick first (agents/evaluation.py), then the paper's final utility and the cost
 METRICS = {
     "eval/return_ratio": "return ratio",
     "eval/reach_999": "reach 0.999 U*",
@@ -211,7 +211,7 @@ class SavedYamlLoader(yaml.SafeLoader):
 
 
 def brief(value) -> str:
-    """A value as typed (:func:`uavrl.rules.shown`), cut to 60 characters for a one-line message."""
+    """A value as typed (:func:`uavrl.envs.rules.shown`), cut to 60 characters for a one-line message."""
     text = shown(value)
     return text if len(text) <= 60 else text[:57] + "..."
 

@@ -33,6 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
 from uavrl.envs.config import make_config
+from uavrl.envs.rules import check, shown
 from uavrl.io import (
     EVENTS,
     Manifest,
@@ -44,7 +45,6 @@ from uavrl.io import (
     save_torch,
     special_kind,
 )
-from uavrl.rules import check, shown
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
 from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
@@ -193,8 +193,8 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path, manifest: Manifest) -> d
     """
     import torch
 
+    from uavrl.agents.evaluation import evaluate_agent
     from uavrl.agents.tabular import TabularAgent
-    from uavrl.evaluation import evaluate_agent
     from uavrl.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
@@ -308,7 +308,7 @@ def findings(history: dict, grid: int) -> list[str]:
 
 
 def yardstick_finding(row: dict) -> str:
-    """What the greedy policies achieve against exact optimal control (the yardstick of ``uavrl.evaluation``)."""
+    """What the greedy policies achieve against exact optimal control (the yardstick of ``uavrl.agents.evaluation``)."""
     grid = f"{row['grid']}x{row['grid']}"
     if row.get("return_ratio") is None:
         return f"{grid}: against exact optimal control: no exact values for this grid"

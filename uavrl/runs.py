@@ -38,7 +38,7 @@ def claim_run_dir(run_dir, agent: str, env: str, holds_run: Callable[[Path], boo
 
 
 def eval_settings(cfg: DictConfig, device) -> dict:
-    """Keyword arguments of :func:`uavrl.evaluation.evaluate` from ``cfg.eval``."""
+    """Keyword arguments of :func:`uavrl.agents.evaluation.evaluate` from ``cfg.eval``."""
     return dict(
         num_starts=cfg.eval.num_starts,
         horizon=cfg.eval.horizon,

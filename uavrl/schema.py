@@ -1,7 +1,7 @@
 """The one home of every command-line setting: its default, type, rule and meaning (standard library only; Hydra is
 imported by :func:`register`).
 
-Each setting is a field of a dataclass schema (:func:`uavrl.rules.setting`): the run's here (:class:`RunSchema`,
+Each setting is a field of a dataclass schema (:func:`uavrl.envs.rules.setting`): the run's here (:class:`RunSchema`,
 :class:`ReproduceSchema`, :class:`BenchmarlSchema`), each agent's in :mod:`uavrl.agents.schema`, and the model's
 options in :class:`uavrl.envs.ModelConfig`, from whose fields :class:`EnvSchema` is made (every option null: the
 preset's value).  From them come
@@ -9,8 +9,8 @@ preset's value).  From them come
 - Hydra's configs: :func:`register` stores the schemas in Hydra's ConfigStore, so ``configs/*.yaml`` hold no
   default and Hydra refuses an unknown key or a value of the wrong type while it composes (``uavrl.cli`` words the
   refusal); the presets of ``envs/config.py`` are the ``env`` group's options;
-- the checks of the commands: :mod:`uavrl.settings` reads the rules (:func:`uavrl.rules.rules_of`);
-- the library's defaults: :func:`uavrl.evaluation.evaluate` and the agents read the same fields;
+- the checks of the commands: :mod:`uavrl.settings` reads the rules (:func:`uavrl.envs.rules.rules_of`);
+- the library's defaults: :func:`uavrl.agents.evaluation.evaluate` and the agents read the same fields;
 - the table of ``docs/settings.md``: :func:`settings_markdown` (``python -m uavrl.schema > docs/settings.md``).
 
 Real-valued settings are typed ``Any``: OmegaConf would turn ``0`` into ``0.0``, and a refusal names the value as
@@ -32,16 +32,15 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from uavrl.agents import AGENTS
-from uavrl.agents.schema import AGENT_SCHEMAS
+from uavrl.agents.schema import AGENT_SCHEMAS, EvalSchema
 from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.rules import (
+from uavrl.envs.rules import (
     DEVICE,
     REAL,
     SEED,
     flag,
     grid_sizes,
-    interval,
     names_among,
     one_of,
     optional,
@@ -74,26 +73,6 @@ class TrainSchema:
         "hours of one CPU core the DQN's training may take, as estimated before it starts from its networks, batch, "
         "gradient steps, worlds and grid (uavrl/settings.py); a run estimated to need more is refused at once",
     )
-
-
-@dataclass
-class EvalSchema:
-    """The shared evaluation (:mod:`uavrl.evaluation`), whose library defaults these are too."""
-
-    num_starts: int = setting(64, whole(1), "fixed, seeded starts of the greedy evaluation")
-    horizon: Optional[int] = setting(
-        None,
-        optional(whole(1), "max(20, 2 (L1 + L2)) steps, or the mission's under an energy model"),
-        "steps per greedy rollout; null: max(20, 2 (L1 + L2)), or under an energy model the steps by which every UAV "
-        "is home (docs/model.md, What the numbers mean)",
-    )
-    gamma: REAL = setting(
-        0.9,
-        interval(0.0, 1.0, low_open=True),
-        "the yardstick's discount (eval/return, eval/return_ratio), whatever the agent trains with",
-    )
-    seed: int = setting(1_000_003, SEED, "held out from training seeds (and layouts)")
-    every: int = setting(0, whole(0), "iterations between evaluations during training; 0: only at the end")
 
 
 @dataclass

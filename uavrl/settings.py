@@ -36,7 +36,7 @@ from uavrl.envs.limits import (
     table_bytes,
     world_bytes,
 )
-from uavrl.rules import Rule, check, flag, one_of, rules_of, shown
+from uavrl.envs.rules import Rule, check, flag, one_of, rules_of, shown
 from uavrl.schema import BenchmarlSchema, EnvSchema, ReproduceSchema, RunSchema, TrainSchema
 
 PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
@@ -342,7 +342,8 @@ def horizon_factor(cfg: DictConfig, model, name: str = "eval.horizon") -> Factor
 
 
 def evaluation_costs(model, starts: Factor, horizon: Factor, tables: Factor | None, names=MODEL_NAMES) -> Cost:
-    """The memory of an evaluation (:mod:`uavrl.evaluation`): the starts' worlds, the greedy rollouts (``tables``:
+    """The memory of an evaluation (:mod:`uavrl.agents.evaluation`): the starts' worlds, the greedy rollouts
+    (``tables``:
     the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
     references: the exact solver where it fits, else the lower bounds.  ``names``: the grid's and the team's
     setting."""

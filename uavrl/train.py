@@ -287,7 +287,7 @@ class Training:
         """
         from tqdm import tqdm
 
-        from uavrl.evaluation import TrainingClock
+        from uavrl.agents.evaluation import TrainingClock
 
         cfg, agent, interrupts = self.cfg, self.agent, self.interrupts
         started = time.perf_counter()
@@ -337,7 +337,7 @@ class Training:
 
     def train_loop(self, bar, clock) -> None:
         """The iterations left, each logged, evaluated and checkpointed as the run's settings ask."""
-        from uavrl.evaluation import evaluate_agent
+        from uavrl.agents.evaluation import evaluate_agent
 
         cfg, agent, interrupts, env_cfg = self.cfg, self.agent, self.interrupts, self.env_cfg
         every = int(cfg.train.checkpoint_every)
@@ -370,7 +370,7 @@ class Training:
         """The final evaluation, logged and saved with the final checkpoint (a run resumed after it: the saved one)."""
         import torch
 
-        from uavrl.evaluation import evaluate_agent
+        from uavrl.agents.evaluation import evaluate_agent
 
         if self.checkpoint is not None and "final" in self.checkpoint:  # resumed after the final checkpoint
             return self.checkpoint["final"]

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from uavrl.agents.evaluation import EVAL_SEED, default_horizon
 from uavrl.envs import ModelConfig
-from uavrl.evaluation import EVAL_SEED, default_horizon
+from uavrl.envs.rules import refuse, rule_of
 from uavrl.io import save_bytes
-from uavrl.rules import refuse, rule_of
 from uavrl.schema import RunEvalSchema
 
 DEFAULT_STARTS = RunEvalSchema.video_starts

@@ -8,6 +8,7 @@ from torch import nn
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.evaluation import episode_metrics
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.physics.channel import rates
@@ -16,7 +17,6 @@ from uavrl.envs.physics.grid import cells_or_away
 from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.world import World
-from uavrl.evaluation import episode_metrics
 
 from .builders import (
     TargetUpdate,

@@ -14,8 +14,8 @@ from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictRe
 from torchrl.modules import EGreedyModule, QMixer, QValueModule, VDNMixer
 from torchrl.objectives import DQNLoss, LossModule, SoftUpdate
 
-from uavrl.compat import make_collector
 from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs.compat import make_collector
 
 from .loss import DoubleQMixerLoss
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy

@@ -11,8 +11,8 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
-from uavrl.compat import load_buffer_state
 from uavrl.envs import NODE_FEATURES
+from uavrl.envs.compat import load_buffer_state
 
 from .transitions import CompactTransitions
 

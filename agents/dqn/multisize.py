@@ -30,6 +30,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.evaluation import episode_metrics
 from uavrl.agents.schema import network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
@@ -38,7 +39,6 @@ from uavrl.envs.physics.fading import fading_part
 from uavrl.envs.physics.grid import cells_or_away
 from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
-from uavrl.evaluation import episode_metrics
 
 from .agent import _SEED_MODULUS, DQNAgent, adam, reset_layouts
 from .builders import build_collector, build_policies, build_replay_buffer, exploration_schedule
@@ -211,8 +211,8 @@ class SetDQNAgent(DQNAgent):
         return [self.policy_for(self.env_cfg)]
 
     def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
-        """:func:`uavrl.evaluation.evaluate` of the greedy policy in ``env_cfg``, of any size."""
-        from uavrl.evaluation import evaluate
+        """:func:`uavrl.agents.evaluation.evaluate` of the greedy policy in ``env_cfg``, of any size."""
+        from uavrl.agents.evaluation import evaluate
 
         return [evaluate(self.policy_for(env_cfg), env_cfg, **kwargs)]
 

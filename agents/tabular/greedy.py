@@ -3,7 +3,7 @@
 :class:`~uavrl.agents.tabular.policy.TabularPolicy` (the TorchRL policy) and
 :func:`evaluate_tables` choose with the same :func:`greedy_joint_actions` from
 the same random numbers, so evaluating the tables here gives the numbers of
-:func:`uavrl.evaluation.evaluate` over the TorchRL policies, without TorchRL and
+:func:`uavrl.agents.evaluation.evaluate` over the TorchRL policies, without TorchRL and
 with every table's rollouts stepped together in one world.
 """
 
@@ -13,11 +13,7 @@ import math
 
 import torch
 
-from uavrl.envs.config import ModelConfig
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid
-from uavrl.envs.world import World
-from uavrl.evaluation import (
+from uavrl.agents.evaluation import (
     DEFAULT_GAMMA,
     EVAL_SEED,
     NUM_STARTS,
@@ -27,6 +23,10 @@ from uavrl.evaluation import (
     evaluation_starts,
     greedy_metrics,
 )
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid
+from uavrl.envs.world import World
 
 OUTPUTS = ("positions", "tasks", "r_pu", "r_se", "task_switches", "moves")  # what the yardstick reads per step
 
@@ -54,7 +54,7 @@ def evaluate_tables(
     policy_seed: int = 0,
     memory_budget: int = DEFAULT_MEMORY_BUDGET,
 ) -> list[dict[str, float]]:
-    """:func:`uavrl.evaluation.evaluate` of the greedy policy of each table ``[R, S, 6^N]``: one dict per table.
+    """:func:`uavrl.agents.evaluation.evaluate` of the greedy policy of each table ``[R, S, 6^N]``: one dict per table.
 
     The same as evaluating ``TabularPolicy(tables[r], cfg, seed=policy_seed)``
     for every ``r`` (same starts, same tie-breaking numbers), with the ``R``

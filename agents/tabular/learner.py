@@ -6,14 +6,14 @@ import math
 
 import torch
 
+from uavrl.agents.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
 from uavrl.agents.schema import TabularSchema
 from uavrl.envs import ModelConfig
 from uavrl.envs.limits import table_bytes
 from uavrl.envs.physics import streams
 from uavrl.envs.physics.rewards import team_reward
+from uavrl.envs.rules import refuse, rule_of
 from uavrl.envs.world import World
-from uavrl.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
-from uavrl.rules import refuse, rule_of
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
 from .tables import TabularModel
@@ -109,7 +109,8 @@ class TeamQLearner:
 
     def run_episode(self) -> dict[str, torch.Tensor]:
         """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
-        :data:`~uavrl.evaluation.EPISODE_METRICS`, summed step by step by :func:`~uavrl.evaluation.episode_step`)."""
+        :data:`~uavrl.agents.evaluation.EPISODE_METRICS`, summed step by step by
+        :func:`~uavrl.agents.evaluation.episode_step`)."""
         k0 = self._episode_starts()
         heads = self._stream_heads()
         metrics = (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, heads)

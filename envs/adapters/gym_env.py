@@ -8,7 +8,7 @@ does, with no TorchRL on the way: the same observations, action masks, rewards a
   costs a few tensor operations whatever the batch, no loop over worlds); next-step autoreset, as
   Gymnasium's own vector envs.
 - :class:`TeamActionPolicy`: a function of these observations (a Stable-Baselines3 model's ``predict``) as a
-  TorchRL policy of ``UAVSpectrumEnv``, so :func:`uavrl.evaluation.evaluate` measures it on the yardstick
+  TorchRL policy of ``UAVSpectrumEnv``, so :func:`uavrl.agents.evaluation.evaluate` measures it on the yardstick
   from the same held-out starts as every agent.
 
 Actions are ``MultiDiscrete([6] * N)`` rather than the joint action ``Discrete(6^N)``: the space grows as
@@ -453,13 +453,13 @@ class TeamActionPolicy(TensorDictModuleBase):
 
     ``act(observation, action_mask)`` gets, for the env's worlds, the team observations ``[*, N, F + 12]``
     float32 and action masks ``[*, N, A]`` int8 exactly as :class:`UAVSpectrumVectorEnv` returns them, and
-    returns ``[*, N]`` integer actions.  :func:`uavrl.evaluation.evaluate` then measures it as it measures every
+    returns ``[*, N]`` integer actions.  :func:`uavrl.agents.evaluation.evaluate` then measures it as it measures every
     agent (the same starts and yardstick).
 
     Example (a Stable-Baselines3 model trained on :class:`UAVSpectrumGymEnv`)::
 
         policy = TeamActionPolicy(lambda obs, mask: model.predict(obs, deterministic=True)[0])
-        metrics = uavrl.evaluation.evaluate(policy, env.cfg)
+        metrics = uavrl.agents.evaluation.evaluate(policy, env.cfg)
     """
 
     in_keys = [("agents", "observation"), ("agents", "action_mask"), "state"]

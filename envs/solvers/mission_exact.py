@@ -4,7 +4,7 @@ The exact mission solver).
 :func:`optimal_mission` takes a reset :class:`~uavrl.envs.world.World` (its state now is each world's start: cells,
 tasks, batteries, statuses) and finds, by backward induction over the states reachable in ``horizon`` steps, the
 most data ``sum_t (R_PU + R_SE) slot_s`` (bit/Hz) any policy delivers from each start, as the evaluation counts it
-(:func:`uavrl.evaluation.mission_metrics`).  The transition function is the World's own step
+(:func:`uavrl.agents.evaluation.mission_metrics`).  The transition function is the World's own step
 (:meth:`~uavrl.envs.world.World.successors`: the dynamics part, then the energy part, then the rates), called on
 every reachable state with every joint action the environment's masks allow; nothing of the physics is written
 here.  What the solver adds is the state space:

@@ -55,7 +55,7 @@ def _rollout(task: Task, policy, device="cpu") -> dict:
     """One greedy rollout per start of ``policy``: the world, start, U*, the steps' outputs and the batteries."""
     import torch
 
-    from uavrl.evaluation import greedy_rollout
+    from uavrl.agents.evaluation import greedy_rollout
 
     env, start, u_star = _started(task, device)
     with torch.no_grad():
@@ -79,8 +79,8 @@ def _values(task: Task, played: dict):
 
 
 def _summary(task: Task, played: dict, references: dict) -> dict:
-    """The evaluation's ``eval/...`` metrics (:func:`uavrl.evaluation.greedy_metrics`) of the rollouts."""
-    from uavrl.evaluation import greedy_metrics
+    """The evaluation's ``eval/...`` metrics (:func:`uavrl.agents.evaluation.greedy_metrics`) of the rollouts."""
+    from uavrl.agents.evaluation import greedy_metrics
 
     return greedy_metrics(
         played["world"],
@@ -94,9 +94,9 @@ def _summary(task: Task, played: dict, references: dict) -> dict:
 
 
 def _start_references(task: Task) -> tuple[dict, dict]:
-    """The evaluation's references of the task's starts (:func:`uavrl.evaluation.start_references`) and, as JSON,
+    """The evaluation's references of the task's starts (:func:`uavrl.agents.evaluation.start_references`) and, as JSON,
     the certified quantities: U*, its gap, the fewest steps or their bound, the mission's optimum or bound."""
-    from uavrl.evaluation import LEVELS, start_references, u_star_gap
+    from uavrl.agents.evaluation import LEVELS, start_references, u_star_gap
 
     env, start, u_star = _started(task)
     refs = start_references(env.world, start, u_star, env.cfg.max_steps, task.gamma)
@@ -117,7 +117,7 @@ def _start_references(task: Task) -> tuple[dict, dict]:
 
 
 def evaluation_references(stored: dict) -> dict:
-    """The references :func:`uavrl.evaluation.greedy_metrics` reads, rebuilt from their JSON form."""
+    """The references :func:`uavrl.agents.evaluation.greedy_metrics` reads, rebuilt from their JSON form."""
     refs = {
         "best_return": _untensor(stored["best_return"]),
         "min_steps": _untensor(stored["min_steps"]),

@@ -3,7 +3,8 @@
 A task (:class:`Task`) is a model (a scenario of ``configs/scenario/``, optionally resized for the zero-shot suite)
 plus its evaluation protocol: ``num_starts`` greedy rollouts of ``horizon`` steps (the scenario's evaluation
 horizon: ``max(20, 2 (L1 + L2))``, or the whole mission under an energy model) from held-out starts, measured
-as :mod:`uavrl.evaluation` measures every policy.  Start ``b`` of a task is the world whose random stream is seeded
+as :mod:`uavrl.agents.evaluation` measures every policy.  Start ``b`` of a task is the world whose random stream is
+seeded
 ``task.seed + b``; every task's seeds lie in ``[2^62, 2^63)``, where no training command draws a world (a test
 proves it: :func:`training_seed_bound`), and apart from ``eval.seed``, which checkpoints may have been selected on.
 
