@@ -13,11 +13,10 @@ Example:
 
 from __future__ import annotations
 
-import math
-
 import torch
 
-from .radio import AL_HOURANI, SPEED_OF_LIGHT, TR36777, tr36777_los_parameters, tr36777_losses_db
+from . import radio
+from .radio import AL_HOURANI, TR36777, tr36777_los_parameters, tr36777_losses_db
 
 AIR_TO_GROUND = (True, True, False, False)  # per node (PT, PR, S, E): is the UAV's link to it air-to-ground?
 
@@ -36,7 +35,7 @@ def free_space_db(distance_m: torch.Tensor, carrier_ghz: float) -> torch.Tensor:
         >>> free_space_db(torch.tensor([100.0, 1000.0]), carrier_ghz=2.0)
         tensor([78.4684, 98.4684])
     """
-    return 20 * torch.log10(distance_m * (4 * math.pi * carrier_ghz * 1e9 / SPEED_OF_LIGHT))
+    return radio.free_space_db(distance_m, carrier_ghz, torch.log10)
 
 
 def al_hourani_los_probability(elevation_deg: torch.Tensor, environment: str) -> torch.Tensor:

@@ -98,10 +98,15 @@ def noise_dbm(bandwidth_mhz: float, noise_figure_db: float) -> float:
     return THERMAL_NOISE_DBM_PER_HZ + 10 * math.log10(bandwidth_mhz * 1e6) + noise_figure_db
 
 
-def free_space_db(distance_m: float, carrier_ghz: float) -> float:
-    """``FSPL = 20 log10(4 pi f_c d / c)`` in dB of a distance in metres and a carrier in GHz (a float; the tensor
-    form is :func:`uavrl.envs.physics.pathloss.free_space_db`)."""
-    return 20 * math.log10(4 * math.pi * carrier_ghz * 1e9 * distance_m / SPEED_OF_LIGHT)
+def free_space_db(distance_m, carrier_ghz: float, log10=math.log10):
+    """``FSPL = 20 log10(4 pi f_c d / c)`` in dB of a distance in metres and a carrier in GHz: of a float, or of a
+    tensor with ``log10=torch.log10`` (:func:`uavrl.envs.physics.pathloss.free_space_db`), one formula for both.
+
+    Example:
+        >>> round(free_space_db(100.0, 2.0), 4)
+        78.4684
+    """
+    return 20 * log10(distance_m * (4 * math.pi * carrier_ghz * 1e9 / SPEED_OF_LIGHT))
 
 
 def tr36777_los_parameters(channel: str, log_h, maximum):
