@@ -24,7 +24,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from uavrl.agents import AGENTS, costs
 from uavrl.agents.costs import FLOAT, TRAINING_COPIES
 from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules, check_dqn_settings, training_models
-from uavrl.envs.config import make_config
+from uavrl.envs.config import ModelConfig, make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
     default_horizon,
@@ -297,7 +297,8 @@ def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typ
 
 
 class _Resized:
-    """A model with its grid, team or spares made the least a setting allows: what a cost would be with them."""
+    """A model with its grid, team or spares made the least a setting allows: what a cost would be with them (the
+    sizes that follow are :class:`~uavrl.envs.ModelConfig`'s own properties, read over the lowered ones)."""
 
     def __init__(self, model, lowered: frozenset, grid: str = "env.grid", team: str = "env.num_uavs"):
         self._model = model
@@ -308,12 +309,10 @@ class _Resized:
     def __getattr__(self, name):
         return getattr(self._model, name)
 
-    num_cells = property(lambda self: self.grid[0] * self.grid[1])
-    fleet_size = property(lambda self: self.num_uavs + self.num_spares)
-    num_joint_actions = property(lambda self: 6**self.num_uavs)
-    num_states = property(
-        lambda self: ((2 if self._model.state_includes_tasks else 1) * self.num_cells) ** self.num_uavs
-    )
+    num_cells = ModelConfig.num_cells
+    fleet_size = ModelConfig.fleet_size
+    num_joint_actions = ModelConfig.num_joint_actions
+    num_states = ModelConfig.num_states
 
 
 def model_factors(model, names: tuple[str, str] = ("env.grid", "env.num_uavs")) -> list[Factor]:
