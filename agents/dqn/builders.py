@@ -11,13 +11,13 @@ import torch
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torchrl.collectors import Collector
 from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.modules import EGreedyModule, QMixer, QValueModule, VDNMixer
+from torchrl.modules import EGreedyModule, QValueModule
 from torchrl.objectives import DQNLoss, LossModule, SoftUpdate
 
 from uavrl.compat import make_collector
 from uavrl.envs import UAVSpectrumEnv
 
-from .loss import DoubleQMixerLoss
+from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
 from .priorities import ProportionalSampler
 from .transitions import CompactTransitions
@@ -162,20 +162,16 @@ def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Poli
 
 
 def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
-    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``).
+    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``, :mod:`.loss`).
 
     Args:
         env: the training environment (``N`` and, for QMIX, the size of ``state``).
         a: the agent's settings ``cfg.agent`` (``mixer``, ``mixing_embed_dim``).
     """
     if a.mixer == "vdn":
-        return TensorDictModule(
-            VDNMixer(env.num_uavs, env.device),
-            in_keys=[("agents", "chosen_action_value")],
-            out_keys=["chosen_action_value"],
-        )
+        return TensorDictModule(VDNMix(), in_keys=[("agents", "chosen_action_value")], out_keys=["chosen_action_value"])
     return TensorDictModule(
-        QMixer((env.state_size,), int(a.mixing_embed_dim), env.num_uavs, env.device),
+        QMix(env.state_size, int(a.mixing_embed_dim), env.num_uavs, env.device),
         in_keys=[("agents", "chosen_action_value"), "state"],
         out_keys=["chosen_action_value"],
     )
@@ -190,7 +186,7 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
         policies: the policies of :func:`build_policies`, whose value network the loss trains.
     """
     if a.head == "factored":
-        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), policies.action_spec, float(a.gamma))
+        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), float(a.gamma))
     loss = DQNLoss(
         policies.value_network,
         double_dqn=True,
