@@ -6,7 +6,7 @@ TorchRL's ``DQNLoss(double_dqn=True)``, :func:`.builders.build_loss`).
 from __future__ import annotations
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDict, TensorDictBase, TensorDictParams
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.objectives import LossModule
@@ -79,6 +79,13 @@ class DoubleQMixerLoss(LossModule):
         mixer: :class:`VDNMix` or :class:`QMix` as a module writing the team value (:func:`build_mixer`).
         gamma: the discount of the targets.
     """
+
+    local_value_network: TensorDictSequential
+    local_value_network_params: TensorDictParams
+    target_local_value_network_params: TensorDictParams
+    mixer_network: TensorDictModule
+    mixer_network_params: TensorDictParams
+    target_mixer_network_params: TensorDictParams
 
     def __init__(self, greedy: TensorDictSequential, mixer: TensorDictModule, gamma: float):
         super().__init__()
