@@ -64,8 +64,8 @@ class _Group:
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  The
-    per-size network (:class:`~.builders.TeamNetwork`); the size-free one (``agent.network=set``) is
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  This class
+    trains the per-size network (:class:`~.builders.TeamNetwork`); the size-free one (``agent.network=set``) is
     :class:`~.multisize.SetDQNAgent`, this class with :class:`~.multisize.SetNetwork`, the class
     :func:`uavrl.agents.agent_class` gives for those settings.
 
