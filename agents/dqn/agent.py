@@ -227,7 +227,7 @@ class DQNAgent(Agent):
         return [self.policy_for(self.env_cfg)]
 
     def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
-        """:func:`uavrl.evaluation.evaluate` of the greedy policy in ``env_cfg``."""
+        """:func:`uavrl.evaluation.evaluate` of the greedy policy in ``env_cfg`` (``kwargs``: its settings)."""
         return [evaluate(self.policy_for(env_cfg), env_cfg, **kwargs)]
 
     def state_dict(self) -> dict:
