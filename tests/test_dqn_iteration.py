@@ -37,9 +37,9 @@ def test_target_update_moves_the_targets_as_torchrls_soft_update(compose_cfg):
             with torch.no_grad():
                 for p in loss.parameters():
                     p.add_(torch.randn_like(p, generator=torch.Generator().manual_seed(p.numel())))
-        agent.target_update.step()
+        agent.network.target_update.step()
         reference.step()
-    assert isinstance(agent.target_update, TargetUpdate)
+    assert isinstance(agent.network.target_update, TargetUpdate)
     ours, expected = agent.loss.state_dict(), theirs.state_dict()
     assert ours.keys() == expected.keys()
     assert all(torch.equal(ours[k], expected[k]) for k in ours if torch.is_tensor(ours[k]))

@@ -165,7 +165,7 @@ def test_the_0_1_module_paths_name_the_moved_modules():
 
 def project_imports() -> dict[str, set[str]]:
     """Each module of the package (by installed name) and the package's modules it imports, at the top or inside a
-    function."""
+    function (not those imported for type checkers only)."""
     import ast
     from pathlib import Path
 
@@ -184,7 +184,16 @@ def project_imports() -> dict[str, set[str]]:
     for name, file in modules.items():
         here = name.split(".") if file.name == "__init__.py" else name.split(".")[:-1]
         graph[name] = set()
-        for node in ast.walk(ast.parse(file.read_text())):
+        tree = ast.parse(file.read_text())
+        typing_only = {  # under `if TYPE_CHECKING:`: never run
+            id(sub)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING"
+            for sub in ast.walk(node)
+        }
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):

@@ -106,7 +106,7 @@ def full_transitions_checkpoint(agent) -> dict:
     """The agent's state as the uavrl before the compact buffer saved it: every transition in full, and its index (a
     size-free agent: in each group's buffer)."""
     state = agent.state_dict()
-    if hasattr(agent, "groups"):
+    if isinstance(state["buffer"], list):  # one buffer per group
         buffers = [(g.buffer, g.transitions, saved) for g, saved in zip(agent.groups, state["buffer"], strict=True)]
         state["buffer"] = [full_buffer_state(*held) for held in buffers]
     else:

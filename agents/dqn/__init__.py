@@ -26,14 +26,14 @@ uninterrupted one, and episodes always start afresh, also with
 ``reset_positions=keep``); the seeds stay clear of the evaluation's.
 
 Built from TorchRL parts: ``MultiAgentMLP`` (torso and per-UAV heads),
-``QValueModule`` (joint argmax), ``EGreedyModule``, ``VDNMixer``/``QMixer``,
-``QMixerLoss`` (its double-DQN target here) and ``DQNLoss(double_dqn=True)``,
+``QValueModule`` (joint argmax), ``EGreedyModule``, ``LossModule`` (the factored head's double-DQN loss with
+the project's own VDN and QMIX mixers, :mod:`.loss`) and ``DQNLoss(double_dqn=True)``,
 ``TensorDictReplayBuffer``, ``SoftUpdate`` and ``Collector``.
 
 The package, one job a module, each read top to bottom:
 
 - :mod:`.networks`: :class:`TeamQNet` and the modules that turn its values into valid actions (:class:`ValidGreedy`);
-- :mod:`.loss`: :class:`DoubleQMixerLoss`, the factored head's double-DQN loss;
+- :mod:`.loss`: :class:`VDNMix`, :class:`QMix` and :class:`DoubleQMixerLoss`, the factored head's double-DQN loss;
 - :mod:`.settings`: :func:`check_settings`, the one-line errors for settings the agent cannot run;
 - :mod:`.transitions`: :class:`CompactTransitions`, the replay buffer's transitions kept as configurations;
 - :mod:`.builders`: the Q network, policies, mixer, loss, replay buffer and collector built from the settings;
@@ -64,7 +64,7 @@ from .builders import (
     build_replay_buffer,
     exploration_schedule,
 )
-from .loss import DoubleQMixerLoss
+from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
 from .settings import MAX_JOINT_ACTIONS, check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
@@ -78,7 +78,9 @@ __all__ = [
     "DoubleQMixerLoss",
     "JointActionMask",
     "Policies",
+    "QMix",
     "TeamQNet",
+    "VDNMix",
     "ValidGreedy",
     "build_collector",
     "build_loss",

@@ -1,6 +1,11 @@
-"""The DQN agent: one iteration (an episode in every world, then gradient steps), read top to bottom."""
+"""The DQN agent: one construction and one iteration (an episode in every world, then gradient steps) for both of its
+networks, read top to bottom.  What differs between ``agent.network=team`` and ``agent.network=set`` is the network
+object, the hooks of :class:`~.builders.QNetwork`: :class:`~.builders.TeamNetwork` and
+:class:`~.multisize.SetNetwork`."""
 
 from __future__ import annotations
+
+from functools import partial
 
 import torch
 from tensordict import TensorDictBase
@@ -8,7 +13,7 @@ from torch import nn
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.evaluation import episode_metrics
+from uavrl.agents.evaluation import episode_metrics, evaluate
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.physics.channel import rates
@@ -18,15 +23,9 @@ from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.world import World
 
-from .builders import (
-    TargetUpdate,
-    build_collector,
-    build_loss,
-    build_policies,
-    build_q_network,
-    build_replay_buffer,
-    exploration_schedule,
-)
+from .builders import TeamNetwork, build_collector, build_policies, build_replay_buffer, exploration_schedule
+from .curriculum import Curriculum, uniform_sample
+from .demonstrations import Demonstrations
 from .migration import load_replay_buffer
 from .settings import check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
@@ -35,12 +34,44 @@ _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) *
 _SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 
 
+class _Group:
+    """One team (and layout) of the run: its worlds, policies, replay buffer and, once the networks are built, its
+    collector (:meth:`start`)."""
+
+    def __init__(self, agent: DQNAgent, env: UAVSpectrumEnv, frames: int):
+        a = agent.settings
+        self.env, self.cfg, self.grid = env, env.cfg, tuple(env.cfg.grid)
+        self.values = agent.network.values(env)
+        self.policies = build_policies(env, a, self.values, exploration_schedule(a, frames, agent.device))
+        self.greedy, self.exploration = self.policies.greedy, self.policies.exploration
+        self.keys = transition_keys(env.world, self.policies.action_keys, int(a.get("n_step", 1)))
+        # agent.buffer_size transitions of this team, kept compact; samples of its share of agent.batch_size
+        self.transitions = CompactTransitions(env.world, self.policies.action_keys)
+        self.buffer = build_replay_buffer(a, self.transitions, agent.batch_size)
+        self.u_star = None  # a fixed layout's U*, solved once
+
+    def start(self) -> None:
+        self.collector = build_collector(self.env, self.policies.explore)
+        self.batches = iter(self.collector)
+
+    def optimum(self) -> torch.Tensor:
+        if self.u_star is None or self.cfg.layout == "random":
+            method = "exchange" if self.cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search"
+            self.u_star = self.env.optimum(method=method)[0]
+        return self.u_star
+
+
 class DQNAgent(Agent):
     """The deep agent behind ``python -m uavrl.train agent=dqn`` (contract: :class:`uavrl.agents.base.Agent`).
 
-    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  The
-    size-free network (``agent.network=set``) is :class:`~.multisize.SetDQNAgent`, the class
+    ``cfg.agent`` holds the settings (``configs/agent/dqn.yaml``), ``agent.iterations`` the run length.  This class
+    trains the per-size network (:class:`~.builders.TeamNetwork`); the size-free one (``agent.network=set``) is
+    :class:`~.multisize.SetDQNAgent`, this class with :class:`~.multisize.SetNetwork`, the class
     :func:`uavrl.agents.agent_class` gives for those settings.
+
+    One iteration: an episode in every world of every group (one group per team and layout the network trains on:
+    the run's own for the per-size network), then ``agent.updates`` gradient steps, each the sum of one batch's loss
+    per group (``agent.batch_size`` split evenly, or by the curriculum).
 
     Args:
         env_cfg: the run's :class:`~uavrl.envs.ModelConfig` (its ``max_steps`` the episode length).
@@ -49,97 +80,104 @@ class DQNAgent(Agent):
         seed: seeds the networks' initial weights and every iteration's worlds.
     """
 
+    Network = TeamNetwork  # what agent.network=team builds (builders.py); SetDQNAgent: SetNetwork
+
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
         check_settings(env_cfg, a)
-        if a.get("network", "team") != "team":  # run configs saved before: no setting
+        network = a.get("network", "team")  # run configs saved before: no setting
+        if network != self.Network.name:
             raise ValueError(
-                f"agent.network={a.network!r} is invalid for DQNAgent, the per-size network: build "
-                "uavrl.agents.agent_class('dqn', cfg.agent), SetDQNAgent for agent.network='set'"
+                f"agent.network={network!r} is invalid for {type(self).__name__}, the {self.Network.kind} network: "
+                "build uavrl.agents.agent_class('dqn', cfg.agent), the class of the settings' agent.network"
             )
         self.env_cfg, self.settings, self.seed = env_cfg, a, int(seed)
         self.device = torch.device(device)
         self.num_iterations = int(a.iterations)
         self.iteration = 0
         torch.manual_seed(self.seed)  # the networks' initial weights; build order matters
-        self.env = UAVSpectrumEnv(
-            batch_size=int(a.worlds),
-            config=env_cfg,
-            seed=self._world_seed(0),
-            device=self.device,
-            memory_budget=a.get("memory_budget", DEFAULT_MEMORY_BUDGET),  # run directories saved without it
-        )
-        q = build_q_network(self.env, a)
+        models = self.Network.models(env_cfg, a)
+        self.batch_size = max(1, int(a.batch_size) // len(models))
+        envs = [self._training_env(model, self._group_seed(0, g)) for g, model in enumerate(models)]
+        self.network = self.Network(self, envs[0])
         frames = int(a.worlds) * env_cfg.max_steps * self.num_iterations
-        policies = build_policies(self.env, a, q, exploration_schedule(a, frames, self.device))
-        self.greedy, self.exploration = policies.greedy, policies.exploration
-        self.loss = build_loss(self.env, a, policies)
-        self.optimizer = adam(list(self.loss.parameters()), float(a.lr))
-        self.target_update = TargetUpdate(self.loss, tau=float(a.tau))
-        self.transitions = CompactTransitions(self.env.world, policies.action_keys)  # what the buffer keeps of each
-        self.buffer = build_replay_buffer(a, self.transitions)
-        self._keys = transition_keys(self.env.world, policies.action_keys, int(a.get("n_step", 1)))
-        self.collector = build_collector(self.env, policies.explore)
-        self._batches = iter(self.collector)
+        self.groups = [_Group(self, env, frames) for env in envs]
+        self.loss = self.network.build_loss(self.groups[0].policies)
+        self.optimizer = adam(self.network.parameters(), float(a.lr))
+        for group in self.groups:
+            group.start()
+        # the sample-efficiency levers (off: pure RL): the oracle's demonstrations, a curriculum over the groups
+        self.curriculum = Curriculum(a.get("curriculum", "none"), len(self.groups), self.batch_size * len(self.groups))
+        self.demonstrations = None  # built at the first gradient step: an evaluation of the checkpoint needs none
+
+    def _training_env(self, cfg: ModelConfig, seed: int) -> UAVSpectrumEnv:
+        a = self.settings
+        memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)  # run directories saved without it
+        return UAVSpectrumEnv(
+            batch_size=int(a.worlds), config=cfg, seed=seed, device=self.device, memory_budget=memory_budget
+        )
 
     def _world_seed(self, iteration: int) -> int:
         return (self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE) % _SEED_MODULUS
 
+    def _group_seed(self, iteration: int, group: int) -> int:
+        return (self._world_seed(iteration) + group * int(self.settings.worlds)) % _SEED_MODULUS
+
+    # the first group's parts: the per-size network's only group
+    env = property(lambda self: self.groups[0].env)
+    greedy = property(lambda self: self.groups[0].greedy)
+    exploration = property(lambda self: self.groups[0].exploration)
+    buffer = property(lambda self: self.groups[0].buffer)
+    transitions = property(lambda self: self.groups[0].transitions)
+
     @property
     def env_steps(self) -> int:
-        """Team steps collected so far (worlds times steps)."""
-        return self.iteration * int(self.settings.worlds) * self.env_cfg.max_steps
+        """Team steps collected so far (groups times worlds times steps)."""
+        return self.iteration * len(self.groups) * int(self.settings.worlds) * self.env_cfg.max_steps
 
     def train_iteration(self) -> dict[str, float]:
-        """One episode in every world, then ``agent.updates`` gradient steps."""
-        self.collector.set_seed(self._world_seed(self.iteration), static_seed=True)
-        self.collector.reset()
+        """One episode in every world of every group, then ``agent.updates`` gradient steps."""
+        a = self.settings
         progress = min(1.0, self.iteration / self.num_iterations)
         for group in self.optimizer.param_groups:  # annealed linearly from agent.lr to agent.lr_end over the run
-            group["lr"] = float(self.settings.lr) + (float(self.settings.lr_end) - float(self.settings.lr)) * progress
-        if self.settings.get("replay", "uniform") == "prioritized":  # importance weights annealed to full correction
-            beta = float(self.settings.priority_beta)
-            self.buffer.sampler.beta = beta + (1.0 - beta) * progress
-        # this episode's layouts; the exchange method where it runs (its results recorded), the search beyond
-        u_star = self.env.optimum(method="exchange" if self.env_cfg.num_uavs <= MAX_EXCHANGE_UAVS else "search")[0]
-        # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
-        # is read; a second clone would copy every world's [C, 2] rows of a shared layout
-        layout = (self.env.cell_contributions, self.env.direct)
-        batch = next(self._batches)  # [worlds, steps]
-
-        def mean_utility(td: TensorDictBase) -> torch.Tensor:
-            """``[W, T]`` mean-channel utility of the batch's configurations in the layouts they were played in."""
-            C = self.env_cfg.num_cells
-            cells = cells_or_away(td.get("positions"), self.env_cfg.grid)  # C: out of service, adds nothing
-            on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
-            contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
-            r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], self.env_cfg)
-            return r_pu + r_se
-
-        if self.settings.objective == "log_gap":
-            batch.set(("next", "reward"), self._log_gap_reward(batch, u_star, mean_utility))
-        stored = n_step_returns(batch, int(self.settings.get("n_step", 1)), float(self.settings.gamma))
-        self.buffer.extend(stored.reshape(-1).select(*self._keys))
-        losses = (
-            [self._update() for _ in range(int(self.settings.updates))]
-            if len(self.buffer) >= int(self.settings.learning_starts)
-            else []
-        )
-        self.exploration.step(batch.numel())
+            group["lr"] = float(a.lr) + (float(a.lr_end) - float(a.lr)) * progress
+        if a.get("replay", "uniform") == "prioritized":  # importance weights annealed to full correction
+            beta = float(a.priority_beta)
+            for group in self.groups:
+                group.buffer.sampler.beta = beta + (1.0 - beta) * progress
+        per_world = [self._collect(g, group) for g, group in enumerate(self.groups)]
+        learning = all(len(group.buffer) >= int(a.learning_starts) for group in self.groups)
+        losses = [self._update() for _ in range(int(a.updates))] if learning else []
         self.iteration += 1
-        nxt = batch.get("next")
-        # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
-        reach_utility = mean_utility(nxt) if fading_part(self.env_cfg).random else None
-        per_world = episode_metrics(
-            *(nxt.get(key).squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")), u_star, reach_utility
-        )
-        out = {f"train/{k}": v.mean().item() for k, v in per_world.items()}
-        out["train/epsilon"] = self.exploration.eps.item()
+        out = {f"train/{k}": torch.cat([w[k] for w in per_world]).mean().item() for k in per_world[0]}
+        out["train/epsilon"] = self.groups[0].exploration.eps.item()
         if losses:
             out["train/loss"] = torch.stack(losses).mean().item()
         return out
 
-    def _log_gap_reward(self, batch: TensorDictBase, u_star: torch.Tensor, mean_utility) -> torch.Tensor:
+    def _collect(self, g: int, group: _Group) -> dict[str, torch.Tensor]:
+        """One episode in every world of ``group`` into its buffer; the episodes' metrics ``[worlds]``."""
+        group.collector.set_seed(self._group_seed(self.iteration, g), static_seed=True)
+        group.collector.reset()
+        # this episode's layouts; the exchange method where it runs (its results recorded), the search beyond
+        u_star = group.optimum()
+        # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
+        # is read; a second clone would copy every world's [C, 2] rows of a shared layout
+        utility = partial(mean_utility, group.cfg, (group.env.cell_contributions, group.env.direct))
+        batch = next(group.batches)  # [worlds, steps]
+        nxt = batch.get("next")
+        if self.settings.objective == "log_gap":
+            batch.set(("next", "reward"), self._log_gap_reward(batch, u_star, utility))
+        stored = n_step_returns(batch, int(self.settings.get("n_step", 1)), float(self.settings.gamma))
+        group.buffer.extend(stored.reshape(-1).select(*group.keys))
+        group.exploration.step(batch.numel())
+        # under fading, "reaches 90% of U*" is decided on the configurations' mean-channel utility
+        reach_utility = utility(nxt) if fading_part(group.cfg).random else None
+        return episode_metrics(
+            *(nxt.get(key).squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")), u_star, reach_utility
+        )
+
+    def _log_gap_reward(self, batch: TensorDictBase, u_star: torch.Tensor, utility) -> torch.Tensor:
         """``[W, T, 1]`` the change of ``-log(1 - U / U* + agent.gap_floor)`` over each step, mean-channel ``U``.
 
         The delta reward's action gaps shrink with the distance to the optimum
@@ -148,38 +186,58 @@ class DQNAgent(Agent):
         gap to U* each halving of the gap is worth the same, down to the floor.
         """
         change = log_gap_reward(
-            mean_utility(batch.get("next")), mean_utility(batch), u_star.unsqueeze(-1), float(self.settings.gap_floor)
+            utility(batch.get("next")), utility(batch), u_star.unsqueeze(-1), float(self.settings.gap_floor)
         )
         return change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype)
 
     def _update(self) -> torch.Tensor:
-        batch = self.buffer.sample()
-        loss = self.loss(batch)["loss"]
-        if self.settings.get("replay", "uniform") == "prioritized":
-            self.buffer.update_priority(batch.get("index"), batch.get("td_error"))
+        """One gradient step: each group's TD loss on its share of the batch (and DQfD's margin loss on the
+        demonstrations among them), summed."""
+        a = self.settings
+        if self.demonstrations is None and a.get("demonstrations", "none") == "oracle":
+            self.demonstrations = Demonstrations(self, self.groups)
+        sizes, losses, margins = self.curriculum.batch_sizes(), [], []
+        for g, (group, size) in enumerate(zip(self.groups, sizes, strict=True)):
+            if self.demonstrations is None:
+                batch = group.buffer.sample() if size == self.batch_size else uniform_sample(group.buffer, size)
+            else:  # DQfD: the demonstrations' share of the batch gets the TD loss and the margin loss
+                demos = self.demonstrations.sample(g, self.demonstrations.demo_size(size))
+                batch = torch.cat([uniform_sample(group.buffer, max(1, size - len(demos))), demos])
+                margins.append(self.demonstrations.loss(group.values.module, demos))
+            losses.append(self.network.td_loss(batch, group))
+            if a.get("replay", "uniform") == "prioritized":
+                group.buffer.update_priority(batch.get("index"), batch.get("td_error"))
+        self.curriculum.record(torch.stack(losses))
+        loss = self.curriculum.total(losses, sizes) + sum(margins)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        nn.utils.clip_grad_norm_(self.loss.parameters(), float(self.settings.max_grad_norm), foreach=True)
+        nn.utils.clip_grad_norm_(self.network.parameters(), float(a.max_grad_norm), foreach=True)
         self.optimizer.step()
-        self.target_update.step()
+        self.network.update_target()
         return loss.detach()
 
-    def _layouts_of(self, iteration: int) -> torch.Tensor:
-        """``[W, 4, 3]`` the layouts iteration ``iteration``'s worlds were reset to (:meth:`train_iteration`)."""
-        return reset_layouts(self.env_cfg, int(self.settings.worlds), self.device, self._world_seed(iteration))
+    def policy_for(self, env_cfg: ModelConfig, run: int = 0) -> CheckedPolicy:
+        """The greedy policy (one run: ``run`` 0) in environments of ``env_cfg``: the run's own grid, number of UAVs
+        and layout only for the per-size network, any grid and number of UAVs for the size-free one."""
+        return self.network.policy_for(env_cfg)
 
     def policies(self) -> list[CheckedPolicy]:
-        """The greedy policy: reads the env's keys, writes ``("agents", "action")``, in environments of the run's grid,
-        number of UAVs and layout only."""
-        return [CheckedPolicy(self.greedy, self.env_cfg)]
+        """The greedy policy in environments of the run's config (reads the env's keys, writes
+        ``("agents", "action")``; :meth:`policy_for` for any other)."""
+        return [self.policy_for(self.env_cfg)]
+
+    def evaluate(self, env_cfg, **kwargs) -> list[dict[str, float]]:
+        """:func:`uavrl.agents.evaluation.evaluate` of the greedy policy in ``env_cfg`` (``kwargs``: its settings)."""
+        return [evaluate(self.policy_for(env_cfg), env_cfg, **kwargs)]
 
     def state_dict(self) -> dict:
         """Networks with their targets, optimizer, exploration, replay buffer, RNG and progress."""
+        per_group = [{"exploration": g.exploration.state_dict(), "buffer": g.buffer.state_dict()} for g in self.groups]
         state = {
             "iteration": self.iteration,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
-            **self._experience_state(),
+            **self.network.experience_state(per_group, self.curriculum),
             "rng": torch.get_rng_state(),
         }
         if self.device.type == "cuda":
@@ -189,26 +247,36 @@ class DQNAgent(Agent):
     def load_state_dict(self, state: dict):
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
-        self._load_experience(state)
+        saved_groups = self.network.experience_of(state, self.curriculum)
+        for g, (group, saved) in enumerate(zip(self.groups, saved_groups, strict=True)):
+            group.exploration.load_state_dict(saved["exploration"])
+            # also earlier versions' buffers (.migration): with random layouts those of iteration k are the layouts
+            # the group's worlds were reset to
+            layouts = partial(self._group_layouts, g) if group.cfg.layout == "random" else None
+            frames = group.env.num_worlds * group.cfg.max_steps
+            load_replay_buffer(
+                group.buffer, group.transitions, saved, group.env.observation_size, self.device, layouts, frames
+            )
         self.iteration = int(state["iteration"])
         torch.set_rng_state(state["rng"])
         if "cuda_rng" in state:
             torch.cuda.set_rng_state(state["cuda_rng"], self.device)
 
-    def _experience_state(self) -> dict:
-        """``"exploration"`` and ``"buffer"`` (storage, write cursor and count, sampler) of the state."""
-        return {"exploration": self.exploration.state_dict(), "buffer": self.buffer.state_dict()}
+    def _group_layouts(self, g: int, iteration: int) -> torch.Tensor:
+        """``[W, 4, 3]`` the layouts group ``g``'s worlds were reset to at ``iteration`` (:meth:`_collect`)."""
+        group = self.groups[g]
+        return reset_layouts(group.cfg, group.env.num_worlds, self.device, self._group_seed(iteration, g))
 
-    def _load_experience(self, state: dict) -> None:
-        self.exploration.load_state_dict(state["exploration"])
-        self._load_buffer(self.buffer, self.transitions, state, self.env, self._layouts_of)
 
-    def _load_buffer(self, buffer, transitions: CompactTransitions, state: dict, env: UAVSpectrumEnv, layouts_of):
-        """``buffer`` (of ``env``'s transitions) from ``state["buffer"]``, also earlier versions' (:mod:`.migration`):
-        with random layouts those of iteration ``k`` are ``layouts_of(k)``, what its worlds were reset to."""
-        layouts = layouts_of if env.cfg.layout == "random" else None
-        frames = env.num_worlds * env.cfg.max_steps
-        load_replay_buffer(buffer, transitions, state, env.observation_size, self.device, layouts, frames)
+def mean_utility(cfg: ModelConfig, layout: tuple[torch.Tensor, torch.Tensor], td: TensorDictBase) -> torch.Tensor:
+    """``[W, T]`` mean-channel utility of the configurations of ``td`` (``[W, T]``) in the worlds' ``layout``
+    (``(cell_contributions, direct)`` of the env of ``cfg``, the layouts they were played in)."""
+    C = cfg.num_cells
+    cells = cells_or_away(td.get("positions"), cfg.grid)  # C: out of service, adds nothing
+    on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
+    contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
+    r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], cfg)
+    return r_pu + r_se
 
 
 def adam(parameters: list[torch.nn.Parameter], lr: float) -> torch.optim.Adam:

@@ -1,26 +1,36 @@
 """The DQN's parts built from its settings: the Q network, the greedy and exploring policies, the mixer, the loss,
 the replay buffer (its transitions kept compact, :mod:`.transitions`) and the collector (TorchRL modules around
-:mod:`.networks` and :mod:`.loss`)."""
+:mod:`.networks` and :mod:`.loss`); :class:`QNetwork`, what ``agent.network`` decides for the agent, and
+:class:`TeamNetwork`, the per-size network's."""
 
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import Categorical, Composite, LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.modules import EGreedyModule, QMixer, QValueModule, VDNMixer
+from torchrl.modules import EGreedyModule, QValueModule
 from torchrl.objectives import DQNLoss, LossModule, SoftUpdate
 
-from uavrl.envs import UAVSpectrumEnv
+from uavrl.agents.env_check import CheckedPolicy
+from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.compat import make_collector
 
-from .loss import DoubleQMixerLoss
+from .curriculum import Curriculum
+from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
 from .priorities import ProportionalSampler
 from .transitions import CompactTransitions
+
+if TYPE_CHECKING:
+    from .agent import DQNAgent, _Group
 
 
 @dataclass
@@ -162,20 +172,16 @@ def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Poli
 
 
 def build_mixer(env: UAVSpectrumEnv, a) -> TensorDictModule:
-    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``).
+    """The team value of the UAVs' chosen values: VDN (their sum) or QMIX (``agent.mixer``, :mod:`.loss`).
 
     Args:
         env: the training environment (``N`` and, for QMIX, the size of ``state``).
         a: the agent's settings ``cfg.agent`` (``mixer``, ``mixing_embed_dim``).
     """
     if a.mixer == "vdn":
-        return TensorDictModule(
-            VDNMixer(env.num_uavs, env.device),
-            in_keys=[("agents", "chosen_action_value")],
-            out_keys=["chosen_action_value"],
-        )
+        return TensorDictModule(VDNMix(), in_keys=[("agents", "chosen_action_value")], out_keys=["chosen_action_value"])
     return TensorDictModule(
-        QMixer((env.state_size,), int(a.mixing_embed_dim), env.num_uavs, env.device),
+        QMix(env.state_size, int(a.mixing_embed_dim), env.num_uavs, env.device),
         in_keys=[("agents", "chosen_action_value"), "state"],
         out_keys=["chosen_action_value"],
     )
@@ -190,7 +196,7 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
         policies: the policies of :func:`build_policies`, whose value network the loss trains.
     """
     if a.head == "factored":
-        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), policies.action_spec, float(a.gamma))
+        return DoubleQMixerLoss(policies.value_network, build_mixer(env, a), float(a.gamma))
     loss = DQNLoss(
         policies.value_network,
         double_dqn=True,
@@ -201,6 +207,104 @@ def build_loss(env: UAVSpectrumEnv, a, policies: Policies) -> LossModule:
     loss.set_keys(action="joint_action", action_value=_values_key(a), value="joint_chosen_action_value")
     loss.make_value_estimator(gamma=float(a.gamma))
     return loss
+
+
+class QNetwork(abc.ABC):
+    """What ``agent.network`` decides for a :class:`~.agent.DQNAgent`: the teams it trains on, the parameters, the
+    module that acts in each team's worlds, the loss and its targets, the greedy policy for other environments and the
+    layout of the experience in a checkpoint.  Everything else (worlds, exploration, replay, the levers, the loop, the
+    optimizer) is the agent's, shared.
+
+    Built by the agent after every team's environment, before any collector (the collectors draw from torch's
+    generator, so the networks' initial weights are the first draws after the seed).
+    """
+
+    name: str
+    """The ``agent.network`` value it implements."""
+    kind: str
+    """What the error message calls it (``per-size``, ``size-free``)."""
+
+    def __init__(self, agent: DQNAgent, env: UAVSpectrumEnv):
+        self.agent, self.settings = agent, agent.settings
+
+    @staticmethod
+    @abc.abstractmethod
+    def models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
+        """The teams (and layouts) a run trains on, one group of worlds each."""
+
+    @abc.abstractmethod
+    def values(self, env: UAVSpectrumEnv) -> TensorDictModule:
+        """The module writing ``("agents", "action_value")`` (or the joint head's values) in ``env``'s worlds."""
+
+    @abc.abstractmethod
+    def build_loss(self, policies) -> nn.Module:
+        """The double-DQN loss, given the first group's :class:`~.builders.Policies`."""
+
+    @abc.abstractmethod
+    def parameters(self) -> list[nn.Parameter]:
+        """The online parameters the optimizer steps (in a fixed order: the optimizer's state and the clipping)."""
+
+    @abc.abstractmethod
+    def td_loss(self, batch: TensorDictBase, group: _Group) -> torch.Tensor:
+        """The mean TD loss of ``batch``, transitions of ``group``."""
+
+    @abc.abstractmethod
+    def update_target(self) -> None:
+        """Move the target parameters towards the online ones (after each gradient step)."""
+
+    @abc.abstractmethod
+    def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
+        """The greedy policy in environments of ``env_cfg``."""
+
+    @abc.abstractmethod
+    def experience_state(self, per_group: list[dict], curriculum: Curriculum) -> dict:
+        """The checkpoint's experience entries from each group's ``{"exploration", "buffer"}``."""
+
+    @abc.abstractmethod
+    def experience_of(self, state: dict, curriculum: Curriculum) -> list[dict]:
+        """Each group's ``{"exploration", "buffer"}`` (and older keys) of a checkpoint's ``state``."""
+
+
+class TeamNetwork(QNetwork):
+    """``agent.network=team``: one :class:`TeamQNet` sized by the run's env (its one group), TorchRL's losses
+    (:func:`build_loss`) with soft-updated targets (:class:`TargetUpdate`)."""
+
+    name, kind = "team", "per-size"
+
+    def __init__(self, agent: DQNAgent, env: UAVSpectrumEnv):
+        super().__init__(agent, env)
+        self.env, self.q = env, build_q_network(env, self.settings)
+
+    @staticmethod
+    def models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
+        return [env_cfg]
+
+    def values(self, env: UAVSpectrumEnv) -> TensorDictModule:
+        return self.q
+
+    def build_loss(self, policies: Policies) -> LossModule:
+        self.loss = build_loss(self.env, self.settings, policies)
+        self.target_update = TargetUpdate(self.loss, tau=float(self.settings.tau))
+        return self.loss
+
+    def parameters(self) -> list[nn.Parameter]:
+        return list(self.loss.parameters())
+
+    def td_loss(self, batch: TensorDictBase, group: _Group) -> torch.Tensor:
+        return self.loss(batch)["loss"]
+
+    def update_target(self) -> None:
+        self.target_update.step()
+
+    def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
+        """The run's greedy policy, in environments of the run's grid, number of UAVs and layout only."""
+        return CheckedPolicy(self.agent.greedy, self.agent.env_cfg)
+
+    def experience_state(self, per_group: list[dict], curriculum: Curriculum) -> dict:
+        return per_group[0]
+
+    def experience_of(self, state: dict, curriculum: Curriculum) -> list[dict]:
+        return [state]  # with the oldest checkpoints' "buffer_writes" (.migration)
 
 
 class ZeroedStorage(LazyTensorStorage):

@@ -28,6 +28,7 @@ import math
 
 import torch
 from tensordict import TensorDictBase
+from torch import nn
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.utils import step_mdp
 
@@ -39,7 +40,7 @@ from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from .builders import ZeroedStorage
 from .curriculum import uniform_sample
 from .networks import Q_INPUTS
-from .setnet import SetQNet, team_value
+from .setnet import team_value
 from .transitions import n_step_returns
 
 _DEMO_SEED_OFFSET = 2**43  # demonstration worlds: seed * 2^44 + 2^43 + group * 2^20, clear of the training iterations'
@@ -81,15 +82,14 @@ def oracle_transitions(
 
 
 class Demonstrations:
-    """The oracle's transitions of every team of a :class:`~.multisize.SetDQNAgent` (its ``groups``), and the
-    margin loss on them (module doc)."""
+    """The oracle's transitions of every team of a :class:`~.agent.DQNAgent` (its ``groups``; the size-free
+    network's levers, :class:`~.multisize.SetDQNAgent`), and the margin loss on them (module doc)."""
 
     def __init__(self, agent, groups: list):
         a = agent.settings
         self.share, self.margin, self.mixer = float(a.demo_batch_share), float(a.margin), a.mixer
         per_group = max(1, int(a.demo_transitions) // len(groups))
         self.buffers = []
-        self._views: dict = {}  # grid -> the core's SetQNet there
         for g, group in enumerate(groups):
             cfg = group.cfg
             worlds = max(1, math.ceil(per_group / cfg.max_steps))
@@ -110,11 +110,9 @@ class Demonstrations:
         """``size`` of team ``g``'s demonstrations, uniformly (full transitions)."""
         return uniform_sample(self.buffers[g], size)
 
-    def loss(self, core, demos: TensorDictBase, grid) -> torch.Tensor:
-        """The margin loss of ``core``'s values on ``demos`` of a team on ``grid``."""
-        grid = tuple(grid)
-        if grid not in self._views:
-            self._views[grid] = SetQNet(core, grid)
-        values = self._views[grid](*(demos.get(k) for k in Q_INPUTS))
+    def loss(self, net: nn.Module, demos: TensorDictBase) -> torch.Tensor:
+        """The margin loss of the values of ``net`` (the network acting in the team's grid, a
+        :class:`~.setnet.SetQNet`) on ``demos``."""
+        values = net(*(demos.get(k) for k in Q_INPUTS))
         expert, allowed = demos.get(("agents", "action")), demos.get(("agents", "action_mask"))
         return margin_loss(values, expert, allowed, self.margin, self.mixer)
