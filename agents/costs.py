@@ -2,7 +2,8 @@
 gradient step's memory and arithmetic (standard library only, so the commands check them before torch is imported).
 
 The counts follow the networks layer by layer: :class:`~uavrl.agents.dqn.networks.TeamQNet` (a centralised
-``MultiAgentMLP`` torso and a per-UAV or joint head), TorchRL's ``QMixer`` (``agent.mixer=qmix``) and
+``MultiAgentMLP`` torso and a per-UAV or joint head), the QMIX mixer :class:`~uavrl.agents.dqn.loss.QMix`
+(``agent.mixer=qmix``, TorchRL ``QMixer``'s layers) and
 :class:`~uavrl.agents.dqn.setnet.SetQCore` (``agent.network=set``); ``tests/test_costs.py`` holds each equal to the
 parameters of the network built.  Arithmetic is counted in multiply-adds of the layers, memory in float32 values.
 
@@ -46,7 +47,8 @@ def team_parameters(num_uavs: int, num_actions: int, energy: bool, head: str, hi
 
 
 def qmix_parameters(num_uavs: int, energy: bool, embed: int) -> int:
-    """Parameters of TorchRL's ``QMixer``: the hypernetworks from the state to the mixing weights and biases."""
+    """Parameters of ``QMix`` (TorchRL ``QMixer``'s layers): the hypernetworks from the state to the mixing weights
+    and biases."""
     S = state_size(num_uavs, energy)
     return _linear(S, embed * num_uavs) + 3 * _linear(S, embed) + _linear(embed, 1)
 
