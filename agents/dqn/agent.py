@@ -8,6 +8,7 @@ from torch import nn
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.schema import AGENTS
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.physics.channel import rates
@@ -28,7 +29,6 @@ from .builders import (
     exploration_schedule,
 )
 from .migration import load_replay_buffer
-from .settings import check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
@@ -51,7 +51,7 @@ class DQNAgent(Agent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        check_settings(env_cfg, a)
+        AGENTS["dqn"].validate(env_cfg, a)
         if a.get("network", "team") != "team":  # run configs saved before: no setting
             raise ValueError(
                 f"agent.network={a.network!r} is invalid for DQNAgent, the per-size network: build "

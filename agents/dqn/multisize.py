@@ -30,7 +30,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.schema import network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
+from uavrl.agents.schema import AGENTS, network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.physics.channel import rates
@@ -46,7 +46,6 @@ from .curriculum import Curriculum, uniform_sample
 from .demonstrations import Demonstrations
 from .networks import Q_INPUTS
 from .setnet import SetDoubleQLoss, SetQCore, SetQNet
-from .settings import check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 
@@ -91,7 +90,7 @@ class SetDQNAgent(DQNAgent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        check_settings(env_cfg, a)  # the size-free network's checks too (agents/schema.py)
+        AGENTS["dqn"].validate(env_cfg, a)  # the size-free network's checks too (agents/schema.py)
         if a.get("network", "team") != "set":
             raise ValueError(
                 f"agent.network={a.get('network', 'team')!r} is invalid for SetDQNAgent: use agent.network=set"
