@@ -35,6 +35,7 @@ from tensordict.nn import TensorDictModuleBase
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
 from uavrl.agents.generators import PolicyGenerator
+from uavrl.agents.schema import AGENTS
 from uavrl.envs import ModelConfig
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, relay_contributions
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
@@ -215,15 +216,19 @@ class BaselineAgent(Agent):
 
     Args:
         env_cfg: the run's :class:`~uavrl.envs.ModelConfig`, the environments its policy acts in.
-        cfg: the full Hydra config (a baseline has no settings of its own).
+        cfg: the full Hydra config (a baseline's settings, ``agent.memory_budget``, are the evaluation's), or
+            ``None``.
         device: unused: a baseline's policy acts on the device of the tensordict it gets.
         seed: seeds the random baseline's generator.
     """
 
     num_iterations = 0
     env_steps = 0
+    name: str  # its name in uavrl.agents.AGENTS
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
+        if cfg is not None and cfg.get("agent") is not None:
+            AGENTS[self.name].validate(env_cfg, cfg.agent)
         self.env_cfg, self.seed = env_cfg, int(seed)
 
     def train_iteration(self) -> dict[str, float]:
@@ -239,12 +244,16 @@ class BaselineAgent(Agent):
 class RandomAgent(BaselineAgent):
     """``agent=random``: the uniform random policy over allowed per-UAV actions, seeded by ``seed``."""
 
+    name = "random"
+
     def policies(self) -> list[CheckedPolicy]:
         return [CheckedPolicy(RandomPolicy(self.seed), self.env_cfg)]
 
 
 class OracleAgent(BaselineAgent):
     """``agent=oracle``: the oracle planner (module doc)."""
+
+    name = "oracle"
 
     def policies(self) -> list[OraclePolicy]:
         return [OraclePolicy(self.env_cfg)]

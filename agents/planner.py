@@ -167,5 +167,7 @@ class PlannerPolicy(OraclePolicy):
 class PlannerAgent(BaselineAgent):
     """``agent=planner``: the energy-aware planner (module doc)."""
 
+    name = "planner"
+
     def policies(self) -> list[PlannerPolicy]:
         return [PlannerPolicy(self.env_cfg)]

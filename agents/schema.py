@@ -1,5 +1,10 @@
-"""Every agent's settings (``agent.*``): each one's default, type, rule and meaning, declared once in the agent's
-schema (standard library and :mod:`uavrl.envs.rules` only).
+"""The agents' registry :data:`AGENTS` and every agent's settings (``agent.*``): each one's default, type, rule and
+meaning, declared once in the agent's schema (standard library and :mod:`uavrl.envs.rules` only).
+
+:data:`AGENTS` maps each agent's name to its :class:`AgentConfig` (as BenchMARL's ``algorithm_config_registry``
+maps an algorithm's name to its config): the schema of its settings, the class that runs them, named and imported on
+first use (:meth:`AgentConfig.associated_class`: naming an agent imports no torch), and the rules its settings follow
+together (:meth:`AgentConfig.validate`).
 
 Hydra starts ``configs/agent/<name>.yaml`` from the agent's schema (registered by :mod:`uavrl.schema`), the commands
 check ``agent.*`` against the rules of the chosen agent's schema only (a new agent's ``agent.alpha`` follows its own
@@ -11,20 +16,27 @@ Example:
     (0.1, 'it must lie in (0.0, 1.0]')
     >>> "agent.alpha" in agent_rules("dqn")
     False
+    >>> AGENTS["dqn"].schema is DQNSchema, AGENTS["dqn"].associated_class({"network": "set"}).__name__
+    (True, 'SetDQNAgent')
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Optional
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, Callable, Optional
 
-from uavrl.envs.config import LAYOUTS
+from uavrl.envs.config import LAYOUTS, NUM_ACTIONS
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rules import (
     REAL,
     SEED,
     UNIT,
     Rule,
+    check,
     flag,
     interval,
     one_of,
@@ -32,11 +44,14 @@ from uavrl.envs.rules import (
     positive,
     rules_of,
     setting,
+    shown,
     whole,
 )
 
 if TYPE_CHECKING:
     from uavrl.envs.config import ModelConfig
+
+    from .base import Agent
 
 METHODS = ("q_learning", "value_iteration")
 DEMONSTRATIONS = ("none", "oracle")
@@ -204,22 +219,8 @@ class BaselineSchema:
     memory_budget: REAL = setting(DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the evaluation; more is refused")
 
 
-# the schema of each agent of uavrl.agents.AGENTS, by name
-AGENT_SCHEMAS = {
-    "tabular": TabularSchema,
-    "dqn": DQNSchema,
-    "random": BaselineSchema,
-    "oracle": BaselineSchema,
-    "planner": BaselineSchema,
-}
-
-
-def agent_rules(name: str) -> dict[str, Rule]:
-    """The rules of the settings of the agent ``name``, as typed (``agent.alpha``)."""
-    return rules_of(AGENT_SCHEMAS[name], "agent")
-
-
 MAX_JOINT_UAVS = 4  # the joint head's 6^N outputs are for small teams
+MAX_JOINT_ACTIONS = NUM_ACTIONS**MAX_JOINT_UAVS  # the joint head is for small teams: N <= 4
 
 
 def _plain(value):
@@ -232,9 +233,7 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
     each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
     from uavrl.envs.config import InvalidOption
-    from uavrl.envs.rules import check, shown
 
-    check(a, agent_rules("dqn"), section="agent")
     network = a.get("network", "team")  # run configs saved before: no setting
     if network == "team":
         if a.mixer == "mean":
@@ -302,6 +301,114 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
             raise ValueError(
                 f"agent.sizes={shown(list(a.sizes), label=True)} is invalid: its team {team}: {err}"
             ) from None
+
+
+# ------------------------------------------------------------------------------------------------ the registry
+@dataclass(frozen=True)
+class AgentConfig:
+    """One agent of :data:`AGENTS`: the schema of its settings, the class that runs them and the rules they follow
+    together (standard library only: the class is named, and imported only by :meth:`associated_class`).
+
+    Args:
+        schema: the dataclass of its settings (``configs/agent/<name>.yaml`` starts from it): each field's default,
+            rule and meaning.
+        agent: its class, ``"<module under uavrl.agents>:<class>"``.
+        variants: ``(setting, value, class)``: the settings with that value run that class instead (``agent=dqn
+            agent.network=set`` is the size-free ``SetDQNAgent``).
+        together: ``(env_cfg, settings)``: a one-line ValueError for settings that cannot go together on the model
+            ``env_cfg``, after each setting's own rule; ``None``: none.
+    """
+
+    schema: type
+    agent: str
+    variants: tuple[tuple[str, Any, str], ...] = ()
+    together: Callable[[ModelConfig, Any], None] | None = None
+
+    def associated_class(self, settings: Any = None) -> type[Agent]:
+        """The class that runs ``settings`` (the run's ``cfg.agent``; ``None``: the default class), imported now."""
+        path = self.agent
+        for name, value, variant in self.variants:
+            if settings is not None and settings.get(name, getattr(self.schema, name)) == value:
+                path = variant  # run configs saved before the setting existed: its default
+                break
+        module, _, cls = path.partition(":")
+        return getattr(importlib.import_module(f"uavrl.agents.{module}"), cls)
+
+    def rules(self) -> dict[str, Rule]:
+        """Each setting's rule, as typed (``agent.alpha``)."""
+        return dict(_rules(self.schema))
+
+    def check_each(self, settings) -> None:
+        """A one-line ValueError for the first setting of ``settings`` (``cfg.agent``) that breaks its own rule."""
+        _once(("each", self.schema, _frozen(settings)), lambda: check(settings, _rules(self.schema), section="agent"))
+
+    def check_together(self, env_cfg: ModelConfig, settings) -> None:
+        """A one-line ValueError for settings that cannot go together on the model ``env_cfg`` (after
+        :meth:`check_each`)."""
+        if self.together is not None:
+            model = (env_cfg, getattr(env_cfg, "preset", None))  # ModelConfig's == leaves its preset out
+            _once(("together", self.together, model, _frozen(settings)), lambda: self.together(env_cfg, settings))
+
+    def validate(self, env_cfg: ModelConfig, settings) -> None:
+        """Every rule of ``settings`` on ``env_cfg``: each setting's own, then together.  An agent's constructor
+        calls it; a rule already passed by the same settings on the same model (a command checks them before it
+        builds the agent: :mod:`uavrl.settings`) does not run again."""
+        self.check_each(settings)
+        self.check_together(env_cfg, settings)
+
+
+@functools.cache
+def _rules(schema: type) -> dict[str, Rule]:
+    return rules_of(schema, "agent")
+
+
+def _frozen(value):
+    """``value`` (a config, a dict, a list) as nested tuples of ``(type, value)`` leaves: settings compared by content
+    and type (``1`` is not ``True``)."""
+    if isinstance(value, Mapping):
+        return tuple((key, _frozen(value[key])) for key in sorted(value, key=str))
+    if isinstance(value, Sequence) and not isinstance(value, str):
+        return tuple(_frozen(v) for v in value)
+    return type(value), value
+
+
+_PASSED: dict[tuple, None] = {}  # the rules (with their settings and model) that passed, the newest 64
+
+
+def _once(key: tuple, rules: Callable[[], None]) -> None:
+    """Run ``rules`` (a one-line ValueError when they refuse) unless they passed for ``key`` before."""
+    try:
+        if key in _PASSED:
+            return
+    except TypeError:  # a value that cannot be compared by content: the rules run every time
+        rules()
+        return
+    rules()
+    _PASSED[key] = None
+    while len(_PASSED) > 64:
+        del _PASSED[next(iter(_PASSED))]
+
+
+# The agents by name: ``agent=<name>`` (``configs/agent/<name>.yaml``) runs ``AGENTS[name]``.
+AGENTS: dict[str, AgentConfig] = {
+    "tabular": AgentConfig(TabularSchema, "tabular:TabularAgent"),
+    "dqn": AgentConfig(
+        DQNSchema,
+        "dqn:DQNAgent",
+        variants=(("network", "set", "dqn.multisize:SetDQNAgent"),),
+        together=check_dqn_settings,
+    ),
+    "random": AgentConfig(BaselineSchema, "baselines:RandomAgent"),
+    "oracle": AgentConfig(BaselineSchema, "baselines:OracleAgent"),
+    "planner": AgentConfig(BaselineSchema, "planner:PlannerAgent"),
+}
+# the schema of each agent, by name (read from AGENTS)
+AGENT_SCHEMAS: Mapping[str, type] = MappingProxyType({name: config.schema for name, config in AGENTS.items()})
+
+
+def agent_rules(name: str) -> dict[str, Rule]:
+    """The rules of the settings of the agent ``name``, as typed (``agent.alpha``)."""
+    return AGENTS[name].rules()
 
 
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:

@@ -213,7 +213,7 @@ def main() -> None:
         ]
     # compile and fill the numba caches once, untimed: the figures are of a user's second run
     with tempfile.TemporaryDirectory() as out:
-        for _name, command in cases[:2]:
+        for _, command in cases[:2]:
             timed(_command(command, out))
     print(f"# reproduction, whole processes; {args.rounds} interleaved rounds; {os.cpu_count()} CPUs")
     wall, cpu = {name: [] for name, _ in cases}, {name: [] for name, _ in cases}

@@ -129,8 +129,8 @@ def main():
             # the run's own team is evaluated as its own (eval.json), any other zero-shot (eval-<N>uav-<grid>.json)
             ("size-free", free, resources_of(free), free_metrics, (n, grid) == (run_cfg.num_uavs, tuple(run_cfg.grid))),
         ]
-        for name, run_dir, usage, metrics, own in rows:
-            metrics = metrics or json.loads((run_dir / "metrics.json").read_text())
+        for name, run_dir, usage, known, own in rows:
+            metrics = known or json.loads((run_dir / "metrics.json").read_text())
             m = evaluate_on(run_dir, n, grid, args.starts, own)
             steps = m.get("eval/step_ratio_999")
             cells = [

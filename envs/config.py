@@ -405,26 +405,6 @@ class ModelConfig:
             )
             raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)
 
-    def _check_step_energies(self):
-        """A step's energies finite under ``rotary_wing``: its propulsion power grows with the speed ``cell_size /
-        slot_s`` to the fourth power, beyond float64 for a slot too short or a cell too long."""
-        try:
-            energies = self.step_energies
-            finite = all(math.isfinite(e) for e in (energies.move, energies.stay, energies.fly, energies.capacity))
-        except (OverflowError, ValueError):  # v^4 beyond float64, or a square root of a rounded negative
-            finite = False
-        if not finite:
-            name = (
-                "slot_s"
-                if self.slot_s != _DEFAULTS["slot_s"] or self.cell_size == _DEFAULTS["cell_size"]
-                else "cell_size"
-            )
-            reason = (
-                f"a move flies cell_size / slot_s = {self.cell_size / self.slot_s:.3g} m/s, and the rotary-wing "
-                "propulsion power at that speed is beyond float64: give a longer slot_s or a smaller cell_size"
-            )
-            raise InvalidOption(name, getattr(self, name), reason)
-
     def _lowest_start_and_largest_reserve(self, **changes) -> tuple[float, float, int]:
         """The lowest battery a UAV may start with, the largest reserve of a cell (the farthest from the base's), and
         that cell's steps from the base, under an energy model (with the options ``changes`` in place of these)."""

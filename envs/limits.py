@@ -32,6 +32,7 @@ import sys
 from .physics import radio
 
 NODE_NAMES = ("PT", "PR", "S", "E")
+SEED_LIMIT = 2**63  # seeds are int64: a seed (a run's, a world's) is a whole number in [0, 2^63), wrapped below it
 _LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
 _LOG_MIN = math.log10(sys.float_info.min)  # its smallest normal number, 2.2e-308
 _LOG_RESOLUTION = math.log10(sys.float_info.epsilon)  # below this s, 1 + s is 1 in float64 and log2(1 + s) is 0

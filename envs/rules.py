@@ -29,6 +29,8 @@ import re
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from .limits import SEED_LIMIT
+
 _ABSENT = object()
 REAL = Any  # a schema's real number as typed (int or float: OmegaConf would turn 0 into 0.0), checked by its rule
 
@@ -97,7 +99,7 @@ def names_among(names, what: str) -> Rule:
     )
 
 
-SEED = Rule(lambda v: _is_whole(v) and 0 <= v < 2**63, "it must be a whole number in [0, 2^63)")
+SEED = Rule(lambda v: _is_whole(v) and 0 <= v < SEED_LIMIT, "it must be a whole number in [0, 2^63)")
 DEVICE = Rule(
     lambda v: isinstance(v, str) and bool(re.fullmatch(r"cpu|cuda(:\d+)?", v)), "use 'cpu', 'cuda' or 'cuda:<index>'"
 )

@@ -1,10 +1,14 @@
-"""The agent contract (:class:`uavrl.agents.base.Agent`), checked for every agent of the registry."""
+"""The agent contract (:class:`uavrl.agents.base.Agent`), checked for every agent of the registry
+(:data:`uavrl.agents.AGENTS`): it trains briefly, saves, loads, evaluates, resumes exactly and refuses a bad setting
+in one line, the command before any work and the agent built in Python alike, each rule run once per command."""
 
+import dataclasses
 import io
 
 import pytest
 import torch
 
+import uavrl.agents.schema as agent_schema
 from uavrl.agents import AGENTS, agent_class
 from uavrl.agents.base import Agent
 from uavrl.config import model_config
@@ -29,10 +33,38 @@ TINY = {
     "oracle": [],
     "planner": [],
 }
+# one setting each agent refuses: (override, the one-line refusal)
+BAD = {
+    "tabular": ("agent.alpha=0", "agent.alpha=0 is invalid: it must lie in (0.0, 1.0]"),
+    "dqn": ("agent.worlds=0", "agent.worlds=0 is invalid: it must be a whole number >= 1"),
+    "random": ("agent.memory_budget=0", "agent.memory_budget=0 is invalid: it must be positive"),
+    "oracle": ("agent.memory_budget=-1", "agent.memory_budget=-1 is invalid: it must be positive"),
+    "planner": ("agent.memory_budget=0", "agent.memory_budget=0 is invalid: it must be positive"),
+}
 
 
-def test_every_agent_has_tiny_settings():
-    assert set(TINY) == set(AGENTS)
+def test_every_agent_has_tiny_and_bad_settings():
+    assert set(TINY) == set(AGENTS) == set(BAD)
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_registry_names_a_schema_and_a_class(name):
+    config = AGENTS[name]
+    assert dataclasses.is_dataclass(config.schema) and config.schema().name == config.schema.name
+    assert agent_class(name) is config.associated_class() and issubclass(agent_class(name), Agent)
+    for setting, value, _ in config.variants:  # a variant's class is an Agent too
+        assert issubclass(config.associated_class({setting: value}), agent_class(name))
+
+
+def test_dqn_network_picks_the_class():
+    from uavrl.agents.dqn import DQNAgent
+    from uavrl.agents.dqn.multisize import SetDQNAgent
+
+    assert agent_class("dqn", {"network": "set"}) is SetDQNAgent
+    assert agent_class("dqn", {"network": "team"}) is DQNAgent and agent_class("dqn", {}) is DQNAgent
+    assert agent_class("dqn") is DQNAgent
+    with pytest.raises(ValueError, match=r"^agent='nope' is invalid: allowed agents are tabular, dqn, "):
+        agent_class("nope")
 
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -86,6 +118,9 @@ def test_agent_contract_train_checkpoint_and_policy(name, agent_cfg):
     restored.load_state_dict(torch.load(saved, weights_only=False))
     assert restored.env_steps == agent.env_steps
     assert same(restored.state_dict(), agent.state_dict())
+    # the restored agent evaluates: one result per independent run, the yardstick's keys
+    results = restored.evaluate(model_config(cfg), num_starts=2, horizon=4)
+    assert len(results) == len(restored.policies()) and all("eval/optimality" in r for r in results), results
     # the TorchRL policies roll out, every UAV taking an allowed action
     env_cfg = model_config(cfg)
     for policy in agent.policies():
@@ -113,3 +148,44 @@ def test_agent_resumes_after_a_kill_exactly(name, agent_cfg, interrupt_at, tmp_p
         train(agent_cfg(name, f"resume={killed}"), overrides=[f"resume={killed}"])
     a, b = (torch.load(d / "checkpoint.pt", weights_only=False) for d in (whole, killed))
     assert a["iteration"] == b["iteration"] and same(a["agent"], b["agent"]) and a["final"] == b["final"]
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_agent_refuses_a_bad_setting_in_one_line(name, agent_cfg, tmp_path):
+    """The command refuses before any work (no run directory), and the agent built in Python with the same message."""
+    override, message = BAD[name]
+    cfg = agent_cfg(name, override, f"run_dir={tmp_path / 'run'}")
+    with pytest.raises(ValueError) as by_command:
+        train(cfg, overrides=[override])
+    with pytest.raises(ValueError) as built:
+        make(cfg)
+    assert str(by_command.value) == str(built.value) == message
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("name", ["tabular", "dqn", "random"])
+def test_each_agent_rule_runs_once_per_command(name, agent_cfg, monkeypatch, tmp_path):
+    """python -m uavrl.train checks the settings before any work and builds the agent, whose constructor validates
+    them too: each rule (each setting's own, then together) runs once."""
+    calls = {"each": 0, "together": 0}
+    check = agent_schema.check
+
+    def each(settings, table, section=""):
+        calls["each"] += section == "agent"
+        return check(settings, table, section)
+
+    config = AGENTS[name]
+
+    def together(env_cfg, settings):
+        calls["together"] += 1
+        return config.together(env_cfg, settings) if config.together is not None else None
+
+    monkeypatch.setattr(agent_schema, "_PASSED", {})
+    monkeypatch.setattr(agent_schema, "check", each)
+    monkeypatch.setitem(AGENTS, name, dataclasses.replace(config, together=together))
+    train(agent_cfg(name, f"run_dir={tmp_path / 'run'}"))
+    assert calls == {"each": 1, "together": 1}
+    make(agent_cfg(name))  # built in Python with the settings the command checked: nothing runs again
+    assert calls == {"each": 1, "together": 1}
+    make(agent_cfg(name, "seed=3"))  # the seed is not an agent setting: the same settings
+    assert calls == {"each": 1, "together": 1}

@@ -220,8 +220,8 @@ def check_command(arguments: list[str]) -> None:
         overrides.append(f"command={positional}" if command == "reproduce" else f"checkpoint={positional}")
     overrides = readable(overrides)  # a path Hydra cannot read unquoted is quoted, as the commands do
     jobs = sweep_jobs(overrides) if any(arg in {"-m", "--multirun"} for arg in arguments) else [overrides]
-    for job in jobs:
-        job = [arg for arg in job if not arg.lstrip("+~").startswith("hydra")]
+    for given in jobs:
+        job = [arg for arg in given if not arg.lstrip("+~").startswith("hydra")]
         cfg = compose_config(CONFIG_OF[command], job)
         if command == "reproduce":
             check(cfg, REPRODUCE_SETTINGS)

@@ -44,14 +44,11 @@ class PlainModel:
         """The next configuration, or None for an invalid joint action (off the grid or two UAVs in one cell)."""
         (positions, tasks), new_pos, new_tasks = config, [], []
         for (x, y), task, a in zip(positions, tasks, joint, strict=True):
-            if a < 4:
-                x, y = x + MOVES[a][0], y + MOVES[a][1]
-                if not (0 <= x < self.grid[0] and 0 <= y < self.grid[1]):
-                    return None
-            else:
-                task = a - 4
-            new_pos.append((x, y))
-            new_tasks.append(task)
+            cell = (x + MOVES[a][0], y + MOVES[a][1]) if a < 4 else (x, y)
+            if not (0 <= cell[0] < self.grid[0] and 0 <= cell[1] < self.grid[1]):
+                return None
+            new_pos.append(cell)
+            new_tasks.append(task if a < 4 else a - 4)
         return (tuple(new_pos), tuple(new_tasks)) if len(set(new_pos)) == self.N else None
 
     def successors(self, config):

@@ -82,10 +82,9 @@ class Mission:
         for (x, y, task, battery), a, target in zip(serving, joint, targets, strict=True):
             cell = (x, y) if clash else target
             moved = a < SENSE if self.by_action else cell != (x, y)
-            battery -= self.move if moved else self.stay
-            task = {SENSE: 0, RELAY: 1}.get(a, task)
-            if battery > self.reserve(*cell):
-                after.append((*cell, task, battery))
+            left = battery - (self.move if moved else self.stay)
+            if left > self.reserve(*cell):
+                after.append((*cell, {SENSE: 0, RELAY: 1}.get(a, task), left))
         return tuple(after)
 
     def best(self, serving, steps_left):

@@ -104,11 +104,10 @@ def test_ten_uavs_on_twenty_by_twenty():
 def python_valid(cells_xy, joint, L1, L2):
     targets = []
     for (x, y), a in zip(cells_xy, joint, strict=True):
-        if a < 4:
-            x, y = x + MOVES[a][0], y + MOVES[a][1]
-        if not (0 <= x < L1 and 0 <= y < L2):
+        cell = (x + MOVES[a][0], y + MOVES[a][1]) if a < 4 else (x, y)
+        if not (0 <= cell[0] < L1 and 0 <= cell[1] < L2):
             return False
-        targets.append((x, y))
+        targets.append(cell)
     return len(set(targets)) == len(targets)
 
 

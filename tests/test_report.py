@@ -184,8 +184,8 @@ def test_report_skips_a_damaged_run_in_one_line(metrics, config, why, study, tmp
 
     bad = study / "damaged run" / "seed=7"
     bad.mkdir(parents=True)
-    for name, content, good in (("metrics.json", metrics, GOOD_METRICS), ("config.yaml", config, GOOD_CONFIG)):
-        content = good if content is None else content
+    for name, given, good in (("metrics.json", metrics, GOOD_METRICS), ("config.yaml", config, GOOD_CONFIG)):
+        content = good if given is None else given
         if content == "fifo":
             os.mkfifo(bad / name)
         else:

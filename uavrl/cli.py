@@ -147,7 +147,8 @@ def readable(args: list[str]) -> list[str]:
                 parser.parse_override(f"{key}={hydra_quoted(value)}")
             except HydraException as still:  # the setting's name itself
                 raise SystemExit(unreadable(arg, still)) from None
-            arg = f"{key}={hydra_quoted(value)}"
+            readable_args.append(f"{key}={hydra_quoted(value)}")
+            continue
         readable_args.append(arg)
     return readable_args
 

@@ -336,8 +336,8 @@ def find_runs(paths) -> tuple[list[Run], list[tuple[Path, str]]]:
     """Every run directory (one holding ``metrics.json`` and ``config.yaml``) under ``paths``, in path order, and
     those skipped with why."""
     runs, skipped = [], []
-    for given in paths:
-        given = Path(given)
+    for path in paths:
+        given = Path(path)
         if not given.is_dir():
             raise FileNotFoundError(f"{quoted(given)}: no such directory (give run directories or sweep directories)")
         for metrics_file in sorted(given.rglob("metrics.json")):

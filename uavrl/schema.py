@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from uavrl.agents import AGENTS
-from uavrl.agents.schema import AGENT_SCHEMAS, EvalSchema
+from uavrl.agents.schema import EvalSchema
 from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rules import (
@@ -270,8 +270,8 @@ def register() -> None:
     store.store(name="benchmarl_schema", node=BenchmarlSchema)
     store.store(group="schema", name="env", node=EnvSchema)
     store.store(group="schema", name="scenario", node=ScenarioSchema)
-    for name, schema in AGENT_SCHEMAS.items():
-        store.store(group="schema/agent", name=name, node=schema(name=name))
+    for name, config in AGENTS.items():
+        store.store(group="schema/agent", name=name, node=config.schema(name=name))
     for preset in PRESETS:
         store.store(group="env", name=preset, node=preset_env(preset))
 
@@ -309,8 +309,8 @@ def _table(title: str, lead: str, schema: type, prefix: str = "") -> list[str]:
 def settings_markdown() -> str:
     """``docs/settings.md``: every setting of the commands with its default, rule and meaning, from the schemas."""
     agents: dict[type, list[str]] = {}
-    for name, schema in AGENT_SCHEMAS.items():
-        agents.setdefault(schema, []).append(name)
+    for name, config in AGENTS.items():
+        agents.setdefault(config.schema, []).append(name)
     lines = [
         "# Settings",
         "",

@@ -23,7 +23,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from uavrl.agents import AGENTS, costs
 from uavrl.agents.costs import FLOAT, TRAINING_COPIES
-from uavrl.agents.schema import AGENT_SCHEMAS, TabularSchema, agent_rules, check_dqn_settings, training_models
+from uavrl.agents.schema import TabularSchema, training_models
 from uavrl.envs.config import ModelConfig, make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
@@ -44,8 +44,8 @@ PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer
 # python -m uavrl.train and python -m uavrl.evaluate (configs/config.yaml): the run's settings and the agent's name;
 # the env.* options are checked by the model itself (uavrl.envs.ModelConfig)
 RUN_SETTINGS: dict[str, Rule] = rules_of(RunSchema) | {"agent.name": one_of(*AGENTS, what="agents")}
-# the settings of each agent (configs/agent/<name>.yaml)
-AGENT_SETTINGS: dict[str, dict[str, Rule]] = {name: agent_rules(name) for name in AGENT_SCHEMAS}
+# the settings of each agent (configs/agent/<name>.yaml), from its schema in the registry
+AGENT_SETTINGS: dict[str, dict[str, Rule]] = {name: config.rules() for name, config in AGENTS.items()}
 # python -m uavrl.reproduce (configs/reproduce.yaml) and python -m uavrl.benchmarl (configs/benchmarl.yaml)
 REPRODUCE_SETTINGS: dict[str, Rule] = rules_of(ReproduceSchema)
 BENCHMARL_SETTINGS: dict[str, Rule] = rules_of(BenchmarlSchema)
@@ -53,18 +53,20 @@ BENCHMARL_SETTINGS: dict[str, Rule] = rules_of(BenchmarlSchema)
 
 def check_run(cfg: DictConfig) -> None:
     """A one-line ValueError for the first setting of a run's config that breaks its rule: the run's settings, then
-    those of its agent."""
+    those of its agent (:meth:`~uavrl.agents.schema.AgentConfig.check_each`)."""
     check(cfg, RUN_SETTINGS)
     name = OmegaConf.select(cfg, "agent.name")
     if name is not None:
-        check(cfg, AGENT_SETTINGS[name])
+        AGENTS[name].check_each(cfg.agent)
 
 
 def check_agent_settings(cfg: DictConfig, model) -> None:
     """A one-line ValueError for agent settings that cannot go together on ``model`` (the DQN's network, head,
-    mixer and training teams), before torch is imported."""
-    if OmegaConf.select(cfg, "agent.name") == "dqn":
-        check_dqn_settings(model, cfg.agent)
+    mixer and training teams: :meth:`~uavrl.agents.schema.AgentConfig.check_together`), before torch is imported.
+    The rules that passed here (and in :func:`check_run`) do not run again when the command builds its agent."""
+    name = OmegaConf.select(cfg, "agent.name")
+    if name is not None:
+        AGENTS[name].check_together(model, cfg.agent)
 
 
 # what each command of configs/config.yaml does not read, and what reads it instead
@@ -104,8 +106,8 @@ def check_typed(cfg: DictConfig, overrides, table: dict[str, Rule], schema: type
         key, _, value = str(override).lstrip("+~").partition("=")
         section, _, name = key.partition(".")
         known = _fields(schema) if schema is not None else set()
-        if schema is None and section == "agent" and name and agent in AGENT_SCHEMAS:
-            known, key_name = _fields(AGENT_SCHEMAS[agent]), name
+        if schema is None and section == "agent" and name and agent in AGENTS:
+            known, key_name = _fields(AGENTS[agent].schema), name
         elif schema is None and section == "env" and name:
             known, key_name = _fields(EnvSchema), name
         else:

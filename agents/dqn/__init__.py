@@ -34,7 +34,6 @@ The package, one job a module, each read top to bottom:
 
 - :mod:`.networks`: :class:`TeamQNet` and the modules that turn its values into valid actions (:class:`ValidGreedy`);
 - :mod:`.loss`: :class:`VDNMix`, :class:`QMix` and :class:`DoubleQMixerLoss`, the factored head's double-DQN loss;
-- :mod:`.settings`: :func:`check_settings`, the one-line errors for settings the agent cannot run;
 - :mod:`.transitions`: :class:`CompactTransitions`, the replay buffer's transitions kept as configurations;
 - :mod:`.builders`: the Q network, policies, mixer, loss, replay buffer and collector built from the settings;
 - :mod:`.migration`: replay buffers of earlier checkpoints, loaded as the current agent would have saved them;
@@ -53,6 +52,8 @@ Example:
     (20, True)
 """
 
+from uavrl.agents.schema import MAX_JOINT_ACTIONS
+
 from .agent import DQNAgent
 from .builders import (
     Policies,
@@ -66,7 +67,6 @@ from .builders import (
 )
 from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
-from .settings import MAX_JOINT_ACTIONS, check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 __all__ = [
@@ -88,7 +88,6 @@ __all__ = [
     "build_policies",
     "build_q_network",
     "build_replay_buffer",
-    "check_settings",
     "exploration_schedule",
     "n_step_returns",
     "transition_keys",

@@ -14,8 +14,9 @@ from torch import nn
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.evaluation import episode_metrics, evaluate
+from uavrl.agents.schema import AGENTS
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
-from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
+from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, SEED_LIMIT
 from uavrl.envs.physics.channel import rates
 from uavrl.envs.physics.fading import fading_part
 from uavrl.envs.physics.grid import cells_or_away
@@ -27,11 +28,9 @@ from .builders import TeamNetwork, build_collector, build_policies, build_replay
 from .curriculum import Curriculum, uniform_sample
 from .demonstrations import Demonstrations
 from .migration import load_replay_buffer
-from .settings import check_settings
 from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
-_SEED_MODULUS = 2**63  # world seeds are int64: seeds past 2^19 wrap around
 
 
 class _Group:
@@ -84,7 +83,7 @@ class DQNAgent(Agent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
-        check_settings(env_cfg, a)
+        AGENTS["dqn"].validate(env_cfg, a)
         network = a.get("network", "team")  # run configs saved before: no setting
         if network != self.Network.name:
             raise ValueError(
@@ -118,10 +117,11 @@ class DQNAgent(Agent):
         )
 
     def _world_seed(self, iteration: int) -> int:
-        return (self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE) % _SEED_MODULUS
+        # world seeds are int64: seeds past 2^19 wrap around
+        return (self.seed * 2**44 + (iteration + 1) * _ITERATION_STRIDE) % SEED_LIMIT
 
     def _group_seed(self, iteration: int, group: int) -> int:
-        return (self._world_seed(iteration) + group * int(self.settings.worlds)) % _SEED_MODULUS
+        return (self._world_seed(iteration) + group * int(self.settings.worlds)) % SEED_LIMIT
 
     # the first group's parts: the per-size network's only group
     env = property(lambda self: self.groups[0].env)

@@ -34,6 +34,7 @@ from torchrl.envs.utils import step_mdp
 
 from uavrl.agents.baselines import OraclePolicy
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs.limits import SEED_LIMIT
 from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 
@@ -93,7 +94,7 @@ class Demonstrations:
         for g, group in enumerate(groups):
             cfg = group.cfg
             worlds = max(1, math.ceil(per_group / cfg.max_steps))
-            seed = (agent.seed * 2**44 + _DEMO_SEED_OFFSET + g * 2**20) % 2**63
+            seed = (agent.seed * 2**44 + _DEMO_SEED_OFFSET + g * 2**20) % SEED_LIMIT
             found = oracle_transitions(
                 cfg, worlds, seed, a.objective, float(a.gap_floor), int(a.get("n_step", 1)), float(a.gamma)
             )[:per_group]

@@ -28,7 +28,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.schema import network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
+from uavrl.agents.schema import AGENTS, network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 
 from .agent import DQNAgent, _Group

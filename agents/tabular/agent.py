@@ -7,9 +7,8 @@ import time
 import torch
 
 from uavrl.agents.base import Agent
-from uavrl.agents.schema import TabularSchema
+from uavrl.agents.schema import AGENTS, TabularSchema
 from uavrl.envs import ModelConfig
-from uavrl.envs.rules import refuse, rule_of
 
 from .learner import TeamQLearner
 from .tables import exact_q_table
@@ -33,8 +32,8 @@ class TabularAgent(Agent):
 
     def __init__(self, env_cfg: ModelConfig, cfg, device, seed: int):
         a = cfg.agent
+        AGENTS["tabular"].validate(env_cfg, a)  # a command has checked them: they do not run again
         self.method = a.get("method", TabularSchema.method)  # run directories saved before it existed
-        refuse("agent.method", self.method, rule_of(TabularSchema, "method"))
         if env_cfg.energy != "none":  # the learner alone takes batteries that outlast its episodes
             raise ValueError(
                 f"env.energy={env_cfg.energy!r} is invalid for agent=tabular: its evaluation plays missions until the "

@@ -9,7 +9,7 @@ import torch
 from uavrl.agents.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
 from uavrl.agents.schema import TabularSchema
 from uavrl.envs import ModelConfig
-from uavrl.envs.limits import table_bytes
+from uavrl.envs.limits import SEED_LIMIT, table_bytes
 from uavrl.envs.physics import streams
 from uavrl.envs.physics.rewards import team_reward
 from uavrl.envs.rules import refuse, rule_of
@@ -92,7 +92,7 @@ class TeamQLearner:
         block, offset = divmod(self.episode, _START_BLOCK)
         if block != self._start_block:
             worlds = _START_BLOCK * self.runs
-            first_world = (self.seed + block * worlds) % 2**63  # world seeds are int64
+            first_world = (self.seed + block * worlds) % SEED_LIMIT  # world seeds are int64
             start = World(self.cfg, worlds, self.device, first_world, memory_budget=self.memory_budget).reset()
             self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
                 _START_BLOCK, self.runs
