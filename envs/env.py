@@ -27,7 +27,7 @@ from .config import (
     make_config,
 )
 from .limits import DEFAULT_MEMORY_BUDGET
-from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
+from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device
 
 __all__ = ["SEED_LIMIT", "MaskedCategorical", "UAVSpectrumEnv", "check_seed", "resolve_device"]
 
@@ -172,7 +172,7 @@ class UAVSpectrumEnv(EnvBase):
         if not isinstance(diagnostics, bool):
             raise InvalidType("diagnostics", diagnostics, "give True or False")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
-        B = _check_batch_size(batch_size)
+        B = check_batch_size(batch_size)
         if not isinstance(agent_rewards, bool):
             raise InvalidType("agent_rewards", agent_rewards, "give True or False")
         check_memory(cfg, B, memory_budget)
