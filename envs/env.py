@@ -241,7 +241,7 @@ class UAVSpectrumEnv(EnvBase):
                 obs[key] = Unbounded((1,), dtype=torch.float32, device=self.device)
             for key in ("moves", "task_switches"):
                 obs[key] = Unbounded((1,), dtype=torch.long, device=self.device)
-            if self.world._state_base is not None:
+            if self.world.state_index_fits:
                 obs["state_index"] = Unbounded((1,), dtype=torch.long, device=self.device)
         if self.cfg.layout == "random":  # not a diagnostic: the oracle plans on each world's layout
             obs["nodes"] = Unbounded((4, 3), dtype=torch.float64, device=self.device)
@@ -332,7 +332,7 @@ class UAVSpectrumEnv(EnvBase):
             message = f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}"
             raise InvalidOption(ACTION_KEY, message=message)
         if hi == RETURN:  # "return" is a serving UAV's only: on the grid
-            away = (action == RETURN) & (self.world._s.cell >= self.cfg.num_cells)
+            away = (action == RETURN) & (self.world.state.cell >= self.cfg.num_cells)
             if away.any():
                 world, uav = (int(i) for i in away.nonzero()[0])
                 raise InvalidOption(
@@ -423,7 +423,7 @@ class UAVSpectrumEnv(EnvBase):
             raise InvalidOption(ACTION_KEY, message=message) from err
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        if not self.world._s.was_reset:
+        if not self.world.was_reset:
             raise RuntimeError(
                 "UAVSpectrumEnv.step() before every world was reset: call env.reset() first (a world never reset has "
                 "no UAV positions yet)"

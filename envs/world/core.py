@@ -193,6 +193,23 @@ class World(LayoutTables, Observations, SolverQueries):
 
     # -------------------------------------------------------------- state
     @property
+    def state(self) -> WorldsState:
+        """The worlds' state now (:class:`WorldsState`: ``cell``, ``task``, the batteries, the clocks, ...), the
+        World's own tensors: read them, never write them."""
+        return self._s
+
+    @property
+    def was_reset(self) -> bool:
+        """Whether every world has been reset at least once (then every UAV has a cell, and a step may follow)."""
+        return self._s.was_reset
+
+    @property
+    def state_index_fits(self) -> bool:
+        """Whether the tabular state index (the output ``state_index``) fits in int64 and is computed: a model
+        with one (:attr:`~uavrl.envs.config.ModelConfig.has_state_index`) and no energy model."""
+        return self._state_base is not None
+
+    @property
     def code(self) -> torch.Tensor:
         """``[B, N]`` ``2 * cell + task`` of every UAV now (:meth:`start_at` takes these)."""
         return torch.add(self._s.task, self._s.cell, alpha=2)
