@@ -4,7 +4,6 @@ docstring, :mod:`uavrl.envs.world`, tells the whole)."""
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import torch
 
@@ -12,7 +11,7 @@ from ..config import ModelConfig
 from ..limits import DEFAULT_MEMORY_BUDGET
 from ..physics import streams
 from ..physics.channel import rates, relay_contributions
-from ..physics.dynamics import UAV_STATE, Dynamics
+from ..physics.dynamics import UAV_STATE
 from ..physics.energy import ENERGY_STATE, energy_part
 from ..physics.fading import fading_part
 from ..physics.layouts import Layouts
@@ -20,7 +19,7 @@ from ..physics.rewards import TeamReward
 from .checks import check_batch_size, check_memory, check_seed, resolve_device
 from .observations import NODE_FEATURES, Observations
 from .queries import SolverQueries
-from .tables import _GRID_TABLES, _LAYOUT_TABLES, _SHARED_TABLES, LayoutTables, _SharedTables
+from .tables import GRID_TABLES, LAYOUT_TABLES, LayoutTables, SharedTables, shared_tables
 
 
 class WorldsState:
@@ -104,17 +103,13 @@ class World(LayoutTables, Observations, SolverQueries):
         # the parts (docs/architecture.md, The World's parts)
         self.layouts = Layouts(cfg, dev)
         self.fading = fading_part(cfg)
-        key = (dataclasses.replace(cfg, max_steps=1), str(dev))  # no table depends on the episode's length
-        self._shared_tables = shared = _SHARED_TABLES.get(key)
-        if shared is None:
-            self._shared_tables = shared = _SHARED_TABLES[key] = _SharedTables()
-            shared.dynamics = Dynamics(cfg, dev)
+        self._shared_tables = shared = shared_tables(cfg, dev)  # the grid's and a fixed layout's, of every such World
         self.dynamics = copy.copy(shared.dynamics)  # its own part (World.to moves it), the same tables
         self.dynamics.cfg = cfg
         self.reward = TeamReward(cfg, self.fading.random)
         self.energy = energy_part(cfg, dev)
         self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
-        self._share(_GRID_TABLES, self._build_geometry)
+        self._share(GRID_TABLES, self._build_geometry)
         # per-layout tables: one shared row for a fixed layout, one per world for random ones (zeros until a reset)
         C, f64 = cfg.num_cells, torch.float64
         fixed = self.layouts.fixed
@@ -155,7 +150,7 @@ class World(LayoutTables, Observations, SolverQueries):
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
         )
         if fixed is not None:
-            self._share(_LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
+            self._share(LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
         self.set_seed(seed)
 
     def to(self, device) -> World:
@@ -166,7 +161,7 @@ class World(LayoutTables, Observations, SolverQueries):
         """
         device = resolve_device(device)
         if device != self.device:  # the moved tables are this World's own from now on
-            self._shared_tables = _SharedTables()
+            self._shared_tables = SharedTables()
         for owner in (self, *self.parts.values()):
             for name, value in vars(owner).items():
                 if isinstance(value, torch.Tensor):

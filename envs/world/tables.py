@@ -9,18 +9,19 @@ in small tables built once per layout.
 
 from __future__ import annotations
 
+import dataclasses
 import weakref
 
 import torch
 
-from ..config import RELAYING
+from ..config import RELAYING, ModelConfig
 from ..physics.channel import direct_terms, link_gains, rates_from_sums, relay_contributions
 from ..physics.dynamics import Dynamics
 from ..physics.rewards import U_STAR_REWARDS
 from ..solvers.optimum import optimum as exact_optimum
 
 
-class _SharedTables(dict):
+class SharedTables(dict):
     """What every World of one model and device shares, read-only: the grid's tables and a fixed layout's by attribute
     name, ``dynamics`` (the dynamics part, whose tables are per cell) and ``optima`` (a fixed layout's exact optimum by
     method, once solved)."""
@@ -32,7 +33,7 @@ class _SharedTables(dict):
 
 
 # what World._build_geometry computes for the grid
-_GRID_TABLES = (
+GRID_TABLES = (
     "_cell_xyz",
     "_state_base",
     "_grid_scale",
@@ -44,7 +45,7 @@ _GRID_TABLES = (
 )
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
-_LAYOUT_TABLES = (
+LAYOUT_TABLES = (
     "_cell_contrib",
     "_code_obs",
     "_code_rate",
@@ -59,6 +60,17 @@ _LAYOUT_TABLES = (
 # the shared tables by (model, device), kept while a World holds them: the environments of one command (training,
 # evaluation) build the per-cell tables of a grid and of a fixed layout once
 _SHARED_TABLES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
+def shared_tables(cfg: ModelConfig, device: torch.device) -> SharedTables:
+    """The tables the Worlds of the model ``cfg`` on ``device`` share: another World's, or a new set holding the
+    dynamics part (its tables are per cell), kept here while a World holds it."""
+    key = (dataclasses.replace(cfg, max_steps=1), str(device))  # no table depends on the episode's length
+    shared = _SHARED_TABLES.get(key)
+    if shared is None:
+        shared = _SHARED_TABLES[key] = SharedTables()
+        shared.dynamics = Dynamics(cfg, device)
+    return shared
 
 
 class LayoutTables:
