@@ -27,7 +27,7 @@ from .config import (
     make_config,
 )
 from .limits import DEFAULT_MEMORY_BUDGET
-from .world import DIAGNOSTICS, SEED_LIMIT, World, _check_batch_size, check_memory, check_seed, resolve_device
+from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device
 
 __all__ = ["SEED_LIMIT", "MaskedCategorical", "UAVSpectrumEnv", "check_seed", "resolve_device"]
 
@@ -172,7 +172,7 @@ class UAVSpectrumEnv(EnvBase):
         if not isinstance(diagnostics, bool):
             raise InvalidType("diagnostics", diagnostics, "give True or False")
         cfg = config or make_config(preset, grid=grid, num_uavs=num_uavs, max_steps=max_steps, **overrides)
-        B = _check_batch_size(batch_size)
+        B = check_batch_size(batch_size)
         if not isinstance(agent_rewards, bool):
             raise InvalidType("agent_rewards", agent_rewards, "give True or False")
         check_memory(cfg, B, memory_budget)
@@ -241,7 +241,7 @@ class UAVSpectrumEnv(EnvBase):
                 obs[key] = Unbounded((1,), dtype=torch.float32, device=self.device)
             for key in ("moves", "task_switches"):
                 obs[key] = Unbounded((1,), dtype=torch.long, device=self.device)
-            if self.world._state_base is not None:
+            if self.world.state_index_fits:
                 obs["state_index"] = Unbounded((1,), dtype=torch.long, device=self.device)
         if self.cfg.layout == "random":  # not a diagnostic: the oracle plans on each world's layout
             obs["nodes"] = Unbounded((4, 3), dtype=torch.float64, device=self.device)
@@ -275,6 +275,8 @@ class UAVSpectrumEnv(EnvBase):
         self.world.set_seed(seed)
 
     # ---------------------------------------------------------- reset, step
+    # TorchRL's hooks: _reset and _step read and check their inputs (the action once per step, in _step); step,
+    # reset and rollout are overridden only for what EnvBase reads before any hook (see each one's docstring).
     def _outputs(self, out: dict) -> TensorDictBase:
         """The world's outputs as this env's TensorDict: the per-UAV keys in the group ``"agents"``, the per-world
         scalars ``[B, 1]``; with ``agent_rewards`` the team reward copied to every UAV."""
@@ -288,21 +290,53 @@ class UAVSpectrumEnv(EnvBase):
         if self.agent_rewards and "reward" in out:
             group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
         if self.num_actions > NUM_ACTIONS:  # "return" is refused where not valid: random actions (rollout) keep off it
-            self.input_spec["full_action_spec"]["agents", "action"].update_mask(group["action_mask"])
+            # the mask kept on the action spec, as TorchRL's PettingZoo wrapper keeps its groups' masks
+            self.input_spec["full_action_spec", "agents", "action"].update_mask(group["action_mask"])
         out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)
         return TensorDict._new_unsafe(out, batch_size=self.batch_size, device=dev)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        """TorchRL's hook of ``reset``: ``kwargs`` are ``reset``'s keywords, ``seed`` and those TorchRL passes itself
+        (:data:`TORCHRL_RESET_KEYWORDS`), any other refused in one line; ``tensordict``'s ``"_reset"`` mask, checked,
+        names the worlds to reset (default all)."""
+        unread = sorted(set(kwargs) - set(TORCHRL_RESET_KEYWORDS))
+        if unread:
+            name = unread[0]
+            message = (
+                f"reset() got {name}={kwargs[name]!r}: UAVSpectrumEnv.reset reads a tensordict (its '_reset' mask) "
+                "and seed, nothing else"
+            )
+            raise InvalidOption(name, message=message)
+        if "seed" in kwargs:
+            self.set_seed(check_seed(kwargs["seed"]))
         B, dev = self.num_worlds, self.device
         mask = tensordict.get("_reset", None) if tensordict is not None else None
+        if mask is not None:
+            self._check_reset_mask(mask)
         worlds = None if mask is None else mask.reshape(B).to(dev).nonzero().squeeze(-1)
         out = self.world.reset(worlds)
         done = torch.zeros(B, 1, dtype=torch.bool, device=dev)
         out.update({"done": done, "terminated": done.clone(), "truncated": done.clone()})
         return self._outputs(out)
 
+    def _check_reset_mask(self, mask: torch.Tensor) -> None:
+        """A one-line error for a ``"_reset"`` mask that is not ``[B]`` or ``[B, 1]`` booleans on the CPU or a CUDA
+        device (it is moved to the env's)."""
+        B, shapes = self.num_worlds, ((self.num_worlds,), (self.num_worlds, 1))
+        wrong = [
+            f"shape {tuple(mask.shape)}" if tuple(mask.shape) not in shapes else "",
+            f"dtype {mask.dtype}" if mask.dtype != torch.bool else "",
+            f"device {mask.device}" if mask.device.type not in ("cpu", "cuda") else "",  # moved to the env's
+        ]
+        if any(wrong):
+            raise InvalidOption(
+                "_reset",
+                message=f"'_reset' has {', '.join(w for w in wrong if w)}: expected [{B}] or [{B}, 1] booleans "
+                "(one per world, True to reset it) on the CPU or a CUDA device",
+            )
+
     def _check_action_tensor(self, action) -> None:
-        """The action's type, shape, dtype and device, checked before TorchRL reads it (a one-line error of
+        """The action's type, shape, dtype and device, checked before the World reads it (a one-line error of
         :class:`~uavrl.envs.InvalidOption` naming ``('agents', 'action')``)."""
         key, shape = ACTION_KEY, (self.num_worlds, self.num_uavs)
         if not isinstance(action, torch.Tensor):
@@ -324,15 +358,17 @@ class UAVSpectrumEnv(EnvBase):
                 f"{self.device})",
             )
 
-    def _check_action(self, action: torch.Tensor):
-        self._check_action_tensor(action)
+    def _check_action_values(self, action: torch.Tensor) -> None:
+        """The action's values: each one of the UAV's actions, and "return" only for a UAV in service (on the grid:
+        what its action_mask allows)."""
         lo, hi = torch.aminmax(action)
         if lo < 0 or hi >= self.num_actions:
             bad = (lo if lo < 0 else hi).item()
             message = f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}"
             raise InvalidOption(ACTION_KEY, message=message)
         if hi == RETURN:  # "return" is a serving UAV's only: on the grid
-            away = (action == RETURN) & (self.world._s.cell >= self.cfg.num_cells)
+            # the World's cells, not the spec's mask: Categorical.to(device) drops the mask (env.to before a step)
+            away = (action == RETURN) & (self.world.state.cell >= self.cfg.num_cells)
             if away.any():
                 world, uav = (int(i) for i in away.nonzero()[0])
                 raise InvalidOption(
@@ -341,9 +377,40 @@ class UAVSpectrumEnv(EnvBase):
                     "not serve: return is valid only for a UAV in service (its action_mask)",
                 )
 
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """TorchRL's hook of ``step``: the action, checked once here (one-line errors of
+        :class:`~uavrl.envs.InvalidOption` for a missing action, or one of the wrong type, shape, dtype, device or
+        values), is every world's next step."""
+        action = tensordict.get(("agents", "action"), None)
+        if action is None:
+            raise InvalidOption(
+                ACTION_KEY,
+                message=f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
+                f"{self.num_uavs}] integers {action_names(self.num_actions)}",
+            )
+        self._check_action_tensor(action)
+        if not self.world.was_reset:
+            raise RuntimeError(
+                "UAVSpectrumEnv.step() before every world was reset: call env.reset() first (a world never reset has "
+                "no UAV positions yet)"
+            )
+        self._check_action_values(action)
+        out, reward, truncated = self.world.step(action)
+        terminated, truncated = self.world.terminated.unsqueeze(-1), truncated.unsqueeze(-1)
+        out["reward"] = reward.float().unsqueeze(-1)
+        out["done"] = terminated | truncated
+        out["terminated"] = terminated
+        out["truncated"] = truncated
+        return self._outputs(out)
+
     def step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """TorchRL's ``step``; one-line errors of :class:`~uavrl.envs.InvalidOption` for a tensordict or an action
-        of the wrong type, shape, dtype or device, before TorchRL reads them."""
+        """TorchRL's ``step``, after a one-line error of :class:`~uavrl.envs.InvalidOption` for an input that is not a
+        TensorDict of batch size ``[B]``.
+
+        Overridden for that alone: ``EnvBase.step``'s first line, ``self._assert_tensordict_shape(tensordict)``, reads
+        ``tensordict.batch_size`` before any hook (an ``AttributeError`` for a dict, TorchRL's ``RuntimeError`` for
+        another batch size); the action is checked in :meth:`_step`.
+        """
         if not isinstance(tensordict, TensorDictBase):
             raise InvalidType(
                 "tensordict",
@@ -356,58 +423,34 @@ class UAVSpectrumEnv(EnvBase):
                 message=f"step() got a TensorDict of batch size {list(tensordict.batch_size)}: this env has "
                 f"[B={self.num_worlds}] worlds, so ('agents', 'action') is [{self.num_worlds}, {self.num_uavs}]",
             )
-        if tensordict.get(("agents", "action"), None) is None:
-            raise InvalidOption(
-                ACTION_KEY,
-                message=f"step() got no ('agents', 'action'): write every UAV's action there, [{self.num_worlds}, "
-                f"{self.num_uavs}] integers {action_names(self.num_actions)}",
-            )
-        self._check_action_tensor(tensordict.get(("agents", "action")))
         return super().step(tensordict)
 
     def reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        """TorchRL's ``reset`` (``tensordict``, ``kwargs``: as TorchRL's); a one-line error for a ``"_reset"`` mask
-        that is not ``[B]`` or ``[B, 1]`` booleans (on the CPU or a CUDA device: it is moved to the env's).
+        """TorchRL's ``reset`` (``tensordict``, ``kwargs``: as TorchRL's, read by :meth:`_reset`), after a one-line
+        error for a ``tensordict`` that is neither ``None`` nor a TensorDict.
 
-        ``seed`` (a keyword) seeds the worlds first, as :meth:`set_seed` does (world ``i`` draws from ``seed + i``),
-        so ``reset(seed=s)`` starts the same worlds as ``set_seed(s)`` then ``reset()``; any other keyword that
-        TorchRL does not pass itself is refused in one line (nothing given is ignored).
+        Overridden for that alone: ``EnvBase.reset`` reads ``tensordict.batch_size``
+        (``self._assert_tensordict_shape``) before any hook.  ``seed`` (a keyword) seeds the worlds first, as
+        :meth:`set_seed` does (world ``i`` draws from ``seed + i``), so ``reset(seed=s)`` starts the same worlds as
+        ``set_seed(s)`` then ``reset()``; any other keyword that TorchRL does not pass itself is refused in one line;
+        so is a ``"_reset"`` mask that is not ``[B]`` or ``[B, 1]`` booleans.
         """
-        unread = sorted(set(kwargs) - set(TORCHRL_RESET_KEYWORDS))
-        if unread:
-            name = unread[0]
-            message = (
-                f"reset() got {name}={kwargs[name]!r}: UAVSpectrumEnv.reset reads a tensordict (its '_reset' mask) "
-                "and seed, nothing else"
-            )
-            raise InvalidOption(name, message=message)
         if tensordict is not None and not isinstance(tensordict, TensorDictBase):
             raise InvalidType(
                 "tensordict",
                 message=f"reset() got a {type(tensordict).__name__}: give None or a "
                 "TensorDict (with a '_reset' mask of the worlds to reset)",
             )
-        if "seed" in kwargs:
-            self.set_seed(check_seed(kwargs.pop("seed")))
-        mask = None if tensordict is None else tensordict.get("_reset", None)
-        if mask is not None:
-            B, shapes = self.num_worlds, ((self.num_worlds,), (self.num_worlds, 1))
-            wrong = [
-                f"shape {tuple(mask.shape)}" if tuple(mask.shape) not in shapes else "",
-                f"dtype {mask.dtype}" if mask.dtype != torch.bool else "",
-                f"device {mask.device}" if mask.device.type not in ("cpu", "cuda") else "",  # moved to the env's
-            ]
-            if any(wrong):
-                raise InvalidOption(
-                    "_reset",
-                    message=f"'_reset' has {', '.join(w for w in wrong if w)}: expected [{B}] or [{B}, 1] booleans "
-                    "(one per world, True to reset it) on the CPU or a CUDA device",
-                )
         return super().reset(tensordict, **kwargs)
 
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
         """TorchRL's ``rollout`` (``args``, ``kwargs``: as TorchRL's, the policy first); one-line errors for
-        ``max_steps < 1`` and for a policy's action not ``[B, N]``."""
+        ``max_steps < 1`` and for a policy's action not ``[B, N]``.
+
+        Overridden for those alone: ``EnvBase.rollout`` hands ``max_steps`` to no hook (it runs ``range(max_steps)``
+        steps after a reset, and stacks no step at all for 0), and the policy writes its action into the ``"agents"``
+        group inside the rollout's loop, where tensordict refuses a wrong shape before ``step`` is called.
+        """
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
             message = f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1"
             raise (InvalidOption if isinstance(max_steps, numbers.Real) else InvalidType)("max_steps", message=message)
@@ -421,22 +464,6 @@ class UAVSpectrumEnv(EnvBase):
             refusal = str(err).splitlines()[0]
             message = f"the policy wrote ('agents', 'action') not {expected}: {refusal}"
             raise InvalidOption(ACTION_KEY, message=message) from err
-
-    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        if not self.world._s.was_reset:
-            raise RuntimeError(
-                "UAVSpectrumEnv.step() before every world was reset: call env.reset() first (a world never reset has "
-                "no UAV positions yet)"
-            )
-        action = tensordict.get(("agents", "action"))
-        self._check_action(action)
-        out, reward, truncated = self.world.step(action)
-        terminated, truncated = self.world.terminated.unsqueeze(-1), truncated.unsqueeze(-1)
-        out["reward"] = reward.float().unsqueeze(-1)
-        out["done"] = terminated | truncated
-        out["terminated"] = terminated
-        out["truncated"] = truncated
-        return self._outputs(out)
 
     render_mode = "rgb_array"  # frames come back as arrays (VMAS's and Gymnasium's name); no window opens
 

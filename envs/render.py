@@ -358,8 +358,8 @@ class WorldRenderer:
     def frame(self, index: int = 0, focus: int | None = None) -> np.ndarray:
         """The ``[H, W, 3]`` uint8 picture of world ``index`` now; ``focus``: the UAV to ring."""
         world, cfg = self.world, self.world.cfg
-        state = world._s
-        nodes_t = world._nodes[index if len(world._nodes) > 1 else 0]
+        state = world.state
+        nodes_t = world.nodes[index]
         nodes = nodes_t[:, :2].cpu().numpy()
         if nodes.tobytes() != self._fitted:
             self._fit(nodes)
@@ -496,7 +496,7 @@ def render(world, mode: str = "rgb_array", env_index=0, agent_index_focus: int |
         raise ValueError(
             f"render(agent_index_focus={agent_index_focus!r}) is invalid: give a UAV 0..{N - 1}, or None for none"
         )
-    if not world._s.was_reset:
+    if not world.was_reset:
         raise RuntimeError("render() before any reset: call env.reset() first (the worlds have no UAVs yet)")
     renderer = _RENDERERS.get(world)
     if renderer is None:

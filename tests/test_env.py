@@ -862,7 +862,7 @@ def test_without_diagnostics_the_env_returns_the_same_steps_without_those_keys(o
     policy = RandomPolicy(seed=0)
     lean_steps = lean.rollout(12, policy, break_when_any_done=False)
     full_steps = full.rollout(12, RandomPolicy(seed=0), break_when_any_done=False)
-    diagnostics = {*DIAGNOSTICS} - {"state_index"} if lean.world._state_base is None else {*DIAGNOSTICS}
+    diagnostics = {*DIAGNOSTICS} - {"state_index"} if not lean.world.state_index_fits else {*DIAGNOSTICS}
     assert {*full_steps["next"].keys()} - {*lean_steps["next"].keys()} == diagnostics
     for key in lean_steps.keys(include_nested=True, leaves_only=True):
         assert torch.equal(lean_steps[key], full_steps[key]), key
@@ -883,3 +883,28 @@ def test_log_gap_reward_is_the_change_of_the_potential_of_the_mean_channel_utili
     tasks = torch.cat([td["tasks"][:, :1], td["next", "tasks"]], 1)
     potential = log_gap_potential(env.utility(positions, tasks)[2], u_star[:, None])
     torch.testing.assert_close(td["next", "reward"][..., 0], potential.diff(dim=1).float())
+
+
+def test_the_env_checks_each_action_once_in_its_step_hook(monkeypatch):
+    """The action is checked once per step, in ``_step`` (TorchRL's hook), whether through ``step`` or ``rollout``;
+    ``step``, ``reset`` and ``rollout`` refuse only what ``EnvBase`` reads before any hook."""
+    env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), max_steps=10)
+    checked = []
+    check = env._check_action_tensor
+    monkeypatch.setattr(env, "_check_action_tensor", lambda action: checked.append(1) or check(action))
+    env.rollout(4, break_when_any_done=False)
+    assert len(checked) == 4
+    env.step(env.rand_action(env.reset()))
+    assert len(checked) == 5
+
+
+def test_the_world_shows_its_state_through_public_properties():
+    """``was_reset``, ``state`` and ``state_index_fits``: what the env, the renderer and the mission solver read."""
+    env = UAVSpectrumEnv(batch_size=2, grid=(3, 3), max_steps=5)
+    world = env.world
+    assert not world.was_reset and world.state_index_fits
+    td = env.reset()
+    assert world.was_reset and torch.equal(world.state.cell, world.code >> 1)
+    assert torch.equal(world.state.task, td["tasks"])
+    energy = UAVSpectrumEnv(batch_size=2, grid=(3, 3), energy="rotary_wing", base=(-1, 0))
+    assert not energy.world.state_index_fits and "state_index" not in energy.reset().keys()

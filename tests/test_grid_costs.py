@@ -14,13 +14,13 @@ from scipy import stats
 
 from uavrl.agents.dqn.networks import ValidGreedy
 from uavrl.envs import make_config
-from uavrl.envs import world as world_module
 from uavrl.envs.limits import KEYED_PLACEMENT_CELLS, world_bytes
 from uavrl.envs.physics import streams
 from uavrl.envs.physics.dynamics import Dynamics
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
 from uavrl.envs.solvers import bounds, optimum
-from uavrl.envs.world import World
+from uavrl.envs.world import World, WorldsState
+from uavrl.envs.world import tables as world_tables
 
 ONE = torch.ones(1, dtype=torch.long)
 
@@ -148,7 +148,7 @@ def test_worlds_of_one_model_share_its_tables_and_they_are_the_ones_built_alone(
     cfg = make_config("paper", grid=(7, 5), num_uavs=3)
     first = World(cfg, batch_size=4)
     second = World(cfg.replace(max_steps=9), batch_size=2)  # the episode length changes no table
-    world_module._SHARED_TABLES.clear()
+    world_tables._SHARED_TABLES.clear()
     alone = World(cfg, batch_size=3)
     for name in ("_cell_contrib", "_code_obs", "_code_rate", "_node_obs", "_direct"):
         assert getattr(first, name) is getattr(second, name)
@@ -216,7 +216,7 @@ def test_the_worlds_memory_estimate_is_flat_in_the_grid_past_the_keyed_placement
     world = World(cfg, batch_size=64)
     state = sum(
         getattr(world._s, name).nbytes
-        for name in world_module._WorldsState.__slots__
+        for name in WorldsState.__slots__
         if isinstance(getattr(world._s, name), torch.Tensor)
     )
     assert state / 64 <= per_world[0]

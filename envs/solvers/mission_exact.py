@@ -122,7 +122,7 @@ def check_world(world) -> None:
         )
     if world.num_uavs > MAX_UAVS:
         raise NotCovered(f"num_uavs={world.num_uavs} is invalid for the exact mission solver: it takes 1 or 2 UAVs")
-    if not bool(world._s.started.all()):
+    if not bool(world.state.started.all()):
         raise RuntimeError("the exact mission solver starts from the World's state: call world.reset() first")
 
 
@@ -316,7 +316,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
     rounding = 0.0 if exact_arithmetic else 2.0**-52 * max(float(world.battery.max()), world.energy.capacity)
     per_world = world.layouts.fixed is None
     joint = decode_joint_actions(N, dev)
-    s = world._s
+    s = world.state
     _, start_key = _canonical({"cell": s.cell, "task": s.task, "battery": s.battery, "status": s.status}, quantum, away)
     levels = start_key[start_key >= 0].div(codes, rounding_mode="floor").unique()
     packed, start_index = _pack(start_key, _layout_rows(world), levels, codes).unique(return_inverse=True)

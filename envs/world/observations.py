@@ -1,0 +1,152 @@
+"""What the World shows an agent: each UAV's observation and each world's state, assembled from the per-code
+tables of :mod:`.tables` (:class:`Observations`, a part of :class:`~uavrl.envs.world.World`), and the outputs of a
+reset or a step.
+
+A UAV's observation is its own (x, y, task), the contributions at its cell and the 4 next cells, then the others'
+(x, y, task) (under an energy model then the batteries and service flags); a world's state is every UAV's (x, y, task)
+and contributions at its cell, then the 4 nodes' positions (:data:`NODE_FEATURES` entries).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..physics.channel import link_gains, relay_contributions
+
+NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
+# outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
+DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index")
+
+
+def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+    """``[*, N, F + 12]``: each UAV's observation followed by its world's node positions (the last 12 of ``state``).
+
+    The nodes are the same for every UAV of a world, so the observation leaves
+    them out; a network that wants them beside each UAV's features builds this input.
+    """
+    nodes = state[..., None, -NODE_FEATURES:]
+    return torch.cat([observation, nodes.expand(*observation.shape[:-1], NODE_FEATURES)], -1)
+
+
+class Observations:
+    """The World's observation assembly (a mixin of :class:`~uavrl.envs.world.World`): it reads the World's parts
+    (``dynamics``, ``energy``), its per-code tables (:class:`~.tables.LayoutTables`) and its state."""
+
+    @property
+    def observation_size(self) -> int:
+        """Per-UAV features: own (x, y, task), contributions at the own and 4 next cells, the others' (x, y, task);
+        under an energy model then its battery (a fraction of the capacity) and service flag, and the others', in
+        the same order as their (x, y, task).
+
+        The 4 nodes' positions are the same for every UAV of a world: they are the last
+        :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
+        N = self.num_uavs
+        return 13 + 3 * (N - 1) + (0 if self.energy is None else 2 * N)
+
+    @property
+    def state_size(self) -> int:
+        """Per UAV (x, y, task) and its contributions at its cell (under an energy model then per UAV its battery and
+        service flag), then the 4 nodes' (x, y, z)."""
+        return (5 if self.energy is None else 7) * self.num_uavs + NODE_FEATURES  # (x, y, task, 2 contributions)
+
+    def _assemble(
+        self, code: torch.Tensor, energy: torch.Tensor | None = None, tables: tuple | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
+        layout); under an energy model ``energy`` ``[W, N, 2]`` their features (default: the worlds' batteries now);
+        ``tables`` ``(code_obs, node_obs)`` of their own layouts (:meth:`_observation_tables`; default: the
+        worlds')."""
+        W, N = code.shape
+        code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables
+        own = self._code_rows(code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
+        parts = [own]
+        if N == 2:  # the other UAV's (x, y, task)
+            parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
+        elif N > 2:
+            # the others' (x, y, task), for UAV i in the order i+1, ..., i+N-1 (mod N): a window over the codes twice
+            xyt = self._code_xyt.index_select(0, torch.cat([code, code], 1).view(-1))  # [2 W N, 3]
+            parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
+        per_uav = [own[..., :5].reshape(W, 5 * N)]
+        if self.energy is not None:  # then each UAV's battery and service flag: its own, the others' in that order
+            energy = self.energy.features(self._s) if energy is None else energy  # [W, N, 2]
+            parts.append(energy)
+            if N == 2:
+                parts.append(energy.flip(1))
+            elif N > 2:
+                parts.append(torch.cat([energy, energy], 1).as_strided((W, N, 2 * (N - 1)), (4 * N, 2, 1), 2))
+            per_uav.append(energy.reshape(W, 2 * N))
+        observation = torch.cat(parts, -1) if len(parts) > 1 else own
+        state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
+        return observation, state
+
+    def energy_features(self, state: torch.Tensor) -> torch.Tensor | None:
+        """``[..., N, 2]`` each UAV's battery and service flag as the ``state`` ``[..., S]`` shows them (what
+        :meth:`configurations` takes); ``None`` without an energy model."""
+        N = self.num_uavs
+        return None if self.energy is None else state[..., 5 * N : 7 * N].unflatten(-1, (N, 2))
+
+    def configurations(
+        self, code: torch.Tensor, energy: torch.Tensor | None = None, nodes: torch.Tensor | None = None
+    ) -> dict:
+        """What an agent acts and learns from (``observation``, ``action_mask``, ``state``, ``positions``, ``tasks``)
+        of ``W`` configurations given by their codes ``[W, N]`` (``2 cell + task``), under an energy model their
+        features ``[W, N, 2]`` (:meth:`energy_features`), with ``layout=random`` their layouts' nodes ``[W, 4, 3]``:
+        what :meth:`reset` and :meth:`step` returned for them, bit for bit.  For a replay buffer that keeps
+        configurations rather than observations.
+
+        Example:
+            >>> from uavrl.envs import World, make_config
+            >>> world = World(make_config("paper", grid=(4, 4), num_uavs=3), batch_size=2)
+            >>> out = world.reset()
+            >>> again = world.configurations(world.code)
+            >>> all(torch.equal(out[key], again[key]) for key in again)
+            True
+        """
+        if (self.energy is None) != (energy is None) or (self.layouts.fixed is None) == (nodes is None):
+            raise ValueError(
+                "World.configurations takes energy features exactly under an energy model (env.energy other than "
+                "none) and nodes exactly with env.layout=random"
+            )
+        tables = None
+        if nodes is not None:
+            tables = self._observation_tables(
+                relay_contributions(link_gains(self._cell_xyz, nodes, self.cfg), self.cfg), nodes
+            )
+        observation, state = self._assemble(code, energy, tables)
+        return self._outputs(observation, state, code >> 1, code & 1)
+
+    def _outputs(self, observation, state, cell: torch.Tensor, task: torch.Tensor) -> dict:
+        """The outputs an agent acts from, of configurations ``cell``, ``task`` ``[W, N]`` (their observation and
+        state assembled)."""
+        W, N = cell.shape
+        return {
+            "observation": observation,
+            "action_mask": self.dynamics.masks(cell),
+            "state": state,
+            "positions": self._cell_xy.index_select(0, cell.view(-1)).view(W, N, 2),
+            "tasks": task,
+        }
+
+    def _observe(self, code: torch.Tensor, cell: torch.Tensor, task: torch.Tensor, moves, switches) -> dict:
+        """The outputs of the configurations ``cell``, ``task`` ``[B, N]`` (``code`` their codes) after a step;
+        ``moves()`` and ``switches()`` count the step's moves and task switches ``[B]`` (called for the diagnostics
+        only)."""
+        B, N = self.num_worlds, self.num_uavs
+        if self._pair_obs is not None:
+            pair = torch.add(code.flip(-1), code, alpha=2 * self.cfg.num_cells)  # [B, 2]: rows (a, b) and (b, a)
+            observation = self._pair_obs.index_select(0, pair.view(-1)).view(B, N, -1)
+            state = self._pair_state.index_select(0, pair[:, 0])
+        else:
+            observation, state = self._assemble(code)
+        out = self._outputs(observation, state, cell, task.clone())  # the state's own tensor stays the World's
+        if not self.diagnostics:
+            return out
+        r = self._s.r.float()
+        out.update(r_pu=r[:, 0], r_se=r[:, 1], utility=r[:, 0] + r[:, 1], moves=moves(), task_switches=switches())
+        if self._state_base is not None:
+            digits = code if self.cfg.state_includes_tasks else cell
+            index = digits[:, N - 1]
+            for i in range(N - 2, -1, -1):  # Horner: d_0 + base (d_1 + base (...)); sums over tiny dims are slow
+                index = torch.add(digits[:, i], index, alpha=self._state_base)
+            out["state_index"] = index.clone() if N == 1 else index
+        return out
