@@ -14,21 +14,11 @@ Example:
 
 from __future__ import annotations
 
-NODE_FEATURES = 12  # uavrl.envs.world.NODE_FEATURES: PT, PR, S, E as (x, y, z)
-OWN_FEATURES = 13  # uavrl.agents.dqn.setnet.OWN_FEATURES
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, observation_size, state_size
+
 PAIR_FEATURES = 3  # uavrl.agents.dqn.setnet.PAIR_FEATURES
 TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
 FLOAT = 4  # bytes of a float32
-
-
-def observation_size(num_uavs: int, energy: bool) -> int:
-    """Per-UAV observation entries (:attr:`uavrl.envs.world.World.observation_size`)."""
-    return 13 + 3 * (num_uavs - 1) + (2 * num_uavs if energy else 0)
-
-
-def state_size(num_uavs: int, energy: bool) -> int:
-    """Entries of a world's state (:attr:`uavrl.envs.world.World.state_size`)."""
-    return (7 if energy else 5) * num_uavs + NODE_FEATURES
 
 
 def _linear(inputs: int, outputs: int, bias: bool = True) -> int:

@@ -35,9 +35,9 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs.config import InvalidOption, ModelConfig
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, observation_size
 from uavrl.envs.physics.channel import fixed_layout
 from uavrl.envs.physics.grid import on_grid
-from uavrl.envs.world import NODE_FEATURES
 
 ADVICE = (
     "act in an environment of the run's env_config (UAVSpectrumEnv(config=env_config), env_config from "
@@ -46,7 +46,6 @@ ADVICE = (
 FULL_CHECKS = (
     8  # tensordicts of one batch shape checked in full at most, while all UAVs stay in the first row or column
 )
-_OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours (envs/world.py)
 
 
 class RunEnvironment:
@@ -63,9 +62,7 @@ class RunEnvironment:
         # under an energy model a UAV out of service is shown at the base, off the grid, and every observation ends
         # with the UAVs' batteries and service flags
         self.base = None if cfg.energy == "none" else torch.tensor(cfg.base)
-        self.observation_size = (
-            _OWN_FEATURES + 3 * (self.num_uavs - 1) + (0 if self.base is None else 2 * self.num_uavs)
-        )
+        self.observation_size = observation_size(self.num_uavs, self.base is not None)
         self._checked_shape = None  # the batch shape whose tensordicts were checked in full
         self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
 
@@ -138,7 +135,7 @@ class RunEnvironment:
             expected = (positions.double() / self.xy_scale).to(observation.dtype)
             if not torch.allclose(observation[..., :2], expected, atol=1e-5):
                 raise self._refuse("the tensordict's observed positions are scaled for another grid")
-            leaves = observation[..., 5:_OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
+            leaves = observation[..., 5:OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
             # the moves up, down, left, right that leave the grid, from the positions (no per-cell table)
             edges = torch.stack([y == 0, y == L2 - 1, x == 0, x == L1 - 1], -1)
             if not torch.equal(leaves[serving], edges[serving]):

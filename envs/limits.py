@@ -32,6 +32,8 @@ import sys
 from .physics import radio
 
 NODE_NAMES = ("PT", "PR", "S", "E")
+OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours
+NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
 SEED_LIMIT = 2**63  # seeds are int64: a seed (a run's, a world's) is a whole number in [0, 2^63), wrapped below it
 _LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
 _LOG_MIN = math.log10(sys.float_info.min)  # its smallest normal number, 2.2e-308
@@ -424,6 +426,24 @@ def row_itemsize(cfg) -> int:
     return 4 if cfg.num_states < 2**31 else 8
 
 
+def observation_size(num_uavs: int, energy: bool) -> int:
+    """Per-UAV observation entries of a World of ``num_uavs`` UAVs (spares included): its own (x, y, task) and
+    contributions at its own and 4 next cells, the others' (x, y, task); under an energy model (``energy``) then its
+    battery and service flag, and the others'.  The World's, the networks' and the costs' one formula.
+
+    Example:
+        >>> observation_size(2, energy=False), observation_size(2, energy=True)
+        (16, 20)
+    """
+    return OWN_FEATURES + 3 * (num_uavs - 1) + (2 * num_uavs if energy else 0)
+
+
+def state_size(num_uavs: int, energy: bool) -> int:
+    """Entries of a world's state: per UAV (x, y, task) and its contributions at its cell (under an energy model then
+    its battery and service flag), then the 4 nodes' (x, y, z)."""
+    return (7 if energy else 5) * num_uavs + NODE_FEATURES
+
+
 def world_bytes(cfg, batch_size: int) -> int:
     """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
     world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).
@@ -456,10 +476,9 @@ def placement_bytes(cfg) -> int:
 
 def frame_bytes(cfg) -> int:
     """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key."""
-    N = cfg.num_uavs
-    per_uav = 3 if cfg.energy == "none" else 5  # (x, y, task), and the battery and service flag of an energy model
-    observation = 4 * N * (10 + per_uav * N)
-    per_step = observation + 4 * ((per_uav + 2) * N + 12) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, ...
+    N, energy = cfg.num_uavs, cfg.energy != "none"
+    observation = 4 * N * observation_size(N, energy)
+    per_step = observation + 4 * state_size(N, energy) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, ...
     return 2 * per_step
 
 

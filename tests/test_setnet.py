@@ -74,7 +74,7 @@ def test_the_network_reads_the_batteries():
     net = SetQNet(SetQCore(cfg.num_actions, True, hidden=16, heads=2, depth=1), cfg.grid)
     td = UAVSpectrumEnv(batch_size=1, config=cfg).reset()
     inputs = [td[k].clone() for k in Q_INPUTS]
-    start = 13 + 3 * 2  # own (13), the others' (x, y, task), then its battery (envs/world.py)
+    start = 13 + 3 * 2  # own (13), the others' (x, y, task), then its battery (envs/world/observations.py)
     drained = inputs[0].clone()
     drained[..., start] = 0.1
     assert not torch.allclose(net(*inputs), net(drained, *inputs[1:]))

@@ -29,13 +29,12 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
-from uavrl.envs import NODE_FEATURES
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
 
 from .loss import discount
 from .networks import Q_INPUTS, ValidGreedy
 
-OWN_FEATURES = 13  # (x, y, task) and the contributions at the own cell and its 4 neighbours (envs/world.py)
 PAIR_FEATURES = 3  # another UAV's (dx, dy) by the grid's span and exp(-its distance in cells)
 MIXERS = ("vdn", "mean")  # the size-free team values: the sum or the mean of the UAVs' chosen values
 
@@ -124,7 +123,9 @@ class SetQNet(nn.Module):
         towards = (nodes[..., None, :, :2] * self.size - xy[..., None, :]) / self.span  # [*, N, 4, 2]
         heights = nodes[..., None, :, 2:].expand(*towards.shape[:-1], 1)
         parts = [observation[..., :OWN_FEATURES], torch.cat([towards, heights], -1).flatten(-2), held.to(xy.dtype)]
-        if self.core.energy:  # its battery and service flag follow the others' (x, y, task) (envs/world.py)
+        if (
+            self.core.energy
+        ):  # its battery and service flag follow the others' (x, y, task) (envs/world/observations.py)
             start = OWN_FEATURES + 3 * (N - 1)
             parts.append(observation[..., start : start + 2])
         offsets = xy[..., None, :, :] - xy[..., :, None, :]  # [*, N, N, 2]: row i, UAV j relative to UAV i

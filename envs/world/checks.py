@@ -8,9 +8,7 @@ import numbers
 import torch
 
 from ..config import InvalidOption, InvalidType, ModelConfig
-from ..limits import gib, world_bytes
-
-SEED_LIMIT = 2**63  # world seeds are int64
+from ..limits import SEED_LIMIT, gib, world_bytes
 
 
 def resolve_device(device) -> torch.device:

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import torch
 
+from ..limits import NODE_FEATURES, observation_size, state_size
 from ..physics.channel import link_gains, relay_contributions
 
-NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
 # outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
 DIAGNOSTICS = ("r_pu", "r_se", "utility", "moves", "task_switches", "state_index")
 
@@ -40,14 +40,13 @@ class Observations:
 
         The 4 nodes' positions are the same for every UAV of a world: they are the last
         :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
-        N = self.num_uavs
-        return 13 + 3 * (N - 1) + (0 if self.energy is None else 2 * N)
+        return observation_size(self.num_uavs, self.energy is not None)
 
     @property
     def state_size(self) -> int:
         """Per UAV (x, y, task) and its contributions at its cell (under an energy model then per UAV its battery and
         service flag), then the 4 nodes' (x, y, z)."""
-        return (5 if self.energy is None else 7) * self.num_uavs + NODE_FEATURES  # (x, y, task, 2 contributions)
+        return state_size(self.num_uavs, self.energy is not None)
 
     def _assemble(
         self, code: torch.Tensor, energy: torch.Tensor | None = None, tables: tuple | None = None
