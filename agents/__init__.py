@@ -16,7 +16,7 @@ per-size :class:`~uavrl.agents.dqn.DQNAgent`.
 
 A new agent: a subclass of ``Agent`` in its own module, one ``AgentConfig``
 entry (its schema: defaults and rules) in :mod:`uavrl.agents.schema`, a config
-``configs/agent/<name>.yaml``; ``tests/test_agents.py`` then runs the contract
+``configs/agent/<name>.yaml``; ``tests/agents/test_agents.py`` then runs the contract
 test over it (docs/architecture.md, Adding an agent).
 """
 

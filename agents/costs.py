@@ -4,7 +4,8 @@ gradient step's memory and arithmetic (standard library only, so the commands ch
 The counts follow the networks layer by layer: :class:`~uavrl.agents.dqn.networks.TeamQNet` (a centralised
 ``MultiAgentMLP`` torso and a per-UAV or joint head), the QMIX mixer :class:`~uavrl.agents.dqn.loss.QMix`
 (``agent.mixer=qmix``, TorchRL ``QMixer``'s layers) and
-:class:`~uavrl.agents.dqn.setnet.SetQCore` (``agent.network=set``); ``tests/test_costs.py`` holds each equal to the
+:class:`~uavrl.agents.dqn.setnet.SetQCore` (``agent.network=set``); ``tests/commands/test_costs.py`` holds each equal
+to the
 parameters of the network built.  Arithmetic is counted in multiply-adds of the layers, memory in float32 values.
 
 Example:

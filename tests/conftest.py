@@ -69,7 +69,7 @@ def interrupt_at(monkeypatch):
     """``with interrupt_at(AgentClass, n): ...``: the n-th ``train_iteration`` call raises KeyboardInterrupt.
 
     As a kill does, it leaves what the last periodic checkpoint saved (a real
-    Ctrl-C saves the iteration it interrupts: ``tests/test_interrupts.py``). A
+    Ctrl-C saves the iteration it interrupts: ``tests/commands/test_interrupts.py``). A
     run killed this way and resumed must end exactly as the uninterrupted run.
     """
 

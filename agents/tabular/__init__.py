@@ -17,7 +17,7 @@ same random numbers:
   parallel (the paper's 10 iterations side by side on the CPU's cores);
 - ``backend="torch"``: the same step batched over runs in torch, on any device.
 
-They give bit-identical Q tables (tests/test_tabular.py).
+They give bit-identical Q tables (tests/agents/test_tabular.py).
 
 ``R`` independent runs each own a table (the paper's repetitions), or, with
 ``shared_table``, ``R`` worlds feed one table: every step all worlds read the

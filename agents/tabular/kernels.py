@@ -13,7 +13,7 @@ the first parallel launch.
 numba's cache of these kernels (``cache=True``) is keyed by this file alone, but
 they also compile functions of other modules (:data:`COMPILED_ELSEWHERE`).
 :data:`COMPILED_ELSEWHERE_DIGEST` is the digest of their source: a change there
-fails ``tests/test_tabular.py`` until the digest here is updated, and that edit of
+fails ``tests/agents/test_tabular.py`` until the digest here is updated, and that edit of
 this file is what makes numba compile the kernels anew.
 """
 

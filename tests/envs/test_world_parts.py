@@ -2,7 +2,7 @@
 
 The Rician power gain is checked against a formula written here with complex numbers, against
 ``scipy.stats.rice`` and against its moments ``E[X] = 1`` and ``E[X^2] = (2 + 4K + K^2) / (K + 1)^2``; the World's
-faded rates are checked by recovering ``X`` from them as tests/test_env.py does for Rayleigh fading.
+faded rates are checked by recovering ``X`` from them as tests/envs/test_env.py does for Rayleigh fading.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
 """The exact mission solver (envs/solvers/mission_exact.py; docs/model.md, The exact mission solver): against
-brute-force optimal control written out in tests/test_mission.py (its own dynamics, costs and rates), under the proved
+brute-force optimal control written out in tests/envs/test_mission.py (its own dynamics, costs and rates), under the
+proved
 bound, above what the random policy and the oracle deliver in the shared evaluation, its policy played through the
 World, and its refusals."""
 

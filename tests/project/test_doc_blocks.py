@@ -17,7 +17,8 @@ settings with the smoke overrides, checking them as the commands do before torch
 a mistyped setting in the docs fails here in a second. Running the blocks is ``slow`` (CI's docs leg runs it with every
 extra installed; in-process, a page's snippets hold up to ~0.8 GB, over the fast suite's memory).
 
-``python tests/test_doc_blocks.py smoke ARGS`` prints the overrides appended to ``python ARGS`` (one a line): the
+``python tests/project/test_doc_blocks.py smoke ARGS`` prints the overrides appended to ``python ARGS`` (one a line):
+the
 bash blocks' ``python`` calls it.
 """
 
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SKIP_COMMENT = re.compile(r"^<!--\s*doc-test:\s*skip\b\s*(?P<reason>.*?)\s*-->$")
 FENCE = re.compile(r"^(?P<indent> {0,3})(?P<fence>`{3,}|~{3,})\s*(?P<info>[^`\s]*)")
 RUN_LANGUAGES = {"python": "python", "py": "python", "bash": "bash", "sh": "bash", "shell": "bash"}

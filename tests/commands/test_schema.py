@@ -45,7 +45,7 @@ def test_the_docs_table_is_the_schemas():
 
     from uavrl.schema import settings_markdown
 
-    docs = Path(__file__).resolve().parent.parent / "docs" / "settings.md"
+    docs = Path(__file__).resolve().parents[2] / "docs" / "settings.md"
     assert docs.read_text() == settings_markdown(), "regenerate: python -m uavrl.schema > docs/settings.md"
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 API_PAGES = sorted((ROOT / "docs" / "api").glob("*.md"))
 CURRENT_MODULE = re.compile(r"^\s*(?:\.\. currentmodule::|```\{currentmodule\})\s+(?P<module>[\w.]+)")
 AUTOSUMMARY = re.compile(r"^\s*\.\. autosummary::")

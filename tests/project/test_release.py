@@ -9,7 +9,7 @@ import yaml
 
 import uavrl
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 # a released entry's heading in Keep a Changelog's format: ## [0.2.0] - 2026-12-03
 RELEASE_HEADING = re.compile(r"^## \[(\d+\.\d+\.\d+)\] - (\d{4}-\d{2}-\d{2})$", re.MULTILINE)
 

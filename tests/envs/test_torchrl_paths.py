@@ -301,8 +301,8 @@ def policies():
     """The policy of every agent, as ``uavrl.load_policy`` returns them (untrained: the paths matter here)."""
     import hydra
 
-    from tests.test_agents import COMMON
-    from tests.test_agents import TINY as TINY_SETTINGS
+    from tests.agents.test_agents import COMMON
+    from tests.agents.test_agents import TINY as TINY_SETTINGS
     from uavrl.config import config_dir
 
     out = {}

@@ -67,7 +67,7 @@ def test_no_module_imports_upward():
     import ast
     from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     commands = {"train", "evaluate", "reproduce", "report", "benchmarl", "render", "cli", "settings", "config"}
     commands |= {"runs", "rundir"}
     agents_layer = {"evaluation", "checkpoints", "logger", "compat", "video", "plots", "schema", "rules", "io"}
@@ -122,7 +122,7 @@ def test_envs_layers_import_only_earlier_layers():
     import ast
     from pathlib import Path
 
-    envs = Path(__file__).resolve().parent.parent / "envs"
+    envs = Path(__file__).resolve().parents[2] / "envs"
     upward = []
     for file in envs.glob("**/*.py"):
         if file.name == "__init__.py":
@@ -170,7 +170,7 @@ def project_imports() -> dict[str, set[str]]:
     import ast
     from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     modules = {}
     for package, folder in (
         ("uavrl", "uavrl"),

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def collector_blocks() -> list[tuple[str, str]]:
     """``(file, code)`` of each Python block of README.md and docs/*.md that builds TorchRL's Collector, joined to the
-    blocks of its file before it (a page's blocks share one namespace, as tests/test_doc_blocks.py runs them)."""
+    blocks of its file before it (a page's blocks share one namespace, as tests/project/test_doc_blocks.py runs
+    them)."""
     files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
     snippets = []
     for path in files:
