@@ -43,7 +43,7 @@ class Agent(abc.ABC):
 
     @abc.abstractmethod
     def train_iteration(self) -> dict[str, float]:
-        """One unit of training; ``train/...`` scalars (see :func:`uavrl.agents.evaluation.episode_metrics`)."""
+        """One unit of training; ``train/...`` scalars (see :func:`uavrl.agents.episodes.episode_metrics`)."""
 
     @abc.abstractmethod
     def policies(self) -> list:

@@ -15,7 +15,8 @@ from benchmarl.experiment.callback import Callback
 from torchrl.data import Composite
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from uavrl.agents.evaluation import TrainingClock, evaluate
+from uavrl.agents.episodes import TrainingClock
+from uavrl.agents.evaluation import evaluate
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 
 GROUP = "agents"
@@ -90,7 +91,7 @@ class YardstickCallback(Callback):
     """At each of BenchMARL's evaluations, the shared evaluation (:func:`~uavrl.agents.evaluation.evaluate`) of its
     greedy policy, logged with our TensorBoard tags against collected frames, beside the seconds BenchMARL had
     trained by
-    then (``time/...``, :class:`~uavrl.agents.evaluation.TrainingClock`: our evaluations left out); ``curve`` keeps each
+    then (``time/...``, :class:`~uavrl.agents.episodes.TrainingClock`: our evaluations left out); ``curve`` keeps each
     point.  The TensorBoard writer opens at the first evaluation: BenchMARL pickles its callbacks with the
     experiment's config, and an experiment reloaded to be scored sets them up again, writing nothing.
 

@@ -6,7 +6,7 @@ Each row runs as a whole process, as a user types it: ``python -m uavrl.benchmar
 iterations), both with ``--starts`` held-out starts and one torch thread.  ``--jobs`` processes run at once (one
 per core).  Both commands log, beside each evaluation's ``eval/...``, the seconds they had trained by then with
 their evaluations left out (``time/train_seconds``, ``time/train_cpu_seconds``:
-``uavrl.agents.evaluation.TrainingClock``);
+``uavrl.agents.episodes.TrainingClock``);
 the curves here are read from their TensorBoard events.  Times are CPU seconds of the process: with one thread per
 process they are its wall time on a core of its own, and they stay comparable when other work shares the cores.
 

@@ -37,7 +37,7 @@ def compose_cfg():
 
 @pytest.fixture
 def episode_tags():
-    """The per-episode TensorBoard scalars every agent writes (``uavrl.agents.evaluation.episode_metrics``) and
+    """The per-episode TensorBoard scalars every agent writes (``uavrl.agents.episodes.episode_metrics``) and
     ``eval/optimality``."""
     return set(_EPISODE_TAGS)
 

@@ -287,7 +287,7 @@ class Training:
         """
         from tqdm import tqdm
 
-        from uavrl.agents.evaluation import TrainingClock
+        from uavrl.agents.episodes import TrainingClock
 
         cfg, agent, interrupts = self.cfg, self.agent, self.interrupts
         started = time.perf_counter()

@@ -13,7 +13,8 @@ from torch import nn
 
 from uavrl.agents.base import Agent
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.evaluation import episode_metrics, evaluate
+from uavrl.agents.episodes import episode_metrics
+from uavrl.agents.evaluation import evaluate
 from uavrl.agents.schema import AGENTS
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, SEED_LIMIT

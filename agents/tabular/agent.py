@@ -71,7 +71,7 @@ class TabularAgent(Agent):
             started = time.perf_counter()
             self.q = exact_q_table(self.env_cfg, self.gamma, self.device, self.memory_budget)
             return {"train/solve_seconds": time.perf_counter() - started}
-        per_run = self.learner.run_episode()  # [R] each: the metrics of evaluation.EPISODE_METRICS
+        per_run = self.learner.run_episode()  # [R] each: the metrics of episodes.EPISODE_METRICS
         self.last_episode = per_run  # for figures
         return {f"train/{k}": v.mean().item() for k, v in per_run.items()}
 

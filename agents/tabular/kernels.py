@@ -6,7 +6,7 @@
 the torch backend of :class:`~uavrl.agents.tabular.TeamQLearner` makes the same
 choices from the same random numbers.  Both backends reward a step with
 :func:`uavrl.envs.physics.rewards.team_reward` and sum its metrics with
-:func:`uavrl.agents.evaluation.episode_step`, the same Python functions (numba
+:func:`uavrl.agents.episodes.episode_step`, the same Python functions (numba
 compiles them for scalars here).  Call :func:`use_workqueue_threads` before
 the first parallel launch.
 
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from numba.extending import register_jitable
 
-from uavrl.agents.evaluation import episode_start, episode_step
+from uavrl.agents.episodes import episode_start, episode_step
 from uavrl.envs.physics import streams
 from uavrl.envs.physics.rewards import best_so_far_reward, delta_reward, episode_best, team_reward
 
@@ -119,8 +119,8 @@ def _log2(power_of_two):
 
 @numba.njit(cache=True, inline="always")
 def _store(out, r, metrics):
-    """Run ``r``'s episode metrics (:func:`~uavrl.agents.evaluation.episode_step`) to ``out[r]``, the columns in their
-    order (:data:`~uavrl.agents.evaluation.EPISODE_METRICS`)."""
+    """Run ``r``'s episode metrics (:func:`~uavrl.agents.episodes.episode_step`) to ``out[r]``, the columns in their
+    order (:data:`~uavrl.agents.episodes.EPISODE_METRICS`)."""
     for column in range(len(metrics)):
         out[r, column] = metrics[column]
 
@@ -131,7 +131,7 @@ def _run_episode(q, r, k, heads, T, model, learning, out):
 
     Step ``t`` draws lane ``t`` of the random stream with head ``heads[r]``
     (:func:`uavrl.envs.physics.streams.stream_heads`).  The episode's metrics
-    (:func:`~uavrl.agents.evaluation.episode_step`) go to ``out[r]``.
+    (:func:`~uavrl.agents.episodes.episode_step`) go to ``out[r]``.
 
     ``model`` holds the tables of :attr:`TabularModel.kernel_tables`, ``learning`` the constants
     ``(alpha, gamma, epsilon, beta1, beta2, use_best_so_far, 0.9 U*)``.  The scan of the next state's row that

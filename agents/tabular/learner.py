@@ -6,7 +6,7 @@ import math
 
 import torch
 
-from uavrl.agents.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
+from uavrl.agents.episodes import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
 from uavrl.agents.schema import TabularSchema
 from uavrl.envs import ModelConfig
 from uavrl.envs.limits import SEED_LIMIT, table_bytes
@@ -109,8 +109,8 @@ class TeamQLearner:
 
     def run_episode(self) -> dict[str, torch.Tensor]:
         """Learn for one episode; returns each run's episode metrics ``[R]`` (the keys of
-        :data:`~uavrl.agents.evaluation.EPISODE_METRICS`, summed step by step by
-        :func:`~uavrl.agents.evaluation.episode_step`)."""
+        :data:`~uavrl.agents.episodes.EPISODE_METRICS`, summed step by step by
+        :func:`~uavrl.agents.episodes.episode_step`)."""
         k0 = self._episode_starts()
         heads = self._stream_heads()
         metrics = (self._episode_numba if self.backend == "numba" else self._episode_torch)(k0, heads)

@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from uavrl.agents.baselines import OraclePolicy
-from uavrl.agents.evaluation import LEVELS, episode_metrics, evaluate, yardstick_metrics
+from uavrl.agents.episodes import episode_metrics
+from uavrl.agents.evaluation import LEVELS, evaluate, yardstick_metrics
 from uavrl.agents.evaluation import check_settings as check_eval_settings
 from uavrl.agents.tabular import exact_q_table
 from uavrl.envs import UAVSpectrumEnv, make_config

@@ -5,7 +5,8 @@ import math
 import pytest
 import torch
 
-from uavrl.agents.evaluation import EPISODE_METRICS, episode_metrics, evaluate
+from uavrl.agents.episodes import EPISODE_METRICS, episode_metrics
+from uavrl.agents.evaluation import evaluate
 from uavrl.agents.tabular import TabularModel, TabularPolicy, TeamQLearner
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.compat import make_collector

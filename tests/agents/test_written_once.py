@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from uavrl.agents.evaluation import EPISODE_METRICS, NINETY_PERCENT, episode_metrics, episode_start, episode_step
+from uavrl.agents.episodes import EPISODE_METRICS, NINETY_PERCENT, episode_metrics, episode_start, episode_step
 from uavrl.agents.tabular import kernels  # noqa: F401  (registers the written-once functions with numba)
 from uavrl.envs.physics.rewards import episode_best, team_reward
 
