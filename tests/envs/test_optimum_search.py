@@ -192,7 +192,7 @@ def test_oracle_evaluation_at_fifty_uavs():
 
 def test_the_evaluation_reports_the_gap_where_the_search_stopped(monkeypatch):
     import uavrl.envs.solvers.optimum as optimum_module
-    from uavrl.agents.evaluation import u_star_gap
+    from uavrl.agents.references import u_star_gap
 
     w = world("paper", (5, 5), 22, {"layout": "random"}, 8, 1)  # crowded: the best cells of both networks overlap
     exact = w.optimum()[0]
