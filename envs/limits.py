@@ -444,6 +444,15 @@ def state_size(num_uavs: int, energy: bool) -> int:
     return (7 if energy else 5) * num_uavs + NODE_FEATURES
 
 
+PAIR_FEATURES = 3  # the size-free network's view of another UAV: (dx, dy) by the grid's span, exp(-its distance)
+
+
+def set_input_size(energy: bool) -> int:
+    """Entries of a UAV's own input to the size-free network (``SetQCore``): its observation's own part, the nodes,
+    which of its 4 next cells another UAV holds, and under an energy model its battery and service flag."""
+    return OWN_FEATURES + NODE_FEATURES + 4 + (2 if energy else 0)
+
+
 def world_bytes(cfg, batch_size: int) -> int:
     """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
     world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).

@@ -27,7 +27,8 @@ from uavrl.envs.rules import check
 from uavrl.io import quoted, save_json, save_text
 from uavrl.rundir import RunDirectory, check_directory
 from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
-from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
+from uavrl.costs import check_benchmarl_costs
+from uavrl.settings import BENCHMARL_SETTINGS
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
 # BenchMARL's own config groups (pkg://benchmarl.conf); everything else on the command line is ours

@@ -45,14 +45,8 @@ from uavrl.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.settings import (
-    RUN_SETTINGS,
-    check_evaluation_costs,
-    check_evaluation_floor,
-    check_read,
-    check_run,
-    check_typed,
-)
+from uavrl.costs import check_evaluation_costs, check_evaluation_floor
+from uavrl.settings import RUN_SETTINGS, check_read, check_run, check_typed
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:

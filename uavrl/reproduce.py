@@ -47,7 +47,8 @@ from uavrl.io import (
 )
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
-from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
+from uavrl.costs import check_reproduce_costs
+from uavrl.settings import REPRODUCE_SETTINGS, check_typed
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}

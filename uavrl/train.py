@@ -53,13 +53,13 @@ from uavrl.runs import (
     size_free_teams,
     yardstick_line,
 )
+from uavrl.costs import check_run_costs
 from uavrl.settings import (
     AGENT_SETTINGS,
     RUN_SETTINGS,
     check_agent_settings,
     check_read,
     check_run,
-    check_run_costs,
     check_scenario,
     check_typed,
 )
