@@ -32,6 +32,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
+from uavrl.costs import check_reproduce_costs
 from uavrl.envs.config import make_config
 from uavrl.envs.rules import check, shown
 from uavrl.io import (
@@ -47,7 +48,6 @@ from uavrl.io import (
 )
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
-from uavrl.costs import check_reproduce_costs
 from uavrl.settings import REPRODUCE_SETTINGS, check_typed
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)

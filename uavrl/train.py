@@ -38,6 +38,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
+from uavrl.costs import check_run_costs
 from uavrl.io import WriteError, quoted, save_json, save_text, special_kind
 from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
 from uavrl.runs import (
@@ -53,7 +54,6 @@ from uavrl.runs import (
     size_free_teams,
     yardstick_line,
 )
-from uavrl.costs import check_run_costs
 from uavrl.settings import (
     AGENT_SETTINGS,
     RUN_SETTINGS,
