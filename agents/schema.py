@@ -56,6 +56,7 @@ if TYPE_CHECKING:
 METHODS = ("q_learning", "value_iteration")
 DEMONSTRATIONS = ("none", "oracle")
 CURRICULA = ("none", "loss")
+START_BLOCK = 256  # episodes whose starts one World draws for all the tabular learner's runs (tabular/learner.py)
 MEMORY_BUDGET = positive()
 
 

@@ -19,14 +19,13 @@ import numbers
 import re
 from dataclasses import dataclass, field
 
-from .limits import PHYSICAL, allowed_range, physics_problem, radio_problem
+from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_problem
 from .physics import power, radio
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; an energy model with recharging adds RETURN
 RETURN = NUM_ACTIONS  # "return": fly home to recharge (docs/model.md, Energy and lifetime)
 SENSING, RELAYING = 0, 1
-NODE_NAMES = ("PT", "PR", "S", "E")
 
 LAYOUTS = ("line", "random", "reference_code")
 FADINGS = ("none", "rayleigh", "los_nlos", "rician")  # uavrl.envs.physics.fading: one part each
@@ -249,23 +248,21 @@ class ModelConfig:
             value = getattr(self, name)
             if value is None and name in POWER_LAW_OPTIONS:  # a physical channel has no g0 and alpha
                 continue
-            if not (_is_real(value) and math.isfinite(value) and value > 0):
+            if not (is_number(value) and value > 0):
                 raise InvalidOption(name, value, "it must be a finite positive number")
         for name in ("beta1", "beta2", "rician_k_db"):
             value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value)):
+            if not is_number(value):
                 raise InvalidOption(name, value, "it must be a finite number")
         if self.fading != "rician" and self.rician_k_db != _DEFAULTS["rician_k_db"]:
             reason = f"only fading='rician' reads it, not fading={self.fading!r}"
             raise InvalidOption("rician_k_db", self.rician_k_db, reason)
         if self.direct_links and self.rate_model == "reference_code":
             raise InvalidOption("direct_links", True, "the authors' rate_model='reference_code' has no direct link")
-        if self.altitude is not None and not (
-            _is_real(self.altitude) and math.isfinite(self.altitude) and self.altitude > 0
-        ):
+        if self.altitude is not None and not (is_number(self.altitude) and self.altitude > 0):
             raise InvalidOption("altitude", self.altitude, "give a finite positive height in cells, or None for h = L1")
         if self.altitude_m is not None:
-            if not (_is_real(self.altitude_m) and math.isfinite(self.altitude_m) and self.altitude_m > 0):
+            if not (is_number(self.altitude_m) and self.altitude_m > 0):
                 raise InvalidOption("altitude_m", self.altitude_m, "give a finite positive height in metres, or None")
             if self.altitude is not None:
                 reason = f"give the height once: altitude={self.altitude:g} (in cells) is set too"
@@ -353,7 +350,7 @@ class ModelConfig:
         for name in ("battery_wh", "slot_s", "circuit_power_w"):
             value = getattr(self, name)
             may_be_zero = name == "circuit_power_w"  # a radio may draw nothing beyond its transmit power
-            if not (_is_real(value) and math.isfinite(value) and (value >= 0 if may_be_zero else value > 0)):
+            if not (is_number(value) and (value >= 0 if may_be_zero else value > 0)):
                 raise InvalidOption(
                     name, value, f"it must be a finite {'number >= 0' if may_be_zero else 'positive number'}"
                 )
@@ -600,10 +597,6 @@ def _choice(name, value, allowed):
 
 def _is_int(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_real(value) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def _is_pair(value) -> bool:

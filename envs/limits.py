@@ -197,7 +197,7 @@ def _best_term_at_least(values: dict, channels: _Channels, src: int, dst: int, p
     return best
 
 
-def _is_number(value) -> bool:
+def is_number(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -213,7 +213,7 @@ def radio_problem(values: dict) -> tuple[str, str] | None:
         **{name: (*radio.POWER_DBM, "give a transmit power in dBm") for name in ("p_pt_dbm", "p_s_dbm", "p_u_dbm")},
     }
     for name, (low, high, what) in ranges.items():
-        if not (_is_number(v[name]) and low <= v[name] <= high):
+        if not (is_number(v[name]) and low <= v[name] <= high):
             return name, f"{what} in [{low:g}, {high:g}]"
     if channel == "al_hourani":
         low, high = radio.AL_HOURANI_HEIGHT_M
@@ -316,60 +316,41 @@ def physics_problem(values: dict) -> str | None:
 
 
 def allowed_range(values: dict, name: str, good: float) -> str:
-    """The values of the positive option ``name`` with which ``values`` passes :func:`physics_problem`, as words.
+    """The values of the option ``name`` with which ``values`` passes :func:`physics_problem`, as words.
 
     ``good`` is a value that passes (the preset's).  Along one option every condition is monotone, so what passes
-    is one interval around ``good``: its ends are found by bisection on ``log10`` of the value.
+    is one interval around ``good``: its ends are found by bisection, on ``log10`` of a positive option's value, on
+    the value itself within ``[-1000, 1000]`` for one in dB (to 0.01 dB).
     """
+    decibels = name in DECIBELS
 
-    if name in DECIBELS:  # a number in dB: bisection on the value itself, within what the model allows
-        return _allowed_decibels(values, name, good)
+    def passes(x: float) -> bool:
+        return physics_problem({**values, name: x if decibels else 10**x}) is None
 
-    def passes(log_value: float) -> bool:
-        return physics_problem({**values, name: 10**log_value}) is None
-
-    def edge(inside: float, outside: float) -> float:
+    def edge(inside: float, outside: float) -> float | None:
+        if passes(outside):
+            return None
         for _ in range(60):
             middle = (inside + outside) / 2
             inside, outside = (middle, outside) if passes(middle) else (inside, middle)
         return inside
 
-    centre = math.log10(good)
-    low = None if passes(_LOG_MIN) else edge(centre, _LOG_MIN)
-    high = None if passes(_LOG_MAX - 1e-9) else edge(centre, _LOG_MAX - 1e-9)
-    # printed with 3 digits, rounded towards the inside so that the printed ends pass too
-    low_text = None if low is None else _rounded(10**low, math.ceil)
-    high_text = None if high is None else _rounded(10**high, math.floor)
+    if decibels:
+        unit = " dBm" if name.endswith("_dbm") else " dB"
+        low, high = edge(good, -1000.0), edge(good, 1000.0)
+        low_text = None if low is None else f"{math.ceil(low * 100) / 100:g}"
+        high_text = None if high is None else f"{math.floor(high * 100) / 100:g}"
+    else:  # printed with 3 digits, rounded towards the inside so that the printed ends pass too
+        unit, centre = "", math.log10(good)
+        low, high = edge(centre, _LOG_MIN), edge(centre, _LOG_MAX - 1e-9)
+        low_text = None if low is None else _rounded(10**low, math.ceil)
+        high_text = None if high is None else _rounded(10**high, math.floor)
     if low_text and high_text:
-        return f"with the other settings as they are it must lie in [{low_text}, {high_text}]"
+        return f"with the other settings as they are it must lie in [{low_text}, {high_text}]{unit}"
     if high_text:
-        return f"with the other settings as they are it must be at most {high_text}"
+        return f"with the other settings as they are it must be at most {high_text}{unit}"
     if low_text:
-        return f"with the other settings as they are it must be at least {low_text}"
-    return "no value of it passes with the other settings as they are"
-
-
-def _allowed_decibels(values: dict, name: str, good: float) -> str:
-    """:func:`allowed_range` of an option in dB: its ends within ``[-1000, 1000]`` dB, to 0.01 dB."""
-
-    def passes(value: float) -> bool:
-        return physics_problem({**values, name: value}) is None
-
-    def edge(inside: float, outside: float) -> float:
-        for _ in range(60):
-            middle = (inside + outside) / 2
-            inside, outside = (middle, outside) if passes(middle) else (inside, middle)
-        return inside
-
-    unit = "dBm" if name.endswith("_dbm") else "dB"
-    low = None if passes(-1000.0) else math.ceil(edge(good, -1000.0) * 100) / 100
-    high = None if passes(1000.0) else math.floor(edge(good, 1000.0) * 100) / 100
-    if low is not None and high is not None:
-        return f"with the other settings as they are it must lie in [{low:g}, {high:g}] {unit}"
-    if high is not None:
-        return f"with the other settings as they are it must be at most {high:g} {unit}"
-    if low is not None:
-        return f"with the other settings as they are it must be at least {low:g} {unit}"
+        return f"with the other settings as they are it must be at least {low_text}{unit}"
     return "no value of it passes with the other settings as they are"
 
 
@@ -442,6 +423,15 @@ def state_size(num_uavs: int, energy: bool) -> int:
     """Entries of a world's state: per UAV (x, y, task) and its contributions at its cell (under an energy model then
     its battery and service flag), then the 4 nodes' (x, y, z)."""
     return (7 if energy else 5) * num_uavs + NODE_FEATURES
+
+
+PAIR_FEATURES = 3  # the size-free network's view of another UAV: (dx, dy) by the grid's span, exp(-its distance)
+
+
+def set_input_size(energy: bool) -> int:
+    """Entries of a UAV's own input to the size-free network (``SetQCore``): its observation's own part, the nodes,
+    which of its 4 next cells another UAV holds, and under an energy model its battery and service flag."""
+    return OWN_FEATURES + NODE_FEATURES + 4 + (2 if energy else 0)
 
 
 def world_bytes(cfg, batch_size: int) -> int:

@@ -60,7 +60,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .config import NODE_NAMES, RELAYING, InvalidOption
+from .config import RELAYING, InvalidOption
+from .limits import NODE_NAMES
 from .physics.channel import PR, PT, E, S
 from .physics.energy import CHARGING, OUT, RETURNING, WAITING
 from .solvers.optimum import optimum as exact_optimum

@@ -23,11 +23,12 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.cli import one_line, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
+from uavrl.costs import check_benchmarl_costs
 from uavrl.envs.rules import check
 from uavrl.io import quoted, save_json, save_text
 from uavrl.rundir import RunDirectory, check_directory
 from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
-from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
+from uavrl.settings import BENCHMARL_SETTINGS
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
 # BenchMARL's own config groups (pkg://benchmarl.conf); everything else on the command line is ours

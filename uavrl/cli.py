@@ -27,15 +27,21 @@ from omegaconf.errors import OmegaConfBaseException
 
 from uavrl.config import MOVED, config_dir
 from uavrl.envs.config import InvalidOption
-from uavrl.envs.rules import shown
+from uavrl.envs.rules import path, rules_of, shown
 from uavrl.io import claim_dir
+from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema
 
 Command = Callable[[DictConfig, list], object]
 # settings that moved: an override of the old name says the new one
 RENAMED = MOVED
-# settings that hold a file system path (every command's): a path Hydra's override grammar cannot read unquoted
-# (letters beyond ASCII, ~ # & ' ( ) [ ] =) is quoted for it, so a path works as the shell passes it
-PATH_SETTINGS = ("run_dir", "sweep_dir", "resume", "checkpoint", "out_dir")
+# settings that hold a file system path (every command's, by their rule): a path Hydra's override grammar cannot read
+# unquoted (letters beyond ASCII, ~ # & ' ( ) [ ] =) is quoted for it, so a path works as the shell passes it
+PATH_SETTINGS = {
+    name
+    for schema in (RunSchema, ReproduceSchema, BenchmarlSchema)
+    for name, rule in rules_of(schema).items()
+    if rule.allowed.startswith(path().allowed)
+}
 
 
 def run_command(

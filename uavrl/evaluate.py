@@ -34,6 +34,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
+from uavrl.costs import check_evaluation_costs, check_evaluation_floor
 from uavrl.io import Manifest, quoted, save_json
 from uavrl.runs import (
     agent_words,
@@ -45,14 +46,7 @@ from uavrl.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.settings import (
-    RUN_SETTINGS,
-    check_evaluation_costs,
-    check_evaluation_floor,
-    check_read,
-    check_run,
-    check_typed,
-)
+from uavrl.settings import RUN_SETTINGS, check_read, check_run, check_typed
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:

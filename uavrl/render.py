@@ -22,9 +22,9 @@ from omegaconf import DictConfig
 
 from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
+from uavrl.costs import check_video_cost
 from uavrl.evaluate import check_settings, load_agent, output_dir
 from uavrl.io import Manifest
-from uavrl.settings import check_video_cost
 
 
 def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:

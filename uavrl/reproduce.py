@@ -32,6 +32,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
+from uavrl.costs import check_reproduce_costs
 from uavrl.envs.config import make_config
 from uavrl.envs.rules import check, shown
 from uavrl.io import (
@@ -47,7 +48,7 @@ from uavrl.io import (
 )
 from uavrl.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
-from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
+from uavrl.settings import REPRODUCE_SETTINGS, check_typed
 
 # Table II of the paper: steps per episode and seconds per episode (Python, Xeon 3.5 GHz)
 PAPER_STEPS = {2: 120, 3: 800, 4: 2000, 5: 5000, 6: 12000, 8: 20000, 10: 30000}

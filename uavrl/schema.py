@@ -71,7 +71,7 @@ class TrainSchema:
         TIME_BUDGET,
         positive(),
         "hours of one CPU core the DQN's training may take, as estimated before it starts from its networks, batch, "
-        "gradient steps, worlds and grid (uavrl/settings.py); a run estimated to need more is refused at once",
+        "gradient steps, worlds and grid (uavrl/costs.py); a run estimated to need more is refused at once",
     )
 
 

@@ -38,6 +38,7 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
+from uavrl.costs import check_run_costs
 from uavrl.io import WriteError, quoted, save_json, save_text, special_kind
 from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
 from uavrl.runs import (
@@ -59,7 +60,6 @@ from uavrl.settings import (
     check_agent_settings,
     check_read,
     check_run,
-    check_run_costs,
     check_scenario,
     check_typed,
 )

@@ -29,13 +29,12 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
-from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, PAIR_FEATURES, set_input_size
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
 
 from .loss import discount
 from .networks import Q_INPUTS, ValidGreedy
 
-PAIR_FEATURES = 3  # another UAV's (dx, dy) by the grid's span and exp(-its distance in cells)
 MIXERS = ("vdn", "mean")  # the size-free team values: the sum or the mean of the UAVs' chosen values
 
 
@@ -80,8 +79,7 @@ class SetQCore(nn.Module):
     def __init__(self, num_actions: int, energy: bool, hidden: int, heads: int, depth: int):
         super().__init__()
         self.energy = energy
-        own = OWN_FEATURES + NODE_FEATURES + 4 + (2 if energy else 0)  # + which next cells another UAV holds
-        self.encode = _mlp(own, hidden, hidden)
+        self.encode = _mlp(set_input_size(energy), hidden, hidden)
         self.attention = nn.ModuleList(RelativeAttention(hidden, heads) for _ in range(depth))
         self.feed = nn.ModuleList(_mlp(hidden, hidden, hidden) for _ in range(depth))
         self.head = _mlp(2 * hidden, hidden, num_actions)  # the UAV's result and the team's mean

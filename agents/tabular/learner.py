@@ -7,7 +7,7 @@ import math
 import torch
 
 from uavrl.agents.episodes import EPISODE_METRICS, NINETY_PERCENT, episode_start, episode_step
-from uavrl.agents.schema import TabularSchema
+from uavrl.agents.schema import START_BLOCK, TabularSchema
 from uavrl.envs import ModelConfig
 from uavrl.envs.limits import SEED_LIMIT, table_bytes
 from uavrl.envs.physics import streams
@@ -18,7 +18,6 @@ from uavrl.envs.world import World
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
 from .tables import TabularModel
 
-_START_BLOCK = 256  # episodes whose starts are drawn together
 _LEARNER_STREAM = 1 << 20  # the purpose of the learner's draws in the random streams (the world's are small numbers)
 
 
@@ -89,13 +88,13 @@ class TeamQLearner:
         world ``seed + e R + r``; drawn for blocks of episodes in one batched reset."""
         if self.cfg.reset_positions == "keep" and self._configuration is not None:
             return self._configuration.clone()
-        block, offset = divmod(self.episode, _START_BLOCK)
+        block, offset = divmod(self.episode, START_BLOCK)
         if block != self._start_block:
-            worlds = _START_BLOCK * self.runs
+            worlds = START_BLOCK * self.runs
             first_world = (self.seed + block * worlds) % SEED_LIMIT  # world seeds are int64
             start = World(self.cfg, worlds, self.device, first_world, memory_budget=self.memory_budget).reset()
             self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
-                _START_BLOCK, self.runs
+                START_BLOCK, self.runs
             )
             self._start_block = block
         return self._block_starts[offset]

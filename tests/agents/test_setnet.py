@@ -211,7 +211,7 @@ def test_the_registry_picks_the_network_and_each_class_refuses_the_other(set_cfg
 def test_the_cost_check_counts_every_team_and_layout_of_a_size_free_run(tmp_path, compose_cfg):
     """Each group of agent.sizes x agent.layouts has its own worlds, batch and buffer: a team that alone fits but
     with the others does not is refused by the command in one line, before any file is written."""
-    from uavrl.settings import check_run_costs
+    from uavrl.costs import check_run_costs
 
     base = ["agent=dqn", "agent.network=set", "agent.mixer=mean", "agent.worlds=128", "agent.memory_budget=400000000"]
     base += ["agent.batch_size=32", "agent.iterations=20"]  # a gradient step and the run's time within the budgets

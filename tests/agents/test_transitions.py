@@ -98,7 +98,7 @@ def test_the_compact_buffer_is_a_tenth_of_the_full_one(compose_cfg):
     stored, full = agent.buffer.storage._storage, agent.buffer[:]
     per_transition = lambda td: td.bytes() / len(td)  # noqa: E731
     assert per_transition(stored) * 10 <= per_transition(full)
-    # the memory check's estimate (uavrl.settings): the stored bytes, and 2 for a joint head's action
+    # the memory check's estimate (uavrl.costs): the stored bytes, and 2 for a joint head's action
     assert per_transition(stored) + 2 == stored_transition_bytes(agent.env_cfg)
 
 

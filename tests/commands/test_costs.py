@@ -1,4 +1,4 @@
-"""What a run costs, estimated before the work (uavrl/settings.py, agents/costs.py): the networks' sizes equal the
+"""What a run costs, estimated before the work (uavrl/costs.py): the networks' sizes equal the
 networks built, every cost that grows with a setting is refused before anything is built, and a refusal names the
 setting as it was typed, with a change that would help."""
 
@@ -9,7 +9,7 @@ import textwrap
 import pytest
 from omegaconf import OmegaConf
 
-from uavrl.agents import costs
+from uavrl import costs
 from uavrl.cli import compose_config
 from uavrl.config import RUN_OPTION_SETTINGS
 from uavrl.envs import InvalidOption, UAVSpectrumEnv
@@ -29,7 +29,7 @@ def parameters(module) -> int:
     ids=["2 UAVs", "3 UAVs", "energy, recharging, a spare"],
 )
 def test_the_parameter_counts_are_the_networks_built(options):
-    """Each formula of agents/costs.py against the network it counts: the team network's both heads, QMIX's mixer
+    """Each formula of uavrl/costs.py against the network it counts: the team network's both heads, QMIX's mixer
     and the size-free core, at two sizes each."""
     from torchrl.modules import QMixer
 
@@ -223,7 +223,7 @@ def test_the_time_estimate_grows_with_every_setting_of_the_work():
     """The DQN's CPU-time estimate doubles (about) with the iterations and grows with the updates, the batch, the
     network and the team, not with the grid's area (at N = 2 the greedy action keeps no occupancy table)."""
     from uavrl.config import model_config
-    from uavrl.settings import Factor, dqn_costs
+    from uavrl.costs import Factor, dqn_costs
 
     def hours(*overrides):
         cfg = compose_config("config", ["agent=dqn", *overrides])

@@ -1,7 +1,7 @@
 """Bad numbers and sizes, refused before any work: one line naming the setting, its value and what is allowed.
 
 Physics that would give NaN, infinite or everywhere-zero rates (uavrl/envs/limits.py), and runs whose memory or
-team steps exceed a budget (uavrl/settings.py, World's memory_budget), from the command line and the Python API.
+team steps exceed a budget (uavrl/costs.py, World's memory_budget), from the command line and the Python API.
 """
 
 import math

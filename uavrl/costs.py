@@ -1,0 +1,691 @@
+"""What a command costs, estimated before it builds anything: the one cost model of memory, team steps and CPU time
+(standard library and omegaconf only, so a run too large is refused before torch is imported).
+
+It reads the validated configs: the model (:class:`~uavrl.envs.ModelConfig`, its sizes its own properties), the
+agent's settings and the budgets.  The byte counts of the World, a transition, the Q tables, the exact solver and the
+bounds are :mod:`uavrl.envs.limits`' (the World's own memory check reads them too); the DQN's networks are counted
+here layer by layer (:class:`~uavrl.agents.dqn.networks.TeamQNet`, the QMIX mixer :class:`~uavrl.agents.dqn.loss.QMix`,
+:class:`~uavrl.agents.dqn.setnet.SetQCore`; ``tests/commands/test_costs.py`` holds each equal to the parameters of
+the network built), arithmetic in multiply-adds, memory in float32 values.  :func:`check_run_costs`,
+:func:`check_evaluation_costs`, :func:`check_benchmarl_costs` and :func:`check_reproduce_costs` refuse, in one line,
+a command over its budgets, naming the setting typed that grows the part and the changes that would fit it::
+
+    agent.hidden=100000000 is invalid: the networks ... needs about ..., over agent.memory_budget=...: ...
+
+Example:
+    >>> team_parameters(num_uavs=2, num_actions=6, energy=False, head="factored", hidden=16, depth=1)
+    2102
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from omegaconf import DictConfig, ListConfig, OmegaConf
+
+from uavrl.agents.schema import START_BLOCK, TabularSchema, training_models
+from uavrl.envs.config import ModelConfig, make_config
+from uavrl.envs.limits import (
+    DEFAULT_MEMORY_BUDGET,
+    NODE_FEATURES,
+    PAIR_FEATURES,
+    default_horizon,
+    evaluation_bytes,
+    evaluation_horizon,
+    frame_bytes,
+    gib,
+    observation_size,
+    set_input_size,
+    state_size,
+    stored_transition_bytes,
+    table_bytes,
+    world_bytes,
+)
+from uavrl.envs.rules import shown
+from uavrl.schema import TrainSchema
+
+PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
+
+
+# ------------------------------------------------------------------------------------------------- the networks
+TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
+FLOAT = 4  # bytes of a float32
+
+
+def _linear(inputs: int, outputs: int, bias: bool = True) -> int:
+    return inputs * outputs + (outputs if bias else 0)
+
+
+def _team_input(num_uavs: int, energy: bool) -> int:
+    """Entries of a UAV's row of the team network's input: its observation and the nodes."""
+    return observation_size(num_uavs, energy) + NODE_FEATURES
+
+
+def team_parameters(num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int) -> int:
+    """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
+    of ``hidden`` units), then the joint head (``6^N`` values) or the shared per-UAV head (one hidden layer)."""
+    N, h, F = num_uavs, hidden, _team_input(num_uavs, energy)
+    torso = _linear(N * F, h) + depth * _linear(h, h)
+    if head == "joint":
+        return torso + _linear(h, 6**N)
+    return torso + _linear(h + F + N + 4, h) + _linear(h, num_actions)
+
+
+def qmix_parameters(num_uavs: int, energy: bool, embed: int) -> int:
+    """Parameters of ``QMix`` (TorchRL ``QMixer``'s layers): the hypernetworks from the state to the mixing weights
+    and biases."""
+    S = state_size(num_uavs, energy)
+    return _linear(S, embed * num_uavs) + 3 * _linear(S, embed) + _linear(embed, 1)
+
+
+def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, depth: int) -> int:
+    """Parameters of ``SetQCore``: the encoder, ``depth`` attention and feed-forward layers, the head; no size in
+    any shape."""
+    h = hidden
+    attention = 4 * _linear(h, h) + _linear(PAIR_FEATURES, h // 2) + _linear(h // 2, heads)
+    attention += _linear(PAIR_FEATURES, h, bias=False)
+    layer = attention + 2 * _linear(h, h)
+    encoder, head = _linear(set_input_size(energy), h) + _linear(h, h), _linear(2 * h, h) + _linear(h, num_actions)
+    return encoder + depth * layer + head
+
+
+def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+    """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it."""
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    if a.get("network", "team") == "set":
+        pairs = N * N * (PAIR_FEATURES * h // 2 + h // 2 * int(a.heads) + PAIR_FEATURES * h + 2 * h)
+        layer = N * 6 * h * h + pairs
+        return N * (set_input_size(energy) * h + h * h) + depth * layer + N * (2 * h * h + h * num_actions)
+    torso = N * F * h + depth * h * h
+    if a.head == "joint":
+        return torso + h * 6**N
+    macs = torso + h * h + N * ((F + N + 4) * h + h * num_actions)
+    if a.mixer == "qmix":
+        embed = int(a.mixing_embed_dim)
+        macs += state_size(N, energy) * embed * (N + 3) + embed * (N + 1)
+    return macs
+
+
+def team_row_values(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+    """Float32 values one world's rows hold at the peak of a gradient step: each layer's inputs and outputs, twice
+    for the team network (its torso's and head's temporaries), once for the size-free one (measured by the peak
+    resident memory of gradient steps of 8 and of 4096 rows, N = 6 on 10x10 with QMIX: 28 KB a row against this
+    count's 37 KB; of 8 and of 256 rows for the size-free network, N = 30 on 40x40: 3.2 MB a row, as counted)."""
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    if a.get("network", "team") == "set":
+        pairs = N * N * (PAIR_FEATURES + 2 * (h // 2) + 3 * int(a.heads) + 2 * h)
+        return N * (set_input_size(energy) + 2 * h) + depth * (N * 12 * h + pairs) + N * (4 * h + num_actions)
+    values = N * F + 2 * (depth + 1) * h
+    if a.head == "joint":
+        return 2 * (values + 3 * 6**N)
+    values += N * (h + F + N + 4 + 2 * h + num_actions)
+    if a.mixer == "qmix":
+        values += state_size(N, energy) + 2 * int(a.mixing_embed_dim) * (N + 3)
+    return 2 * values
+
+
+# ------------------------------------------------------------------------------------------ what a run costs
+# The DQN's CPU time on one core of the machine of BENCHMARKS.md: a batched environment step and a gradient step cost
+# a fixed overhead and more per UAV (the greedy valid action picks UAV by UAV), the networks' multiply-adds at
+# MACS_PER_SECOND and the greedy action's occupancy table (per world and per sampled transition: the grid's cells,
+# where it has fewer than N^2 A, else none; agents/dqn/networks.py ValidGreedy) at CELLS_PER_SECOND.  Measured CPU
+# seconds an iteration against this estimate: the defaults on 6x6 0.56 (0.44), N = 6 on 10x10 with QMIX 0.63 idle,
+# 0.86 loaded (0.82).
+STEP_SECONDS, UPDATE_SECONDS, UAV_SECONDS = 2e-3, 3e-3, 0.5e-3
+MACS_PER_SECOND, CELLS_PER_SECOND = 1.5e10, 8e8
+GROUPS = ("scenario", "env", "agent")  # config groups: a setting of one may come from the group's choice
+MODEL_NAMES = ("env.grid", "env.num_uavs")  # how the grid and the team are typed: uavrl.train, uavrl.evaluate
+REPRODUCE_NAMES = ("grids", "num_uavs")  # uavrl.reproduce
+TABLE_FREE = "or use agent=dqn, which keeps no table"
+
+
+class Typed:
+    """The settings a command line typed, ``{name: value as typed}`` (``+`` and ``~`` dropped; a group choice such
+    as ``env=a2g_urban`` under its group's name).  ``overrides=None`` (the Python API): every setting counts as
+    given."""
+
+    def __init__(self, cfg: DictConfig, overrides=None):
+        self.cfg = cfg
+        self.given = None if overrides is None else {}
+        for override in overrides or ():
+            key, _, value = str(override).partition("=")
+            self.given[key.lstrip("+~")] = value
+
+    def __contains__(self, name: str) -> bool:
+        return self.given is None or name in self.given
+
+    def shown(self, name: str) -> str:
+        """``name=<value>``: as typed, else the config's value and the choice it came from."""
+        if self.given is not None and name in self.given:
+            return f"{name}={self.given[name]}"
+        value = OmegaConf.select(self.cfg, name, default=None)
+        if isinstance(value, (DictConfig, ListConfig)):
+            value = OmegaConf.to_container(value, resolve=True)
+        text = f"{name}={shown(value, label=True)}"
+        if self.given is None:
+            return text
+        chosen = [g for g in GROUPS if g in self.given and (name.startswith(f"{g}.") or g == "scenario")]
+        if "agent" in self.given and name == "env.max_steps":  # an agent's yaml sets its training episode length
+            chosen.append("agent")
+        return f"{text} ({'from ' + self.shown(chosen[0]) if chosen else 'the default'})"
+
+
+@dataclass(frozen=True)
+class Factor:
+    """A number a cost grows with: ``name`` the setting as typed (words, ``fixed``, for what no setting sets),
+    ``size`` how much of the cost it makes (a grid: its cells), ``least`` the size its smallest value gives;
+    ``origin``: for a setting left null, the settings its value follows from; ``label`` names it in the formula."""
+
+    name: str
+    size: int
+    least: int = 1
+    origin: tuple[str, ...] = ()
+    label: str = ""
+    fixed: bool = False
+    multiplies: bool = True  # the cost is proportional to it (else it grows with it some other way)
+
+    def at(self, lowered: frozenset) -> int:
+        """Its size, or its least where ``lowered`` names it."""
+        return self.least if self.name in lowered else self.size
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What one part of a command needs (bytes, team steps or CPU seconds): ``estimate(lowered)`` is the amount with
+    the factors named in ``lowered`` at their least, so a refusal advises only the settings that would help."""
+
+    what: str
+    factors: tuple[Factor, ...]
+    estimate: Callable[[frozenset], int]
+    hint: str = ""  # another change that helps, in words
+    summed: bool = False  # parts added up: the formula of no single part describes it
+
+    @property
+    def amount(self) -> int:
+        return self.estimate(frozenset())
+
+    def formula(self) -> str:
+        """``what (a x b = 2 x 3; with c 4)``: the factors it is proportional to, then the others."""
+        if self.summed:
+            return self.what
+        product = [f for f in self.factors if f.multiplies and (f.size != 1 or not f.fixed)]
+        names = " x ".join(f.label or f.name for f in product)
+        parts = [f"{names} = {' x '.join(count(f.size) for f in product)}"] if product else []
+        others = [f"{f.label or f.name} {count(f.size)}" for f in self.factors if not f.multiplies]
+        parts += [f"with {', '.join(others)}"] if others else []
+        return f"{self.what} ({'; '.join(parts)})"
+
+
+def product(what: str, factors, scale: int = 1) -> Cost:
+    """A cost of ``scale`` times the product of the factors' sizes."""
+    factors = tuple(factors)
+    return Cost(what, factors, lambda low: scale * math.prod(f.at(low) for f in factors))
+
+
+def count(value) -> str:
+    """A whole number with thousands separators, or ``2.7e+296`` beyond 15 digits."""
+    value = int(value)
+    if abs(value) < 10**15:
+        return f"{value:,}"
+    digits = len(str(abs(value))) - 1
+    return f"{int(str(abs(value))[:3]) / 100:.3g}e+{digits:02d}" if digits > 300 else f"{float(value):.3g}"
+
+
+UNITS = {"bytes": "<bytes>", "steps": "<steps>", "seconds": "<hours>"}
+
+
+def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str, typed: Typed) -> None:
+    """A one-line ValueError for the first part over ``budget``, or for the parts together (they are held at once):
+    the setting typed that grows it, the estimate and the changes that would bring it within the budget."""
+    for cost in [*costs, *([total(costs, held=True)] if len(costs) > 1 else [])]:
+        amount = cost.amount
+        limit = budget * 3600 if unit == "seconds" else budget
+        if amount > limit:
+            raise ValueError(over_budget(cost, amount, limit, budget_name, unit, typed))
+
+
+def _listed(changes: list[str]) -> str:
+    """``lower a, lower b, use c``: the changes, the ``lower`` ones run together (``lower a or b``)."""
+    lowered = [c.removeprefix("lower ") for c in changes if c.startswith("lower ")]
+    rest = [c for c in changes if not c.startswith("lower ")]
+    joined = ([f"lower {' or '.join(lowered)}"] if lowered else []) + rest
+    return ", ".join(joined)
+
+
+def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typed: Typed) -> str:
+    settings = [f for f in cost.factors if not f.fixed and f.size > f.least]
+
+    def lowered(f: Factor) -> frozenset:  # a setting lowered, and the null settings whose value follows from it
+        return frozenset({f.name, *(g.name for g in cost.factors if f.name in g.origin)})
+
+    helps = [f for f in settings if cost.estimate(lowered(f)) <= limit]
+
+    def given(f: Factor) -> bool:
+        return f.name in typed or any(name in typed for name in f.origin)
+
+    pool = helps or settings or [f for f in cost.factors if not f.fixed] or list(cost.factors)
+
+    def saving(f: Factor) -> float:  # how many times less the part needs with the setting at its least
+        return math.log10(amount + 1) - math.log10(cost.estimate(lowered(f)) + 1)
+
+    blamed = max(pool, key=lambda f: (given(f), saving(f)))
+    name = blamed.name if blamed.name in typed else next((o for o in blamed.origin if o in typed), blamed.name)
+    changes = []
+    for f in sorted(helps, key=lambda f: not given(f)):
+        if f.origin and name in f.origin and name not in {h.name for h in helps}:
+            changes.append(f"change {name}")
+        changes.append(f"give {f.name}={UNITS.get(f.name, '<smaller>')}" if f.origin else f"lower {f.name}")
+    advice = _listed(list(dict.fromkeys(changes))[:3])
+    advice = ", ".join(filter(None, [advice, cost.hint.removeprefix("or ") if not advice else cost.hint]))
+    raise_it = f"raise {budget_name}={UNITS[unit]}"
+    if unit == "bytes":
+        estimate = gib(amount)
+    elif unit == "steps":
+        estimate = f"{count(amount)} team steps"
+    else:
+        estimate = f"{amount / 3600:.3g} hours of one CPU core"
+    if budget_name in typed:
+        budget_text = typed.shown(budget_name)
+    else:
+        budget_text = f"{budget_name}={limit / 3600:g}" if unit == "seconds" else f"{budget_name}={int(limit)}"
+    return (
+        f"{typed.shown(name)} is invalid: {cost.formula()} needs about {estimate}, over {budget_text}: "
+        f"{advice + ', or ' if advice else ''}{raise_it}"
+    )
+
+
+class _Resized:
+    """A model with its grid, team or spares made the least a setting allows: what a cost would be with them (the
+    sizes that follow are :class:`~uavrl.envs.ModelConfig`'s own properties, read over the lowered ones)."""
+
+    def __init__(self, model, lowered: frozenset, grid: str = "env.grid", team: str = "env.num_uavs"):
+        self._model = model
+        self.num_uavs = 1 if team in lowered else model.num_uavs
+        self.num_spares = 0 if "env.num_spares" in lowered else model.num_spares
+        self.grid = (self.num_uavs + self.num_spares, 1) if grid in lowered else model.grid
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    num_cells = ModelConfig.num_cells
+    fleet_size = ModelConfig.fleet_size
+    num_joint_actions = ModelConfig.num_joint_actions
+    num_states = ModelConfig.num_states
+
+
+def model_factors(model, names: tuple[str, str] = ("env.grid", "env.num_uavs")) -> list[Factor]:
+    """The grid's cells and the team (and its spares) as factors of a cost, named as typed (``names``: the grid's
+    and the team's setting)."""
+    grid, team = names
+    factors = [
+        Factor(grid, model.num_cells, model.fleet_size, label=f"the cells of {grid}", multiplies=False),
+        Factor(team, model.num_uavs, multiplies=False),
+    ]
+    if model.num_spares:
+        factors.append(Factor("env.num_spares", model.num_spares, 0, multiplies=False))
+    return factors
+
+
+def horizon_factor(cfg: DictConfig, model, name: str = "eval.horizon") -> Factor:
+    """``eval.horizon``, or the default it takes when null: crossing the grid twice, or under an energy model the
+    whole mission, which the battery, the energy numbers and the base set."""
+    horizon = OmegaConf.select(cfg, name, default=None)
+    if horizon:
+        return Factor(name, int(horizon))
+    if model.energy == "none":
+        return Factor(name, default_horizon(model.grid), origin=("env.grid",), label=f"{name} (null: 2 (L1 + L2))")
+    origin = ("env.battery_wh", "env.slot_s", "env.circuit_power_w", "env.base", "env.energy", "env.grid")
+    return Factor(name, evaluation_horizon(model), origin=origin, label=f"{name} (null: the whole mission)")
+
+
+def evaluation_costs(model, starts: Factor, horizon: Factor, tables: Factor | None, names=MODEL_NAMES) -> Cost:
+    """The memory of an evaluation (:mod:`uavrl.agents.evaluation`): the starts' worlds, the greedy rollouts
+    (``tables``:
+    the tabular agent's ``tables x num_starts`` worlds stepped together; else a TorchRL rollout) and the
+    references: the exact solver where it fits, else the lower bounds.  ``names``: the grid's and the team's
+    setting."""
+    factors = [starts, horizon, *([tables] if tables and tables.size > 1 else []), *model_factors(model, names)]
+
+    def estimate(low):
+        sizes = {f.name: f.at(low) for f in factors}
+        n_tables = sizes[tables.name] if tables and tables.size > 1 else (1 if tables else 0)
+        resized = _Resized(model, low, *names)
+        return evaluation_bytes(resized, sizes[starts.name], sizes[horizon.name], n_tables)
+
+    return Cost("the evaluation", tuple(factors), estimate)
+
+
+def check_run_costs(cfg: DictConfig, model, overrides=None) -> None:
+    """A one-line refusal, before anything is built, when a run of ``python -m uavrl.train`` would need more memory
+    than ``agent.memory_budget``, more team steps than ``train.step_budget`` or (the DQN) more CPU time than
+    ``train.time_budget``, or no exact optimum exists for it.  ``overrides``: the command line's, so a refusal names
+    what was typed (``None``: every setting counts as typed)."""
+    typed = Typed(cfg, overrides)
+    check_optimum_exists(model, "env.num_uavs")
+    a = cfg.agent
+    step_budget = OmegaConf.select(cfg, "train.step_budget", default=TrainSchema.step_budget)
+    time_budget = OmegaConf.select(cfg, "train.time_budget", default=TrainSchema.time_budget)
+    horizon = horizon_factor(cfg, model)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    T = Factor("env.max_steps", model.max_steps)
+    steps, memory, seconds, tables = [], [], [], None
+    if a.name == "tabular" and a.get("method", TabularSchema.method) == "q_learning":
+        runs = Factor("agent.runs", int(a.runs))
+        tables = runs if not a.shared_table else Factor("agent.runs", 1, fixed=True)
+        steps.append(product("training", [Factor("agent.episodes", int(a.episodes)), runs, T]))
+        memory.append(starts_worlds(model, runs))
+        memory.append(q_tables(model, tables, hint=TABLE_FREE))
+    elif a.name == "tabular":
+        tables = Factor("agent.runs", 1, fixed=True)
+    elif a.name == "dqn":
+        dqn_memory, dqn_steps, dqn_seconds = dqn_costs(cfg, model, T)
+        memory += dqn_memory
+        steps += dqn_steps
+        seconds += dqn_seconds
+    runs_shown = [tables] if tables and tables.size > 1 else []
+    steps.append(product("the evaluation", [starts, horizon, *runs_shown]))
+    memory.append(evaluation_costs(model, starts, horizon, tables))
+    if a.name == "dqn":
+        memory.append(policy_pass(model, a, starts))
+    if cfg.eval.get("video", False):
+        memory.append(video_cost(cfg, model))
+    refuse_memory(memory, cfg, typed)
+    refuse_over([total(steps)], step_budget, "train.step_budget", "steps", typed)
+    if seconds:
+        refuse_over([total(seconds)], time_budget, "train.time_budget", "seconds", typed)
+
+
+class _Grid:
+    """A model seen without its energy model: the video's default length is the grid's, not the mission's."""
+
+    def __init__(self, model):
+        self.grid, self.energy = model.grid, "none"
+
+
+class _Agent(dict):
+    """An agent's settings as the networks' counts read them, some lowered to their least."""
+
+    __getattr__ = dict.__getitem__
+
+    @classmethod
+    def of(cls, a) -> "_Agent":
+        return cls({k: a.get(k) for k in ("network", "head", "mixer", "hidden", "depth", "heads", "mixing_embed_dim")})
+
+
+def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost], list[Cost]]:
+    """The DQN's memory (the worlds, a batch of transitions, the replay buffers, the networks with their target,
+    gradients and Adam's moments, a gradient step), its team steps and its CPU time.  A size-free run trains every
+    team of ``agent.sizes`` in every layout of ``agent.layouts``: each group has its own worlds, buffer and share of
+    the batch (agents/dqn/multisize.py)."""
+    a = cfg.agent
+    settings = _Agent.of(a)
+    size_free = settings["network"] == "set"
+    groups = training_models(model, a)
+    for group in groups:
+        check_optimum_exists(group, "agent.sizes" if a.get("sizes") else "env.num_uavs")
+    sized = bool(a.get("sizes"))
+    grid_name, team_name = ("agent.sizes", "agent.sizes") if sized else ("env.grid", "env.num_uavs")
+    largest = max(groups, key=lambda m: m.num_cells * m.fleet_size)
+    worlds = Factor("agent.worlds", int(a.worlds))
+    buffer = Factor("agent.buffer_size", int(a.buffer_size))
+    batch = Factor("agent.batch_size", int(a.batch_size))
+    iterations, updates = Factor("agent.iterations", int(a.iterations)), Factor("agent.updates", int(a.updates))
+    per_iteration = [dataclasses.replace(f, multiplies=False) for f in (updates, batch, worlds, T)]
+    each = [Factor("groups (agent.sizes x agent.layouts)", len(groups), fixed=True)] if len(groups) > 1 else []
+    shape = model_factors(largest, (grid_name, team_name))
+    if sized:  # agent.sizes names the grid and the team at once
+        del shape[1]
+    network = [
+        Factor("agent.hidden", int(a.hidden), multiplies=False),
+        Factor("agent.depth", int(a.depth), multiplies=False),
+    ]
+    if size_free:
+        network.append(Factor("agent.heads", int(a.heads), multiplies=False))
+    elif a.mixer == "qmix" and a.head == "factored":
+        network.append(Factor("agent.mixing_embed_dim", int(a.mixing_embed_dim), multiplies=False))
+
+    def models(low):
+        return [_Resized(m, low, grid_name, team_name) for m in groups]
+
+    def agent(low):
+        lowered = _Agent(settings)
+        for f in network:
+            if f.name in low:
+                lowered[f.name.split(".")[1]] = f.least
+        return lowered
+
+    def group_batch(low) -> int:
+        rows = batch.at(low)
+        return max(1, rows // len(groups)) if size_free else rows  # agents/dqn/multisize.py
+
+    def network_bytes(low) -> int:
+        s = agent(low)
+        if size_free:
+            hidden, heads, depth = int(s.hidden), int(s.heads), int(s.depth)
+            return TRAINING_COPIES * FLOAT * set_parameters(model.num_actions, _e(model), hidden, heads, depth)
+        m = models(low)[0]
+        params = team_parameters(m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth))
+        if s.head == "factored" and s.mixer == "qmix":
+            params += qmix_parameters(m.fleet_size, _e(m), int(s.mixing_embed_dim))
+        return TRAINING_COPIES * FLOAT * params
+
+    def step_bytes(low) -> int:
+        s, rows = agent(low), group_batch(low)
+        return sum(
+            rows * (frame_bytes(m) + FLOAT * team_row_values(m.fleet_size, m.num_actions, _e(m), s))
+            + rows * greedy_cells(m)  # the greedy action's occupancy table
+            for m in models(low)
+        )
+
+    def world_memory(low) -> int:
+        return sum(world_bytes(m, worlds.at(low)) for m in models(low))
+
+    def batch_memory(low) -> int:
+        return worlds.at(low) * T.at(low) * sum(frame_bytes(m) for m in models(low))
+
+    def buffer_memory(low) -> int:
+        return buffer.at(low) * sum(stored_transition_bytes(m) for m in models(low))
+
+    def cpu_seconds(low) -> int:
+        s, total_seconds, rows = agent(low), 0.0, group_batch(low)
+        for m in models(low):
+            macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s)
+            per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
+            per_step += worlds.at(low) * (2 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
+            per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size
+            per_update += rows * (6 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
+            total_seconds += T.at(low) * per_step + updates.at(low) * per_update
+        return math.ceil(iterations.at(low) * total_seconds)
+
+    memory = [
+        Cost("the training worlds", (worlds, *shape, *each), world_memory),
+        Cost("each iteration's batch of transitions", (worlds, T, *shape[1:], *each), batch_memory),
+        Cost("the replay buffers", (buffer, *shape[1:], *each), buffer_memory),
+        Cost(
+            "the networks with their targets, gradients and Adam's moments",
+            (*network, *([] if size_free else shape[1:])),
+            network_bytes,
+        ),
+        Cost(  # agent.batch_size is shared out among the groups of a size-free run
+            "a gradient step's batch and activations",
+            (batch, *network, *shape, *(dataclasses.replace(f, multiplies=False) for f in each)),
+            step_bytes,
+        ),
+    ]
+    steps = [product("training", [iterations, worlds, T, *each])]
+    seconds = [Cost("training", (iterations, *per_iteration, *network, *shape, *each), cpu_seconds)]
+    return memory, steps, seconds
+
+
+def _e(model) -> bool:
+    return model.energy != "none"
+
+
+def greedy_cells(model) -> int:
+    """The cells of the greedy valid action's occupancy table (``ValidGreedy``): the grid's and two more where that
+    is fewer than N^2 A comparisons of targets with claims, else none (its cost then follows the team, not the grid)."""
+    cells = model.num_cells + 2
+    return cells if cells <= model.fleet_size**2 * model.num_actions else 0
+
+
+def policy_pass(model, a, starts: Factor) -> Cost:
+    """The DQN policy's forward pass over the evaluation's starts: its activations and the greedy action's
+    occupancy table (:func:`greedy_cells`)."""
+    settings = _Agent.of(a)
+
+    def estimate(low):
+        m, rows = _Resized(model, low), starts.at(low)
+        values = team_row_values(m.fleet_size, m.num_actions, _e(m), settings)
+        return rows * (FLOAT * values + greedy_cells(m))
+
+    return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
+
+
+def video_cost(cfg: DictConfig, model) -> Cost:
+    """The frames of a video of ``cfg.eval`` on ``model`` (:mod:`uavrl.video`; its default length the grid's, not a
+    mission's): every step's panels of the policy and the oracle, their tiles and the stacked frames, each panel
+    ``PANEL_BYTES``."""
+    horizon = horizon_factor(cfg, _Grid(model))
+    factors = (Factor("eval.video_starts", int(cfg.eval.video_starts)), horizon)
+
+    def estimate(low):
+        return 3 * 2 * factors[0].at(low) * (horizon.at(low) + 1) * PANEL_BYTES
+
+    return Cost("the video's frames (eval.video)", factors, estimate)
+
+
+def check_evaluation_floor(cfg: DictConfig, video: bool, overrides=None) -> None:
+    """Before ``python -m uavrl.evaluate`` or ``uavrl.render`` knows the model: a one-line refusal when the
+    evaluation's starts, or the ``video``'s, need more than ``agent.memory_budget`` even for the smallest model (one
+    UAV on one cell, the shortest default horizon): every evaluation builds its starts' worlds."""
+    typed = Typed(cfg, overrides)
+    smallest = make_config("paper", grid=(1, 1), num_uavs=1)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    what = "the evaluation's worlds, even of the smallest model (1 UAV on 1 cell)"
+    parts = [product(what, [starts], world_bytes(smallest, 1))]
+    if video:
+        parts.append(video_cost(cfg, smallest))
+    refuse_memory(parts, cfg, typed)
+
+
+def check_evaluation_costs(cfg: DictConfig, saved: DictConfig, model, video: bool, overrides=None) -> None:
+    """Once the saved run's config is read (``saved``, its agent; ``model`` the model evaluated): a one-line
+    refusal when the evaluation, the policy's pass or the video would need more than ``agent.memory_budget``."""
+    typed = Typed(cfg, overrides)
+    horizon = horizon_factor(cfg, model)
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    tables = Factor("agent.runs", 1, fixed=True) if saved.agent.name == "tabular" else None
+    parts = [evaluation_costs(model, starts, horizon, tables)]
+    if saved.agent.name == "dqn":
+        parts.append(policy_pass(model, saved.agent, starts))
+    if video:
+        parts.append(video_cost(cfg, model))
+    refuse_memory(parts, cfg, typed)
+
+
+def check_video_cost(cfg: DictConfig, model, overrides=None) -> None:
+    """A one-line refusal, before any frame is drawn, when the video of ``cfg.eval`` on ``model`` (a run read from
+    its checkpoint) would need more than ``agent.memory_budget``."""
+    refuse_memory([video_cost(cfg, model)], cfg, Typed(cfg, overrides))
+
+
+def refuse_memory(parts: list[Cost], cfg: DictConfig, typed: Typed) -> None:
+    """:func:`refuse_over` of the run's ``agent.memory_budget`` (its schema's default where the config has none)."""
+    budget = OmegaConf.select(cfg, "agent.memory_budget", default=DEFAULT_MEMORY_BUDGET)
+    refuse_over(parts, budget, "agent.memory_budget", "bytes", typed)
+
+
+def starts_worlds(model, runs: Factor, names=MODEL_NAMES) -> Cost:
+    """The tabular learner's World that draws the episode starts of ``START_BLOCK`` episodes of every run."""
+    block = Factor("episodes per block", START_BLOCK, fixed=True)
+    factors = (runs, block, *model_factors(model, names))
+
+    def estimate(low):
+        n = runs.at(low)
+        return world_bytes(_Resized(model, low, *names), START_BLOCK * n)
+
+    return Cost("the worlds of the episode starts", factors, estimate)
+
+
+def q_tables(model, tables: Factor, names=MODEL_NAMES, hint: str = "") -> Cost:
+    """The tabular learner's Q tables, one per run (``tables``), and the model tables beside them; the DQN has no
+    table, and a refusal says so where one table alone is over the budget."""
+    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]} ({count(model.num_states)} states x "
+    what += f"{count(model.num_joint_actions)} joint actions each, with the model's lookup tables)"
+    factors = (tables, *model_factors(model, names))
+
+    def estimate(low):
+        n = tables.at(low)
+        return table_bytes(_Resized(model, low, *names), n)
+
+    return Cost(what, factors, estimate, hint)
+
+
+def total(parts: list[Cost], held: bool = False) -> Cost:
+    """The parts added up, named by the factors of the largest part; ``held``: the parts held at once, with every
+    part's factors."""
+    largest = max(parts, key=lambda part: part.amount)
+
+    def estimate(low):
+        return sum(part.estimate(low) for part in parts)
+
+    if not held:
+        return Cost(largest.what, largest.factors, estimate)
+    factors = {f.name: f for part in sorted(parts, key=lambda part: part is not largest) for f in part.factors}
+    what = f"{len(parts)} parts held at once ({largest.what} the largest)"
+    return Cost(what, tuple(factors.values()), estimate, summed=True)
+
+
+def check_benchmarl_costs(cfg: DictConfig, model, overrides=None) -> None:
+    """A one-line refusal, before BenchMARL builds anything, when our part of ``python -m uavrl.benchmarl`` would need
+    more than ``memory_budget``: the batched worlds BenchMARL collects from (the larger of its on- and off-policy
+    ``experiment.*_n_envs_per_worker``) and the evaluation at each of its evaluations.  BenchMARL's own networks
+    and buffers are its experiment's to size."""
+    typed = Typed(cfg, overrides)
+    check_optimum_exists(model, "env.num_uavs")
+    counts = [f"experiment.{kind}_n_envs_per_worker" for kind in ("on_policy", "off_policy")]
+    name = max(counts, key=lambda n: int(OmegaConf.select(cfg, n, default=1)))
+    worlds = Factor(name, int(OmegaConf.select(cfg, name, default=1)))
+    starts = Factor("eval.num_starts", int(cfg.eval.num_starts))
+    memory = [
+        Cost(
+            "the training worlds",
+            (worlds, *model_factors(model)),
+            lambda low: world_bytes(_Resized(model, low), worlds.at(low)),
+        ),
+        evaluation_costs(model, starts, horizon_factor(cfg, model), None),
+    ]
+    refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes", typed)
+
+
+def check_optimum_exists(model, num_uavs_name: str) -> None:
+    """The evaluation measures against the optimum U*: refused in one line where it is 0."""
+    if model.rate_model == "reference_code" and model.num_uavs < 2:
+        raise ValueError(
+            f"{num_uavs_name}={model.num_uavs} is invalid with the authors' rate_model='reference_code': it pays "
+            "neither network unless both tasks are staffed, so U* = 0 and U / U* is undefined; give 2 or more"
+        )
+
+
+def check_reproduce_costs(cfg: DictConfig, models: list, overrides=None) -> None:
+    """A one-line refusal, before anything is built, when the protocol of ``python -m uavrl.reproduce`` would need
+    more memory on one grid than ``memory_budget`` or more team steps in all than ``step_budget``."""
+    typed = Typed(cfg, overrides)
+    runs, episodes = Factor("runs", int(cfg.runs)), Factor("episodes", int(cfg.episodes))
+    starts, steps = Factor("eval_starts", int(cfg.eval_starts)), []
+    for model in models:
+        check_optimum_exists(model, "num_uavs")
+        horizon = Factor("its horizon", default_horizon(model.grid), fixed=True)
+        length = Factor("steps", model.max_steps, origin=() if cfg.steps else ("grids",))
+        steps.append(product(f"training on {model.grid[0]}x{model.grid[1]}", [runs, episodes, length]))
+        steps.append(product("the evaluation", [starts, runs, horizon]))
+        memory = [
+            q_tables(model, runs, REPRODUCE_NAMES),
+            starts_worlds(model, runs, REPRODUCE_NAMES),
+            evaluation_costs(model, starts, horizon, runs, REPRODUCE_NAMES),
+        ]
+        refuse_over(memory, cfg.memory_budget, "memory_budget", "bytes", typed)
+    refuse_over([total(steps)], cfg.step_budget, "step_budget", "steps", typed)
