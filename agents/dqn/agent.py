@@ -46,7 +46,7 @@ class _Group:
         self.greedy, self.exploration = self.policies.greedy, self.policies.exploration
         self.keys = transition_keys(env.world, self.policies.action_keys, int(a.get("n_step", 1)))
         # agent.buffer_size transitions of this team, kept compact; samples of its share of agent.batch_size
-        self.transitions = CompactTransitions(env.world, self.policies.action_keys)
+        self.transitions = CompactTransitions(env.world, self.policies.action_keys, int(a.get("n_step", 1)))
         self.buffer = build_replay_buffer(a, self.transitions, agent.batch_size)
         self.u_star = None  # a fixed layout's U*, solved once
 

@@ -84,20 +84,24 @@ class CompactTransitions(Transform):
     Kept per transition: ``code`` and ``("next", "code")`` ``[N]`` (int16 while the codes fit), under an energy
     model ``energy`` and ``("next", "energy")`` ``[N, 2]`` float32 (:meth:`World.energy_features`), with random
     layouts ``nodes`` ``[4, 3]`` float64 (a step keeps its layout), the actions (``action`` ``[N]`` int8;
-    ``joint_action`` int16 for the joint head), with n-step returns ``"steps_to_next_obs"`` (int8), and ``reward``,
-    ``done``, ``terminated`` of ``"next"``.
+    ``joint_action`` int16 for the joint head), with n-step returns ``"steps_to_next_obs"`` (int8, wider where
+    ``n_step`` and the episode both exceed 127 steps), and ``reward``, ``done``, ``terminated`` of ``"next"``.
 
     Args:
         world: the training env's :class:`~uavrl.envs.World`.
         action_keys: the action entries a transition stores (``Policies.action_keys``: ``("agents", "action")``,
             and ``"joint_action"`` for the joint head).
+        n_step: the n-step returns' horizon: a transition's ``"steps_to_next_obs"`` is at most it and the episode's
+            length.
     """
 
-    def __init__(self, world: World, action_keys: list):
+    def __init__(self, world: World, action_keys: list, n_step: int = 1):
         super().__init__(in_keys=[], out_keys=[])
         self.world = world
         self.joint = "joint_action" in action_keys
         self.code_dtype = torch.int16 if 2 * world.dynamics.slots <= torch.iinfo(torch.int16).max else torch.int32
+        longest = min(n_step, world.cfg.max_steps)
+        self.steps_dtype = next(d for d in (torch.int8, torch.int16, torch.int32) if longest <= torch.iinfo(d).max)
 
     def _inv_call(self, td: TensorDictBase) -> TensorDictBase:
         world, grid = self.world, self.world.cfg.grid
@@ -107,7 +111,7 @@ class CompactTransitions(Transform):
         if world.layouts.fixed is None:
             stored["nodes"] = td.get("nodes")
         if STEPS in td.keys():
-            stored[STEPS] = td.get(STEPS).to(torch.int8)
+            stored[STEPS] = td.get(STEPS).to(self.steps_dtype)
         nxt = {key: td.get(("next", key)) for key in _OUTCOME}
         for holder, step in ((stored, td), (nxt, td.get("next"))):
             code = 2 * cells_or_away(step.get("positions"), grid) + step.get("tasks")

@@ -173,3 +173,21 @@ def test_two_runs_of_one_seed_save_the_same_bytes_before_the_buffer_fills(compos
         del agent
         torch.full((1 << 16,), -1, dtype=torch.int64)  # leftovers for the second run's storage, were it not zeroed
     assert saved[0] == saved[1]
+
+
+@pytest.mark.parametrize("n_step, dtype", [(3, torch.int8), (200, torch.int16)])
+def test_n_step_counts_past_127_are_kept_whole(n_step, dtype):
+    """A 200-step episode's n-step counts (MultiStep's ``steps_to_next_obs``) rebuild exactly: up to 200 steps to the
+    next observation do not fit the int8 a short horizon is stored in (200 became -56, and the loss raised gamma to
+    that power)."""
+    from uavrl.agents.dqn.transitions import STEPS, CompactTransitions, n_step_returns
+    from uavrl.envs import UAVSpectrumEnv
+
+    env = UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_uavs=2, max_steps=200, seed=0)
+    episodes = env.rollout(200)
+    full = n_step_returns(episodes, n_step, 0.9).reshape(-1)
+    compact = CompactTransitions(env.world, [("agents", "action")], n_step)
+    stored = compact.inv(full)
+    assert stored.get(STEPS).dtype == dtype
+    assert torch.equal(compact(stored).get(STEPS), full.get(STEPS).long())
+    assert full.get(STEPS).max().item() == min(n_step, 200)
