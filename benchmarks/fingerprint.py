@@ -154,6 +154,12 @@ RECHARGE_AGENT_CASES = {
 COMMON = ["env.grid=[4,4]", "eval.num_starts=4", "progress=false"]
 
 
+def machine_key() -> str:
+    """What the digests depend on beside the code: torch's version, the processor and its vector instructions (torch's
+    kernels round differently with AVX2 and AVX512)."""
+    return f"torch {torch.__version__} on {platform.machine()} {torch.backends.cpu.get_cpu_capability()}"
+
+
 def digest(value, h=None):
     """SHA-256 over tensors (dtype, shape, bytes), numbers, strings and nested containers, in a fixed order."""
     top = h is None
@@ -212,7 +218,7 @@ def agent_case(overrides: list[str]) -> dict[str, str]:
 def main() -> None:
     torch.set_num_threads(1)
     logging.getLogger("torchrl").setLevel(logging.WARNING)  # its storage messages would land among the digests
-    print(f"# torch {torch.__version__} on {platform.machine()}")
+    print(f"# {machine_key()}")
     only = sys.argv[1:]
     # the energy cases come after the others, so the earlier lines keep their places in the recorded file
     groups = [

@@ -1,6 +1,6 @@
 """Behaviour kept bit for bit: ``benchmarks/fingerprint.py`` against the digests recorded in
-``benchmarks/results/fingerprint.txt`` (on the torch and machine they were recorded with; elsewhere floating-point
-kernels may round differently, and the test skips)."""
+``benchmarks/results/fingerprint.txt`` (on the torch, processor and vector instructions they were recorded with:
+elsewhere floating-point kernels may round differently, and the test skips)."""
 
 import platform
 import subprocess
@@ -17,8 +17,9 @@ RECORDED = ROOT / "benchmarks" / "results" / "fingerprint.txt"
 @pytest.mark.slow
 def test_every_setting_gives_the_recorded_digests():
     recorded = RECORDED.read_text().splitlines()
-    if recorded[0] != f"# torch {torch.__version__} on {platform.machine()}":
-        pytest.skip(f"digests recorded with {recorded[0][2:]}, not torch {torch.__version__} on {platform.machine()}")
+    here = f"torch {torch.__version__} on {platform.machine()} {torch.backends.cpu.get_cpu_capability()}"
+    if recorded[0] != f"# {here}":
+        pytest.skip(f"digests recorded with {recorded[0][2:]}, not {here}")
     run = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "fingerprint.py")], capture_output=True, text=True, check=True
     )
