@@ -24,9 +24,9 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.cli import one_line, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
 from uavrl.envs.rules import check
-from uavrl.io import quoted, save_json, save_text
-from uavrl.rundir import RunDirectory, check_directory
-from uavrl.runs import claim_run_dir, eval_settings, yardstick_line
+from uavrl.experiment.io import quoted, save_json, save_text
+from uavrl.experiment.rundir import RunDirectory, check_directory
+from uavrl.experiment.runs import claim_run_dir, eval_settings, yardstick_line
 from uavrl.settings import BENCHMARL_SETTINGS, check_benchmarl_costs
 
 INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
@@ -78,7 +78,7 @@ def already_finished(run_dir) -> str:
 
 def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
     """``run_dir`` or a new ``runs/benchmarl_<algorithm>/<env>/<timestamp>``, claimed and locked as ``uavrl.train``'s
-    are (:func:`uavrl.runs.claim_run_dir`)."""
+    are (:func:`uavrl.experiment.runs.claim_run_dir`)."""
     refusal = already_finished(cfg.run_dir) if cfg.run_dir else ""
     return claim_run_dir(cfg.run_dir, f"benchmarl_{algorithm}", cfg.env.name, finished, refusal)
 
@@ -174,7 +174,7 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     import torch
 
     from uavrl.agents.benchmarl import YardstickCallback
-    from uavrl.logger import RunLogger
+    from uavrl.experiment.logger import RunLogger
 
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)

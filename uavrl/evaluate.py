@@ -24,7 +24,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.checkpoints import (
+from uavrl.experiment.checkpoints import (
     CheckpointError,
     checkpoint_files,
     load_checkpoint,
@@ -34,8 +34,8 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import Manifest, quoted, save_json
-from uavrl.runs import (
+from uavrl.experiment.io import Manifest, quoted, save_json
+from uavrl.experiment.runs import (
     agent_words,
     eval_settings,
     is_size_free,
@@ -167,7 +167,7 @@ def free_evaluation_file(out_dir: Path, name: str, made_with: dict) -> Path:
     each file are recorded in ``.uavrl-evaluations.json`` there."""
     import os
 
-    from uavrl.io import read_regular_text
+    from uavrl.experiment.io import read_regular_text
 
     record_path = out_dir / EVALUATIONS
     try:
@@ -224,10 +224,10 @@ def evaluate_and_save(cfg: DictConfig, overrides=()) -> tuple[dict[str, float], 
 
 
 def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path) -> None:
-    """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.video`), as ``cfg.eval`` asks: files in
+    """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.experiment.video`), as ``cfg.eval`` asks: files in
     ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
-    from uavrl.logger import RunLogger
-    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
+    from uavrl.experiment.logger import RunLogger
+    from uavrl.experiment.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
     env_cfg, label = model_config(saved), saved.agent.name
     policy = agent.policy_for(env_cfg)

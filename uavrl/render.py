@@ -8,7 +8,7 @@ start: the policy left, the oracle right), and writes ``video.gif`` (and
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
 checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
-Under an energy model it also writes ``battery.png`` (:func:`uavrl.plots.mission_figure`): the batteries of the
+Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.plots.mission_figure`): the batteries of the
 mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
 the whole mission), one strip per UAV with its returns, arrivals, recharges and entries marked.
 """
@@ -23,7 +23,7 @@ from omegaconf import DictConfig
 from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.evaluate import check_settings, load_agent, output_dir
-from uavrl.io import Manifest
+from uavrl.experiment.io import Manifest
 from uavrl.settings import check_video_cost
 
 
@@ -33,8 +33,8 @@ def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:
     import torch
 
     from uavrl.envs.world import resolve_device
-    from uavrl.plots import mission_figure
-    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
+    from uavrl.experiment.plots import mission_figure
+    from uavrl.experiment.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
     torch.set_num_threads(int(cfg.num_threads))
     device = resolve_device(cfg.device)

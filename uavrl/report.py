@@ -45,9 +45,9 @@ import yaml
 
 from uavrl.envs.limits import default_horizon
 from uavrl.envs.rules import Rule, rules_of, shown, whole
-from uavrl.io import Manifest, make_dirs, quoted, save_text, special_kind
-from uavrl.plots import pyplot, save_figure
-from uavrl.runs import BASELINE_AGENTS, flat_settings
+from uavrl.experiment.io import Manifest, make_dirs, quoted, save_text, special_kind
+from uavrl.experiment.plots import pyplot, save_figure
+from uavrl.experiment.runs import BASELINE_AGENTS, flat_settings
 from uavrl.schema import RunSchema
 
 # the yardstick first (agents/evaluation.py), then the paper's final utility and the cost

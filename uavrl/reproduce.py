@@ -34,7 +34,7 @@ from uavrl.agents.schema import TabularSchema
 from uavrl.cli import run_command
 from uavrl.envs.config import make_config
 from uavrl.envs.rules import check, shown
-from uavrl.io import (
+from uavrl.experiment.io import (
     EVENTS,
     Manifest,
     make_dirs,
@@ -45,7 +45,7 @@ from uavrl.io import (
     save_torch,
     special_kind,
 )
-from uavrl.runs import share_of_starts
+from uavrl.experiment.runs import share_of_starts
 from uavrl.schema import ReproduceSchema
 from uavrl.settings import REPRODUCE_SETTINGS, check_reproduce_costs, check_typed
 
@@ -195,7 +195,7 @@ def run_grid(size: int, cfg: DictConfig, out_dir: Path, manifest: Manifest) -> d
 
     from uavrl.agents.evaluation import evaluate_agent
     from uavrl.agents.tabular import TabularAgent
-    from uavrl.logger import RunLogger
+    from uavrl.experiment.logger import RunLogger
 
     steps = steps_per_episode(size, cfg)
     model = grid_model(size, cfg)
@@ -355,7 +355,7 @@ def read_history(path: Path, size: int) -> dict:
     """
     import torch
 
-    from uavrl.checkpoints import CheckpointError, ForeignObjects, read_torch
+    from uavrl.experiment.checkpoints import CheckpointError, ForeignObjects, read_torch
 
     again = f"delete it and run this command again (it then runs the {size}x{size} protocol first)"
     shown_path = quoted(path)
@@ -384,7 +384,7 @@ def read_history(path: Path, size: int) -> dict:
 def figures(cfg: DictConfig) -> list[Path]:
     import torch
 
-    from uavrl.plots import pyplot
+    from uavrl.experiment.plots import pyplot
 
     plt = pyplot()
     size = int(cfg.figure_grid)

@@ -8,7 +8,7 @@ evaluation.  ``resume=<run dir>`` continues a killed run from its newest
 readable checkpoint with the run's saved config; with the same seed it ends
 exactly as an uninterrupted run would.  One process at a time holds a run
 directory; Ctrl-C or SIGTERM saves a checkpoint at the end of the iteration
-and prints the command that resumes it (:mod:`uavrl.rundir`).
+and prints the command that resumes it (:mod:`uavrl.experiment.rundir`).
 
 Every setting is checked before torch is imported (:mod:`uavrl.settings`), so a
 mistyped override is refused at once; :func:`train` imports the heavy modules
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.checkpoints import (
+from uavrl.experiment.checkpoints import (
     CheckpointError,
     CheckpointWriter,
     check_resumable,
@@ -38,9 +38,9 @@ from uavrl.checkpoints import (
 )
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config, saved_config
-from uavrl.io import WriteError, quoted, save_json, save_text, special_kind
-from uavrl.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
-from uavrl.runs import (
+from uavrl.experiment.io import WriteError, quoted, save_json, save_text, special_kind
+from uavrl.experiment.rundir import Interrupted, Interrupts, RunDirectory, hold, path_argument, resume_command, tidy
+from uavrl.experiment.runs import (
     BASELINE_AGENTS,
     agent_label,
     agent_words,
@@ -96,7 +96,7 @@ def check_no_foreign_run_files(run_dir: Path) -> None:
     its first checkpoint leaves its own, which a new run replaces)."""
     import yaml
 
-    from uavrl.io import read_regular_text
+    from uavrl.experiment.io import read_regular_text
 
     for name in ("metrics.json", "config.yaml"):
         path = run_dir / name
@@ -125,8 +125,8 @@ def seed_everything(seed: int) -> None:
 
 
 def hold_run_dir(cfg: DictConfig) -> RunDirectory:
-    """The run directory, locked (:mod:`uavrl.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job gets one
-    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>`` (``<agent>``: :func:`uavrl.runs.agent_label`,
+    """The run directory, locked (:mod:`uavrl.experiment.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job gets one
+    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>`` (``<agent>``: :func:`uavrl.experiment.runs.agent_label`,
     ``dqn-set`` for a size-free network)."""
     if cfg.resume:
         return hold(run_directory(cfg.resume, "resume"), "resume")
@@ -177,7 +177,7 @@ def train(cfg: DictConfig, overrides=()) -> Path:
     """Run training as configured; returns the run directory.
 
     The run directory is locked for the whole run; SIGINT and SIGTERM end the
-    run with a checkpoint at the end of the iteration (:mod:`uavrl.rundir`); a
+    run with a checkpoint at the end of the iteration (:mod:`uavrl.experiment.rundir`); a
     run that fails before it saved anything removes the directory it made.
     """
     try:
@@ -265,7 +265,7 @@ class Training:
 
     def open_run_files(self) -> None:
         """``config.yaml``, the logger and the checkpoint writer."""
-        from uavrl.logger import RunLogger
+        from uavrl.experiment.logger import RunLogger
 
         self.resolved = OmegaConf.to_container(self.cfg, resolve=True)
         save_text(OmegaConf.to_yaml(self.resolved), self.run_dir / "config.yaml")
@@ -402,7 +402,7 @@ class Training:
 
     def video_frames(self):
         """The greedy policy beside the oracle, where ``eval.video`` asks (a run saved before has no setting)."""
-        from uavrl.video import comparison_frames, video_settings
+        from uavrl.experiment.video import comparison_frames, video_settings
 
         cfg = self.cfg
         if not cfg.eval.get("video", False):

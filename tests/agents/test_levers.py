@@ -18,7 +18,7 @@ from uavrl.agents.lookahead import LookaheadPolicy, lookahead_policy
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.solvers import exact
-from uavrl.runs import optimality_line
+from uavrl.experiment.runs import optimality_line
 
 SMALL = [
     "agent=dqn",

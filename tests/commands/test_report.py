@@ -262,7 +262,7 @@ def legend_labels(figure) -> list[str]:
 
 
 def write_curves(run_dir, values) -> None:
-    from uavrl.logger import RunLogger
+    from uavrl.experiment.logger import RunLogger
 
     logger = RunLogger(run_dir)
     for step, value in enumerate(values, start=1):

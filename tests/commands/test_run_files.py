@@ -21,7 +21,7 @@ from hydra import compose, initialize_config_dir
 
 import uavrl
 from uavrl.agents.env_check import FULL_CHECKS
-from uavrl.checkpoints import CheckpointError
+from uavrl.experiment.checkpoints import CheckpointError
 from uavrl.config import config_dir
 from uavrl.envs import UAVSpectrumEnv
 from uavrl.evaluate import load_agent

@@ -29,10 +29,10 @@ from uavrl.envs.render import (
     tile,
 )
 from uavrl.envs.world import World
-from uavrl.logger import RunLogger
+from uavrl.experiment.logger import RunLogger
 from uavrl.render import as_overrides, render_checkpoint
 from uavrl.train import train
-from uavrl.video import can_write_mp4, comparison_frames, encode
+from uavrl.experiment.video import can_write_mp4, comparison_frames, encode
 
 TINY_RUN = ["env.grid=[3,3]", "agent.episodes=2", "env.max_steps=20", "agent.runs=1", "eval.num_starts=4"]
 

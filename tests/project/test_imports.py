@@ -69,16 +69,20 @@ def test_no_module_imports_upward():
 
     root = Path(__file__).resolve().parents[2]
     commands = {"train", "evaluate", "reproduce", "report", "benchmarl", "render", "cli", "settings", "config"}
-    commands |= {"runs", "rundir"}
-    agents_layer = {"evaluation", "checkpoints", "logger", "compat", "video", "plots", "schema", "rules", "io"}
+    library = {"runs", "rundir"}
+    agents_layer = {"evaluation", "compat", "schema", "rules"}  # uavrl/: 0.2's paths and the settings' schemas
+    beside_agents = {"checkpoints", "logger", "video", "plots", "io"}  # uavrl/experiment/
     layers = {"model": [*root.glob("envs/**/*.py")], "agents": [*root.glob("agents/**/*.py")]}
     layers["agents"] += [root / "uavrl" / f"{name}.py" for name in agents_layer]
+    layers["agents"] += [root / "uavrl" / "experiment" / f"{name}.py" for name in beside_agents]
     layers["commands"] = [root / "uavrl" / f"{name}.py" for name in commands]
+    layers["commands"] += [root / "uavrl" / "experiment" / f"{name}.py" for name in library]
     above = {
-        "model": tuple(f"uavrl.{name}" for name in (*commands, *agents_layer, "agents")),
-        "agents": tuple(f"uavrl.{name}" for name in commands),
+        "model": ("uavrl.experiment", "uavrl.agents", *(f"uavrl.{name}" for name in (*commands, *agents_layer))),
+        "agents": ("uavrl.experiment." + name for name in library),
         "commands": ("uavrl.train",),
     }
+    above["agents"] = (*above["agents"], *(f"uavrl.{name}" for name in commands))
     upward = []
     for layer, files in layers.items():
         for file in files:

@@ -9,7 +9,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from uavrl.checkpoints import CheckpointError
+from uavrl.experiment.checkpoints import CheckpointError
 from uavrl.envs import UAVSpectrumEnv
 from uavrl.evaluate import load_agent
 from uavrl.train import train

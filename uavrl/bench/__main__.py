@@ -77,7 +77,7 @@ def parse(args: list[str]) -> dict:
     if "agent" in settings and settings["agent"] not in BASELINES:
         raise ValueError(f"agent={settings['agent']} is invalid: give one of {', '.join(BASELINES)}")
     if "checkpoint" in settings:
-        from uavrl.checkpoints import checkpoint_files, no_checkpoint
+        from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
 
         if not checkpoint_files(settings["checkpoint"]):
             raise ValueError(no_checkpoint(settings["checkpoint"], "checkpoint"))
@@ -144,7 +144,7 @@ def score_command(suite: str, settings: dict) -> None:
     from uavrl.bench import cache
     from uavrl.bench.results import save
     from uavrl.bench.run import score_suite
-    from uavrl.runs import agent_label
+    from uavrl.experiment.runs import agent_label
 
     torch.set_num_threads(settings.get("num_threads", 1))
     budget = {k.split(".", 1)[1]: v for k, v in settings.items() if k.startswith("budget.")}

@@ -14,7 +14,7 @@ import json
 import os
 from pathlib import Path
 
-from uavrl.io import save_text
+from uavrl.experiment.io import save_text
 
 REFERENCES_VERSION = 1  # bump when what a reference means changes: every entry is then recomputed
 

@@ -13,7 +13,7 @@ import json
 import platform
 from pathlib import Path
 
-from uavrl.io import save_text
+from uavrl.experiment.io import save_text
 
 FORMAT, VERSION = "uavrl-bench-results", 1
 
@@ -125,7 +125,7 @@ def figure(results_list: list[dict], path) -> None:
     each file's IQM), n/a where a policy cannot act."""
     from matplotlib.patches import Patch
 
-    from uavrl.plots import pyplot, save_figure
+    from uavrl.experiment.plots import pyplot, save_figure
 
     plt = pyplot()
     count = len(results_list)
