@@ -23,7 +23,7 @@ from tensorboard.backend.event_processing.event_file_loader import RawEventFileL
 
 import uavrl.agents.tabular as tabular
 import uavrl.experiment.io
-import uavrl.train
+import uavrl.experiment.training
 from uavrl.agents.dqn import DQNAgent
 from uavrl.cli import typed
 from uavrl.experiment.io import quoted
@@ -189,13 +189,13 @@ def test_a_second_signal_during_the_checkpoint_write_keeps_the_checkpoints_on_di
 def test_a_second_signal_while_the_run_stops_is_dropped_and_the_report_kept(
     compose_cfg, signal_at, monkeypatch, tmp_path
 ):
-    report = uavrl.train.interrupted_note
+    report = uavrl.experiment.training.interrupted_note
 
     def second_signal_in_report(*args):
         os.kill(os.getpid(), signal.SIGINT)  # the process is already on its way out
         return report(*args)
 
-    monkeypatch.setattr(uavrl.train, "interrupted_note", second_signal_in_report)
+    monkeypatch.setattr(uavrl.experiment.training, "interrupted_note", second_signal_in_report)
     with signal_at(tabular.TabularAgent, 3, signal.SIGTERM), pytest.raises(Interrupted) as err:
         train(compose_cfg(*TABULAR, *COMMON, f"run_dir={tmp_path / 'run'}"))
     assert err.value.signum == signal.SIGTERM and "checkpoint.pt holds iteration 3 of 6" in err.value.__notes__[0]

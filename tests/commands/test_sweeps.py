@@ -11,7 +11,7 @@ import pytest
 
 from uavrl.cli import check_sweep, split_sweep_dir, sweep_jobs
 from uavrl.experiment.io import claim_dir
-from uavrl.train import hold_run_dir
+from uavrl.experiment.training import hold_run_dir
 
 
 def test_runs_started_at_once_get_their_own_directories(tmp_path, compose_cfg, monkeypatch):

@@ -10,7 +10,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from uavrl.cli import hydra_quoted, readable, split_sweep_dir, sweep_dir_override, typed
 from uavrl.envs import make_config
-from uavrl.train import summary
+from uavrl.experiment.training import summary
 
 ODD = "my runs/ünï (copy) #1 ~x 'q'"  # a directory name Hydra cannot read unquoted; {odd} below is tmp/ODD
 

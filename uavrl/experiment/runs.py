@@ -17,8 +17,8 @@ from typing import Callable
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.experiment.io import claim_dir
-from uavrl.experiment.rundir import RunDirectory, hold, missing_parents
+from uavrl.experiment.io import claim_dir, quoted
+from uavrl.experiment.rundir import RunDirectory, hold, missing_parents, path_argument
 
 
 def claim_run_dir(run_dir, agent: str, env: str, holds_run: Callable[[Path], bool], refusal: str) -> RunDirectory:
@@ -193,4 +193,12 @@ def optimality_line(cfg: DictConfig, result: dict, agent_name: str) -> str:
         f"optimality {optimality:.4f}: from {cfg.eval.num_starts} fixed starts, {policy} ends at {optimality:.1%} "
         f"of the best possible utility U* on average (worst start {worst:.1%}; "
         f"{share_of_starts(result['eval/optimal_fraction'])} of starts within 1% of U*)"
+    )
+
+
+def already_a_run(run_dir) -> str:
+    """The refusal of a new run into ``run_dir``, which holds a run's checkpoint."""
+    return (
+        f"run_dir={quoted(run_dir)} already holds a run: continue it with {path_argument('resume', run_dir)}, "
+        "or pick another run_dir"
     )
