@@ -141,7 +141,7 @@ def load_experiment(run_dir):
     import yaml
 
     from uavrl.cli import compose_config
-    from uavrl.report import DamagedRun, SavedYamlLoader, read_small_text
+    from uavrl.experiment.io import DamagedRun, SavedYamlLoader, read_small_text
 
     run_dir = Path(run_dir)
     check_directory(run_dir, "run_dir")

@@ -14,7 +14,7 @@ from uavrl.envs import make_config
 from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
 from uavrl.envs.render import STATUS_COLOURS
 from uavrl.experiment.plots import battery_figure, mission_events, mission_history, pyplot, save_figure
-from uavrl.render import render_checkpoint
+from uavrl.experiment.rendering import render_checkpoint
 from uavrl.train import train
 
 S, R, C, W, X = SERVING, RETURNING, CHARGING, WAITING, OUT  # X: out

@@ -21,10 +21,9 @@ from hydra import compose, initialize_config_dir
 
 import uavrl
 from uavrl.agents.env_check import FULL_CHECKS
-from uavrl.experiment.checkpoints import CheckpointError
 from uavrl.config import config_dir
 from uavrl.envs import UAVSpectrumEnv
-from uavrl.evaluate import load_agent
+from uavrl.experiment.checkpoints import CheckpointError, load_agent
 from uavrl.reproduce import variant
 from uavrl.train import train
 
@@ -272,7 +271,7 @@ def test_a_missing_newest_checkpoint_is_said_with_the_file_and_iteration_used(fi
     with pytest.warns(UserWarning) as warned:
         uavrl.load_policy(prev_only)
     assert [str(w.message) for w in warned] == [used]
-    from uavrl.evaluate import evaluate_checkpoint
+    from uavrl.experiment.evaluating import evaluate_checkpoint
 
     evaluate_checkpoint(compose_config("config", [f"checkpoint={prev_only}", *TINY]))
     assert capsys.readouterr().err.strip() == f"warning: {used}"

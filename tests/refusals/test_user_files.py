@@ -240,7 +240,7 @@ def test_a_manifest_writes_beside_a_users_file_and_over_its_own(tmp_path):
 def test_report_writes_over_no_report_of_a_users(run_dir, tmp_path):
     import shutil
 
-    from uavrl.report import report
+    from uavrl.experiment.reporting import report
 
     study = tmp_path / "study"
     shutil.copytree(run_dir, study / "run")

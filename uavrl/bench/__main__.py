@@ -107,7 +107,7 @@ def checkpoint_factory(path):
     from uavrl.agents.dqn.multisize import network_refusal
     from uavrl.bench.run import NotApplicable
     from uavrl.config import model_config
-    from uavrl.evaluate import load_agent
+    from uavrl.experiment.checkpoints import load_agent
 
     agent, saved, fallback = load_agent(path)
     if fallback:
@@ -128,7 +128,7 @@ def run_costs(checkpoint) -> dict:
     """The training CPU seconds a run directory recorded (``metrics.json``'s ``train_cpu_seconds``), or nothing."""
     import json
 
-    from uavrl.evaluate import output_dir
+    from uavrl.experiment.saved import output_dir
 
     try:
         metrics = json.loads((output_dir(checkpoint) / "metrics.json").read_text())

@@ -19,6 +19,8 @@ import stat
 import tempfile
 from pathlib import Path
 
+import yaml
+
 EVENTS = "events.out.tfevents.*"  # TensorBoard's event files (uavrl.experiment.logger)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -270,3 +272,38 @@ def save_bytes(data: bytes, path) -> None:
 
 def save_text(text: str, path) -> None:
     _atomic(path, lambda f: f.write(text.encode()))
+
+
+# a run's files read back (config.yaml, metrics.json): guarded, without torch
+# uavrl's config.yaml and metrics.json hold a few KB: a larger file is not one it wrote, and is not read whole
+MAX_FILE_BYTES = 1 << 20
+
+
+class DamagedRun(ValueError):
+    """A run directory whose files the report cannot use; the message names the file and why, in one line."""
+
+
+class SavedYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
+    nested aliases expand to billions of values."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
+        return super().compose_node(parent, index)
+
+
+def read_small_text(path: Path) -> str:
+    """The text of a regular file of at most ``MAX_FILE_BYTES`` (a FIFO or device would block or never end)."""
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise DamagedRun(f"{path.name} is not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise DamagedRun(f"{path.name} holds {info.st_size:,} bytes, more than uavrl writes ({MAX_FILE_BYTES:,})")
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DamagedRun(f"{path.name} is not UTF-8 text") from None
+    except OSError as err:
+        raise DamagedRun(f"{path.name} cannot be read ({err.strerror or err})") from None

@@ -1,0 +1,82 @@
+"""A saved run read without torch: where an evaluation of it writes, its ``config.yaml``, the model an evaluation
+of it acts in, and the check of that evaluation (:func:`check_evaluation`: ``uavrl.evaluate``'s and
+``uavrl.render``'s settings check, before either imports torch)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+from omegaconf import DictConfig, OmegaConf
+
+from uavrl.agents.schema import network_refusal
+from uavrl.config import model_config, saved_config
+from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
+from uavrl.experiment.io import DamagedRun, SavedYamlLoader, quoted, read_small_text
+from uavrl.settings import (
+    RUN_SETTINGS,
+    check_evaluation_costs,
+    check_evaluation_floor,
+    check_read,
+    check_run,
+    check_typed,
+)
+
+
+def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
+    """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
+    anything heavy is imported: with the run's saved ``config.yaml`` beside the checkpoint, also the ``env.*`` of a
+    zero-shot evaluation and what the evaluation of that model costs (``overrides``: the command line's, so a
+    refusal names what was typed)."""
+    check_run(cfg)
+    check_read(overrides, "evaluate")
+    check_typed(cfg, overrides, RUN_SETTINGS)
+    video = bool(cfg.eval.video) if video is None else video
+    check_evaluation_floor(cfg, video, overrides)
+    if not cfg.checkpoint:
+        raise ValueError("checkpoint is not set: give checkpoint=<run dir or checkpoint.pt>")
+    if not checkpoint_files(cfg.checkpoint):
+        raise FileNotFoundError(no_checkpoint(cfg.checkpoint, "checkpoint"))
+    saved = saved_run_config(cfg.checkpoint)
+    if saved is not None:
+        evaluated = evaluated_config(saved, cfg, overrides or (), f"checkpoint={quoted(cfg.checkpoint)}")
+        check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+
+
+def saved_run_config(checkpoint) -> DictConfig | None:
+    """The run's config as ``uavrl.train`` saved it beside the checkpoint (``config.yaml``), read without torch;
+    ``None`` where there is none or it cannot be read (the checkpoint's own copy is checked once it is loaded)."""
+    path = output_dir(checkpoint) / "config.yaml"
+    if not path.is_file():
+        return None
+    try:
+        data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
+        return saved_config(data, quoted(path)) if isinstance(data, dict) else None
+    except (DamagedRun, yaml.YAMLError, RecursionError, ValueError):
+        return None
+
+
+def output_dir(checkpoint) -> Path:
+    """Where an evaluation of ``checkpoint`` (a run directory or a file in one) writes: the run directory."""
+    return Path(checkpoint) if Path(checkpoint).is_dir() else Path(checkpoint).parent
+
+
+def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str) -> DictConfig:
+    """The saved run's config with the command line's ``env.*`` overrides (``overrides``, as typed; ``cfg`` their
+    values); a one-line ValueError beginning with ``source`` when the saved policy cannot act in that model."""
+    changed = [key for key in (o.split("=", 1)[0].lstrip("+~") for o in overrides) if key.startswith("env.")]
+    if not changed:
+        return saved
+    if "env.max_steps" in changed:  # the evaluation plays eval.horizon steps from each start, whatever it is
+        typed = next(o for o in overrides if o.split("=", 1)[0].lstrip("+~") == "env.max_steps").lstrip("+~")
+        raise ValueError(
+            f"{typed} is invalid for an evaluation, which plays eval.horizon steps from each start (env.max_steps "
+            "is the training's episode length): give eval.horizon=<steps>"
+        )
+    evaluated = saved.copy()
+    for key in changed:
+        OmegaConf.update(evaluated, key, OmegaConf.select(cfg, key), force_add=True)
+    refusal = network_refusal(saved, model_config(evaluated), model_config(saved))
+    if refusal:
+        raise ValueError(f"{source}: {', '.join(changed)} given: {refusal}")
+    return evaluated
