@@ -8,8 +8,8 @@ place.  One start is then one *mission*, scored by the data it delivers against 
 
 This example plays a persistent mission (three UAVs in service, one spare, recharging at the base) with the
 energy-aware planner and with the oracle that ignores energy, scores both with :func:`uavrl.agents.evaluation.evaluate`,
-and draws the planner's batteries with :func:`uavrl.experiment.plots.battery_figure`.  ``scenario=persistent_10x10`` is the
-same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a real run.
+and draws the planner's batteries with :func:`uavrl.experiment.plots.battery_figure`.  ``scenario=persistent_10x10``
+is the same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a real run.
 """
 
 # %%

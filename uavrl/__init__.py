@@ -52,7 +52,7 @@ def load_policy(run_dir, device="cpu", run: int = 0, env_config=None):
 
     from uavrl.config import model_config
     from uavrl.envs.config import InvalidOption, InvalidType, ModelConfig
-    from uavrl.experiment.checkpoints import load_agent
+    from uavrl.experiment.saved import load_agent
 
     if not isinstance(run_dir, (str, os.PathLike)):
         raise InvalidType("run_dir", run_dir, "give a run directory or a checkpoint.pt in one, a str or a Path")

@@ -17,7 +17,7 @@ teams the network trained on and the one it was evaluated on (``zero-shot: ...``
 
 Every setting is checked before torch is imported (:func:`check_settings`); the evaluation itself is
 :mod:`uavrl.experiment.evaluating`'s (``evaluate_checkpoint``; ``load_agent`` is
-:func:`uavrl.experiment.checkpoints.load_agent`).
+:func:`uavrl.experiment.saved.load_agent`).
 """
 
 from __future__ import annotations
@@ -31,9 +31,7 @@ from uavrl.experiment.saved import check_evaluation
 
 # uavrl 0.2's names of this module that moved to the library (load_agent, evaluate_checkpoint, output_dir, ...):
 # deprecated aliases
-__getattr__ = moved_names(
-    __name__, "uavrl.experiment.evaluating", "uavrl.experiment.saved", "uavrl.experiment.checkpoints"
-)
+__getattr__ = moved_names(__name__, "uavrl.experiment.evaluating", "uavrl.experiment.saved")
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:

@@ -23,8 +23,9 @@ import uavrl
 from uavrl.agents.env_check import FULL_CHECKS
 from uavrl.config import config_dir
 from uavrl.envs import UAVSpectrumEnv
-from uavrl.experiment.checkpoints import CheckpointError, load_agent
-from uavrl.reproduce import variant
+from uavrl.experiment.checkpoints import CheckpointError
+from uavrl.experiment.protocol import variant
+from uavrl.experiment.saved import load_agent
 from uavrl.train import train
 
 TINY = ["env.grid=[3,3]", "env.max_steps=10", "eval.num_starts=2", "progress=false"]

@@ -10,7 +10,8 @@ import torch
 from tensordict import TensorDict
 
 from uavrl.envs import UAVSpectrumEnv
-from uavrl.experiment.checkpoints import CheckpointError, load_agent
+from uavrl.experiment.checkpoints import CheckpointError
+from uavrl.experiment.saved import load_agent
 from uavrl.train import train
 
 # (command and overrides, words the one-line error must contain: the setting as typed); {tmp} is an empty

@@ -107,7 +107,7 @@ def checkpoint_factory(path):
     from uavrl.agents.dqn.multisize import network_refusal
     from uavrl.bench.run import NotApplicable
     from uavrl.config import model_config
-    from uavrl.experiment.checkpoints import load_agent
+    from uavrl.experiment.saved import load_agent
 
     agent, saved, fallback = load_agent(path)
     if fallback:

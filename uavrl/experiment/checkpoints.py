@@ -21,7 +21,6 @@ import warnings
 from pathlib import Path
 
 from uavrl.agents import agent_class
-from uavrl.config import model_config, saved_config
 from uavrl.experiment.io import quoted, save_torch, special_kind
 
 CHECKPOINT = "checkpoint.pt"
@@ -272,25 +271,3 @@ class CheckpointWriter:
         previous = self.run_dir / PREVIOUS_CHECKPOINT if self.keep_previous else None
         save_torch(state, self.run_dir / CHECKPOINT, previous=previous)
         self.keep_previous = True
-
-
-def load_agent(path, device="cpu", setting: str = "checkpoint"):
-    """``(agent, saved config, fallback)`` from a ``checkpoint.pt`` or the run directory holding one (``setting=path``).
-
-    ``fallback`` is None when the newest checkpoint was read, else one line
-    saying which newer files were missing or unreadable and which file and
-    iteration were used instead.  A checkpoint this uavrl cannot rebuild an
-    agent from is a one-line CheckpointError naming its file.
-    """
-    import torch
-
-    state, file, notes = load_checkpoint(path, setting)
-    source = quoted(file)
-    try:
-        cfg = saved_config(state["config"], source)
-    except ValueError as err:
-        raise CheckpointError(str(err)) from None
-    agent = saved_agent(cfg, model_config(cfg), torch.device(device), file)
-    restore_agent(agent, state, file, cfg.agent.name)
-    fallback = f"{'; '.join(notes)}: using {source} (iteration {state['iteration']})" if notes else None
-    return agent, cfg, fallback

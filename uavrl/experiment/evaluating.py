@@ -24,7 +24,6 @@ from uavrl.agents.lookahead import lookahead_settings
 from uavrl.agents.schema import training_models
 from uavrl.config import model_config
 from uavrl.envs.world import resolve_device
-from uavrl.experiment.checkpoints import load_agent
 from uavrl.experiment.io import Manifest, quoted, read_regular_text, save_json
 from uavrl.experiment.logger import RunLogger
 from uavrl.experiment.runs import (
@@ -37,7 +36,7 @@ from uavrl.experiment.runs import (
     team_words,
     yardstick_line,
 )
-from uavrl.experiment.saved import check_evaluation, evaluated_config, output_dir
+from uavrl.experiment.saved import check_evaluation, evaluated_config, load_agent, output_dir
 from uavrl.experiment.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 from uavrl.settings import (
     check_evaluation_costs,
@@ -120,8 +119,8 @@ def evaluate_and_save(
 
 
 def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path) -> None:
-    """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.experiment.video`), as ``cfg.eval`` asks: files in
-    ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
+    """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.experiment.video`), as ``cfg.eval``
+    asks: files in ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
     env_cfg, label = model_config(saved), saved.agent.name
     policy = agent.policy_for(env_cfg)
     frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))

@@ -1,6 +1,7 @@
 """What the commands share about a run (standard library and omegaconf; the run directory's lock from
-:mod:`uavrl.experiment.rundir`): a new run's directory, its evaluation's settings, its settings as flat names, the line of its
-yardstick.  ``uavrl.train``, ``uavrl.evaluate``, ``uavrl.benchmarl`` and ``uavrl.report`` import them from here.
+:mod:`uavrl.experiment.rundir`): a new run's directory, its evaluation's settings, its settings as flat names, the
+line of its yardstick.  The commands' library (``uavrl.experiment.training``, ``evaluating``, ``benchmarl``,
+``reporting``) imports them from here.
 
 Example:
     >>> flat_settings({"agent": {"name": "dqn", "gamma": 0.7}, "env": {"grid": [6, 6]}})
@@ -22,9 +23,9 @@ from uavrl.experiment.rundir import RunDirectory, hold, missing_parents, path_ar
 
 
 def claim_run_dir(run_dir, agent: str, env: str, holds_run: Callable[[Path], bool], refusal: str) -> RunDirectory:
-    """The held directory of a new run (:mod:`uavrl.experiment.rundir`): ``run_dir`` if given, refused with ``refusal`` when
-    it holds a run (``holds_run``) once locked (a run may have started there since the settings were checked);
-    else a new ``runs/<agent>/<env>/<timestamp>`` (``-1``, ``-2``, ... when taken), removed with the folders made
+    """The held directory of a new run (:mod:`uavrl.experiment.rundir`): ``run_dir`` if given, refused with
+    ``refusal`` when it holds a run (``holds_run``) once locked (a run may have started there since the settings
+    were checked); else a new ``runs/<agent>/<env>/<timestamp>`` (``-1``, ``-2``, ... when taken), removed with the folders made
     for it if the run fails before it saved anything."""
     if run_dir:
         held = hold(run_dir, "run_dir")

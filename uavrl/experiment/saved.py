@@ -1,6 +1,7 @@
 """A saved run read without torch: where an evaluation of it writes, its ``config.yaml``, the model an evaluation
 of it acts in, and the check of that evaluation (:func:`check_evaluation`: ``uavrl.evaluate``'s and
-``uavrl.render``'s settings check, before either imports torch)."""
+``uavrl.render``'s settings check, before either imports torch); and its agent rebuilt (:func:`load_agent`, which
+imports torch when called)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,14 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.schema import network_refusal
 from uavrl.config import model_config, saved_config
-from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
+from uavrl.experiment.checkpoints import (
+    CheckpointError,
+    checkpoint_files,
+    load_checkpoint,
+    no_checkpoint,
+    restore_agent,
+    saved_agent,
+)
 from uavrl.experiment.io import DamagedRun, SavedYamlLoader, quoted, read_small_text
 from uavrl.settings import (
     RUN_SETTINGS,
@@ -80,3 +88,25 @@ def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str)
     if refusal:
         raise ValueError(f"{source}: {', '.join(changed)} given: {refusal}")
     return evaluated
+
+
+def load_agent(path, device="cpu", setting: str = "checkpoint"):
+    """``(agent, saved config, fallback)`` from a ``checkpoint.pt`` or the run directory holding one (``setting=path``).
+
+    ``fallback`` is None when the newest checkpoint was read, else one line
+    saying which newer files were missing or unreadable and which file and
+    iteration were used instead.  A checkpoint this uavrl cannot rebuild an
+    agent from is a one-line CheckpointError naming its file.
+    """
+    import torch
+
+    state, file, notes = load_checkpoint(path, setting)
+    source = quoted(file)
+    try:
+        cfg = saved_config(state["config"], source)
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
+    agent = saved_agent(cfg, model_config(cfg), torch.device(device), file)
+    restore_agent(agent, state, file, cfg.agent.name)
+    fallback = f"{'; '.join(notes)}: using {source} (iteration {state['iteration']})" if notes else None
+    return agent, cfg, fallback

@@ -68,9 +68,9 @@ def seed_everything(seed: int) -> None:
 
 
 def hold_run_dir(cfg: DictConfig) -> RunDirectory:
-    """The run directory, locked (:mod:`uavrl.experiment.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job gets one
-    from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>`` (``<agent>``: :func:`uavrl.experiment.runs.agent_label`,
-    ``dqn-set`` for a size-free network)."""
+    """The run directory, locked (:mod:`uavrl.experiment.rundir`): ``resume``'s, ``run_dir`` if given (a sweep job
+    gets one from ``uavrl.cli``), else a new ``runs/<agent>/<env>/<timestamp>`` (``<agent>``:
+    :func:`uavrl.experiment.runs.agent_label`, ``dqn-set`` for a size-free network)."""
     if cfg.resume:
         return hold(run_directory(cfg.resume, "resume"), "resume")
     refusal = already_a_run(cfg.run_dir) if cfg.run_dir else ""

@@ -149,8 +149,8 @@ def save_videos(frames: np.ndarray, out_dir, fps: int, manifest=None) -> list[Pa
         frames: ``[T, H, W, 3]`` uint8 frames (:func:`comparison_frames`).
         out_dir: the folder to write to.
         fps: frames (steps) per second.
-        manifest: a :class:`~uavrl.experiment.io.Manifest` of ``out_dir``: a file of those names that uavrl did not write stays,
-            and the video goes beside it (``video-2.gif``); None: the names as they are.
+        manifest: a :class:`~uavrl.experiment.io.Manifest` of ``out_dir``: a file of those names that uavrl did not
+            write stays, and the video goes beside it (``video-2.gif``); None: the names as they are.
     """
     kinds = (".gif", ".mp4") if can_write_mp4() else (".gif",)
     paths = [Path(out_dir) / f"video{kind}" for kind in kinds]
