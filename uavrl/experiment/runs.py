@@ -25,8 +25,8 @@ from uavrl.experiment.rundir import RunDirectory, hold, missing_parents, path_ar
 def claim_run_dir(run_dir, agent: str, env: str, holds_run: Callable[[Path], bool], refusal: str) -> RunDirectory:
     """The held directory of a new run (:mod:`uavrl.experiment.rundir`): ``run_dir`` if given, refused with
     ``refusal`` when it holds a run (``holds_run``) once locked (a run may have started there since the settings
-    were checked); else a new ``runs/<agent>/<env>/<timestamp>`` (``-1``, ``-2``, ... when taken), removed with the folders made
-    for it if the run fails before it saved anything."""
+    were checked); else a new ``runs/<agent>/<env>/<timestamp>`` (``-1``, ``-2``, ... when taken), removed with the
+    folders made for it if the run fails before it saved anything."""
     if run_dir:
         held = hold(run_dir, "run_dir")
         if holds_run(held.path):
