@@ -203,3 +203,13 @@ def already_a_run(run_dir) -> str:
         f"run_dir={quoted(run_dir)} already holds a run: continue it with {path_argument('resume', run_dir)}, "
         "or pick another run_dir"
     )
+
+
+def finished(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds a finished ``python -m uavrl.benchmarl`` run (its ``metrics.json``)."""
+    return (run_dir / "metrics.json").exists()
+
+
+def already_finished(run_dir) -> str:
+    """The refusal of a BenchMARL run into ``run_dir``, which holds a finished one."""
+    return f"run_dir={run_dir!r} already holds a finished run: pick another run_dir"
