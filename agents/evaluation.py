@@ -44,12 +44,13 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import numbers
 import time
 
 import torch
 
 from uavrl.agents.schema import EvalSchema
-from uavrl.envs import InvalidOption, ModelConfig
+from uavrl.envs import InvalidOption, InvalidType, ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, EXACT_SOLVER_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.physics.grid import cells_of, on_grid
@@ -58,7 +59,7 @@ from uavrl.envs.solvers import exact, mission_exact
 from uavrl.envs.solvers.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS, optimum_bound
-from uavrl.envs.world import World
+from uavrl.envs.world import World, check_seed, resolve_device
 
 # the command line's eval.* defaults (uavrl/schema.py): the seed is far from training seeds, so the evaluation's
 # worlds (and random layouts) are held out
@@ -86,11 +87,6 @@ def check_settings(gamma, horizon, num_starts) -> None:
 def check_arguments(policy, cfg, **settings) -> None:
     """:func:`evaluate`'s arguments, refused in one line of :class:`~uavrl.envs.InvalidOption` (an
     :class:`~uavrl.envs.InvalidType` for a wrong type) that names the keyword as the caller typed it."""
-    import numbers
-
-    from uavrl.envs import InvalidType
-    from uavrl.envs.world import check_seed, resolve_device
-
     if not callable(policy):
         raise InvalidType("policy", policy, "give a TorchRL policy (a module that writes ('agents', 'action'))")
     if not isinstance(cfg, ModelConfig):

@@ -5,8 +5,8 @@
 
 ``benchmarl``: each ``RUN_DIR`` is a directory of ``python -m uavrl.benchmarl ... run_dir=RUN_DIR`` (needs the
 ``[benchmarl]`` extra); its experiment at its last checkpoint (``uavrl.experiment.benchmarl.load_experiment``) acts
-with its deterministic policy where it can (the model it trained on), n/a elsewhere.  The budget is the experiment's frames
-and its training CPU seconds (``metrics.json``).
+with its deterministic policy where it can (the model it trained on), n/a elsewhere.  The budget is the experiment's
+frames and its training CPU seconds (``metrics.json``).
 
 ``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
 through ``TeamActionPolicy`` on the paper's 6x6 model only.  The budget is its ``num_timesteps``.

@@ -8,7 +8,7 @@ start: the policy left, the oracle right), and writes ``video.gif`` (and
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
 checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
-Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.plots.mission_figure`): the batteries
+Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.missions.mission_figure`): the batteries
 of the mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
 the whole mission), one strip per UAV with its returns, arrivals, recharges and entries marked.
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from uavrl.bench.results import _budget_words, figure, interval, read
 from uavrl.bench.tasks import SUITES
 from uavrl.experiment.io import save_text
 
@@ -26,15 +27,11 @@ NOT_YET_SCORED: list[tuple[str, str, str]] = []
 
 
 def _budget(budget: dict) -> str:
-    from uavrl.bench.results import _budget_words
-
     return _budget_words(budget)
 
 
 def suite_table(suite: str, files: list[dict]) -> list[str]:
     """The Markdown lines of one suite's table."""
-    from uavrl.bench.results import interval
-
     tasks = [task.name for task in SUITES[suite]]
     ranked = sorted(files, key=lambda r: -(r.get("aggregate", {}).get("iqm") or float("-inf")))
     lines = [
@@ -102,8 +99,6 @@ def _environments(results_files: list[dict]) -> list[str]:
 
 def write(results_dir: Path = DEFAULT_RESULTS, out: Path = DEFAULT_OUT) -> Path:
     """Regenerate ``out`` from the results files in ``results_dir`` (and the suites' figures beside it)."""
-    from uavrl.bench.results import figure, read
-
     files = [read(path) for path in sorted(Path(results_dir).glob("*.json"))]
     figures = {}
     for suite in SUITES:

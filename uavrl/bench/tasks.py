@@ -33,6 +33,10 @@ import hashlib
 import json
 from functools import lru_cache
 
+from uavrl.cli import compose_config
+from uavrl.config import model_config
+from uavrl.envs.limits import evaluation_horizon
+
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
 TASK_SEED_STRIDE = 2**24  # each task's starts: seeds task.seed .. task.seed + num_starts - 1
 NUM_STARTS = 32
@@ -130,9 +134,6 @@ SUITES_TEXT = ", ".join(SUITES)
 def _scenario(name: str):
     """``(model config, evaluation horizon or None)`` of a scenario, as ``python -m uavrl.train scenario=<name>``
     composes it."""
-    from uavrl.cli import compose_config
-    from uavrl.config import model_config
-
     cfg = compose_config("config", [f"scenario={name}", "agent=random"])
     return model_config(cfg), cfg.eval.horizon
 
@@ -146,8 +147,6 @@ def model(task: Task):
 
 def horizon(task: Task, cfg=None) -> int:
     """Steps per rollout: the scenario's ``eval.horizon``, else the evaluation's default for the task's model."""
-    from uavrl.envs.limits import evaluation_horizon
-
     base, steps = _scenario(task.scenario)
     return int(steps) if steps is not None else evaluation_horizon(cfg or base.replace(**dict(task.options)))
 

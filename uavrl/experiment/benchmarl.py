@@ -25,10 +25,11 @@ from omegaconf import DictConfig, OmegaConf
 from uavrl.agents.benchmarl import UAVTask, YardstickCallback
 from uavrl.cli import compose_config, one_line
 from uavrl.config import model_config
-from uavrl.experiment.io import DamagedRun, SavedYamlLoader, quoted, read_small_text, save_json, save_text
+from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text
 from uavrl.experiment.logger import RunLogger
 from uavrl.experiment.rundir import RunDirectory, check_directory
 from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
+from uavrl.experiment.saved import SavedYamlLoader
 
 
 def run_training(cfg: DictConfig, algorithm: str) -> Path:

@@ -20,7 +20,6 @@ import re
 import warnings
 from pathlib import Path
 
-from uavrl.agents import agent_class
 from uavrl.experiment.io import quoted, save_torch, special_kind
 
 CHECKPOINT = "checkpoint.pt"
@@ -208,21 +207,6 @@ def run_directory(path, setting: str) -> Path:
             "continues from the newest readable checkpoint there)"
         )
     return path.parent if path.is_file() else path
-
-
-def saved_agent(cfg, env_cfg, device, file: Path):
-    """The agent of a saved run's config ``cfg`` (model ``env_cfg``), built as ``uavrl.train`` builds it; a
-    CheckpointError naming ``file`` when this uavrl cannot build that agent from that config."""
-    from omegaconf.errors import OmegaConfBaseException
-
-    source = quoted(file)
-    try:
-        return agent_class(cfg.agent.name, cfg.agent)(env_cfg, cfg, device, int(cfg.seed))
-    except (OmegaConfBaseException, KeyError, TypeError) as err:
-        reason = " ".join(f"{type(err).__name__}: {err}".split())
-        raise CheckpointError(f"{source}: its saved config does not fit a {cfg.agent.name} agent ({reason})") from None
-    except ValueError as err:
-        raise CheckpointError(f"{source}: in its saved config, {err}") from None
 
 
 def restore_agent(agent, state: dict, file: Path, name: str) -> None:

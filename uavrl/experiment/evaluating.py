@@ -20,7 +20,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.evaluation import evaluate_agent
-from uavrl.agents.lookahead import lookahead_settings
+from uavrl.agents.lookahead_rules import lookahead_settings
 from uavrl.agents.schema import training_models
 from uavrl.config import model_config
 from uavrl.envs.world import resolve_device
@@ -83,7 +83,16 @@ def free_evaluation_file(out_dir: Path, name: str, made_with: dict) -> Path:
 
 
 def evaluate_checkpoint(cfg: DictConfig, overrides=()) -> dict[str, float]:
-    """The metrics of ``cfg.checkpoint``'s greedy policy (the module doc), written beside it."""
+    """The metrics of ``cfg.checkpoint``'s greedy policy (the module doc), written beside it; the settings are
+    checked first (:func:`uavrl.experiment.saved.check_evaluation`).
+
+    Args:
+        cfg: the composed config (``checkpoint=`` and the ``eval.*`` settings).
+        overrides: the command line's overrides, so a refusal names what was typed.
+
+    Returns:
+        The metrics, as written to the evaluation's JSON file.
+    """
     return evaluate_and_save(cfg, overrides)[0]
 
 

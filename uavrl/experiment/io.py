@@ -19,8 +19,6 @@ import stat
 import tempfile
 from pathlib import Path
 
-import yaml
-
 EVENTS = "events.out.tfevents.*"  # TensorBoard's event files (uavrl.experiment.logger)
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -281,17 +279,6 @@ MAX_FILE_BYTES = 1 << 20
 
 class DamagedRun(ValueError):
     """A run directory whose files the report cannot use; the message names the file and why, in one line."""
-
-
-class SavedYamlLoader(yaml.SafeLoader):
-    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
-    nested aliases expand to billions of values."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
-        return super().compose_node(parent, index)
 
 
 def read_small_text(path: Path) -> str:

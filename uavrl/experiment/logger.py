@@ -1,14 +1,18 @@
-"""The one logging path: TensorBoard event files in the run directory."""
+"""The one logging path: TensorBoard event files in the run directory; and :func:`encode`, frames as GIF (or MP4)
+bytes, which TensorBoard shows as an animated image and the video files hold (:mod:`uavrl.experiment.video`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from tensorboard.compat.proto.summary_pb2 import Summary
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams as hparams_summaries
 
+from uavrl.envs.rules import refuse, rule_of
 from uavrl.experiment.io import EVENTS, save_bytes
+from uavrl.schema import RunEvalSchema
 
 
 class RunLogger:
@@ -38,8 +42,6 @@ class RunLogger:
         The summary ``SummaryWriter.add_video`` writes, encoded by imageio: ``add_video`` needs moviepy (and
         ``moviepy.editor``, gone from moviepy 2), and without it logs nothing.
         """
-        from uavrl.experiment.video import encode
-
         _, H, W, C = frames.shape
         image = Summary.Image(height=H, width=W, colorspace=C, encoded_image_string=encode(frames, fps))
         self.writer.file_writer.add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), step)
@@ -102,3 +104,21 @@ def merge_events(run_dir: Path, last_step: int) -> None:
     for path in files:
         if path != merged:
             path.unlink()
+
+
+def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
+    """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4.
+
+    Args:
+        frames: ``[T, H, W, 3]`` uint8 frames.
+        fps: frames per second.
+        extension: ``".gif"`` or ``".mp4"`` (needs PyAV: ``pip install -e ".[video]"``).
+    """
+    import imageio.v3 as iio
+
+    refuse("fps", fps, rule_of(RunEvalSchema, "video_fps"))
+    if extension == ".gif":
+        return iio.imwrite("<bytes>", frames, extension=".gif", duration=1000 / fps, loop=0)
+    # H.264 in yuv420p needs even sides
+    frames = np.pad(frames, ((0, 0), (0, frames.shape[1] % 2), (0, frames.shape[2] % 2), (0, 0)), constant_values=255)
+    return iio.imwrite("<bytes>", frames, extension=".mp4", plugin="pyav", codec="libx264", fps=fps)

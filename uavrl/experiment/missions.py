@@ -1,7 +1,6 @@
-"""Figures: matplotlib without a display, PNGs written atomically, and a mission's battery over time.
+"""A mission's batteries over time (its figure drawn with :mod:`uavrl.experiment.plots`).
 
-:func:`pyplot` and :func:`save_figure` are what every figure of the package
-uses (the study report's too).  :func:`battery_figure` draws a mission under
+:func:`battery_figure` draws a mission under
 an energy model (docs/model.md, Energy and lifetime) from its per-step
 batteries and statuses: one strip per UAV with its battery in % of the
 capacity against the step, the steps it spends out of service shaded in its
@@ -23,15 +22,18 @@ Example:
 
 from __future__ import annotations
 
-import io
-import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
-from uavrl.experiment.io import save_bytes
+from uavrl.agents.evaluation import mission_rollout
+from uavrl.envs.env import UAVSpectrumEnv
+from uavrl.envs.limits import evaluation_horizon
+from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
+from uavrl.envs.render import STATUS_COLOURS, STATUS_NAMES
+from uavrl.experiment.plots import pyplot, save_figure
 
 # the events of a UAV's mission: (its status before, its statuses after), marker, colour, legend
 EVENT_STYLES = {
@@ -40,38 +42,6 @@ EVENT_STYLES = {
     "recharged": ("^", "#0e8a9a", "recharged"),
     "enters": ("o", "#1f4e9c", "enters service"),
 }
-
-
-def pyplot():
-    """matplotlib's pyplot, without a display unless the caller chose a backend: a script or notebook that imported
-    pyplot first, or set ``MPLBACKEND``, keeps its own (so ``plt.show()`` still shows our figures there)."""
-    import matplotlib
-
-    if "matplotlib.pyplot" not in sys.modules and not os.environ.get("MPLBACKEND"):
-        matplotlib.use("Agg")  # the commands only write PNGs: no window, and no display needed
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save_figure(figure, path: Path) -> Path:
-    """The figure as a PNG written atomically (a temporary file renamed over it), then closed; laid out by its own
-    layout engine (``layout="constrained"``), else by ``tight_layout``.
-
-    Args:
-        figure: a matplotlib figure.
-        path: the PNG file to write.
-
-    Returns:
-        ``path``.
-    """
-    if figure.get_layout_engine() is None:
-        figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
-    save_bytes(buffer.getvalue(), path)
-    pyplot().close(figure)
-    return path
 
 
 @dataclass(frozen=True)
@@ -92,8 +62,6 @@ def mission_events(status: np.ndarray) -> list[MissionEvent]:
         status: the statuses ``[T + 1, N]`` of :mod:`uavrl.envs.physics.energy` (``SERVING`` 0, ``RETURNING`` 1,
             ``OUT`` 2, ``CHARGING`` 3, ``WAITING`` 4).
     """
-    from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
-
     before, after = np.asarray(status[:-1]), np.asarray(status[1:])
     kinds = {
         "leaves": (before == SERVING) & ((after == RETURNING) | (after == OUT)),
@@ -127,9 +95,6 @@ def battery_figure(battery: np.ndarray, status: np.ndarray, capacity: float, *, 
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
-
-    from uavrl.envs.physics.energy import SERVING
-    from uavrl.envs.render import STATUS_COLOURS, STATUS_NAMES
 
     battery, status = np.asarray(battery, dtype=float), np.asarray(status)
     if battery.ndim != 2 or battery.shape != status.shape or len(battery) < 2:
@@ -188,10 +153,6 @@ def mission_history(policy, cfg, horizon: int, seed: int, device="cpu") -> tuple
         seed: the evaluation's seed, whose first start is played.
         device: the torch device of the mission's world.
     """
-    import torch
-
-    from uavrl.agents.evaluation import mission_rollout
-    from uavrl.envs.env import UAVSpectrumEnv
 
     env = UAVSpectrumEnv(batch_size=1, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     start = env.reset()
@@ -222,7 +183,6 @@ def mission_figure(policy, cfg, path: Path, *, horizon: int | None, seed: int, d
         device: the torch device of the mission's world.
         label: the policy's name in the title.
     """
-    from uavrl.envs.limits import evaluation_horizon
 
     horizon = horizon or evaluation_horizon(cfg)
     battery, status = mission_history(policy, cfg, horizon, seed, device)

@@ -13,7 +13,7 @@ from omegaconf import DictConfig
 from uavrl.config import model_config
 from uavrl.envs.world import resolve_device
 from uavrl.experiment.io import Manifest
-from uavrl.experiment.plots import mission_figure
+from uavrl.experiment.missions import mission_figure
 from uavrl.experiment.saved import check_evaluation, load_agent, output_dir
 from uavrl.experiment.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 from uavrl.settings import check_video_cost

@@ -29,7 +29,6 @@ from uavrl.envs.rules import Rule, rules_of, shown, whole
 from uavrl.experiment.io import (
     DamagedRun,
     Manifest,
-    SavedYamlLoader,
     make_dirs,
     quoted,
     read_small_text,
@@ -38,6 +37,7 @@ from uavrl.experiment.io import (
 )
 from uavrl.experiment.plots import pyplot, save_figure
 from uavrl.experiment.runs import BASELINE_AGENTS, flat_settings
+from uavrl.experiment.saved import SavedYamlLoader
 from uavrl.schema import RunSchema
 
 # the yardstick first (agents/evaluation.py), then the paper's final utility and the cost

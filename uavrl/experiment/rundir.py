@@ -27,6 +27,7 @@ import sys
 import threading
 from pathlib import Path
 
+from uavrl.cli import typed
 from uavrl.experiment.io import EVENTS, WriteError, make_dirs, orphans, quoted, read_regular_text, save_text
 
 LOCK = ".uavrl.lock"
@@ -38,8 +39,6 @@ VALUABLE = ("checkpoint.pt", "checkpoint.prev.pt", "metrics.json")
 
 def path_argument(setting: str, path) -> str:
     """``setting=path`` as one command-line argument that the shell and Hydra's override parser both read back."""
-    from uavrl.cli import typed
-
     return typed(setting, path)
 
 

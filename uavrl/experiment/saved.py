@@ -9,7 +9,9 @@ from pathlib import Path
 
 import yaml
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
+from uavrl.agents import agent_class
 from uavrl.agents.schema import network_refusal
 from uavrl.config import model_config, saved_config
 from uavrl.experiment.checkpoints import (
@@ -18,9 +20,8 @@ from uavrl.experiment.checkpoints import (
     load_checkpoint,
     no_checkpoint,
     restore_agent,
-    saved_agent,
 )
-from uavrl.experiment.io import DamagedRun, SavedYamlLoader, quoted, read_small_text
+from uavrl.experiment.io import DamagedRun, quoted, read_small_text
 from uavrl.settings import (
     RUN_SETTINGS,
     check_evaluation_costs,
@@ -31,11 +32,28 @@ from uavrl.settings import (
 )
 
 
+class SavedYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
+    nested aliases expand to billions of values."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
+        return super().compose_node(parent, index)
+
+
 def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
     """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
     anything heavy is imported: with the run's saved ``config.yaml`` beside the checkpoint, also the ``env.*`` of a
     zero-shot evaluation and what the evaluation of that model costs (``overrides``: the command line's, so a
-    refusal names what was typed)."""
+    refusal names what was typed).
+
+    Args:
+        cfg: the composed config (``checkpoint=`` and the ``eval.*`` settings).
+        video: whether a video is made; None: ``eval.video``.
+        overrides: the command line's overrides.
+    """
     check_run(cfg)
     check_read(overrides, "evaluate")
     check_typed(cfg, overrides, RUN_SETTINGS)
@@ -90,6 +108,19 @@ def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str)
     return evaluated
 
 
+def saved_agent(cfg, env_cfg, device, file: Path):
+    """The agent of a saved run's config ``cfg`` (model ``env_cfg``), built as ``uavrl.train`` builds it; a
+    CheckpointError naming ``file`` when this uavrl cannot build that agent from that config."""
+    source = quoted(file)
+    try:
+        return agent_class(cfg.agent.name, cfg.agent)(env_cfg, cfg, device, int(cfg.seed))
+    except (OmegaConfBaseException, KeyError, TypeError) as err:
+        reason = " ".join(f"{type(err).__name__}: {err}".split())
+        raise CheckpointError(f"{source}: its saved config does not fit a {cfg.agent.name} agent ({reason})") from None
+    except ValueError as err:
+        raise CheckpointError(f"{source}: in its saved config, {err}") from None
+
+
 def load_agent(path, device="cpu", setting: str = "checkpoint"):
     """``(agent, saved config, fallback)`` from a ``checkpoint.pt`` or the run directory holding one (``setting=path``).
 
@@ -97,6 +128,11 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     saying which newer files were missing or unreadable and which file and
     iteration were used instead.  A checkpoint this uavrl cannot rebuild an
     agent from is a one-line CheckpointError naming its file.
+
+    Args:
+        path: a ``checkpoint.pt`` or the run directory holding one.
+        device: the torch device of the agent.
+        setting: the setting ``path`` was given as, named by a refusal (``checkpoint``, ``run_dir``, ...).
     """
     import torch
 

@@ -21,10 +21,11 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from uavrl.agents import agent_class
-from uavrl.agents.evaluation import TrainingClock, evaluate_agent
+from uavrl.agents import evaluation as shared_evaluation  # evaluate_agent looked up at each call, as before
+from uavrl.agents.evaluation import TrainingClock
+from uavrl.agents.lookahead_rules import lookahead_settings
 from uavrl.config import model_config, saved_config
 from uavrl.envs.world import resolve_device
-from uavrl.experiment import video
 from uavrl.experiment.checkpoints import (
     CheckpointError,
     CheckpointWriter,
@@ -33,7 +34,6 @@ from uavrl.experiment.checkpoints import (
     load_checkpoint,
     restore_agent,
     run_directory,
-    saved_agent,
 )
 from uavrl.experiment.io import WriteError, quoted, save_json, save_text
 from uavrl.experiment.logger import RunLogger
@@ -52,6 +52,7 @@ from uavrl.experiment.runs import (
     size_free_teams,
     yardstick_line,
 )
+from uavrl.experiment.saved import saved_agent
 from uavrl.settings import (
     check_run,
 )
@@ -204,9 +205,7 @@ class Training:
             self.logger = RunLogger(self.run_dir, resume_step=resume_step)
         self.checkpoints = CheckpointWriter(self.run_dir, self.newest_is_readable)
         self.eval_kwargs = eval_settings(self.cfg, self.device)
-        if self.cfg.eval.get("lookahead", 0):  # the search needs TensorDict: a tabular run imports none
-            from uavrl.agents.lookahead import lookahead_settings
-
+        if self.cfg.eval.get("lookahead", 0):  # the lookahead's keywords, where eval.lookahead asks for one
             self.eval_kwargs.update(lookahead_settings(self.cfg))
 
     def train_and_evaluate(self) -> dict:
@@ -280,7 +279,7 @@ class Training:
                 if cfg.eval.every and done % int(cfg.eval.every) == 0 and done < agent.num_iterations:
                     trained = clock.read()  # before the evaluation, which the clock leaves out
                     with clock.paused():
-                        evaluation = evaluate_agent(agent, env_cfg, **self.eval_kwargs)
+                        evaluation = shared_evaluation.evaluate_agent(agent, env_cfg, **self.eval_kwargs)
                     self.log_evaluation({**evaluation, **trained}, self.video_frames())
                 if done % every == 0 and done < agent.num_iterations:
                     self.save_checkpoint(done)
@@ -299,7 +298,7 @@ class Training:
         iterations = self.agent.num_iterations
         trained_rng = torch.get_rng_state()
         try:
-            final = evaluate_agent(self.agent, self.env_cfg, **self.eval_kwargs)
+            final = shared_evaluation.evaluate_agent(self.agent, self.env_cfg, **self.eval_kwargs)
             frames = self.video_frames()
         except Interrupted:  # the training is whole: kept, and the resumed run evaluates it
             if self.saved != iterations:
@@ -327,6 +326,8 @@ class Training:
         cfg = self.cfg
         if not cfg.eval.get("video", False):
             return None
+        from uavrl.experiment import video  # TorchRL (the oracle's rollouts): a tabular run without one imports none
+
         policy = self.agent.policies()[0]
         return video.comparison_frames(
             policy, self.env_cfg, label=cfg.agent.name, **video.video_settings(cfg, self.device)

@@ -5,7 +5,7 @@ evaluation seeded ``eval.seed`` is seeded ``eval.seed + i`` (docs/model.md,
 Worlds), so a batch of ``k`` starts holds the first ``k`` of the yardstick's
 ``eval.num_starts``.  Each is played for the yardstick's horizon; a frame has
 one row per start, the policy on the left and the oracle (an optimal plan) on
-the right, drawn by :mod:`uavrl.envs.render`.  :func:`encode` writes GIF bytes
+the right, drawn by :mod:`uavrl.envs.render`.  :func:`~uavrl.experiment.logger.encode` writes GIF bytes
 with imageio (TensorBoard shows them as an animated image, what
 ``SummaryWriter.add_video`` makes with moviepy) and MP4 bytes where PyAV is
 installed (the ``[video]`` extra).
@@ -26,10 +26,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from uavrl.agents.baselines import OraclePolicy
 from uavrl.agents.evaluation import EVAL_SEED, default_horizon
 from uavrl.envs import ModelConfig
+from uavrl.envs.env import UAVSpectrumEnv
+from uavrl.envs.render import WorldRenderer, tile
 from uavrl.envs.rules import refuse, rule_of
 from uavrl.experiment.io import save_bytes
+from uavrl.experiment.logger import encode
 from uavrl.schema import RunEvalSchema
 
 DEFAULT_STARTS = RunEvalSchema.video_starts
@@ -52,9 +56,6 @@ def rollout_frames(policy, cfg: ModelConfig, starts: int, horizon: int, seed: in
         device: the torch device of the worlds.
         label: the policy's name in each frame's heading.
     """
-    from uavrl.envs.env import UAVSpectrumEnv
-    from uavrl.envs.render import WorldRenderer
-
     env = UAVSpectrumEnv(batch_size=starts, config=cfg.replace(max_steps=horizon), seed=seed, device=device)
     renderer = WorldRenderer(env.world, label=label)
     start = env.reset()
@@ -101,9 +102,6 @@ def comparison_frames(
         >>> len(frames), frames.dtype
         (3, dtype('uint8'))
     """
-    from uavrl.agents.baselines import OraclePolicy
-    from uavrl.envs.render import tile
-
     refuse("starts", starts, rule_of(RunEvalSchema, "video_starts"))
     horizon = horizon or default_horizon(cfg.grid)
     played = rollout_frames(policy, cfg, starts, horizon, seed, device, label)
@@ -114,24 +112,6 @@ def comparison_frames(
             for mine, best in zip(played, oracle, strict=True)
         ]
     )
-
-
-def encode(frames: np.ndarray, fps: int, extension: str = ".gif") -> bytes:
-    """``[T, H, W, 3]`` uint8 frames as an animated GIF (looping) or, with ``extension=".mp4"``, an H.264 MP4.
-
-    Args:
-        frames: ``[T, H, W, 3]`` uint8 frames.
-        fps: frames per second.
-        extension: ``".gif"`` or ``".mp4"`` (needs PyAV: ``pip install -e ".[video]"``).
-    """
-    import imageio.v3 as iio
-
-    refuse("fps", fps, rule_of(RunEvalSchema, "video_fps"))
-    if extension == ".gif":
-        return iio.imwrite("<bytes>", frames, extension=".gif", duration=1000 / fps, loop=0)
-    # H.264 in yuv420p needs even sides
-    frames = np.pad(frames, ((0, 0), (0, frames.shape[1] % 2), (0, frames.shape[2] % 2), (0, 0)), constant_values=255)
-    return iio.imwrite("<bytes>", frames, extension=".mp4", plugin="pyav", codec="libx264", fps=fps)
 
 
 def can_write_mp4() -> bool:
