@@ -31,7 +31,7 @@ from uavrl.experiment.saved import check_evaluation
 
 # uavrl 0.2's names of this module that moved to the library (load_agent, evaluate_checkpoint, output_dir, ...):
 # deprecated aliases
-__getattr__ = moved_names(__name__, "uavrl.experiment.evaluating", "uavrl.experiment.saved")
+__getattr__ = moved_names(__name__, "uavrl.experiment.saved", "uavrl.experiment.evaluating")
 
 
 def check_settings(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:

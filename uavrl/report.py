@@ -34,7 +34,7 @@ from pathlib import Path
 from uavrl._moved import moved_names
 
 # uavrl 0.2's names of this module that moved to the library (report, iqm, bootstrap_ci, ...): deprecated aliases
-__getattr__ = moved_names(__name__, "uavrl.experiment.reporting", "uavrl.experiment.io", "uavrl.experiment.saved")
+__getattr__ = moved_names(__name__, "uavrl.experiment.io", "uavrl.experiment.saved", "uavrl.experiment.reporting")
 
 MAX_RESAMPLES = 10**6  # bootstrap resamples: 10^6 draws of 64 seeds take 1 GB
 
