@@ -15,6 +15,7 @@ Example (the oracle planner on the smoke-sized suite):
 from __future__ import annotations
 
 import time
+from functools import lru_cache
 from pathlib import Path
 
 import torch
@@ -25,14 +26,38 @@ from uavrl.agents.planner import PlannerPolicy
 from uavrl.bench import cache
 from uavrl.bench.results import new_results
 from uavrl.bench.stats import aggregate
-from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task, horizon, model
+from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task
+from uavrl.cli import compose_config
+from uavrl.config import model_config
 from uavrl.envs.env import UAVSpectrumEnv
+from uavrl.envs.limits import evaluation_horizon
 
 RANDOM_SEED = 0  # the random policy every score is normalised by
 
 
 class NotApplicable(Exception):
     """Raised by a policy factory for a task its policy cannot act in (the message says why)."""
+
+
+@lru_cache(maxsize=None)
+def _scenario(name: str):
+    """``(model config, evaluation horizon or None)`` of a scenario, as ``python -m uavrl.train scenario=<name>``
+    composes it."""
+    cfg = compose_config("config", [f"scenario={name}", "agent=random"])
+    return model_config(cfg), cfg.eval.horizon
+
+
+def model(task: Task):
+    """The task's :class:`~uavrl.envs.ModelConfig`, its episodes as long as its horizon."""
+    cfg, _ = _scenario(task.scenario)
+    cfg = cfg.replace(**dict(task.options))
+    return cfg.replace(max_steps=horizon(task, cfg))
+
+
+def horizon(task: Task, cfg=None) -> int:
+    """Steps per rollout: the scenario's ``eval.horizon``, else the evaluation's default for the task's model."""
+    base, steps = _scenario(task.scenario)
+    return int(steps) if steps is not None else evaluation_horizon(cfg or base.replace(**dict(task.options)))
 
 
 def _tensor(values) -> dict:
