@@ -36,6 +36,7 @@ NEEDS = {
     "uavrl.bench.stats": "rliable",
     "uavrl.agents.benchmarl": "benchmarl",
     "uavrl.benchmarl": "benchmarl",
+    "uavrl.experiment.benchmarl": "benchmarl",
     "uavrl.envs.adapters.gym_env": "gymnasium",
     "uavrl.envs.adapters.pettingzoo_env": "pettingzoo",
 }

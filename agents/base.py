@@ -61,7 +61,7 @@ class Agent(abc.ABC):
         An agent may override it with a faster evaluation of the same greedy
         policies that gives the same numbers (the tabular agent reads its tables).
         """
-        from uavrl.agents.evaluation import evaluate
+        from uavrl.agents.evaluation import evaluate  # torch and the solvers: the contract itself imports neither
 
         return [evaluate(policy, env_cfg, **kwargs) for policy in self.policies()]
 

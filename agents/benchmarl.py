@@ -99,7 +99,7 @@ class YardstickCallback(Callback):
         env_cfg: the model the greedy policy is evaluated in (the task's).
         eval_kwargs: the settings of :func:`~uavrl.agents.evaluation.evaluate` (``num_starts``, ``horizon``, ...).
         open_log: opens the run's TensorBoard events when first called (``functools.partial(RunLogger, run_dir)`` of
-            :mod:`uavrl.logger`): an object with ``log(metrics, step)`` and ``close()``.
+            :mod:`uavrl.experiment.logger`): an object with ``log(metrics, step)`` and ``close()``.
     """
 
     def __init__(self, env_cfg: ModelConfig, eval_kwargs: dict, open_log):

@@ -42,6 +42,7 @@ Example:
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
 
@@ -52,12 +53,12 @@ from uavrl.agents.references import (
     u_star_gap,
 )
 from uavrl.agents.schema import EvalSchema
-from uavrl.envs import InvalidOption, ModelConfig
+from uavrl.envs import InvalidOption, InvalidType, ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, evaluation_bytes, evaluation_horizon, gib
 from uavrl.envs.limits import default_horizon as default_horizon  # the video's and the tabular evaluation's
 from uavrl.envs.physics.grid import on_grid
 from uavrl.envs.rules import refuse, rule_of
-from uavrl.envs.world import World
+from uavrl.envs.world import World, check_seed, resolve_device
 
 # the command line's eval.* defaults (uavrl/schema.py): the seed is far from training seeds, so the evaluation's
 # worlds (and random layouts) are held out
@@ -80,11 +81,6 @@ def check_settings(gamma, horizon, num_starts) -> None:
 def check_arguments(policy, cfg, **settings) -> None:
     """:func:`evaluate`'s arguments, refused in one line of :class:`~uavrl.envs.InvalidOption` (an
     :class:`~uavrl.envs.InvalidType` for a wrong type) that names the keyword as the caller typed it."""
-    import numbers
-
-    from uavrl.envs import InvalidType
-    from uavrl.envs.world import check_seed, resolve_device
-
     if not callable(policy):
         raise InvalidType("policy", policy, "give a TorchRL policy (a module that writes ('agents', 'action'))")
     if not isinstance(cfg, ModelConfig):

@@ -39,7 +39,10 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torch import nn
 
+from uavrl.agents.dqn.networks import ValidGreedy
+from uavrl.agents.dqn.setnet import SetQNet
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.lookahead_rules import check_lookahead, lookahead_settings  # noqa: F401 (lookahead_settings: 0.2's path)
 from uavrl.envs import ModelConfig
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, rates, relay_contributions
 from uavrl.envs.physics.grid import cells_of
@@ -213,8 +216,6 @@ def _team_value(chosen: torch.Tensor, mixer: str) -> torch.Tensor:
 
 
 def _valid_greedy(world: World, cfg: ModelConfig):
-    from uavrl.agents.dqn.networks import ValidGreedy
-
     return ValidGreedy(world.neighbours, cfg.grid[0], cfg.num_actions)
 
 
@@ -224,8 +225,6 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     a = getattr(agent, "settings", None)
     check_lookahead(a, depth, type(agent).__name__)
     if hasattr(agent, "core"):  # the size-free network: any grid and team
-        from uavrl.agents.dqn.setnet import SetQNet
-
         agent.policy_for(env_cfg)  # its one-line refusals (another model)
         values = SetQNet(agent.core, env_cfg.grid)
     else:
@@ -245,25 +244,3 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     checked = CheckedPolicy(policy, env_cfg)
     checked.lookahead = policy
     return checked
-
-
-def check_lookahead(a, depth: int, agent_name: str) -> None:
-    """One-line errors for ``eval.lookahead=depth`` with agent settings ``a`` (None: an agent without settings)."""
-    if a is None or a.get("name") != "dqn":
-        raise ValueError(f"eval.lookahead={depth} needs a Q-network agent (agent=dqn): {agent_name} has none")
-    if a.head != "factored" or a.mixer not in ("vdn", "mean"):
-        raise ValueError(
-            f"eval.lookahead={depth} is invalid with agent.head={a.head!r} agent.mixer={a.mixer!r}: it reads per-UAV "
-            "values mixed by their sum or mean (agent.head=factored, agent.mixer=vdn or mean)"
-        )
-
-
-def lookahead_settings(cfg, agent_settings=None) -> dict:
-    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); the
-    agent is checked at once: ``agent_settings`` (an evaluated checkpoint's saved ``agent``), else ``cfg.agent`` (a
-    training run's, before it trains)."""
-    depth = int(cfg.eval.get("lookahead", 0) or 0)
-    a = agent_settings if agent_settings is not None else cfg.get("agent")
-    if depth and a is not None:
-        check_lookahead(a, depth, f"agent={a.name}")
-    return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}

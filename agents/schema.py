@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
-from uavrl.envs.config import LAYOUTS, NUM_ACTIONS
+from uavrl.envs.config import LAYOUTS, NUM_ACTIONS, InvalidOption
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rules import (
     REAL,
@@ -233,8 +233,6 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for DQN settings that cannot go together (after the schema's rules), before torch is
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
     each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
-    from uavrl.envs.config import InvalidOption
-
     network = a.get("network", "team")  # run configs saved before: no setting
     if network == "team":
         if a.mixer == "mean":

@@ -109,7 +109,7 @@ def main() -> None:
     if args.table2:
         from omegaconf import OmegaConf
 
-        from uavrl.reproduce import table2
+        from uavrl.experiment.reproducing import table2
 
         cfg2 = OmegaConf.load(__file__.replace("benchmarks/learner_throughput.py", "configs/reproduce.yaml"))
         cfg2.progress, cfg2.out_dir = False, "/tmp/uavrl-bench-table2"

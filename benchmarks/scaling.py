@@ -30,7 +30,7 @@ import torch
 from uavrl.agents.baselines import OraclePolicy
 from uavrl.agents.evaluation import evaluate
 from uavrl.config import model_config
-from uavrl.evaluate import load_agent
+from uavrl.experiment.saved import load_agent
 
 # (N, grid, the specialist's overrides): the scenarios' budgets where one exists, else about 15-20 minutes of one core
 SIZES = [

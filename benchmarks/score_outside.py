@@ -4,9 +4,9 @@
     python benchmarks/score_outside.py sb3 MODEL.zip [--suite paper] [--out DIR]
 
 ``benchmarl``: each ``RUN_DIR`` is a directory of ``python -m uavrl.benchmarl ... run_dir=RUN_DIR`` (needs the
-``[benchmarl]`` extra); its experiment at its last checkpoint (``uavrl.benchmarl.load_experiment``) acts with its
-deterministic policy where it can (the model it trained on), n/a elsewhere.  The budget is the experiment's frames
-and its training CPU seconds (``metrics.json``).
+``[benchmarl]`` extra); its experiment at its last checkpoint (``uavrl.experiment.benchmarl.load_experiment``) acts
+with its deterministic policy where it can (the model it trained on), n/a elsewhere.  The budget is the experiment's
+frames and its training CPU seconds (``metrics.json``).
 
 ``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
 through ``TeamActionPolicy`` on the paper's 6x6 model only.  The budget is its ``num_timesteps``.
@@ -30,7 +30,7 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from uavrl.bench.run import NotApplicable, score_suite
-    from uavrl.benchmarl import load_experiment
+    from uavrl.experiment.benchmarl import load_experiment
 
     saved = OmegaConf.load(run_dir / "config.yaml")
     metrics = json.loads((run_dir / "metrics.json").read_text())

@@ -122,7 +122,7 @@ def evaluate_team(out: Path, team: str, runs: dict, args) -> dict:
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
     from uavrl.agents.evaluation import evaluate, evaluate_with_lookahead
     from uavrl.config import model_config
-    from uavrl.evaluate import load_agent
+    from uavrl.experiment.saved import load_agent
 
     torch.set_num_threads(1)
     path = out / f"eval-{team.replace(':', '_')}.json"

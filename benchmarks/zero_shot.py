@@ -27,7 +27,7 @@ from uavrl.agents.evaluation import EVAL_SEED, evaluate
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv
 from uavrl.envs.limits import evaluation_horizon
-from uavrl.evaluate import load_agent
+from uavrl.experiment.saved import load_agent
 
 DEFAULT_TEAMS = ["2:6x6", "6:10x10", "10:20x20", "20:30x30", "50:50x50", "6:10x10:random"]
 COLUMNS = ("eval/return_ratio", "eval/reach_999", "eval/step_ratio_999", "eval/optimality")

@@ -27,6 +27,7 @@ from .config import (
     make_config,
 )
 from .limits import DEFAULT_MEMORY_BUDGET
+from .render import render as draw_world
 from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device
 
 __all__ = ["SEED_LIMIT", "MaskedCategorical", "UAVSpectrumEnv", "check_seed", "resolve_device"]
@@ -474,9 +475,7 @@ class UAVSpectrumEnv(EnvBase):
         against U* (:mod:`uavrl.envs.render`); ``agent_index_focus`` rings one UAV.  ``mode``: ``"rgb_array"``, the
         only one.
         """
-        from .render import render
-
-        return render(self.world, mode, env_index, agent_index_focus)
+        return draw_world(self.world, mode, env_index, agent_index_focus)
 
     # ------------------------------------------------------ the world's helpers
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:

@@ -8,8 +8,8 @@ place.  One start is then one *mission*, scored by the data it delivers against 
 
 This example plays a persistent mission (three UAVs in service, one spare, recharging at the base) with the
 energy-aware planner and with the oracle that ignores energy, scores both with :func:`uavrl.agents.evaluation.evaluate`,
-and draws the planner's batteries with :func:`uavrl.plots.battery_figure`.  ``scenario=persistent_10x10`` is the
-same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a real run.
+and draws the planner's batteries with :func:`uavrl.experiment.missions.battery_figure`.  ``scenario=persistent_10x10``
+is the same kind of mission at full size; raise ``HORIZON`` and ``NUM_STARTS`` for a real run.
 """
 
 # %%
@@ -21,7 +21,7 @@ from uavrl.agents.baselines import OraclePolicy
 from uavrl.agents.evaluation import evaluate
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.envs import make_config
-from uavrl.plots import battery_figure, mission_history
+from uavrl.experiment.missions import battery_figure, mission_history
 
 HORIZON, NUM_STARTS = 240, 16  # scenario=persistent_10x10: 500 steps, 200 starts
 cfg = make_config(
@@ -62,5 +62,5 @@ figure = battery_figure(
     num_serving=cfg.num_uavs,
     title="energy-aware planner, 6x6, 3 serving + 1 spare, recharged in 30 steps",
 )
-figure.tight_layout()  # as uavrl.plots.save_figure does before it writes the PNG
+figure.tight_layout()  # as uavrl.experiment.plots.save_figure does before it writes the PNG
 plt.show()

@@ -28,7 +28,7 @@ from omegaconf.errors import OmegaConfBaseException
 from uavrl.config import MOVED, config_dir
 from uavrl.envs.config import InvalidOption
 from uavrl.envs.rules import path, rules_of, shown
-from uavrl.io import claim_dir
+from uavrl.experiment.io import claim_dir
 from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema
 
 Command = Callable[[DictConfig, list], object]

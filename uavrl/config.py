@@ -6,7 +6,9 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl.envs.config import OPTION_NAMES, ModelConfig, make_config
+from uavrl.envs.config import OPTION_NAMES, InvalidOption, ModelConfig, make_config
+from uavrl.schema import register
+from uavrl.settings import check_run
 
 # how the model's options are typed on the command line of uavrl.train and uavrl.evaluate
 RUN_OPTION_SETTINGS = {name: f"env.{name}" for name in (*OPTION_NAMES, "preset")}
@@ -17,11 +19,9 @@ def config_dir() -> str:
 
     Their schemas (:mod:`uavrl.schema`) are registered with Hydra's ConfigStore on the way.
     """
-    from uavrl.schema import register
-
     register()
     try:
-        import uavrl.configs as packaged
+        import uavrl.configs as packaged  # the installed data package, else (ImportError) the checkout's configs/
 
         here = Path(packaged.__file__).resolve().parent
         if (here / "config.yaml").exists():
@@ -61,9 +61,6 @@ def saved_config(saved: dict, source: str = "the saved run") -> DictConfig:
     setting outside its rule (:mod:`uavrl.settings`) or the model's.
     """
     from omegaconf.errors import OmegaConfBaseException
-
-    from uavrl.envs.config import InvalidOption
-    from uavrl.settings import check_run
 
     for name, value in _settings_of(saved):
         if isinstance(value, str) and "${" in value:

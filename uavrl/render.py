@@ -8,9 +8,12 @@ start: the policy left, the oracle right), and writes ``video.gif`` (and
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
 checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
 
-Under an energy model it also writes ``battery.png`` (:func:`uavrl.plots.mission_figure`): the batteries of the
-mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
+Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.missions.mission_figure`): the batteries
+of the mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
 the whole mission), one strip per UAV with its returns, arrivals, recharges and entries marked.
+
+The settings are checked before torch is imported (:func:`uavrl.experiment.saved.check_evaluation`, the
+evaluation's check with a video); the drawing is :mod:`uavrl.experiment.rendering`'s.
 """
 
 from __future__ import annotations
@@ -20,54 +23,26 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from uavrl._moved import moved_names
 from uavrl.cli import hydra_quoted, run_command
-from uavrl.config import RUN_OPTION_SETTINGS, model_config
-from uavrl.costs import check_video_cost
-from uavrl.evaluate import check_settings, load_agent, output_dir
-from uavrl.io import Manifest
+from uavrl.config import RUN_OPTION_SETTINGS
+from uavrl.experiment.saved import check_evaluation
 
-
-def render_checkpoint(cfg: DictConfig, overrides=None) -> list[Path]:
-    """The run's video files, written (``overrides``: the command line's, named by a refusal)."""
-    check_settings(cfg, video=True, overrides=overrides)
-    import torch
-
-    from uavrl.envs.world import resolve_device
-    from uavrl.plots import mission_figure
-    from uavrl.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
-
-    torch.set_num_threads(int(cfg.num_threads))
-    device = resolve_device(cfg.device)
-    agent, saved, fallback = load_agent(cfg.checkpoint, device)  # named checkpoint=, as the command line has it
-    if fallback:
-        print(f"warning: {fallback}", file=sys.stderr)
-    env_cfg = model_config(saved)
-    check_video_cost(cfg, env_cfg, overrides)
-    policy, out_dir = agent.policies()[0], output_dir(cfg.checkpoint)
-    frames = comparison_frames(policy, env_cfg, **video_settings(cfg, device))
-    written_here = Manifest(out_dir, "checkpoint", VIDEO_RECORD)  # a user's video.gif or battery.png there stays
-    written = save_videos(frames, out_dir, int(cfg.eval.video_fps), written_here)
-    if env_cfg.energy != "none":  # the mission's batteries
-        horizon, seed = cfg.eval.horizon, int(cfg.eval.seed)
-        label = f"{saved.agent.name} (greedy)"
-        written.append(
-            mission_figure(
-                policy,
-                env_cfg,
-                written_here.free(out_dir / "battery.png"),
-                horizon=horizon,
-                seed=seed,
-                device=device,
-                label=label,
-            )
-        )
-    return written
+# uavrl 0.2's names of this module that moved to the library (render_checkpoint): deprecated aliases
+__getattr__ = moved_names(__name__, "uavrl.experiment.rendering")
 
 
 def print_videos(cfg: DictConfig, overrides) -> None:
-    """``python -m uavrl.render``: the paths written, one a line."""
-    for path in render_checkpoint(cfg, overrides):
-        print(path)
+    """``python -m uavrl.render``: the paths written, one a line.
+
+    Args:
+        cfg: the composed config.
+        overrides: the command line's overrides.
+    """
+    check_evaluation(cfg, video=True, overrides=overrides)
+    from uavrl.experiment import rendering  # torch, the agents, matplotlib: only once the settings are good
+
+    rendering.print_videos(cfg, overrides, checked=True)
 
 
 def as_overrides(args: list[str]) -> list[str]:

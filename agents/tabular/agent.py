@@ -10,6 +10,7 @@ from uavrl.agents.base import Agent
 from uavrl.agents.schema import AGENTS, TabularSchema
 from uavrl.envs import ModelConfig
 
+from .greedy import evaluate_tables
 from .learner import TeamQLearner
 from .tables import exact_q_table
 
@@ -84,8 +85,6 @@ class TabularAgent(Agent):
     def evaluate(self, env_cfg: ModelConfig, **kwargs) -> list[dict[str, float]]:
         """The evaluation of :meth:`policies` in the model ``env_cfg``, read from the tables in one batched world (no
         TorchRL rollouts); ``kwargs``: the settings of :func:`uavrl.agents.evaluation.evaluate`."""
-        from .greedy import evaluate_tables
-
         return evaluate_tables(self.learner.q if self.learner is not None else self.q[None], env_cfg, **kwargs)
 
     def state_dict(self) -> dict:

@@ -13,8 +13,9 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E4
 
 from uavrl.agents.benchmarl import YardstickCallback  # noqa: E402
 from uavrl.agents.evaluation import evaluate  # noqa: E402
-from uavrl.benchmarl import check_settings, load_experiment, train  # noqa: E402
+from uavrl.benchmarl import check_settings, train  # noqa: E402
 from uavrl.cli import compose_config  # noqa: E402
+from uavrl.experiment.benchmarl import load_experiment  # noqa: E402
 
 # a few thousand frames: two batches of 1,200 (40 worlds x 30 steps), evaluated after each
 TINY = [

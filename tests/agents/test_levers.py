@@ -18,7 +18,7 @@ from uavrl.agents.lookahead import LookaheadPolicy, lookahead_policy
 from uavrl.config import config_dir, model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.solvers import exact
-from uavrl.runs import optimality_line
+from uavrl.experiment.runs import optimality_line
 
 SMALL = [
     "agent=dqn",
@@ -223,7 +223,7 @@ def test_eval_lookahead_is_refused_for_an_agent_without_q_values():
     ],
 )
 def test_eval_lookahead_is_refused_before_training(overrides, words):
-    from uavrl.agents.lookahead import lookahead_settings
+    from uavrl.agents.lookahead_rules import lookahead_settings
 
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
         cfg = compose("config", overrides=[*overrides, "eval.lookahead=2"])
@@ -247,7 +247,7 @@ def test_eval_lookahead_on_a_per_size_dqn_in_its_own_model():
 def test_evaluate_checks_the_lookahead_against_the_checkpoints_agent_not_its_own_default():
     """``python -m uavrl.evaluate checkpoint=<dqn run> eval.lookahead=1``: evaluate's own config holds the default
     agent (tabular); the saved run's agent is the one that must have a Q-network."""
-    from uavrl.agents.lookahead import lookahead_settings
+    from uavrl.agents.lookahead_rules import lookahead_settings
 
     with initialize_config_dir(config_dir=config_dir(), version_base=None):
         evaluate_cfg = compose("config", overrides=["agent=tabular", "eval.lookahead=1"])

@@ -17,7 +17,7 @@ from uavrl.agents.dqn.setnet import Q_INPUTS, SetQCore, SetQNet
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.world import World
-from uavrl.evaluate import evaluate_checkpoint
+from uavrl.experiment.evaluating import evaluate_checkpoint
 from uavrl.train import train
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py

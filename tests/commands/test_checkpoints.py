@@ -10,8 +10,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensorboard.backend.event_processing.plugin_event_accumulator import EventAccumulator as PluginEventAccumulator
 
 import uavrl.agents.tabular as tabular
-from uavrl.checkpoints import CheckpointError
-from uavrl.io import save_text
+from uavrl.experiment.checkpoints import CheckpointError
+from uavrl.experiment.io import save_text
 from uavrl.train import train
 
 SMALL = ["env.grid=[3,3]", "agent.episodes=6", "env.max_steps=100", "agent.runs=2"]

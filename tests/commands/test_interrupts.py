@@ -22,12 +22,12 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensorboard.backend.event_processing.event_file_loader import RawEventFileLoader
 
 import uavrl.agents.tabular as tabular
-import uavrl.io
-import uavrl.train
+import uavrl.experiment.io
+import uavrl.experiment.training
 from uavrl.agents.dqn import DQNAgent
 from uavrl.cli import typed
-from uavrl.io import quoted
-from uavrl.rundir import HOLDER, Interrupted, RunDirectoryInUse
+from uavrl.experiment.io import quoted
+from uavrl.experiment.rundir import HOLDER, Interrupted, RunDirectoryInUse
 from uavrl.train import train
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -113,22 +113,22 @@ def test_a_signal_mid_iteration_saves_that_iteration_and_the_resumed_run_ends_ex
 def test_a_signal_during_the_final_video_keeps_the_training_and_logs_the_evaluation_once(
     compose_cfg, monkeypatch, tmp_path
 ):
-    import uavrl.video
+    import uavrl.experiment.video
 
     settings = [*TABULAR, *COMMON, "eval.video=true", "eval.video_starts=1", "eval.horizon=3"]
-    run_dir, drawn = tmp_path / "run", uavrl.video.comparison_frames
+    run_dir, drawn = tmp_path / "run", uavrl.experiment.video.comparison_frames
 
     def signalled(*args, **kwargs):  # a Ctrl-C while the video of the trained policy is drawn
         os.kill(os.getpid(), signal.SIGINT)
         return drawn(*args, **kwargs)
 
-    monkeypatch.setattr(uavrl.video, "comparison_frames", signalled)
+    monkeypatch.setattr(uavrl.experiment.video, "comparison_frames", signalled)
     with pytest.raises(Interrupted) as err:
         train(compose_cfg(*settings, f"run_dir={run_dir}"))
     assert err.value.__notes__ == [
         f"checkpoint.pt holds iteration 6 of 6; continue the run with: python -m uavrl.train resume={run_dir}"
     ]
-    monkeypatch.setattr(uavrl.video, "comparison_frames", drawn)
+    monkeypatch.setattr(uavrl.experiment.video, "comparison_frames", drawn)
     resume(compose_cfg, run_dir, *settings)
     events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
     events.Reload()
@@ -175,10 +175,10 @@ def test_a_second_signal_during_the_checkpoint_write_keeps_the_checkpoints_on_di
     if during == "torch.save":
         monkeypatch.setattr(torch, "save", second_signal_in_save)
     else:
-        monkeypatch.setattr(uavrl.io.os, "fsync", second_signal_in_fsync)
+        monkeypatch.setattr(uavrl.experiment.io.os, "fsync", second_signal_in_fsync)
     with signal_at(tabular.TabularAgent, 3, signal.SIGTERM), pytest.raises(Interrupted) as err:
         train(compose_cfg(*TABULAR, *COMMON, f"run_dir={killed}"))
-    monkeypatch.setattr(uavrl.io.os, "fsync", fsync)
+    monkeypatch.setattr(uavrl.experiment.io.os, "fsync", fsync)
     monkeypatch.setattr(torch, "save", save)
     assert err.value.signum == signal.SIGINT and "checkpoint.pt holds iteration 2 of 6" in err.value.__notes__[0]
     assert iteration(killed) == 2 and temporary_files(killed) == []
@@ -189,13 +189,13 @@ def test_a_second_signal_during_the_checkpoint_write_keeps_the_checkpoints_on_di
 def test_a_second_signal_while_the_run_stops_is_dropped_and_the_report_kept(
     compose_cfg, signal_at, monkeypatch, tmp_path
 ):
-    report = uavrl.train.interrupted_note
+    report = uavrl.experiment.training.interrupted_note
 
     def second_signal_in_report(*args):
         os.kill(os.getpid(), signal.SIGINT)  # the process is already on its way out
         return report(*args)
 
-    monkeypatch.setattr(uavrl.train, "interrupted_note", second_signal_in_report)
+    monkeypatch.setattr(uavrl.experiment.training, "interrupted_note", second_signal_in_report)
     with signal_at(tabular.TabularAgent, 3, signal.SIGTERM), pytest.raises(Interrupted) as err:
         train(compose_cfg(*TABULAR, *COMMON, f"run_dir={tmp_path / 'run'}"))
     assert err.value.signum == signal.SIGTERM and "checkpoint.pt holds iteration 3 of 6" in err.value.__notes__[0]
@@ -499,8 +499,8 @@ def test_the_end_of_a_run_prints_commands_that_paste(compose_cfg, tmp_path, caps
 
 def test_a_write_after_one_cut_short_between_its_renames_keeps_both_checkpoints(tmp_path):
     newest, previous = tmp_path / "checkpoint.pt", tmp_path / "checkpoint.prev.pt"
-    uavrl.io.save_torch({"iteration": 1}, newest)
+    uavrl.experiment.io.save_torch({"iteration": 1}, newest)
     os.link(newest, previous)  # what a write stopped after keeping the previous checkpoint leaves
-    uavrl.io.save_torch({"iteration": 2}, newest, previous=previous)
+    uavrl.experiment.io.save_torch({"iteration": 2}, newest, previous=previous)
     assert iteration(tmp_path) == 2 and iteration(tmp_path, previous.name) == 1
     assert temporary_files(tmp_path) == []

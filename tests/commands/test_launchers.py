@@ -44,7 +44,7 @@ def test_the_launchers_give_the_same_results(swept):
 
 
 def test_the_report_on_a_ray_sweep(swept):
-    from uavrl.report import report
+    from uavrl.experiment.reporting import report
 
     root, _ = swept
     text = report([root / "ray"], root / "ray").read_text()

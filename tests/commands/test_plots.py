@@ -1,4 +1,5 @@
-"""The battery-over-time figure of a mission (uavrl/plots.py) and ``python -m uavrl.render`` writing it."""
+"""The battery-over-time figure of a mission (uavrl/experiment/missions.py) and ``python -m uavrl.render``
+writing it."""
 
 import os
 import subprocess
@@ -13,8 +14,9 @@ from uavrl.cli import compose_config
 from uavrl.envs import make_config
 from uavrl.envs.physics.energy import CHARGING, OUT, RETURNING, SERVING, WAITING
 from uavrl.envs.render import STATUS_COLOURS
-from uavrl.plots import battery_figure, mission_events, mission_history, pyplot, save_figure
-from uavrl.render import render_checkpoint
+from uavrl.experiment.missions import battery_figure, mission_events, mission_history
+from uavrl.experiment.plots import pyplot, save_figure
+from uavrl.experiment.rendering import render_checkpoint
 from uavrl.train import train
 
 S, R, C, W, X = SERVING, RETURNING, CHARGING, WAITING, OUT  # X: out
@@ -110,7 +112,7 @@ PERSISTENT = [
 def test_the_render_command_writes_the_battery_figure_of_the_runs_mission(tmp_path, compose_cfg, monkeypatch):
     """End to end: a tiny persistent mission's run, rendered: battery.png is the figure of the mission the run's
     policy plays from the evaluation's first start, with its returns and recharges."""
-    import uavrl.plots
+    import uavrl.experiment.missions
     from uavrl.agents.baselines import OraclePolicy
 
     drawn = []
@@ -119,7 +121,7 @@ def test_the_render_command_writes_the_battery_figure_of_the_runs_mission(tmp_pa
         drawn.append((np.asarray(battery), np.asarray(status), capacity, kwargs["num_serving"]))
         return battery_figure(battery, status, capacity, **kwargs)
 
-    monkeypatch.setattr(uavrl.plots, "battery_figure", recorded)
+    monkeypatch.setattr(uavrl.experiment.missions, "battery_figure", recorded)
     run_dir = train(compose_cfg(*PERSISTENT, f"run_dir={tmp_path / 'run'}"))
     written = render_checkpoint(
         compose_config("config", [f"checkpoint={run_dir}", "eval.video_starts=1", "eval.horizon=30"])
@@ -144,7 +146,7 @@ def test_pyplot_keeps_the_backend_the_caller_chose(chosen):
     script = (
         "import matplotlib\n"
         + ("matplotlib.use('svg'); import matplotlib.pyplot\n" if chosen == "pyplot first" else "")
-        + "from uavrl.plots import pyplot\n"
+        + "from uavrl.experiment.plots import pyplot\n"
         "pyplot()\n"
         "print(matplotlib.get_backend())\n"
     )
@@ -154,7 +156,7 @@ def test_pyplot_keeps_the_backend_the_caller_chose(chosen):
     chosen_backend = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
     assert chosen_backend.stdout.strip() == "svg"
     alone = subprocess.run(
-        [sys.executable, "-c", "from uavrl.plots import pyplot; print(pyplot().get_backend())"],
+        [sys.executable, "-c", "from uavrl.experiment.plots import pyplot; print(pyplot().get_backend())"],
         env={k: v for k, v in os.environ.items() if k != "MPLBACKEND"},
         capture_output=True,
         text=True,

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from uavrl.report import bootstrap_band, bootstrap_ci, iqm, main, report
+from uavrl.experiment.reporting import bootstrap_band, bootstrap_ci, iqm, report
+from uavrl.report import main
 
 
 @pytest.mark.parametrize(
@@ -236,7 +237,7 @@ def laid_out_figures(monkeypatch) -> dict:
     """The report's figures by file name, each drawn as saved (its layout applied), kept open to be inspected."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    import uavrl.report as module
+    import uavrl.experiment.reporting as module
 
     figures, save = {}, module.save_figure
 
@@ -262,7 +263,7 @@ def legend_labels(figure) -> list[str]:
 
 
 def write_curves(run_dir, values) -> None:
-    from uavrl.logger import RunLogger
+    from uavrl.experiment.logger import RunLogger
 
     logger = RunLogger(run_dir)
     for step, value in enumerate(values, start=1):

@@ -21,11 +21,11 @@ from hydra import compose, initialize_config_dir
 
 import uavrl
 from uavrl.agents.env_check import FULL_CHECKS
-from uavrl.checkpoints import CheckpointError
 from uavrl.config import config_dir
 from uavrl.envs import UAVSpectrumEnv
-from uavrl.evaluate import load_agent
-from uavrl.reproduce import variant
+from uavrl.experiment.checkpoints import CheckpointError
+from uavrl.experiment.protocol import variant
+from uavrl.experiment.saved import load_agent
 from uavrl.train import train
 
 TINY = ["env.grid=[3,3]", "env.max_steps=10", "eval.num_starts=2", "progress=false"]
@@ -272,7 +272,7 @@ def test_a_missing_newest_checkpoint_is_said_with_the_file_and_iteration_used(fi
     with pytest.warns(UserWarning) as warned:
         uavrl.load_policy(prev_only)
     assert [str(w.message) for w in warned] == [used]
-    from uavrl.evaluate import evaluate_checkpoint
+    from uavrl.experiment.evaluating import evaluate_checkpoint
 
     evaluate_checkpoint(compose_config("config", [f"checkpoint={prev_only}", *TINY]))
     assert capsys.readouterr().err.strip() == f"warning: {used}"

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from uavrl.cli import check_sweep, split_sweep_dir, sweep_jobs
-from uavrl.io import claim_dir
-from uavrl.train import hold_run_dir
+from uavrl.experiment.io import claim_dir
+from uavrl.experiment.training import hold_run_dir
 
 
 def test_runs_started_at_once_get_their_own_directories(tmp_path, compose_cfg, monkeypatch):
@@ -40,7 +40,7 @@ def test_processes_started_at_once_get_their_own_directories(tmp_path):
     """The same with real processes (each its own interpreter) released at one instant."""
     release = time.time() + 3.0
     probe = (
-        "import sys, time; from uavrl.io import claim_dir\n"
+        "import sys, time; from uavrl.experiment.io import claim_dir\n"
         f"time.sleep(max(0.0, {release} - time.time()))\n"
         "print(claim_dir(sys.argv[1]))\n"
     )

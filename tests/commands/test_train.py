@@ -10,7 +10,7 @@ import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 import uavrl.agents.tabular as tabular
-from uavrl.evaluate import evaluate_checkpoint
+from uavrl.experiment.evaluating import evaluate_checkpoint
 from uavrl.train import train
 
 SMALL = [

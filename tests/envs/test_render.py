@@ -29,10 +29,11 @@ from uavrl.envs.render import (
     tile,
 )
 from uavrl.envs.world import World
-from uavrl.logger import RunLogger
-from uavrl.render import as_overrides, render_checkpoint
+from uavrl.experiment.logger import RunLogger
+from uavrl.experiment.rendering import render_checkpoint
+from uavrl.experiment.video import can_write_mp4, comparison_frames, encode
+from uavrl.render import as_overrides
 from uavrl.train import train
-from uavrl.video import can_write_mp4, comparison_frames, encode
 
 TINY_RUN = ["env.grid=[3,3]", "agent.episodes=2", "env.max_steps=20", "agent.runs=1", "eval.num_starts=4"]
 
@@ -384,7 +385,7 @@ def test_the_command_line_prints_the_files_it_wrote(tmp_path, compose_cfg):
 
 
 def test_evaluate_with_video_writes_the_gif_and_tensorboard(tmp_path, compose_cfg):
-    from uavrl.evaluate import evaluate_checkpoint
+    from uavrl.experiment.evaluating import evaluate_checkpoint
 
     run_dir = train(compose_cfg(*TINY_RUN, "progress=false", f"run_dir={tmp_path / 'run'}"))
     evaluate_checkpoint(

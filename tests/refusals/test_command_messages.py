@@ -10,7 +10,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from uavrl.cli import hydra_quoted, readable, split_sweep_dir, sweep_dir_override, typed
 from uavrl.envs import make_config
-from uavrl.train import summary
+from uavrl.experiment.training import summary
 
 ODD = "my runs/ünï (copy) #1 ~x 'q'"  # a directory name Hydra cannot read unquoted; {odd} below is tmp/ODD
 
@@ -139,7 +139,7 @@ def test_reproduce_checks_its_memory_budget_before_any_work(monkeypatch, tmp_pat
 )
 def test_a_share_of_starts_never_rounds_a_miss_up_to_all(fraction, shown):
     """199 of 200 starts is 99.5%, not 100%: the summary's shares round down to 0.1%."""
-    from uavrl.runs import share_of_starts, yardstick_line
+    from uavrl.experiment.runs import share_of_starts, yardstick_line
 
     assert share_of_starts(fraction) == shown
     assert yardstick_line(None, {"eval/reach_999": fraction}) == f"yardstick: 0.999 U* reached from {shown} of starts"

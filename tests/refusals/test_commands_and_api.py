@@ -9,9 +9,9 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from uavrl.checkpoints import CheckpointError
 from uavrl.envs import UAVSpectrumEnv
-from uavrl.evaluate import load_agent
+from uavrl.experiment.checkpoints import CheckpointError
+from uavrl.experiment.saved import load_agent
 from uavrl.train import train
 
 # (command and overrides, words the one-line error must contain: the setting as typed); {tmp} is an empty

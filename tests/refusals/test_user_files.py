@@ -12,8 +12,8 @@ import os
 
 import pytest
 
-from uavrl.checkpoints import CheckpointError, load_checkpoint, read_torch
-from uavrl.io import Manifest, read_regular_text, special_kind
+from uavrl.experiment.checkpoints import CheckpointError, load_checkpoint, read_torch
+from uavrl.experiment.io import Manifest, read_regular_text, special_kind
 from uavrl.reproduce import check_settings, reproduce
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -143,7 +143,7 @@ def test_a_special_checkpoint_is_named_for_what_it_is(kind, tmp_path):
 
 
 def test_the_holder_of_a_run_is_read_from_a_regular_file_only(tmp_path):
-    from uavrl.rundir import HOLDER, holder
+    from uavrl.experiment.rundir import HOLDER, holder
 
     os.mkfifo(tmp_path / HOLDER)  # read, it would block: what it says is not known
     assert holder(tmp_path) == "pid unknown"
@@ -240,7 +240,7 @@ def test_a_manifest_writes_beside_a_users_file_and_over_its_own(tmp_path):
 def test_report_writes_over_no_report_of_a_users(run_dir, tmp_path):
     import shutil
 
-    from uavrl.report import report
+    from uavrl.experiment.reporting import report
 
     study = tmp_path / "study"
     shutil.copytree(run_dir, study / "run")

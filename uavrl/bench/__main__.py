@@ -19,9 +19,17 @@ imported.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
+from uavrl._moved import moved_names
+from uavrl.bench.leaderboard import leaderboard_command
+from uavrl.bench.results import interval, read
+from uavrl.bench.stats import probability_of_improvement
 from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS
+from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
+
+# uavrl 0.2's names of this module that moved to the library (score_command, baseline_factory, ...): deprecated
+# aliases
+__getattr__ = moved_names(__name__, "uavrl.bench.scoring")
 
 BASELINES = ("random", "oracle", "planner")
 SETTINGS = (
@@ -77,117 +85,15 @@ def parse(args: list[str]) -> dict:
     if "agent" in settings and settings["agent"] not in BASELINES:
         raise ValueError(f"agent={settings['agent']} is invalid: give one of {', '.join(BASELINES)}")
     if "checkpoint" in settings:
-        from uavrl.checkpoints import checkpoint_files, no_checkpoint
-
         if not checkpoint_files(settings["checkpoint"]):
             raise ValueError(no_checkpoint(settings["checkpoint"], "checkpoint"))
     return settings
-
-
-def baseline_factory(agent: str):
-    """A policy factory (:func:`uavrl.bench.run.score_suite`) of a baseline by name."""
-
-    def factory(env):
-        from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-        from uavrl.agents.planner import PlannerPolicy
-        from uavrl.bench.run import RANDOM_SEED
-
-        if agent == "random":
-            return RandomPolicy(seed=RANDOM_SEED)
-        return OraclePolicy(env.cfg) if agent == "oracle" else PlannerPolicy(env.cfg)
-
-    return factory
-
-
-def checkpoint_factory(path):
-    """``(policy factory, the run's saved config, its agent)`` of a run directory: each of the run's independent
-    runs' greedy policies where the run's policy can act (a per-size policy in its own model, a size-free network in
-    any team and grid of it), :class:`~uavrl.bench.run.NotApplicable` elsewhere.  The settings that only shape
-    training (the reward, the episode length) are the run's own."""
-    from uavrl.agents.dqn.multisize import network_refusal
-    from uavrl.bench.run import NotApplicable
-    from uavrl.config import model_config
-    from uavrl.evaluate import load_agent
-
-    agent, saved, fallback = load_agent(path)
-    if fallback:
-        print(f"warning: {fallback}", file=sys.stderr)
-    run = model_config(saved)
-
-    def factory(env):
-        acting = env.cfg.replace(reward=run.reward, max_steps=run.max_steps)
-        refusal = network_refusal(saved, acting, run)
-        if refusal:
-            raise NotApplicable(refusal.split(";")[0])
-        return [agent.policy_for(acting, r) for r in range(len(agent.policies()))]
-
-    return factory, saved, agent
-
-
-def run_costs(checkpoint) -> dict:
-    """The training CPU seconds a run directory recorded (``metrics.json``'s ``train_cpu_seconds``), or nothing."""
-    import json
-
-    from uavrl.evaluate import output_dir
-
-    try:
-        metrics = json.loads((output_dir(checkpoint) / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return {"cpu_seconds": float(metrics["train_cpu_seconds"])} if "train_cpu_seconds" in metrics else {}
-
-
-def score_command(suite: str, settings: dict) -> None:
-    """``python -m uavrl.bench <suite> ...`` (module doc)."""
-    import torch
-
-    from uavrl.bench import cache
-    from uavrl.bench.results import save
-    from uavrl.bench.run import score_suite
-    from uavrl.runs import agent_label
-
-    torch.set_num_threads(settings.get("num_threads", 1))
-    budget = {k.split(".", 1)[1]: v for k, v in settings.items() if k.startswith("budget.")}
-    if "agent" in settings:
-        factory, name = baseline_factory(settings["agent"]), settings["agent"]
-        budget.setdefault("env_steps", 0)
-        source = f"python -m uavrl.bench {suite} agent={settings['agent']}"
-    else:
-        factory, saved, agent = checkpoint_factory(settings["checkpoint"])
-        name = f"{agent_label(saved)}:{Path(settings['checkpoint']).name}"
-        budget.setdefault("env_steps", int(agent.env_steps))
-        for key, value in run_costs(settings["checkpoint"]).items():
-            budget.setdefault(key, value)
-        source = f"python -m uavrl.bench {suite} checkpoint={settings['checkpoint']}"
-    if "tasks" in settings:
-        source += f" tasks=[{','.join(settings['tasks'])}]"
-    name = settings.get("name", name)
-    results = score_suite(
-        suite,
-        factory,
-        name=name,
-        budget=budget,
-        source=source,
-        cache_dir=Path(settings["cache_dir"]) if "cache_dir" in settings else cache.default_dir(),
-        tasks=settings.get("tasks"),
-        train_command=settings.get("train_command"),
-        progress=lambda line: print(line, file=sys.stderr, flush=True),
-    )
-    out = Path(settings.get("out") or Path("bench") / suite / f"{name.replace(':', '-').replace('/', '-')}.json")
-    written = save(results, out)
-    from uavrl.bench.results import markdown
-
-    print(markdown(results))
-    print("wrote " + ", ".join(str(p) for p in written))
 
 
 def compare_command(args: list[str]) -> None:
     """``python -m uavrl.bench compare A.json B.json``: P(A > B) with its CI, and each file's IQM."""
     if len(args) != 2:
         raise ValueError(f"compare {' '.join(args)} is invalid: give two results files, compare A.json B.json")
-    from uavrl.bench.results import interval, read
-    from uavrl.bench.stats import probability_of_improvement
-
     a, b = read(args[0]), read(args[1])
     p = probability_of_improvement(a, b)
     for path, r in ((args[0], a), (args[1], b)):
@@ -210,6 +116,11 @@ def list_command() -> None:
 
 
 def main(argv: list[str]) -> None:
+    """``python -m uavrl.bench``: the command word, then its arguments (the module doc).
+
+    Args:
+        argv: the arguments after ``python -m uavrl.bench``.
+    """
     if not argv or argv[0] in ("-h", "--help"):
         print(USAGE + "\n" + __doc__)
         return
@@ -217,13 +128,14 @@ def main(argv: list[str]) -> None:
     if command == "compare":
         compare_command(rest)
     elif command == "leaderboard":
-        from uavrl.bench.leaderboard import leaderboard_command
-
         leaderboard_command(rest)
     elif command == "list":
         list_command()
     elif command in SUITES:
-        score_command(command, parse(rest))
+        settings = parse(rest)
+        from uavrl.bench.scoring import score_command  # torch, TorchRL, the agents: once the settings are good
+
+        score_command(command, settings)
     else:
         hint = " (a task; give its suite)" if command in TASKS else ""
         raise ValueError(f"{command!r} is invalid{hint}: give a suite ({SUITES_TEXT}), compare, leaderboard or list")

@@ -14,7 +14,8 @@ import json
 import os
 from pathlib import Path
 
-from uavrl.io import save_text
+import uavrl
+from uavrl.experiment.io import save_text
 
 REFERENCES_VERSION = 1  # bump when what a reference means changes: every entry is then recomputed
 
@@ -36,10 +37,8 @@ def default_dir() -> Path:
 
 def entry_key(task) -> str:
     """The content key of a task's references."""
-    from uavrl import __version__
-
     text = json.dumps(
-        {"task": task.spec(), "uavrl": __version__, "references": REFERENCES_VERSION}, sort_keys=True
+        {"task": task.spec(), "uavrl": uavrl.__version__, "references": REFERENCES_VERSION}, sort_keys=True
     ).encode()
     return hashlib.sha256(text).hexdigest()
 

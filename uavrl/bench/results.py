@@ -13,7 +13,9 @@ import json
 import platform
 from pathlib import Path
 
-from uavrl.io import save_text
+import uavrl
+from uavrl.experiment.io import save_text
+from uavrl.experiment.plots import pyplot, save_figure
 
 FORMAT, VERSION = "uavrl-bench-results", 1
 
@@ -26,10 +28,8 @@ def environment() -> dict:
     import torch
     import torchrl
 
-    from uavrl import __version__
-
     return {
-        "uavrl": __version__,
+        "uavrl": uavrl.__version__,
         "torch": torch.__version__,
         "torchrl": torchrl.__version__,
         "tensordict": tensordict.__version__,
@@ -124,8 +124,6 @@ def figure(results_list: list[dict], path) -> None:
     with their CIs), side by side, as a PNG: one colour per results file in both panels, one legend under them (with
     each file's IQM), n/a where a policy cannot act."""
     from matplotlib.patches import Patch
-
-    from uavrl.plots import pyplot, save_figure
 
     plt = pyplot()
     count = len(results_list)

@@ -15,10 +15,23 @@ Example (the oracle planner on the smoke-sized suite):
 from __future__ import annotations
 
 import time
+from functools import lru_cache
 from pathlib import Path
 
+import torch
+
+from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+from uavrl.agents.evaluation import greedy_metrics, greedy_rollout
+from uavrl.agents.planner import PlannerPolicy
+from uavrl.agents.references import LEVELS, start_references, u_star_gap
 from uavrl.bench import cache
-from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task, horizon, model
+from uavrl.bench.results import new_results
+from uavrl.bench.stats import aggregate
+from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task
+from uavrl.cli import compose_config
+from uavrl.config import model_config
+from uavrl.envs.env import UAVSpectrumEnv
+from uavrl.envs.limits import evaluation_horizon
 
 RANDOM_SEED = 0  # the random policy every score is normalised by
 
@@ -27,20 +40,38 @@ class NotApplicable(Exception):
     """Raised by a policy factory for a task its policy cannot act in (the message says why)."""
 
 
+@lru_cache(maxsize=None)
+def _scenario(name: str):
+    """``(model config, evaluation horizon or None)`` of a scenario, as ``python -m uavrl.train scenario=<name>``
+    composes it."""
+    cfg = compose_config("config", [f"scenario={name}", "agent=random"])
+    return model_config(cfg), cfg.eval.horizon
+
+
+def model(task: Task):
+    """The task's :class:`~uavrl.envs.ModelConfig`, its episodes as long as its horizon."""
+    cfg, _ = _scenario(task.scenario)
+    cfg = cfg.replace(**dict(task.options))
+    return cfg.replace(max_steps=horizon(task, cfg))
+
+
+def horizon(task: Task, cfg=None) -> int:
+    """Steps per rollout: the scenario's ``eval.horizon``, else the evaluation's default for the task's model."""
+    base, steps = _scenario(task.scenario)
+    return int(steps) if steps is not None else evaluation_horizon(cfg or base.replace(**dict(task.options)))
+
+
 def _tensor(values) -> dict:
     return None if values is None else {"dtype": str(values.dtype).removeprefix("torch."), "values": values.tolist()}
 
 
 def _untensor(entry):
-    import torch
 
     return None if entry is None else torch.tensor(entry["values"], dtype=getattr(torch, entry["dtype"]))
 
 
 def task_env(task: Task, device="cpu"):
     """The task's environment, one world per start, seeded at its starts (not yet reset), on the torch ``device``."""
-    from uavrl.envs.env import UAVSpectrumEnv
-
     return UAVSpectrumEnv(batch_size=task.num_starts, config=model(task), seed=task.seed, device=device)
 
 
@@ -53,9 +84,6 @@ def _started(task: Task, device="cpu"):
 
 def _rollout(task: Task, policy, device="cpu") -> dict:
     """One greedy rollout per start of ``policy``: the world, start, U*, the steps' outputs and the batteries."""
-    import torch
-
-    from uavrl.agents.evaluation import greedy_rollout
 
     env, start, u_star = _started(task, device)
     with torch.no_grad():
@@ -66,8 +94,6 @@ def _rollout(task: Task, policy, device="cpu") -> dict:
 def _values(task: Task, played: dict):
     """Per start: the raw value (the discounted gain J; under an energy model the data delivered, bit/Hz) and the
     mean-channel utilities ``[B, H + 1]``."""
-    import torch
-
     world, start, steps = played["world"], played["start"], played["steps"]
     positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
@@ -80,8 +106,6 @@ def _values(task: Task, played: dict):
 
 def _summary(task: Task, played: dict, references: dict) -> dict:
     """The evaluation's ``eval/...`` metrics (:func:`uavrl.agents.evaluation.greedy_metrics`) of the rollouts."""
-    from uavrl.agents.evaluation import greedy_metrics
-
     return greedy_metrics(
         played["world"],
         played["start"],
@@ -96,8 +120,6 @@ def _summary(task: Task, played: dict, references: dict) -> dict:
 def _start_references(task: Task) -> tuple[dict, dict]:
     """The evaluation's references of the task's starts (:func:`uavrl.agents.evaluation.start_references`) and, as JSON,
     the certified quantities: U*, its gap, the fewest steps or their bound, the mission's optimum or bound."""
-    from uavrl.agents.evaluation import LEVELS, start_references, u_star_gap
-
     env, start, u_star = _started(task)
     refs = start_references(env.world, start, u_star, env.cfg.max_steps, task.gamma)
     u_start = env.world.utility(start["positions"], start["tasks"])[2]
@@ -132,9 +154,6 @@ def evaluation_references(stored: dict) -> dict:
 def compute_references(task: Task) -> dict:
     """A task's references as JSON (module doc of :mod:`uavrl.bench.tasks`): the certified quantities, the random
     policy's and the planner's per-start values and metrics, and the reference a score of 1 means."""
-    from uavrl.agents.baselines import OraclePolicy, RandomPolicy
-    from uavrl.agents.planner import PlannerPolicy
-
     began = time.process_time()
     _, stored = _start_references(task)
     refs = evaluation_references(stored)
@@ -255,8 +274,6 @@ def score_suite(
         train_command: the command that trained the policies, if any (carried into the results).
         progress: a callable given one line per task scored.
     """
-    from uavrl.bench.results import new_results
-
     if isinstance(cache_dir, cache.DefaultDir):
         cache_dir = cache.default_dir()
     chosen = suite_tasks(suite)
@@ -282,7 +299,6 @@ def score_suite(
         results["tasks"].append(entry)
         if progress is not None:
             progress(f"{_progress_line(entry)} ({time.process_time() - began:.1f} CPU s)")
-    from uavrl.bench.stats import aggregate
 
     results["aggregate"] = aggregate(results)
     return results

@@ -31,7 +31,8 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-from functools import lru_cache
+
+from uavrl._moved import moved_names
 
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
 TASK_SEED_STRIDE = 2**24  # each task's starts: seeds task.seed .. task.seed + num_starts - 1
@@ -124,32 +125,9 @@ SUITES = {
     "tiny": [TASKS["tiny_3x3"], TASKS["tiny_energy"]],
 }
 SUITES_TEXT = ", ".join(SUITES)
-
-
-@lru_cache(maxsize=None)
-def _scenario(name: str):
-    """``(model config, evaluation horizon or None)`` of a scenario, as ``python -m uavrl.train scenario=<name>``
-    composes it."""
-    from uavrl.cli import compose_config
-    from uavrl.config import model_config
-
-    cfg = compose_config("config", [f"scenario={name}", "agent=random"])
-    return model_config(cfg), cfg.eval.horizon
-
-
-def model(task: Task):
-    """The task's :class:`~uavrl.envs.ModelConfig`, its episodes as long as its horizon."""
-    cfg, _ = _scenario(task.scenario)
-    cfg = cfg.replace(**dict(task.options))
-    return cfg.replace(max_steps=horizon(task, cfg))
-
-
-def horizon(task: Task, cfg=None) -> int:
-    """Steps per rollout: the scenario's ``eval.horizon``, else the evaluation's default for the task's model."""
-    from uavrl.envs.limits import evaluation_horizon
-
-    base, steps = _scenario(task.scenario)
-    return int(steps) if steps is not None else evaluation_horizon(cfg or base.replace(**dict(task.options)))
+# uavrl 0.2's model() and horizon() of a task are uavrl.bench.run's (they compose the scenario with Hydra):
+# deprecated aliases
+__getattr__ = moved_names(__name__, "uavrl.bench.run")
 
 
 def training_seed_bound(max_training_seed: int, step_budget: int) -> int:

@@ -1,0 +1,27 @@
+"""``eval.lookahead``'s rules, standard library only: which agents the lookahead (:mod:`uavrl.agents.lookahead`)
+reads, and :func:`~uavrl.agents.evaluation.evaluate_agent`'s lookahead keywords from a config, so that a command
+checks them without importing TensorDict or the Q-networks."""
+
+from __future__ import annotations
+
+
+def check_lookahead(a, depth: int, agent_name: str) -> None:
+    """One-line errors for ``eval.lookahead=depth`` with agent settings ``a`` (None: an agent without settings)."""
+    if a is None or a.get("name") != "dqn":
+        raise ValueError(f"eval.lookahead={depth} needs a Q-network agent (agent=dqn): {agent_name} has none")
+    if a.head != "factored" or a.mixer not in ("vdn", "mean"):
+        raise ValueError(
+            f"eval.lookahead={depth} is invalid with agent.head={a.head!r} agent.mixer={a.mixer!r}: it reads per-UAV "
+            "values mixed by their sum or mean (agent.head=factored, agent.mixer=vdn or mean)"
+        )
+
+
+def lookahead_settings(cfg, agent_settings=None) -> dict:
+    """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); the
+    agent is checked at once: ``agent_settings`` (an evaluated checkpoint's saved ``agent``), else ``cfg.agent`` (a
+    training run's, before it trains)."""
+    depth = int(cfg.eval.get("lookahead", 0) or 0)
+    a = agent_settings if agent_settings is not None else cfg.get("agent")
+    if depth and a is not None:
+        check_lookahead(a, depth, f"agent={a.name}")
+    return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}

@@ -1,0 +1,153 @@
+"""The BenchMARL command's body (``python -m uavrl.benchmarl``, :mod:`uavrl.benchmarl`; the ``[benchmarl]`` extra):
+BenchMARL's :class:`~benchmarl.experiment.Experiment` of a config (:func:`build_experiment`), run in a held run
+directory with our evaluation (:func:`run_training`), and rebuilt from a finished run (:func:`load_experiment`)."""
+
+from __future__ import annotations
+
+import functools
+import json
+import shutil
+import tempfile
+import time
+import weakref
+from pathlib import Path
+
+import torch
+import yaml
+from benchmarl.experiment import Experiment
+from benchmarl.hydra_config import (
+    load_algorithm_config_from_hydra,
+    load_experiment_config_from_hydra,
+    load_model_config_from_hydra,
+)
+from omegaconf import DictConfig, OmegaConf
+
+from uavrl.agents.benchmarl import UAVTask, YardstickCallback
+from uavrl.cli import compose_config, one_line
+from uavrl.config import model_config
+from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text
+from uavrl.experiment.logger import RunLogger
+from uavrl.experiment.rundir import RunDirectory, check_directory
+from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
+from uavrl.experiment.saved import SavedYamlLoader
+
+
+def run_training(cfg: DictConfig, algorithm: str) -> Path:
+    """Run BenchMARL's experiment as configured, once :func:`uavrl.benchmarl.check_settings` passed, and evaluate its
+    policy with ours; returns the run directory.
+
+    Args:
+        cfg: the composed ``benchmarl`` config.
+        algorithm: the algorithm's name in BenchMARL's registry (``qmix``, ``mappo``, ...).
+
+    Returns:
+        The run directory.
+    """
+    held = hold_run_dir(cfg, algorithm)
+    try:  # released, never removed: BenchMARL's own folder may hold its checkpoints
+        return run_experiment(cfg, algorithm, held.path)
+    finally:
+        held.release()
+
+
+def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
+    """``run_dir`` or a new ``runs/benchmarl_<algorithm>/<env>/<timestamp>``, claimed and locked as ``uavrl.train``'s
+    are (:func:`uavrl.experiment.runs.claim_run_dir`)."""
+    refusal = already_finished(cfg.run_dir) if cfg.run_dir else ""
+    return claim_run_dir(cfg.run_dir, f"benchmarl_{algorithm}", cfg.env.name, finished, refusal)
+
+
+def build_experiment(cfg: DictConfig, save_folder: Path, callbacks=(), **experiment_settings):
+    """BenchMARL's :class:`~benchmarl.experiment.Experiment` of ``cfg`` (its task, algorithm, models and seed),
+    keeping its folders under ``save_folder``; ``experiment_settings`` replace those of ``cfg.experiment``."""
+    experiment_config = load_experiment_config_from_hydra(cfg.experiment)
+    experiment_config.save_folder = str(save_folder.resolve())
+    for name, value in experiment_settings.items():
+        setattr(experiment_config, name, value)
+    return Experiment(
+        task=UAVTask.from_model_config(cfg.task.name, model_config(cfg)),
+        algorithm_config=load_algorithm_config_from_hydra(cfg.algorithm),
+        model_config=load_model_config_from_hydra(cfg.model),
+        critic_model_config=load_model_config_from_hydra(cfg.critic_model),
+        seed=int(cfg.seed),
+        config=experiment_config,
+        callbacks=list(callbacks),
+    )
+
+
+def load_experiment(run_dir):
+    """The experiment of a ``python -m uavrl.benchmarl`` run directory at its last checkpoint, to act or be scored
+    (``experiment.policy``; docs/leaderboard.md).
+
+    It is rebuilt from the run's ``config.yaml`` as the command built it, in a temporary folder removed with it, and
+    the checkpoint's weights are read with ``torch.load(weights_only=True)``: nothing in the run directory is
+    written, and nothing read from it runs code (BenchMARL's own ``Experiment.reload_from_file`` unpickles the
+    experiment's ``config.pkl``).  A directory that is no finished run of the command is refused in one line.
+
+    Args:
+        run_dir: the run directory (``run_dir=`` of the command).
+    """
+    run_dir = Path(run_dir)
+    check_directory(run_dir, "run_dir")
+    no_run = f"run_dir={quoted(run_dir)} is no finished run of python -m uavrl.benchmarl"
+    try:
+        metrics = json.loads(read_small_text(run_dir / "metrics.json"))
+        saved = yaml.load(read_small_text(run_dir / "config.yaml"), Loader=SavedYamlLoader)
+        algorithm, task = metrics["agent"].removeprefix("benchmarl_"), saved["task"]["name"]
+    except (DamagedRun, OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
+        raise ValueError(
+            f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
+        ) from None
+    frames = {p: p.stem.rpartition("_")[2] for p in run_dir.glob("*/checkpoints/checkpoint_*.pt")}
+    checkpoints = sorted((p for p, n in frames.items() if n.isdigit()), key=lambda p: int(frames[p]))
+    if not checkpoints:
+        raise ValueError(f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
+    cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
+    try:
+        state = torch.load(checkpoints[-1], map_location="cpu", weights_only=True)
+    except Exception as err:  # torch's unpickler refuses anything but tensors and plain containers
+        raise ValueError(f"{quoted(checkpoints[-1])} cannot be read as weights ({one_line(err)[:200]})") from None
+    folder = tempfile.mkdtemp(prefix="uavrl-benchmarl-")
+    experiment = build_experiment(cfg, Path(folder), loggers=[])
+    weakref.finalize(experiment, shutil.rmtree, folder, ignore_errors=True)  # the folder goes with the experiment
+    experiment.load_state_dict(state)
+    return experiment
+
+
+def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
+    """BenchMARL's experiment of ``cfg`` run in the held ``run_dir``, its policy evaluated with ours at each of its
+    evaluations and at the end; writes ``config.yaml``, ``curve.json`` and ``metrics.json``, prints the summary and
+    returns ``run_dir``."""
+    torch.set_num_threads(int(cfg.num_threads))
+    env_cfg = model_config(cfg)
+    save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
+    open_log = functools.partial(RunLogger, run_dir, resume_step=0)
+    yardstick = YardstickCallback(env_cfg, eval_settings(cfg, "cpu"), open_log)
+    experiment = build_experiment(cfg, run_dir, [yardstick])
+    started = time.perf_counter()
+    experiment.run()
+    final = yardstick.measure()
+    yardstick.log(final, experiment.total_frames)
+    yardstick.close()
+    result = {
+        "agent": f"benchmarl_{algorithm}",
+        "env": cfg.env.name,
+        "task": f"uavrl/{cfg.task.name}",
+        "env_steps": experiment.total_frames,
+        "iterations": experiment.n_iters_performed,
+        "train_seconds": final["time/train_seconds"],
+        "train_cpu_seconds": final["time/train_cpu_seconds"],
+        "total_seconds": time.perf_counter() - started,
+        **final,
+    }
+    save_json(yardstick.curve, run_dir / "curve.json")
+    save_json(result, run_dir / "metrics.json")
+    grid = f"{env_cfg.grid[0]}x{env_cfg.grid[1]} grid, {env_cfg.num_uavs} UAVs"
+    print(
+        f"trained BenchMARL {algorithm} on uavrl/{cfg.task.name} ({grid}): {result['env_steps']:,} frames in "
+        f"{result['train_seconds']:.1f} s; optimality {final['eval/optimality']:.4f} "
+        f"from {cfg.eval.num_starts} fixed starts"
+    )
+    print(yardstick_line(cfg, result))
+    print(f"run directory: {run_dir} (config.yaml, metrics.json, curve.json, TensorBoard events, {experiment.name}/)")
+    return run_dir
