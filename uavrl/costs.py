@@ -545,9 +545,9 @@ def policy_pass(model, a, starts: Factor) -> Cost:
 
 
 def video_cost(cfg: DictConfig, model) -> Cost:
-    """The frames of a video of ``cfg.eval`` on ``model`` (:mod:`uavrl.video`; its default length the grid's, not a
-    mission's): every step's panels of the policy and the oracle, their tiles and the stacked frames, each panel
-    ``PANEL_BYTES``."""
+    """The frames of a video of ``cfg.eval`` on ``model`` (:mod:`uavrl.experiment.video`; its default length the
+    grid's, not a mission's): every step's panels of the policy and the oracle, their tiles and the stacked frames,
+    each panel ``PANEL_BYTES``."""
     horizon = horizon_factor(cfg, _Grid(model))
     factors = (Factor("eval.video_starts", int(cfg.eval.video_starts)), horizon)
 

@@ -78,7 +78,7 @@ class TrainSchema:
 @dataclass
 class RunEvalSchema(EvalSchema):
     """The evaluation of ``uavrl.train`` and ``uavrl.evaluate``, with a video of the greedy policy beside the oracle
-    (``uavrl/video.py``)."""
+    (``uavrl/experiment/video.py``)."""
 
     video: bool = setting(
         False,
