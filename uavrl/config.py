@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -20,14 +21,11 @@ def config_dir() -> str:
     Their schemas (:mod:`uavrl.schema`) are registered with Hydra's ConfigStore on the way.
     """
     register()
-    try:
-        import uavrl.configs as packaged  # the installed data package, else (ImportError) the checkout's configs/
-
-        here = Path(packaged.__file__).resolve().parent
+    packaged = importlib.util.find_spec("uavrl.configs")  # the installed data package, else the checkout's configs/
+    if packaged is not None and packaged.origin is not None:
+        here = Path(packaged.origin).resolve().parent
         if (here / "config.yaml").exists():
             return str(here)
-    except ImportError:
-        pass
     return str(Path(__file__).resolve().parent.parent / "configs")
 
 

@@ -38,7 +38,6 @@ from uavrl.experiment.runs import (
     yardstick_line,
 )
 from uavrl.experiment.saved import check_evaluation, evaluated_config, load_agent, output_dir
-from uavrl.experiment.video import VIDEO_RECORD, comparison_frames, save_videos, video_settings
 
 
 def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
@@ -128,10 +127,13 @@ def evaluate_and_save(
 def save_video(agent, saved: DictConfig, cfg: DictConfig, device, out_dir: Path) -> None:
     """The greedy policy of the run ``saved`` beside the oracle (:mod:`uavrl.experiment.video`), as ``cfg.eval``
     asks: files in ``out_dir`` and TensorBoard's ``eval/video`` at the agent's step, in the run's events."""
+    from uavrl.experiment import video  # TorchRL and tensordict only when a video is asked for
+
     env_cfg, label = model_config(saved), saved.agent.name
     policy = agent.policy_for(env_cfg)
-    frames = comparison_frames(policy, env_cfg, label=label, **video_settings(cfg, device))
-    for path in save_videos(frames, out_dir, int(cfg.eval.video_fps), Manifest(out_dir, "checkpoint", VIDEO_RECORD)):
+    frames = video.comparison_frames(policy, env_cfg, label=label, **video.video_settings(cfg, device))
+    manifest = Manifest(out_dir, "checkpoint", video.VIDEO_RECORD)
+    for path in video.save_videos(frames, out_dir, int(cfg.eval.video_fps), manifest):
         print(f"wrote {path}", file=sys.stderr)
     logger = RunLogger(out_dir)
     logger.video("eval/video", frames, agent.env_steps, int(cfg.eval.video_fps))
