@@ -1,7 +1,8 @@
-"""One evaluation for every agent and baseline: the paper's per-episode metrics and the exact yardstick.
+"""One evaluation for every agent and baseline: the exact yardstick.
 
-Training curves (``train/...``) and evaluations (``eval/...``) of all agents are
-computed here, so their TensorBoard tags and meanings are identical.
+Evaluations (``eval/...``) of all agents are computed here, and their training curves (``train/...``) by
+:mod:`uavrl.agents.episodes`, so their TensorBoard tags and meanings are identical; the references each start is
+measured against are :mod:`uavrl.agents.references`'.
 
 The yardstick (docs/model.md, "What the numbers mean") measures what the paper set out to do: reach
 the best configuration in as few steps as possible.  From each of
@@ -21,7 +22,8 @@ decide whether a level is reached):
   ``eval/step_ratio_<level>`` (mean of steps / fewest over starts needing >= 1).
 - ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
   ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
-- ``eval/u_star_gap``, only where U* is not proven exact (:func:`u_star_gap`): every metric above then uses the
+- ``eval/u_star_gap``, only where U* is not proven exact (:func:`~uavrl.agents.references.u_star_gap`): every
+  metric above then uses the
   best configuration found, within this relative gap of the optimum.
 
 Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
