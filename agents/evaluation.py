@@ -23,8 +23,7 @@ decide whether a level is reached):
 - ``eval/end_at_optimum``; ``eval/optimality`` (final U / U*),
   ``eval/optimality_min`` and ``eval/optimal_fraction`` (final U >= 0.99 U*).
 - ``eval/u_star_gap``, only where U* is not proven exact (:func:`~uavrl.agents.references.u_star_gap`): every
-  metric above then uses the
-  best configuration found, within this relative gap of the optimum.
+  metric above then uses the best configuration found, within this relative gap of the optimum.
 
 Under an energy model each start is one mission (no restart; the default horizon sees every UAV home) and
 :func:`mission_metrics` adds its delivered data, lifetimes, energy per bit and the ratio to an upper bound on what
