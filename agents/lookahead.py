@@ -30,9 +30,11 @@ Example:
 
 from __future__ import annotations
 
+import importlib
 import itertools
 import math
 import time
+import warnings
 
 import torch
 from tensordict import TensorDictBase
@@ -244,3 +246,17 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     checked = CheckedPolicy(policy, env_cfg)
     checked.lookahead = policy
     return checked
+
+
+def __getattr__(name: str):
+    """uavrl 0.2's ``uavrl.agents.lookahead.evaluate_with_lookahead``, now :mod:`uavrl.agents.evaluation`'s (beside
+    ``evaluate_agent``): a deprecated alias until 0.4, found on first use (the evaluation imports this module)."""
+    if name != "evaluate_with_lookahead":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    warnings.warn(
+        "uavrl.agents.lookahead.evaluate_with_lookahead moved to uavrl.agents.evaluation in uavrl 0.3; the old path "
+        "goes in 0.4",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return importlib.import_module("uavrl.agents.evaluation").evaluate_with_lookahead

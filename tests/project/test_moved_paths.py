@@ -39,3 +39,15 @@ def test_the_library_imports_no_old_path():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split(" ", 1)[1].strip() == "[]"
+
+
+def test_evaluate_with_lookahead_keeps_its_old_path_with_a_warning():
+    import warnings
+
+    from uavrl.agents import evaluation, lookahead
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        moved = lookahead.evaluate_with_lookahead
+    assert moved is evaluation.evaluate_with_lookahead
+    assert any("moved to uavrl.agents.evaluation" in str(w.message) for w in caught)
