@@ -9,10 +9,11 @@ import textwrap
 import pytest
 from omegaconf import OmegaConf
 
-from uavrl import costs
+from uavrl.agents import network_sizes
 from uavrl.cli import compose_config
 from uavrl.config import RUN_OPTION_SETTINGS
 from uavrl.envs import InvalidOption, UAVSpectrumEnv
+from uavrl.envs.limits import observation_size, state_size
 
 
 def parameters(module) -> int:
@@ -38,14 +39,16 @@ def test_the_parameter_counts_are_the_networks_built(options):
 
     env = UAVSpectrumEnv(batch_size=1, **options)
     energy, N, A = env.cfg.energy != "none", env.num_uavs, env.num_actions
-    assert (costs.observation_size(N, energy), costs.state_size(N, energy)) == (env.observation_size, env.state_size)
+    assert (observation_size(N, energy), state_size(N, energy)) == (env.observation_size, env.state_size)
     for hidden, depth, heads in ((16, 1, 2), (24, 3, 3)):
         for head in ("factored", "joint"):
             built = parameters(TeamQNet(env, head, hidden, depth))
-            assert built == costs.team_parameters(N, A, energy, head, hidden, depth), (head, hidden, depth)
-        assert parameters(QMixer((env.state_size,), hidden, N, "cpu")) == costs.qmix_parameters(N, energy, hidden)
+            assert built == network_sizes.team_parameters(N, A, energy, head, hidden, depth), (head, hidden, depth)
+        assert parameters(QMixer((env.state_size,), hidden, N, "cpu")) == network_sizes.qmix_parameters(
+            N, energy, hidden
+        )
         built = parameters(SetQCore(A, energy, hidden, heads, depth))
-        assert built == costs.set_parameters(A, energy, hidden, heads, depth)
+        assert built == network_sizes.set_parameters(A, energy, hidden, heads, depth)
 
 
 def refusal(*overrides: str) -> str | None:

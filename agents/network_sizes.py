@@ -1,0 +1,88 @@
+"""What the DQN's networks cost, counted without building them (standard library only, so the commands refuse a run
+too large before torch is imported): their parameters, and a gradient step's multiply-adds and float32 values per
+world.  :mod:`uavrl.costs` turns them into a run's memory and CPU time; ``tests/commands/test_costs.py`` holds each
+count equal to the parameters of the network built.
+
+Example:
+    >>> team_parameters(num_uavs=2, num_actions=6, energy=False, head="factored", hidden=16, depth=1)
+    2102
+"""
+
+from __future__ import annotations
+
+from uavrl.envs.limits import NODE_FEATURES, PAIR_FEATURES, observation_size, set_input_size, state_size
+
+TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
+FLOAT = 4  # bytes of a float32
+
+
+def _linear(inputs: int, outputs: int, bias: bool = True) -> int:
+    return inputs * outputs + (outputs if bias else 0)
+
+
+def _team_input(num_uavs: int, energy: bool) -> int:
+    """Entries of a UAV's row of the team network's input: its observation and the nodes."""
+    return observation_size(num_uavs, energy) + NODE_FEATURES
+
+
+def team_parameters(num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int) -> int:
+    """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
+    of ``hidden`` units), then the joint head (``6^N`` values) or the shared per-UAV head (one hidden layer)."""
+    N, h, F = num_uavs, hidden, _team_input(num_uavs, energy)
+    torso = _linear(N * F, h) + depth * _linear(h, h)
+    if head == "joint":
+        return torso + _linear(h, 6**N)
+    return torso + _linear(h + F + N + 4, h) + _linear(h, num_actions)
+
+
+def qmix_parameters(num_uavs: int, energy: bool, embed: int) -> int:
+    """Parameters of ``QMix`` (TorchRL ``QMixer``'s layers): the hypernetworks from the state to the mixing weights
+    and biases."""
+    S = state_size(num_uavs, energy)
+    return _linear(S, embed * num_uavs) + 3 * _linear(S, embed) + _linear(embed, 1)
+
+
+def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, depth: int) -> int:
+    """Parameters of ``SetQCore``: the encoder, ``depth`` attention and feed-forward layers, the head; no size in
+    any shape."""
+    h = hidden
+    attention = 4 * _linear(h, h) + _linear(PAIR_FEATURES, h // 2) + _linear(h // 2, heads)
+    attention += _linear(PAIR_FEATURES, h, bias=False)
+    layer = attention + 2 * _linear(h, h)
+    encoder, head = _linear(set_input_size(energy), h) + _linear(h, h), _linear(2 * h, h) + _linear(h, num_actions)
+    return encoder + depth * layer + head
+
+
+def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+    """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it."""
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    if a.get("network", "team") == "set":
+        pairs = N * N * (PAIR_FEATURES * h // 2 + h // 2 * int(a.heads) + PAIR_FEATURES * h + 2 * h)
+        layer = N * 6 * h * h + pairs
+        return N * (set_input_size(energy) * h + h * h) + depth * layer + N * (2 * h * h + h * num_actions)
+    torso = N * F * h + depth * h * h
+    if a.head == "joint":
+        return torso + h * 6**N
+    macs = torso + h * h + N * ((F + N + 4) * h + h * num_actions)
+    if a.mixer == "qmix":
+        embed = int(a.mixing_embed_dim)
+        macs += state_size(N, energy) * embed * (N + 3) + embed * (N + 1)
+    return macs
+
+
+def team_row_values(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+    """Float32 values one world's rows hold at the peak of a gradient step: each layer's inputs and outputs, twice
+    for the team network (its torso's and head's temporaries), once for the size-free one (measured by the peak
+    resident memory of gradient steps of 8 and of 4096 rows, N = 6 on 10x10 with QMIX: 28 KB a row against this
+    count's 37 KB; of 8 and of 256 rows for the size-free network, N = 30 on 40x40: 3.2 MB a row, as counted)."""
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    if a.get("network", "team") == "set":
+        pairs = N * N * (PAIR_FEATURES + 2 * (h // 2) + 3 * int(a.heads) + 2 * h)
+        return N * (set_input_size(energy) + 2 * h) + depth * (N * 12 * h + pairs) + N * (4 * h + num_actions)
+    values = N * F + 2 * (depth + 1) * h
+    if a.head == "joint":
+        return 2 * (values + 3 * 6**N)
+    values += N * (h + F + N + 4 + 2 * h + num_actions)
+    if a.mixer == "qmix":
+        values += state_size(N, energy) + 2 * int(a.mixing_embed_dim) * (N + 3)
+    return 2 * values
