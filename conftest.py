@@ -59,7 +59,7 @@ class InstalledDoctestModule(DoctestModule):
 
 def pytest_collect_file(file_path: Path, parent):
     name = installed_name(file_path) if file_path.suffix == ".py" else None
-    if name is not None and "from uavrl._moved import alias" in file_path.read_text():
+    if name is not None and "from uavrl.envs._moved import alias" in file_path.read_text():
         return None  # an old path of a moved module: its examples run under the module's own name
     if name is not None and (name not in NEEDS or importlib.util.find_spec(NEEDS[name]) is not None):
         return InstalledDoctestModule.from_parent(parent, path=file_path)

@@ -30,11 +30,9 @@ Example:
 
 from __future__ import annotations
 
-import importlib
 import itertools
 import math
 import time
-import warnings
 
 import torch
 from tensordict import TensorDictBase
@@ -46,6 +44,7 @@ from uavrl.agents.dqn.setnet import SetQNet
 from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.lookahead_rules import check_lookahead, lookahead_settings  # noqa: F401 (lookahead_settings: 0.2's path)
 from uavrl.envs import ModelConfig
+from uavrl.envs._moved import moved_names
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, rates, relay_contributions
 from uavrl.envs.physics.grid import cells_of
 from uavrl.envs.physics.rewards import log_gap_reward
@@ -248,15 +247,5 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     return checked
 
 
-def __getattr__(name: str):
-    """uavrl 0.2's ``uavrl.agents.lookahead.evaluate_with_lookahead``, now :mod:`uavrl.agents.evaluation`'s (beside
-    ``evaluate_agent``): a deprecated alias until 0.4, found on first use (the evaluation imports this module)."""
-    if name != "evaluate_with_lookahead":
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    warnings.warn(
-        "uavrl.agents.lookahead.evaluate_with_lookahead moved to uavrl.agents.evaluation in uavrl 0.3; the old path "
-        "goes in 0.4",
-        DeprecationWarning,
-        stacklevel=2,
-    )
-    return importlib.import_module("uavrl.agents.evaluation").evaluate_with_lookahead
+# 0.2's uavrl.agents.lookahead.evaluate_with_lookahead, now uavrl.agents.evaluation's: deprecated until 0.4
+__getattr__ = moved_names(__name__, "uavrl.agents.evaluation")

@@ -23,10 +23,10 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from uavrl._moved import moved_names
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
 from uavrl.costs import check_benchmarl_costs
+from uavrl.envs._moved import moved_names
 from uavrl.envs.rules import check
 from uavrl.experiment.rundir import check_directory
 from uavrl.experiment.runs import already_finished, finished

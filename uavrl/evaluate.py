@@ -24,9 +24,9 @@ from __future__ import annotations
 
 from omegaconf import DictConfig
 
-from uavrl._moved import moved_names
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS
+from uavrl.envs._moved import moved_names
 from uavrl.experiment.saved import check_evaluation
 
 # uavrl 0.2's names of this module that moved to the library (load_agent, evaluate_checkpoint, output_dir, ...):

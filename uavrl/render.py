@@ -23,9 +23,9 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from uavrl._moved import moved_names
 from uavrl.cli import hydra_quoted, run_command
 from uavrl.config import RUN_OPTION_SETTINGS
+from uavrl.envs._moved import moved_names
 from uavrl.experiment.saved import check_evaluation
 
 # uavrl 0.2's names of this module that moved to the library (render_checkpoint): deprecated aliases

@@ -31,7 +31,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from uavrl._moved import moved_names
+from uavrl.envs._moved import moved_names
 
 # uavrl 0.2's names of this module that moved to the library (report, iqm, bootstrap_ci, ...): deprecated aliases
 __getattr__ = moved_names(__name__, "uavrl.experiment.io", "uavrl.experiment.saved", "uavrl.experiment.reporting")

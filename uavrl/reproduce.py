@@ -30,9 +30,9 @@ import sys
 
 from omegaconf import DictConfig
 
-from uavrl._moved import moved_names
 from uavrl.cli import run_command
 from uavrl.costs import check_reproduce_costs
+from uavrl.envs._moved import moved_names
 from uavrl.envs.rules import check, shown
 from uavrl.experiment.io import quoted, special_kind
 from uavrl.experiment.protocol import (

@@ -1,5 +1,5 @@
 """Deprecated: uavrl 0.2's path of :mod:`uavrl.experiment.runs`, which this module is; it goes in 0.4."""
 
-from uavrl._moved import alias
+from uavrl.envs._moved import alias
 
 alias(__name__, "uavrl.experiment.runs")

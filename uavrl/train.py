@@ -23,10 +23,10 @@ from pathlib import Path
 import yaml
 from omegaconf import DictConfig
 
-from uavrl._moved import moved_names
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.costs import check_run_costs
+from uavrl.envs._moved import moved_names
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint, run_directory
 from uavrl.experiment.io import quoted, read_regular_text, special_kind
 from uavrl.experiment.rundir import tidy

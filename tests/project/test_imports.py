@@ -96,7 +96,7 @@ def test_no_module_imports_upward():
 
 # envs/'s layers in import order (docs/architecture.md): a module imports only earlier layers, or its own subpackage
 ENVS_LAYERS = [
-    {"compat", "physics.radio", "physics.power"},  # compat: TorchRL only
+    {"_moved", "compat", "physics.radio", "physics.power"},  # _moved: standard library; compat: TorchRL only
     {"limits"},
     {"rules"},
     {"config"},

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import sys
 
-from uavrl._moved import moved_names
 from uavrl.bench.leaderboard import leaderboard_command
 from uavrl.bench.results import interval, read
 from uavrl.bench.stats import probability_of_improvement
 from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS
+from uavrl.envs._moved import moved_names
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
 
 # uavrl 0.2's names of this module that moved to the library (score_command, baseline_factory, ...): deprecated

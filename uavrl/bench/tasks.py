@@ -32,7 +32,7 @@ import dataclasses
 import hashlib
 import json
 
-from uavrl._moved import moved_names
+from uavrl.envs._moved import moved_names
 
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
 TASK_SEED_STRIDE = 2**24  # each task's starts: seeds task.seed .. task.seed + num_starts - 1

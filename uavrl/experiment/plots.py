@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-from uavrl._moved import moved_names
+from uavrl.envs._moved import moved_names
 from uavrl.experiment.io import save_bytes
 
 # uavrl 0.2's names of this module that moved to uavrl.experiment.missions (battery_figure, mission_history, ...):

@@ -1,4 +1,5 @@
-"""The import paths of uavrl 0.2 whose modules moved in 0.3: each old module is the new one, with a warning."""
+"""The import paths of uavrl 0.2 whose modules or names moved in 0.3: each old one is the new one, with a warning
+(standard library only, below every layer that keeps an old path)."""
 
 from __future__ import annotations
 
