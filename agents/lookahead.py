@@ -42,7 +42,7 @@ from torch import nn
 from uavrl.agents.dqn.networks import ValidGreedy
 from uavrl.agents.dqn.setnet import SetQNet
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.lookahead_rules import check_lookahead, lookahead_settings  # noqa: F401 (lookahead_settings: 0.2's path)
+from uavrl.agents.lookahead_rules import check_lookahead
 from uavrl.envs import ModelConfig
 from uavrl.envs._moved import moved_names
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, rates, relay_contributions
@@ -247,5 +247,5 @@ def lookahead_policy(agent, env_cfg: ModelConfig, depth: int, width: int) -> Che
     return checked
 
 
-# 0.2's uavrl.agents.lookahead.evaluate_with_lookahead, now uavrl.agents.evaluation's: deprecated until 0.4
-__getattr__ = moved_names(__name__, "uavrl.agents.evaluation")
+# 0.2's evaluate_with_lookahead and lookahead_settings of this module, moved: deprecated aliases until 0.4
+__getattr__ = moved_names(__name__, "uavrl.agents.evaluation", "uavrl.agents.lookahead_rules")
