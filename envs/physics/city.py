@@ -198,7 +198,7 @@ def inside_building(city: City, points) -> np.ndarray:
 
 def _slab(start, step, low, high):
     """The open interval ``(enter, leave)`` of ``t`` where ``start + t step`` lies strictly between ``low`` and
-    ``high``, for links ``[L, 1]`` against buildings ``[1, B]`` (``(-inf, inf)`` or empty for ``step == 0``)."""
+    ``high``, for links ``[L, 1]`` against buildings ``[L, M]`` (``(-inf, inf)`` or empty for ``step == 0``)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         t_low, t_high = (low - start) / step, (high - start) / step
     enter, leave = np.minimum(t_low, t_high), np.maximum(t_low, t_high)
@@ -210,6 +210,46 @@ def _slab(start, step, low, high):
     return enter, leave
 
 
+def _sites_along(city: City, start: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For links ``[L, 3]``, the first and last lattice site (along each link's major ground axis, the one it moves
+    along more) whose building its ground track may meet, a site of margin on each side against rounding."""
+    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
+    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
+    u_origin = np.where(x_major, city.origin_x, city.origin_y)
+    first = np.floor((np.minimum(u, u + du) - city.side_m - u_origin) / city.pitch_m).astype(np.int64)
+    last = np.floor((np.maximum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64) + 1
+    return first, last
+
+
+def _crossed_buildings(city: City, start: np.ndarray, step: np.ndarray, first: np.ndarray, count: int):
+    """The buildings that links ``[L, 3]`` may pass through: indices ``[L, 2 count]`` and whether each is one.
+
+    Along its major ground axis ``u`` a link meets the buildings of the sites ``first, ..., first + count - 1``; over
+    one building's extent in ``u`` it moves at most a building's side along the other axis ``v``, so it meets at most
+    two rows there: the site of its lowest ``v`` over that extent and the next (a site ends in a street, so rounding
+    ``v`` across a site's edge loses no building)."""
+    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
+    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
+    v, dv = np.where(x_major, start[:, 1], start[:, 0]), np.where(x_major, step[:, 1], step[:, 0])
+    u_origin = np.where(x_major, city.origin_x, city.origin_y)[:, None]
+    v_origin = np.where(x_major, city.origin_y, city.origin_x)[:, None]
+    u_sites = np.where(x_major, city.columns, city.rows)[:, None]
+    v_sites = np.where(x_major, city.rows, city.columns)[:, None]
+    site = first[:, None] + np.arange(count)  # [L, K]
+    wall = u_origin + site * city.pitch_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_wall, t_far = (wall - u[:, None]) / du[:, None], (wall + city.side_m - u[:, None]) / du[:, None]
+    still = (du == 0)[:, None]  # then dv == 0 too: a vertical link, its whole length over one point
+    t_low = np.where(still, 0.0, np.clip(np.minimum(t_wall, t_far), 0, 1))
+    t_high = np.where(still, 1.0, np.clip(np.maximum(t_wall, t_far), 0, 1))
+    lowest_v = v[:, None] + np.minimum(t_low * dv[:, None], t_high * dv[:, None])
+    row = np.floor((lowest_v - v_origin) / city.pitch_m).astype(np.int64)
+    site, row = np.repeat(site, 2, axis=1), np.repeat(row, 2, axis=1) + np.tile([0, 1], count)  # [L, 2K]
+    valid = (site >= 0) & (site < u_sites) & (row >= 0) & (row < v_sites)
+    index = np.where(x_major[:, None], row * city.columns + site, site * city.columns + row)
+    return np.where(valid, index, 0), valid
+
+
 def line_of_sight(city: City, a, b) -> np.ndarray:
     """Whether each straight segment ``a -> b`` clears every building: a bool array of the links' shape.
 
@@ -217,8 +257,11 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     passes through the open interior of a building (the slab method: the segment's ``t`` in ``[0, 1]`` inside the
     three open slabs of a box form a non-empty interval).  So a segment that only touches a building, grazing a roof
     edge, running along a wall or over a roof at roof height, is in line of sight, and one with an end inside a
-    building (:func:`inside_building`) is blocked.  Links are tested against the buildings in chunks of at most
-    ``CHUNK_BYTES`` of working memory; a link above every roof is not tested.
+    building (:func:`inside_building`) is blocked.
+
+    Each link is tested only against the buildings its ground track may cross, found by walking the lattice along
+    it (about two per building pitch of its length), in chunks of at most ``CHUNK_BYTES`` of working memory; a link
+    above every roof is not tested.
 
     Args:
         city: the city.
@@ -229,20 +272,29 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     shape = a.shape[:-1]
     a, b = a.reshape(-1, 3), b.reshape(-1, 3)
     clear = np.ones(len(a), dtype=bool)
-    low = np.stack([city.x0, city.y0, np.zeros_like(city.height)])  # [3, B]
-    high = np.stack([city.x1, city.y1, city.height])
     tallest = float(city.height.max(initial=0.0))
-    candidates = np.flatnonzero(np.minimum(a[:, 2], b[:, 2]) < tallest)
-    chunk = max(1, CHUNK_BYTES // (_PAIR_BYTES * max(1, low.shape[1])))
-    for begin in range(0, len(candidates), chunk):
-        links = candidates[begin : begin + chunk]
-        start, step = a[links, :, None], (b - a)[links, :, None]  # [L, 3, 1]
-        enter, leave = np.zeros((len(links), low.shape[1])), np.ones((len(links), low.shape[1]))
+    links = np.flatnonzero(np.minimum(a[:, 2], b[:, 2]) < tallest)
+    first, last = _sites_along(city, a[links], b[links] - a[links])
+    order = np.argsort(first - last, kind="stable")  # the links that cross the most sites first
+    links, first, counts = links[order], first[order], (last - first + 1)[order]
+    low = (city.x0, city.y0, np.zeros_like(city.height))
+    high = (city.x1, city.y1, city.height)
+    begin = 0
+    while begin < len(links):
+        count = int(counts[begin])
+        end = begin + max(1, CHUNK_BYTES // (_PAIR_BYTES * 2 * count))
+        chunk = links[begin:end]
+        start, step = a[chunk], b[chunk] - a[chunk]
+        index, valid = _crossed_buildings(city, start, step, first[begin:end], count)
+        enter, leave = np.zeros(index.shape), np.ones(index.shape)
         for axis in range(3):
-            axis_enter, axis_leave = _slab(start[:, axis], step[:, axis], low[axis], high[axis])
+            axis_enter, axis_leave = _slab(
+                start[:, axis, None], step[:, axis, None], low[axis][index], high[axis][index]
+            )
             np.maximum(enter, axis_enter, out=enter)
             np.minimum(leave, axis_leave, out=leave)
-        clear[links] = ~(enter < leave).any(axis=1)
+        clear[chunk] = ~(valid & (enter < leave)).any(axis=1)
+        begin = end
     return clear.reshape(shape)
 
 
