@@ -212,11 +212,13 @@ def _slab(start, step, low, high):
 
 def _sites_along(city: City, start: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For links ``[L, 3]``, the first and last lattice site (along each link's major ground axis, the one it moves
-    along more) whose building its ground track may meet, a site of margin on each side against rounding."""
+    along more) whose building its ground track may meet.  A site is a building then a street, so the site of the
+    track's lowest ``u`` is the first (rounding that ``u`` down a site loses nothing); the last has a site of margin
+    against rounding its highest ``u`` down past a building it enters."""
     x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
     u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
     u_origin = np.where(x_major, city.origin_x, city.origin_y)
-    first = np.floor((np.minimum(u, u + du) - city.side_m - u_origin) / city.pitch_m).astype(np.int64)
+    first = np.floor((np.minimum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64)
     last = np.floor((np.maximum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64) + 1
     return first, last
 

@@ -163,6 +163,20 @@ def test_line_of_sight_agrees_link_by_link_with_an_independent_intersection(envi
     assert 0.05 < expected.mean() < 0.99  # both outcomes are common
 
 
+def test_long_links_in_small_chunks_agree_too(monkeypatch):
+    """Links up to 1.8 km long, in every direction, across a 1.5 km x 1 km city, tested a few at a time."""
+    from uavrl.envs.physics import city as city_module
+
+    monkeypatch.setattr(city_module, "CHUNK_BYTES", 20_000)
+    rng = np.random.default_rng(7)
+    for environment in ("urban", "highrise"):
+        city = generate_city(*P1410[environment], 1500.0, 1000.0, seed=11)
+        a, b = random_links(city, rng, 3000)
+        expected = reference_line_of_sight(city, a, b)
+        assert np.array_equal(line_of_sight(city, a, b), expected)
+        assert np.array_equal(line_of_sight(city, b.reshape(30, 100, 3), a.reshape(30, 100, 3)).ravel(), expected)
+
+
 def box_city(boxes) -> City:
     """A hand-made city of ``(x0, y0, x1, y1, height)`` boxes on a 1-site-per-box lattice of pitch 100 m."""
     x0, y0, x1, y1, h = (np.array(v, dtype=float) for v in zip(*boxes, strict=True))
