@@ -117,8 +117,8 @@ def generate_city(alpha, beta, gamma, width_m, depth_m, seed: int = 0) -> City:
     kept whole (none is cut at the edge).  ``P1410[environment]`` gives the standard environments' parameters.
 
     One ``numpy.random.Generator(PCG64(seed))`` draws, in order, the lattice's offset (two uniforms) and the heights
-    (row by row, west to east), so a seed gives the same city bit for bit on every machine.  Seeds are the cities'
-    names: a set of training cities and a disjoint set of held-out ones are two sets of seeds.
+    (row by row, west to east), so a seed gives the same city bit for bit on every machine with the same numpy.  Seeds
+    are the cities' names: a set of training cities and a disjoint set of held-out ones are two sets of seeds.
 
     Args:
         alpha: the ratio of land covered by buildings, in (0, 1).
