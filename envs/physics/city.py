@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import InvalidOption
-from .radio import ENVIRONMENTS
 
 # (alpha, beta per km^2, gamma m) of the four standard environments: Holis and Pechac, "Elevation dependent shadowing
 # model for mobile communications via high altitude platforms in built-up areas", IEEE Trans. Antennas Propag.
@@ -37,7 +36,6 @@ P1410 = {
     "dense_urban": (0.5, 300.0, 20.0),
     "highrise": (0.5, 300.0, 50.0),
 }
-assert tuple(P1410) == ENVIRONMENTS
 
 MAX_BUILDINGS = 4_000_000  # 5 arrays of float64: 160 MB; a 10 km x 10 km suburban city has 75,000
 CHUNK_BYTES = 64 * 2**20  # the working memory of line_of_sight's link-by-building arrays
@@ -262,7 +260,7 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     building (:func:`inside_building`) is blocked.
 
     Each link is tested only against the buildings its ground track may cross, found by walking the lattice along
-    it (about two per building pitch of its length), in chunks of at most ``CHUNK_BYTES`` of working memory; a link
+    it (about two per building pitch of its length), in chunks of about ``CHUNK_BYTES`` of working memory; a link
     above every roof is not tested.
 
     Args:
