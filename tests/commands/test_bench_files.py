@@ -578,3 +578,86 @@ def test_a_foreign_out_is_refused_by_the_command_in_one_line(tmp_path):
     assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
     assert done.stderr.startswith(f"error: out={quoted(out)} is invalid: {quoted(notes)} exists beside it")
     assert notes.read_text() == "my thesis" and not out.exists()
+
+
+# load_experiment (the refusals come before BenchMARL is needed, so they are tested without it too)
+
+
+def benchmarl_run(folder: Path, agent: str = "benchmarl_iql", task: str = "tiny_4x4") -> Path:
+    """A directory holding what a finished python -m uavrl.benchmarl run holds, as far as its reader looks."""
+    (folder / "iql_run" / "checkpoints").mkdir(parents=True)
+    (folder / "metrics.json").write_text(json.dumps({"agent": agent}))
+    (folder / "config.yaml").write_text(f"task:\n  name: {task}\n")
+    (folder / "iql_run" / "checkpoints" / "checkpoint_2400.pt").write_bytes(b"PK")
+    return folder
+
+
+@pytest.mark.parametrize("given", [None, 3, b"runs/x", ["runs/x"]])
+def test_load_experiment_of_no_path_is_a_type_error(given):
+    from uavrl.experiment.benchmarl import load_experiment
+
+    with pytest.raises(TypeError) as err:
+        load_experiment(given)
+    assert one_line(err) == f"run_dir={given!r} is invalid: give the run directory's path (a str or a pathlib.Path)"
+
+
+def no_run(case: str, run: Path) -> Path:
+    """The run directory ``run`` made into what ``case`` names (LOAD_REFUSALS); the path to give load_experiment."""
+    if case == "missing":
+        return run / "missing"
+    if case in ("file", "fifo"):
+        return hostile(run / "x", case) if case == "fifo" else (run / "x").write_text("x") and run / "x"
+    if case == "empty":
+        return run
+    checkpoint = benchmarl_run(run, **LOAD_REFUSALS[case][1]) / "iql_run" / "checkpoints" / "checkpoint_2400.pt"
+    if case in ("metrics fifo", "metrics zero", "metrics outside"):
+        (run / "metrics.json").unlink()
+        hostile(run / "metrics.json", case.split()[1])
+    elif case == "checkpoint outside":
+        checkpoint.unlink()
+        (run.parent / "checkpoint_9.pt").write_bytes(b"PK")
+        checkpoint.with_name("checkpoint_9.pt").symlink_to(run.parent / "checkpoint_9.pt")
+    return run
+
+
+LOAD_REFUSALS = {  # case: (what the refusal says, the run's metrics and config)
+    "missing": ("run_dir={d}/missing is invalid: no such directory", {}),
+    "file": ("run_dir={d}/x is invalid: it is a file, not a directory", {}),
+    "fifo": ("run_dir={d}/x is invalid: it is a FIFO, not a directory", {}),
+    "empty": ("run_dir={d} is no finished run of python -m uavrl.benchmarl: its metrics.json and config.yaml", {}),
+    "metrics fifo": (
+        "run_dir={d} is no finished run of python -m uavrl.benchmarl: its metrics.json and config.yaml "
+        "cannot be read as the command writes them (metrics.json is a FIFO, not a regular file)",
+        {},
+    ),
+    "metrics zero": ("them (metrics.json is a link to /dev/zero, out of {d})", {}),
+    "metrics outside": ("them (metrics.json is a link to {d.parent}/outside-metrics.json, out of {d})", {}),
+    "agent path": ("metrics.json's agent='benchmarl_../../x' names no", {"agent": "benchmarl_../../x"}),
+    "task object": ("config.yaml's task.name={{'a': 1}} names no algorithm or task", {"task": "{a: 1}"}),
+    "checkpoint outside": ("{d}/iql_run/checkpoints/checkpoint_9.pt is a link to", {}),
+}
+
+
+@pytest.mark.parametrize("case", LOAD_REFUSALS)
+def test_load_experiment_refuses_what_is_no_run_in_one_line(case, tmp_path):
+    from uavrl.experiment.benchmarl import load_experiment
+
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(ValueError) as err:
+        load_experiment(no_run(case, run))
+    assert LOAD_REFUSALS[case][0].format(d=run) in one_line(err)
+
+
+def test_load_experiment_without_benchmarl_says_how_to_install_it(tmp_path):
+    import importlib.util
+
+    from uavrl.experiment.benchmarl import load_experiment
+
+    if importlib.util.find_spec("benchmarl") is not None:
+        pytest.skip("BenchMARL is installed: tests/agents/test_benchmarl.py loads real runs")
+    with pytest.raises(ImportError) as err:
+        load_experiment(benchmarl_run(tmp_path))
+    assert one_line(err).endswith(
+        'needs BenchMARL, which is not installed: pip install torch==2.13.0 -e ".[benchmarl]"'
+    )

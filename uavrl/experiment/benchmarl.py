@@ -107,14 +107,16 @@ def load_experiment(run_dir):
             raise ValueError(f"{given} is invalid: no such directory")
         raise ValueError(f"{given} is invalid: it is {special_kind(run_dir) or 'a file'}, not a directory")
     no_run = f"{given} is no finished run of python -m uavrl.benchmarl"
+    cannot = f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
     try:
         metrics = json.loads(read_small_text(run_dir / "metrics.json", within=run_dir))
         saved = yaml.load(read_small_text(run_dir / "config.yaml", within=run_dir), Loader=SavedYamlLoader)
         algorithm, task = metrics["agent"].removeprefix("benchmarl_"), saved["task"]["name"]
-    except (DamagedRun, OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
-        raise ValueError(
-            f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
-        ) from None
+    except DamagedRun as err:  # a file there that the guarded reader refuses (a FIFO, a link out, ...): named
+        missing = not all(os.path.lexists(run_dir / name) for name in ("metrics.json", "config.yaml"))
+        raise ValueError(cannot if missing else f"{cannot} ({err})") from None
+    except (OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
+        raise ValueError(cannot) from None
     for what, name in (("metrics.json's agent", metrics["agent"]), ("config.yaml's task.name", task)):
         if not isinstance(name, str) or not re.fullmatch(r"\w+", name.removeprefix("benchmarl_")):
             raise ValueError(f"{no_run}: {what}={name!r} names no algorithm or task of it")
