@@ -485,6 +485,9 @@ def test_the_run_costs_are_read_guarded(tmp_path):
         ("num_threads=0", "num_threads=0 is invalid: it must be a whole number in [1, 1024]"),
         ("num_threads=" + "9" * 5000, "num_threads='999"),
         ("budget.env_steps=2.7", "budget.env_steps=2.7 is invalid: give a whole number >= 0"),
+        ("name=a\nb", "name='a\\nb' is invalid: it must be one line of text"),
+        ("name=", "name='' is invalid: it must be one line of text"),
+        ("train_command=x\x00", "train_command='x\\x00' is invalid: it must be one line of text"),
     ],
 )
 def test_the_bench_settings_follow_the_commands_rules(arg, said):

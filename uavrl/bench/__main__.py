@@ -24,7 +24,7 @@ import sys
 
 from uavrl.bench import cache
 from uavrl.bench.leaderboard import leaderboard_command
-from uavrl.bench.results import check_out, interval, read
+from uavrl.bench.results import TEXT, check_out, interval, read
 from uavrl.bench.stats import probability_of_improvement
 from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS
 from uavrl.envs._moved import moved_names
@@ -85,6 +85,9 @@ def parse(args: list[str]) -> dict:
             "num_threads", int(typed) if typed.isdigit() and len(typed) < 20 else typed, whole_within(1, MAX_THREADS)
         )
         settings["num_threads"] = int(typed)
+    for key in ("name", "train_command"):  # as a results file holds them (uavrl.bench.results.read)
+        if key in settings and not (settings[key].strip() and TEXT.accepts(settings[key])):
+            raise ValueError(f"{key}={settings[key]!r} is invalid: {TEXT.allowed} (at most 4,000 characters)")
     if "tasks" in settings:
         settings["tasks"] = [t.strip() for t in settings["tasks"].strip("[]").split(",") if t.strip()]
         if not settings["tasks"]:

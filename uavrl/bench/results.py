@@ -77,7 +77,7 @@ NUMBER = _numbers(0, "a finite number")
 NUMBERS = _numbers(1, "a list of finite numbers (one per start)")
 TABLE = _numbers(2, "a list of lists of finite numbers (one list per training run, one number per start)")
 AT_LEAST_0 = Rule(lambda v: NUMBER.accepts(v) and v >= 0, "it must be a finite number >= 0")
-TEXT = Rule(lambda v: isinstance(v, str) and v.isprintable() and len(v) <= 1000, "it must be one line of text")
+TEXT = Rule(lambda v: isinstance(v, str) and v.isprintable() and len(v) <= 4000, "it must be one line of text")
 PAIR = Rule(lambda v: NUMBERS.accepts(v) and len(v) == 2, "it must be [low, high], two finite numbers")
 METRICS = {"*": NUMBER}
 REFERENCES = {
