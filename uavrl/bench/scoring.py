@@ -4,7 +4,6 @@ or a run directory's policies scored on a suite (:func:`uavrl.bench.run.score_su
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -14,10 +13,10 @@ from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.agents.schema import network_refusal
 from uavrl.bench import cache
-from uavrl.bench.results import check_out, markdown, save
+from uavrl.bench.results import AT_LEAST_0, check_out, markdown, save
 from uavrl.bench.run import RANDOM_SEED, NotApplicable, score_suite
 from uavrl.config import model_config
-from uavrl.experiment.io import DamagedRun, quoted, read_small_text
+from uavrl.experiment.io import quoted, read_small_text
 from uavrl.experiment.runs import agent_label
 from uavrl.experiment.saved import load_agent, output_dir
 
@@ -62,16 +61,12 @@ def run_costs(checkpoint) -> dict:
     refusal = f"checkpoint={quoted(checkpoint)}: cannot read the training's CPU seconds"
     try:
         metrics = json.loads(read_small_text(path, within=output_dir(checkpoint)))
-    except (DamagedRun, ValueError, RecursionError) as err:
+    except (ValueError, RecursionError) as err:  # DamagedRun (a FIFO, a huge file, a link out), not JSON
         raise ValueError(f"{refusal} ({err}): give budget.cpu_seconds=<seconds>") from None
     seconds = metrics.get("train_cpu_seconds") if isinstance(metrics, dict) else None
     if seconds is None:
         return {}
-    if (
-        isinstance(seconds, bool)
-        or not isinstance(seconds, (int, float))
-        or not (math.isfinite(seconds) and seconds >= 0)
-    ):
+    if not AT_LEAST_0.accepts(seconds):
         raise ValueError(f"{refusal} (metrics.json: train_cpu_seconds={seconds!r}): give budget.cpu_seconds=<seconds>")
     return {"cpu_seconds": float(seconds)}
 
@@ -101,16 +96,14 @@ def score_command(suite: str, settings: dict) -> None:
         source += f" tasks=[{','.join(settings['tasks'])}]"
     name = settings.get("name", name)
     out = Path(settings.get("out") or Path("bench") / suite / f"{name.replace(':', '-').replace('/', '-')}.json")
-    check_out(out)  # before any scoring: the default out too
-    cache_dir = Path(settings["cache_dir"]) if "cache_dir" in settings else cache.default_dir()
-    cache.check_dir(cache_dir)
+    check_out(out)  # before any scoring: the default out too (score_suite checks the cache before its work)
     results = score_suite(
         suite,
         factory,
         name=name,
         budget=budget,
         source=source,
-        cache_dir=cache_dir,
+        cache_dir=Path(settings["cache_dir"]) if "cache_dir" in settings else cache.default_dir(),
         tasks=settings.get("tasks"),
         train_command=settings.get("train_command"),
         progress=lambda line: print(line, file=sys.stderr, flush=True),
