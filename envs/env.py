@@ -463,8 +463,8 @@ class UAVSpectrumEnv(EnvBase):
         if need > self.memory_budget:
             message = (
                 f"rollout(max_steps={max_steps!r}) is invalid: {steps:,} steps of {self.num_worlds:,} worlds need "
-                f"about {gib(need)}, over memory_budget={int(self.memory_budget):,} bytes: use fewer steps, or raise the "
-                "env's memory_budget"
+                f"about {gib(need)}, over memory_budget={int(self.memory_budget):,} bytes: use fewer steps, or raise "
+                "the env's memory_budget"
             )
             raise InvalidOption("max_steps", message=message)
         try:
