@@ -398,3 +398,31 @@ def test_the_lookahead_depth_is_refused_in_python_as_on_the_command_line():
     with pytest.raises(ValueError) as refused:
         check_lookahead(None, 10**9, "RandomAgent")
     assert str(refused.value) == "eval.lookahead=1000000000 is invalid: it must be a whole number in [0, 100]"
+
+
+def test_a_dqn_agent_built_in_python_names_its_worlds(compose_cfg):
+    """Its training env's batch is ``agent.worlds``: a refusal names that, not the env's internal ``batch_size``."""
+    from uavrl.agents.dqn import DQNAgent
+    from uavrl.config import model_config
+
+    cfg = compose_cfg("agent=dqn", "agent.worlds=10000000000")
+    with pytest.raises(InvalidOption) as refused:
+        DQNAgent(model_config(cfg), cfg, "cpu", 0)
+    assert str(refused.value).startswith(
+        "agent.worlds=10000000000 is invalid: 10,000,000,000 worlds of 2 UAVs on 6x6 need about "
+    ) and str(refused.value).endswith(
+        "over agent.memory_budget=4,294,967,296 bytes: use fewer worlds, or raise memory_budget"
+    )
+
+
+def test_the_gymnasium_vector_env_names_its_num_envs():
+    """Its worlds are ``num_envs`` (it takes no memory_budget): a refusal names them, not the World's batch_size."""
+    pytest.importorskip("gymnasium")
+    from uavrl.envs.adapters.gym_env import UAVSpectrumVectorEnv
+
+    with pytest.raises(InvalidOption) as refused:
+        UAVSpectrumVectorEnv(num_envs=10**10)
+    assert str(refused.value) == (
+        "num_envs=10000000000 is invalid: 10,000,000,000 worlds of 2 UAVs on 6x6 need about 15,200,001,073,520 bytes "
+        "(13.8 TiB), over memory_budget=4,294,967,296 bytes: use fewer worlds"
+    )
