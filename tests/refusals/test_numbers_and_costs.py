@@ -415,6 +415,7 @@ def test_a_dqn_agent_built_in_python_names_its_worlds(compose_cfg):
     )
 
 
+@pytest.mark.gym
 def test_the_gymnasium_vector_env_names_its_num_envs():
     """Its worlds are ``num_envs`` (it takes no memory_budget): a refusal names them, not the World's batch_size."""
     pytest.importorskip("gymnasium")
