@@ -410,7 +410,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         return sum(world_bytes(m, worlds.at(low)) for m in models(low))
 
     def batch_memory(low) -> int:  # n-step returns: MultiStep's copy of the frames and its padded rewards
-        copies, padded = (2, FLOAT * worlds.at(low) * (T.at(low) + n_step.at(low))) if n_step.size > 1 else (1, 0)
+        copies, padded = (2, FLOAT * worlds.at(low) * (T.at(low) + n_step.at(low))) if n_step.at(low) > 1 else (1, 0)
         return copies * worlds.at(low) * T.at(low) * sum(frame_bytes(m) for m in models(low)) + padded
 
     def buffer_memory(low) -> int:
