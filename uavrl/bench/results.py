@@ -97,9 +97,9 @@ def markdown_text(value, code: bool = False) -> str:
     """``value``, a string read from a file (a submission's name, a command, a version), as Markdown for a table cell
     that shows its text and makes no markup: no HTML, link, heading, emphasis, math or new row.
 
-    Control characters and line breaks become spaces; with ``code``, the text is an inline code span (fenced by one
-    backtick more than its longest run of backticks, ``|`` escaped as a table cell needs), else the characters that
-    start Markdown, MyST or HTML markup are escaped.
+    Control characters and line breaks become spaces, the ends trimmed; with ``code``, the text is an inline code
+    span (fenced by one backtick more than its longest run of backticks, ``|`` escaped as a table cell needs), else
+    the characters that start Markdown, MyST or HTML markup are escaped.
 
     Example:
         >>> markdown_text("</td><script>x</script> # [a](b)")
@@ -107,14 +107,13 @@ def markdown_text(value, code: bool = False) -> str:
         >>> markdown_text("echo `date` | tee", code=True)
         '``echo `date` \\\\| tee``'
     """
-    text = "".join(" " if unicodedata.category(ch) in _CONTROL else ch for ch in str(value))
+    text = "".join(" " if unicodedata.category(ch) in _CONTROL else ch for ch in str(value)).strip()
     if not code:
         return text.translate(_MARKUP)
-    if not text.strip():
+    if not text:
         return ""
     fence = "`" * (max(map(len, re.findall("`+", text)), default=0) + 1)
-    # CommonMark strips one space from each end of a span that starts and ends with one: pad so the text keeps its own
-    pad = " " if text[0] == "`" or text[-1] == "`" or text[0] == text[-1] == " " else ""
+    pad = " " if text[0] == "`" or text[-1] == "`" else ""  # a space between the fence and a backtick of the text
     return f"{fence}{pad}{text.replace('|', chr(92) + '|')}{pad}{fence}"
 
 
@@ -125,7 +124,7 @@ def markdown(results: dict) -> str:
     lines = [
         "| submission | suite | protocol | budget | command |",
         "|---|---|---|---|---|",
-        f"| **{markdown_text(sub['name'])}** | {markdown_text(results['suite'], code=True)} | "
+        f"| {markdown_text(sub['name'])} | {markdown_text(results['suite'], code=True)} | "
         f"{markdown_text(results['protocol'])} | {_budget_words(sub['budget'])} | "
         f"{markdown_text(sub['source'], code=True)} |",
         "",
