@@ -176,8 +176,8 @@ def figure(results_list: list[dict], path) -> None:
     names = list(dict.fromkeys(t["task"] for r in ranked for t in r["tasks"]))
     palette = plt.get_cmap("tab20").colors
     colours = [*palette[0::2], *palette[1::2]]  # ten distinct hues first, then their light shades
-    fig = plt.figure(figsize=(10, 4.2 + 0.3 * count), layout="constrained")
-    top, bottom = fig.subfigures(2, 1, height_ratios=[1.2 + 0.3 * count, 3.4])
+    fig = plt.figure(figsize=(8.5, 3.9 + 0.27 * count), layout="constrained")  # read at the docs page's width
+    top, bottom = fig.subfigures(2, 1, height_ratios=[1.1 + 0.27 * count, 3.2])
     heat, iqm = top.subplots(1, 2, sharey=True, width_ratios=[max(2, len(names)), 2.2])
     profile = bottom.subplots()
     norm, cmap = Normalize(0.0, 1.0), plt.get_cmap("viridis")
