@@ -67,7 +67,7 @@ def page(results_files: list[dict], figures: dict[str, str]) -> str:
             continue
         lines += [f"### Suite `{suite}`", "", *suite_table(suite, files), ""]
         if suite in figures:
-            lines += [f"![suite {suite}: scores per task and performance profiles]({figures[suite]})", ""]
+            lines += [f"![suite {suite}: mean score per task, IQM and performance profiles]({figures[suite]})", ""]
     lines += _environments(results_files)
     scored = {r["submission"]["name"] for r in results_files}
     left = [(name, suites, command) for name, suites, command in NOT_YET_SCORED if name not in scored]
