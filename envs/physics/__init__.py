@@ -5,7 +5,8 @@ made of (docs/architecture.md, The World's parts).
   library only: :mod:`uavrl.envs.config` checks options against them before torch is imported);
 - :mod:`.pathloss`: the physical channel models' mean path loss in dB;
 - :mod:`.grid`: cells, moves and joint actions; :mod:`.channel`: node layouts, link gains and the AF rates;
-  :mod:`.streams`: the per-world counter-based random streams;
+  :mod:`.streams`: the per-world counter-based random streams; :mod:`.city`: ITU-R P.1410 cities of buildings and
+  their geometric line of sight (numpy only, not yet used by the World);
 - the World's parts: :mod:`.layouts`, :mod:`.fading`, :mod:`.dynamics`, :mod:`.rewards`, :mod:`.energy`.
 
 Nothing here imports TorchRL, a solver or the World; this file imports nothing, so the standard-library modules stay

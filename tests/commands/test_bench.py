@@ -8,7 +8,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from uavrl.bench import cache
 from uavrl.bench.run import NotApplicable, score_suite
 from uavrl.bench.stats import BOOTSTRAP_SEED, aggregate, probability_of_improvement, score_matrix
 from uavrl.bench.tasks import SEED_BASE, SUITES, TASKS, training_seed_bound
@@ -57,30 +56,6 @@ def test_held_out_starts_are_disjoint_from_every_training_seed():
         assert world_seed + 2**24 - 1 < bound
     # and for the tabular learner's (seed + episode x runs + run, at most one seed per team step)
     assert 2**17 - 1 + STEP_BUDGET < bound
-
-
-def test_cache_keeps_json_and_recomputes_a_damaged_entry(tmp_path):
-    calls = []
-
-    def compute():
-        calls.append(1)
-        return {"values": [1.5, 2.5]}
-
-    assert cache.cached(tmp_path, "k", compute) == {"values": [1.5, 2.5]}
-    assert cache.cached(tmp_path, "k", compute) == {"values": [1.5, 2.5]} and len(calls) == 1
-    path = tmp_path / "k.json"
-    entry = json.loads(path.read_text())
-    assert set(entry) == {"key", "sha256", "payload"}
-    for damaged in (
-        json.dumps({**entry, "payload": {"values": [9.0, 2.5]}}),  # payload changed, checksum not
-        json.dumps({**entry, "key": "other"}),  # another entry's content
-        path.read_text()[:-7],  # cut short
-        "\x80\x04not json",
-    ):
-        path.write_text(damaged)
-        before = len(calls)
-        assert cache.cached(tmp_path, "k", compute) == {"values": [1.5, 2.5]} and len(calls) == before + 1
-        assert cache.load(tmp_path, "k") == {"values": [1.5, 2.5]}  # rewritten whole
 
 
 def test_scores_are_normalised_from_random_to_the_exact_reference(scored):

@@ -161,7 +161,7 @@ DAMAGED_RUNS = [
     ("metrics 5000 digits", '{"eval/optimality": ' + "9" * 5000 + "}", None, "Exceeds the limit (4300 digits)"),
     ("metrics huge", " " * (1 << 20) + "{}", None, "metrics.json holds 1,048,578 bytes, more than uavrl writes"),
     ("metrics not utf-8", b"\xff\xfe{}", None, "metrics.json is not UTF-8 text"),
-    ("metrics fifo", "fifo", None, "metrics.json is not a regular file"),
+    ("metrics fifo", "fifo", None, "metrics.json is a FIFO, not a regular file"),
     ("invalid yaml", None, "seed: [1\nenv: {", "config.yaml is not valid YAML"),
     ("config list", None, "- seed\n- env\n", "config.yaml holds a list, not a mapping of settings"),
     ("empty config", None, "", "config.yaml holds null, not a mapping of settings"),

@@ -12,20 +12,25 @@ JSON; default ``bench/<suite>/<name>.json``, the table ``.md`` and figure ``.png
 ``budget.env_steps``, ``budget.cpu_seconds``, ``budget.gpu_seconds`` (a run directory's own env steps by default);
 ``train_command`` (the command that trained the policy, carried into the results and the leaderboard);
 ``tasks=[a,b]`` (a subset of the suite: a partial protocol); ``cache_dir`` (the references' cache); ``num_threads``
-(torch's CPU threads, default 1: the same scores bit for bit).  A bad setting is refused in one line before torch is
-imported.
+(torch's CPU threads, default 1: the same scores bit for bit; at most ``uavrl.schema.MAX_THREADS``, as every command).
+A bad setting is refused in one line before torch is imported: an ``out`` the benchmark may not write (a file of a
+user's of its name or beside it, :func:`uavrl.bench.results.check_out`) and a ``cache_dir`` that cannot be written
+among them.
 """
 
 from __future__ import annotations
 
 import sys
 
+from uavrl.bench import cache
 from uavrl.bench.leaderboard import leaderboard_command
-from uavrl.bench.results import interval, read
+from uavrl.bench.results import TEXT, check_out, interval, read
 from uavrl.bench.stats import probability_of_improvement
 from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS
 from uavrl.envs._moved import moved_names
+from uavrl.envs.rules import refuse, whole_within
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
+from uavrl.schema import MAX_THREADS
 
 # uavrl 0.2's names of this module that moved to the library (score_command, baseline_factory, ...): deprecated
 # aliases
@@ -71,11 +76,18 @@ def parse(args: list[str]) -> dict:
                 number = -1.0
             if not number >= 0 or number == float("inf"):
                 raise ValueError(f"{key}={settings[key]} is invalid: give a number >= 0")
+            if key == "budget.env_steps" and not number.is_integer():  # 2.7 steps is no budget, and not 2
+                raise ValueError(f"{key}={settings[key]} is invalid: give a whole number >= 0")
             settings[key] = int(number) if key == "budget.env_steps" else number
     if "num_threads" in settings:
-        if not settings["num_threads"].isdigit() or int(settings["num_threads"]) < 1:
-            raise ValueError(f"num_threads={settings['num_threads']} is invalid: give a whole number >= 1")
-        settings["num_threads"] = int(settings["num_threads"])
+        typed = settings["num_threads"]
+        refuse(
+            "num_threads", int(typed) if typed.isdigit() and len(typed) < 20 else typed, whole_within(1, MAX_THREADS)
+        )
+        settings["num_threads"] = int(typed)
+    for key in ("name", "train_command"):  # as a results file holds them (uavrl.bench.results.read)
+        if key in settings and not (settings[key].strip() and TEXT.accepts(settings[key])):
+            raise ValueError(f"{key}={settings[key]!r} is invalid: {TEXT.allowed} (at most 4,000 characters)")
     if "tasks" in settings:
         settings["tasks"] = [t.strip() for t in settings["tasks"].strip("[]").split(",") if t.strip()]
         if not settings["tasks"]:
@@ -87,6 +99,10 @@ def parse(args: list[str]) -> dict:
     if "checkpoint" in settings:
         if not checkpoint_files(settings["checkpoint"]):
             raise ValueError(no_checkpoint(settings["checkpoint"], "checkpoint"))
+    if "out" in settings:
+        check_out(settings["out"])
+    if "cache_dir" in settings:
+        cache.check_dir(settings["cache_dir"])
     return settings
 
 
@@ -144,5 +160,5 @@ def main(argv: list[str]) -> None:
 if __name__ == "__main__":
     try:
         main(sys.argv[1:])
-    except (ValueError, FileNotFoundError, ImportError) as err:
+    except (ValueError, OSError, ImportError) as err:  # the refusals, and a file that could not be written
         raise SystemExit(f"error: {err}") from None

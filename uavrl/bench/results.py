@@ -10,16 +10,21 @@ or bound), the aggregate (:mod:`uavrl.bench.stats`), and the uavrl, torch and to
 from __future__ import annotations
 
 import json
+import math
+import os
 import platform
 import re
 import unicodedata
 from pathlib import Path
 
 import uavrl
-from uavrl.experiment.io import save_text
+from uavrl.bench.tasks import SUITES
+from uavrl.envs.rules import Rule, flag, interval, one_of, optional, whole
+from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
 from uavrl.experiment.plots import pyplot, save_figure
 
 FORMAT, VERSION = "uavrl-bench-results", 1
+PARTIAL = "partial: a subset of the suite's tasks"
 
 
 def environment() -> dict:
@@ -50,23 +55,209 @@ def new_results(suite: str, name: str, budget: dict, source: str, partial: bool 
         "format": FORMAT,
         "version": VERSION,
         "suite": suite,
-        "protocol": "partial: a subset of the suite's tasks" if partial else "full",
+        "protocol": PARTIAL if partial else "full",
         "submission": {"name": name, "source": source, "budget": budget},
         "environment": environment(),
         "tasks": [],
     }
 
 
-def read(path) -> dict:
-    """The results file at ``path``, refused in one line when it is not one this version reads."""
+# A results file is untrusted input (anyone can write one): it is read only when it has the structure, types and
+# finite values every reader of it (the table, the leaderboard, compare, the statistics) relies on.  A schema is a
+# dict (keys ending in ``?`` optional, ``*`` any other key; no other key allowed), a one-element list (each item)
+# or a Rule (uavrl.envs.rules) of a value.
+def _numbers(depth: int, words: str) -> Rule:
+    def accepts(value, depth=depth):
+        if depth == 0:
+            return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return isinstance(value, list) and all(accepts(item, depth - 1) for item in value)
+
+    return Rule(accepts, f"it must be {words}")
+
+
+NUMBER = _numbers(0, "a finite number")
+NUMBERS = _numbers(1, "a list of finite numbers (one per start)")
+TABLE = _numbers(2, "a list of lists of finite numbers (one list per training run, one number per start)")
+AT_LEAST_0 = Rule(lambda v: NUMBER.accepts(v) and v >= 0, "it must be a finite number >= 0")
+TEXT = Rule(lambda v: isinstance(v, str) and v.isprintable() and len(v) <= 4000, "it must be one line of text")
+PAIR = Rule(lambda v: NUMBERS.accepts(v) and len(v) == 2, "it must be [low, high], two finite numbers")
+METRICS = {"*": NUMBER}
+REFERENCES = {
+    "value": TEXT,
+    "reference": {"kind": TEXT, "values": NUMBERS},
+    "random": NUMBERS,
+    "planner": TEXT,
+    "planner_summary": METRICS,
+    "u_star": NUMBERS,
+    "u_star_gap": NUMBER,
+    "min_steps": TABLE,
+    "min_steps_levels": [TEXT],
+    "min_steps_exact": flag(),
+    "delivered_bound?": NUMBERS,
+    "delivered_optimum?": NUMBERS,
+}
+TASK = {
+    "task": TEXT,
+    "spec": Rule(lambda v: isinstance(v, dict), "it must be an object"),
+    "horizon": whole(1),
+    "references": REFERENCES,
+    "status": one_of("scored", "n/a"),
+    "reason?": TEXT,
+    "values?": TABLE,
+    "scores?": TABLE,
+    "mean_score?": NUMBER,
+    "summary?": METRICS,
+}
+ESTIMATES = {
+    f"{name}{ci}?": PAIR if ci else NUMBER for name in ("iqm", "mean", "median", "optimality_gap") for ci in ("", "_ci")
+}
+SCHEMA = {
+    "format": one_of(FORMAT),
+    "version": one_of(VERSION),
+    "suite": one_of(*SUITES, what="suites"),
+    "protocol": one_of("full", PARTIAL),
+    "submission": {
+        "name": TEXT,
+        "source": TEXT,
+        "train_command?": TEXT,
+        "budget": {"env_steps?": whole(0), "cpu_seconds?": AT_LEAST_0, "gpu_seconds?": AT_LEAST_0},
+    },
+    "environment": {
+        **{
+            key: TEXT for key in ("uavrl", "torch", "torchrl", "tensordict", "python", "machine", "processor", "device")
+        },
+        "cpus": optional(whole(1), "unknown"),
+        "torch_threads": whole(1),
+    },
+    "tasks": [TASK],
+    "aggregate": {
+        "tasks": [TEXT],
+        "note?": TEXT,
+        "rows?": whole(1),
+        "reps?": whole(1),
+        "confidence?": interval(0.0, 1.0, low_open=True),
+        **ESTIMATES,
+        "profile?": {key: NUMBERS for key in ("taus", "fraction", "ci_low", "ci_high")},
+    },
+}
+
+
+class Invalid(ValueError):
+    """A field of a JSON document that breaks its schema: ``field=value is invalid: why``, or ``field is missing``."""
+
+
+def _shown(value) -> str:
     try:
-        results = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as err:
-        raise ValueError(f"{path}: not a readable results file ({err})") from None
+        text = "{...}" if isinstance(value, dict) else json.dumps(value)
+    except RecursionError:  # a list nested deeper than json writes
+        text = "[...]"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def conform(value, schema, field: str = "") -> None:
+    """An :class:`Invalid` naming the first field of ``value`` (``field`` its place) that breaks ``schema``."""
+    if isinstance(schema, Rule):
+        if not schema.accepts(value):
+            raise Invalid(f"{field}={_shown(value)} is invalid: {schema.allowed}")
+    elif isinstance(schema, list):
+        if not isinstance(value, list):
+            raise Invalid(f"{field}={_shown(value)} is invalid: it must be a list")
+        for k, item in enumerate(value):
+            conform(item, schema[0], f"{field}[{k}]")
+    else:
+        if not isinstance(value, dict):
+            raise Invalid(f"{field or 'the file'}={_shown(value)} is invalid: it must be an object")
+        known = {key.rstrip("?"): sub for key, sub in schema.items()}
+        for key in schema:
+            if not key.endswith("?") and key != "*" and key not in value:
+                raise Invalid(f"{field}{'.' if field else ''}{key} is missing")
+        for key, item in value.items():
+            place = f"{field}{'.' if field else ''}{key}"
+            if key not in known and "*" not in known:
+                raise Invalid(f"{place} is invalid: no such field (allowed: {', '.join(k for k in known if k != '*')})")
+            conform(item, known.get(key, known.get("*")), place)
+
+
+def check_results(results) -> None:
+    """An :class:`Invalid` naming the first field of ``results`` that is not as :func:`uavrl.bench.run.score_suite`
+    writes it: its schema, then what ties the fields together (the suite's tasks, each once, with the suite's specs;
+    a score per start and run; the mean score and the aggregate's tasks as the scores say)."""
+    conform(results, SCHEMA)
+    suite = {task.name: task for task in SUITES[results["suite"]]}
+    seen, rows, scored = set(), set(), []
+    for k, task in enumerate(results["tasks"]):
+        field, name = f"tasks[{k}]", task["task"]
+        if name not in suite:
+            raise Invalid(f"{field}.task={_shown(name)} is invalid: suite {results['suite']} has {', '.join(suite)}")
+        if name in seen:
+            raise Invalid(f"{field}.task={_shown(name)} is invalid: the task is given twice")
+        seen.add(name)
+        if task["spec"] != suite[name].spec():
+            raise Invalid(f"{field}.spec is invalid: it is not task {name}'s of this uavrl (other starts or model)")
+        starts = suite[name].num_starts
+        for key in ("random", "u_star"):
+            if len(task["references"][key]) != starts:
+                raise Invalid(f"{field}.references.{key} is invalid: it must hold {starts} values, one per start")
+        needs = ("values", "scores", "mean_score", "summary") if task["status"] == "scored" else ("reason",)
+        missing = [key for key in needs if key not in task]
+        if missing:
+            raise Invalid(f"{field}.{missing[0]} is missing (a task whose status is {task['status']} holds it)")
+        if task["status"] != "scored":
+            continue
+        values, scores = task["values"], task["scores"]
+        if (
+            not scores
+            or [len(run) for run in values] != [len(run) for run in scores]
+            or {len(r) for r in scores} != {starts}
+        ):
+            raise Invalid(f"{field}.scores is invalid: one list of {starts} scores per run, as many runs as values")
+        flat = [score for run in scores for score in run]
+        if not math.isclose(task["mean_score"], sum(flat) / len(flat), rel_tol=1e-9, abs_tol=1e-12):
+            raise Invalid(f"{field}.mean_score={_shown(task['mean_score'])} is invalid: it is not its scores' mean")
+        for key in ("eval/optimality", "eval/reach_999"):
+            if key not in task["summary"]:
+                raise Invalid(f"{field}.summary.{key} is missing")
+        rows.add(len(flat))
+        scored.append(name)
+    if len(rows) > 1:
+        raise Invalid("tasks is invalid: its tasks were scored from different numbers of starts or runs")
+    if results["protocol"] == "full" and seen != set(suite):
+        raise Invalid(f"tasks is invalid: a full protocol scores every task of suite {results['suite']}")
+    agg = results["aggregate"]
+    if agg["tasks"] != scored:
+        raise Invalid(f"aggregate.tasks={_shown(agg['tasks'])} is invalid: the scored tasks are {_shown(scored)}")
+    if scored:
+        needed = ("rows", "reps", "confidence", *(key.rstrip("?") for key in ESTIMATES), "profile")
+        missing = [key for key in needed if key not in agg]
+        if missing:
+            raise Invalid(f"aggregate.{missing[0]} is missing (an aggregate over scored tasks holds it)")
+        if agg["rows"] not in rows or len({len(v) for v in agg["profile"].values()}) != 1:
+            raise Invalid("aggregate is invalid: its rows or its profile's lists do not match the scores")
+
+
+def read(path, within=None) -> dict:
+    """The results file at ``path``, refused in one line that names it (and the field) when it is not one this
+    version writes (:func:`check_results`); ``within``: the directory it was found in, which it may not link out of."""
+    try:
+        text = read_regular_text(path, within=within)
+    except OSError as err:
+        raise ValueError(f"{quoted(path)} cannot be read ({err.strerror or err})") from None
+    try:
+        results = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"{quoted(path)} nests deeper than a results file does") from None
+    except ValueError as err:
+        raise ValueError(f"{quoted(path)} is not valid JSON ({err})") from None
     if not isinstance(results, dict) or results.get("format") != FORMAT:
-        raise ValueError(f"{path}: not a uavrl benchmark results file (no format {FORMAT!r})")
+        raise ValueError(f"{quoted(path)}: not a uavrl benchmark results file (no format {FORMAT!r})")
     if results.get("version") != VERSION:
-        raise ValueError(f"{path}: results version {results.get('version')!r}, this uavrl reads version {VERSION}")
+        raise ValueError(
+            f"{quoted(path)}: results version {_shown(results.get('version'))}, this uavrl reads version {VERSION}"
+        )
+    try:
+        check_results(results)
+    except Invalid as err:
+        raise ValueError(f"{quoted(path)}: {err}") from None
     return results
 
 
@@ -233,13 +424,54 @@ def figure(results_list: list[dict], path) -> None:
     save_figure(fig, Path(path))
 
 
-def save(results: dict, path) -> list[Path]:
-    """Write ``path`` (the JSON) and beside it ``.md`` (the table) and ``.png`` (the figure); the paths written."""
+def outputs(path) -> list[Path]:
+    """The files a results file ``path`` comes with: the JSON, its table ``.md`` and its figure ``.png``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    return [path, path.with_suffix(".md"), path.with_suffix(".png")]
+
+
+def check_out(path, setting: str = "out") -> None:
+    """Refuse in one line, before any scoring, a results file ``path`` (given as ``setting``) the benchmark may not
+    write: one not ending in ``.json``; one whose folder cannot be made; a JSON there that is no results file of
+    uavrl's; a ``.md`` or ``.png`` beside it when no results file of uavrl's is there (a user's notes or figure).
+    The table and figure beside a results file of uavrl's are its own, replaced with it."""
+    path = Path(path)
+    given = f"{setting}={quoted(path)}"
+    if path.suffix != ".json":
+        raise ValueError(f"{given} is invalid: give a .json file (its table .md and figure .png go beside it)")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:  # the first folder that exists holds the ones to make
+        folder = folder.parent
+    if not folder.is_dir():
+        raise NotADirectoryError(
+            f"{given} is invalid: {quoted(folder)} is {special_kind(folder) or 'a file'}, not a folder"
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"{given} is invalid: the folder {quoted(folder)} is not writable")
+    ours = False
+    if os.path.lexists(path):
+        try:
+            read(path)
+            ours = True
+        except ValueError as err:
+            raise FileExistsError(
+                f"{given} is invalid: it exists and is no uavrl results file ({err}); give another {setting} "
+                "(it is not overwritten)"
+            ) from None
+    for beside in outputs(path)[1:]:
+        if os.path.lexists(beside) and (not ours or special_kind(beside) is not None):
+            raise FileExistsError(
+                f"{given} is invalid: {quoted(beside)} exists beside it and the benchmark did not write it; give "
+                f"another {setting}, or move that file away (it is not overwritten)"
+            )
+
+
+def save(results: dict, path) -> list[Path]:
+    """Write ``path`` (the JSON) and beside it ``.md`` (the table) and ``.png`` (the figure); the paths written.
+    Files of those names that the benchmark did not write are refused first, in one line (:func:`check_out`)."""
+    check_out(path, "path")
+    path, table, png = outputs(path)
     save_text(json.dumps(results, indent=1, sort_keys=True) + "\n", path)  # atomic: a reader never sees half a file
-    table = path.with_suffix(".md")
     save_text(markdown(results), table)
-    png = path.with_suffix(".png")
     figure([results], png)
     return [path, table, png]

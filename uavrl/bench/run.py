@@ -276,6 +276,8 @@ def score_suite(
     """
     if isinstance(cache_dir, cache.DefaultDir):
         cache_dir = cache.default_dir()
+    if cache_dir is not None:
+        cache.check_dir(cache_dir)  # before any reference is computed
     chosen = suite_tasks(suite)
     if tasks is not None:
         unknown = [t for t in tasks if t not in {task.name for task in chosen}]

@@ -13,9 +13,10 @@ from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.agents.schema import network_refusal
 from uavrl.bench import cache
-from uavrl.bench.results import markdown, save
+from uavrl.bench.results import AT_LEAST_0, check_out, markdown, save
 from uavrl.bench.run import RANDOM_SEED, NotApplicable, score_suite
 from uavrl.config import model_config
+from uavrl.experiment.io import quoted, read_small_text
 from uavrl.experiment.runs import agent_label
 from uavrl.experiment.saved import load_agent, output_dir
 
@@ -52,12 +53,22 @@ def checkpoint_factory(path):
 
 
 def run_costs(checkpoint) -> dict:
-    """The training CPU seconds a run directory recorded (``metrics.json``'s ``train_cpu_seconds``), or nothing."""
-    try:
-        metrics = json.loads((output_dir(checkpoint) / "metrics.json").read_text())
-    except (OSError, ValueError):
+    """The training CPU seconds a run directory recorded (``metrics.json``'s ``train_cpu_seconds``), or nothing when
+    it has no metrics.json; a metrics.json that cannot say them is refused in one line."""
+    path = output_dir(checkpoint) / "metrics.json"
+    if not path.exists():
         return {}
-    return {"cpu_seconds": float(metrics["train_cpu_seconds"])} if "train_cpu_seconds" in metrics else {}
+    refusal = f"checkpoint={quoted(checkpoint)}: cannot read the training's CPU seconds"
+    try:
+        metrics = json.loads(read_small_text(path, within=output_dir(checkpoint)))
+    except (ValueError, RecursionError) as err:  # DamagedRun (a FIFO, a huge file, a link out), not JSON
+        raise ValueError(f"{refusal} ({err}): give budget.cpu_seconds=<seconds>") from None
+    seconds = metrics.get("train_cpu_seconds") if isinstance(metrics, dict) else None
+    if seconds is None:
+        return {}
+    if not AT_LEAST_0.accepts(seconds):
+        raise ValueError(f"{refusal} (metrics.json: train_cpu_seconds={seconds!r}): give budget.cpu_seconds=<seconds>")
+    return {"cpu_seconds": float(seconds)}
 
 
 def score_command(suite: str, settings: dict) -> None:
@@ -78,12 +89,14 @@ def score_command(suite: str, settings: dict) -> None:
         factory, saved, agent = checkpoint_factory(settings["checkpoint"])
         name = f"{agent_label(saved)}:{Path(settings['checkpoint']).name}"
         budget.setdefault("env_steps", int(agent.env_steps))
-        for key, value in run_costs(settings["checkpoint"]).items():
-            budget.setdefault(key, value)
+        if "cpu_seconds" not in budget:
+            budget.update(run_costs(settings["checkpoint"]))
         source = f"python -m uavrl.bench {suite} checkpoint={settings['checkpoint']}"
     if "tasks" in settings:
         source += f" tasks=[{','.join(settings['tasks'])}]"
     name = settings.get("name", name)
+    out = Path(settings.get("out") or Path("bench") / suite / f"{name.replace(':', '-').replace('/', '-')}.json")
+    check_out(out)  # before any scoring: the default out too (score_suite checks the cache before its work)
     results = score_suite(
         suite,
         factory,
@@ -95,7 +108,6 @@ def score_command(suite: str, settings: dict) -> None:
         train_command=settings.get("train_command"),
         progress=lambda line: print(line, file=sys.stderr, flush=True),
     )
-    out = Path(settings.get("out") or Path("bench") / suite / f"{name.replace(':', '-').replace('/', '-')}.json")
     written = save(results, out)
     print(markdown(results))
     print("wrote " + ", ".join(str(p) for p in written))

@@ -1,11 +1,16 @@
 """The BenchMARL command's body (``python -m uavrl.benchmarl``, :mod:`uavrl.benchmarl`; the ``[benchmarl]`` extra):
 BenchMARL's :class:`~benchmarl.experiment.Experiment` of a config (:func:`build_experiment`), run in a held run
-directory with our evaluation (:func:`run_training`), and rebuilt from a finished run (:func:`load_experiment`)."""
+directory with our evaluation (:func:`run_training`), and rebuilt from a finished run (:func:`load_experiment`).
+BenchMARL is imported where an experiment is built, so that a run directory :func:`load_experiment` cannot use is
+refused, and named, without it."""
 
 from __future__ import annotations
 
 import functools
+import importlib.util
 import json
+import os
+import re
 import shutil
 import tempfile
 import time
@@ -14,20 +19,15 @@ from pathlib import Path
 
 import torch
 import yaml
-from benchmarl.experiment import Experiment
-from benchmarl.hydra_config import (
-    load_algorithm_config_from_hydra,
-    load_experiment_config_from_hydra,
-    load_model_config_from_hydra,
-)
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
-from uavrl.agents.benchmarl import UAVTask, YardstickCallback
-from uavrl.cli import compose_config, one_line
+from uavrl.cli import compose_config
 from uavrl.config import model_config
-from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text
+from uavrl.experiment.checkpoints import CheckpointError, read_torch
+from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text, special_kind
 from uavrl.experiment.logger import RunLogger
-from uavrl.experiment.rundir import RunDirectory, check_directory
+from uavrl.experiment.rundir import RunDirectory
 from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
 from uavrl.experiment.saved import SavedYamlLoader
 
@@ -60,6 +60,15 @@ def hold_run_dir(cfg: DictConfig, algorithm: str) -> RunDirectory:
 def build_experiment(cfg: DictConfig, save_folder: Path, callbacks=(), **experiment_settings):
     """BenchMARL's :class:`~benchmarl.experiment.Experiment` of ``cfg`` (its task, algorithm, models and seed),
     keeping its folders under ``save_folder``; ``experiment_settings`` replace those of ``cfg.experiment``."""
+    from benchmarl.experiment import Experiment
+    from benchmarl.hydra_config import (
+        load_algorithm_config_from_hydra,
+        load_experiment_config_from_hydra,
+        load_model_config_from_hydra,
+    )
+
+    from uavrl.agents.benchmarl import UAVTask
+
     experiment_config = load_experiment_config_from_hydra(cfg.experiment)
     experiment_config.save_folder = str(save_folder.resolve())
     for name, value in experiment_settings.items():
@@ -82,35 +91,65 @@ def load_experiment(run_dir):
     It is rebuilt from the run's ``config.yaml`` as the command built it, in a temporary folder removed with it, and
     the checkpoint's weights are read with ``torch.load(weights_only=True)``: nothing in the run directory is
     written, and nothing read from it runs code (BenchMARL's own ``Experiment.reload_from_file`` unpickles the
-    experiment's ``config.pkl``).  A directory that is no finished run of the command is refused in one line.
+    experiment's ``config.pkl``).  Every file is read through the guarded reader, and none through a link out of the
+    directory.  A ``run_dir`` that is no path (TypeError), no directory, or no finished run of the command
+    (ValueError) is refused in one line that names it, before BenchMARL is needed.
 
     Args:
-        run_dir: the run directory (``run_dir=`` of the command).
+        run_dir: the run directory (``run_dir=`` of the command): a str or a path.
     """
+    if not isinstance(run_dir, (str, os.PathLike)) or not isinstance(os.fspath(run_dir), str):
+        raise TypeError(f"run_dir={run_dir!r} is invalid: give the run directory's path (a str or a pathlib.Path)")
     run_dir = Path(run_dir)
-    check_directory(run_dir, "run_dir")
-    no_run = f"run_dir={quoted(run_dir)} is no finished run of python -m uavrl.benchmarl"
+    given = f"run_dir={quoted(run_dir)}"
+    if not run_dir.is_dir():
+        if not os.path.lexists(run_dir):
+            raise ValueError(f"{given} is invalid: no such directory")
+        raise ValueError(f"{given} is invalid: it is {special_kind(run_dir) or 'a file'}, not a directory")
+    no_run = f"{given} is no finished run of python -m uavrl.benchmarl"
+    cannot = f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
     try:
-        metrics = json.loads(read_small_text(run_dir / "metrics.json"))
-        saved = yaml.load(read_small_text(run_dir / "config.yaml"), Loader=SavedYamlLoader)
+        metrics = json.loads(read_small_text(run_dir / "metrics.json", within=run_dir))
+        saved = yaml.load(read_small_text(run_dir / "config.yaml", within=run_dir), Loader=SavedYamlLoader)
         algorithm, task = metrics["agent"].removeprefix("benchmarl_"), saved["task"]["name"]
-    except (DamagedRun, OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
-        raise ValueError(
-            f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
-        ) from None
+    except DamagedRun as err:  # a file there that the guarded reader refuses (a FIFO, a link out, ...): named
+        missing = not all(os.path.lexists(run_dir / name) for name in ("metrics.json", "config.yaml"))
+        raise ValueError(cannot if missing else f"{cannot} ({err})") from None
+    except (OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
+        raise ValueError(cannot) from None
+    for what, name in (("metrics.json's agent", metrics["agent"]), ("config.yaml's task.name", task)):
+        if not isinstance(name, str) or not re.fullmatch(r"\w+", name.removeprefix("benchmarl_")):
+            raise ValueError(f"{no_run}: {what}={name!r} names no algorithm or task of it")
     frames = {p: p.stem.rpartition("_")[2] for p in run_dir.glob("*/checkpoints/checkpoint_*.pt")}
     checkpoints = sorted((p for p, n in frames.items() if n.isdigit()), key=lambda p: int(frames[p]))
     if not checkpoints:
         raise ValueError(f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
-    cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
+    last = checkpoints[-1]
+    if not last.resolve().is_relative_to(run_dir.resolve()):
+        raise ValueError(f"{quoted(last)} is a link to {quoted(last.resolve())}, out of {given}")
+    if importlib.util.find_spec("benchmarl") is None:
+        from uavrl.benchmarl import INSTALL
+
+        raise ImportError(f"load_experiment({given}) needs BenchMARL, which is not installed: {INSTALL}")
+    import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
+
     try:
-        state = torch.load(checkpoints[-1], map_location="cpu", weights_only=True)
-    except Exception as err:  # torch's unpickler refuses anything but tensors and plain containers
-        raise ValueError(f"{quoted(checkpoints[-1])} cannot be read as weights ({one_line(err)[:200]})") from None
+        cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
+    except (SystemExit, OmegaConfBaseException) as err:  # Hydra's refusal of an algorithm or task it does not have
+        raise ValueError(f"{no_run}: its config.yaml does not compose ({str(err).removeprefix('error: ')})") from None
+    try:
+        state = read_torch(last)
+    except CheckpointError as err:  # torch's unpickler refuses anything but tensors and plain containers
+        raise ValueError(f"{quoted(last)} cannot be read as weights ({err})") from None
     folder = tempfile.mkdtemp(prefix="uavrl-benchmarl-")
     experiment = build_experiment(cfg, Path(folder), loggers=[])
     weakref.finalize(experiment, shutil.rmtree, folder, ignore_errors=True)  # the folder goes with the experiment
-    experiment.load_state_dict(state)
+    try:
+        experiment.load_state_dict(state)
+    except (KeyError, RuntimeError, TypeError, ValueError, AttributeError) as err:
+        raise ValueError(
+            f"{quoted(last)} does not fit the run's config.yaml ({str(err).splitlines()[0][:200]})"
+        ) from None
     return experiment
 
 
@@ -118,6 +157,8 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     """BenchMARL's experiment of ``cfg`` run in the held ``run_dir``, its policy evaluated with ours at each of its
     evaluations and at the end; writes ``config.yaml``, ``curve.json`` and ``metrics.json``, prints the summary and
     returns ``run_dir``."""
+    from uavrl.agents.benchmarl import YardstickCallback
+
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)
     save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")

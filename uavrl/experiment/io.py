@@ -54,19 +54,35 @@ def special_kind(path) -> str | None:
     return next((kind for test, kind in kinds if test(mode)), "not a regular file")
 
 
-def read_regular_text(path, limit: int = 16 * 2**20) -> str:
-    """The text of the regular file ``path`` (at most ``limit`` bytes); a ValueError naming it when it is a FIFO, a
-    device, a socket or larger, or not UTF-8, an OSError (FileNotFoundError, ...) when it cannot be opened."""
+def read_regular_text(path, limit: int = 16 * 2**20, within=None, shown: str | None = None) -> str:
+    """The text of the regular file ``path`` (at most ``limit`` bytes): every reader of uavrl reads through this.
+
+    Refused with a one-line ValueError that names the file as ``shown`` (default: ``path`` as given): a FIFO, a
+    device, a socket or a directory (reading would block or never end), a file larger than ``limit`` (its size is
+    read before its bytes: a link to ``/dev/zero`` or a huge sparse file is not read), a symbolic link that leads
+    out of the directory ``within`` when one is given, text that is not UTF-8.  An OSError (FileNotFoundError, ...)
+    when it cannot be opened.
+    """
+    shown = quoted(path) if shown is None else shown
+    if within is not None and not Path(path).resolve().is_relative_to(Path(within).resolve()):
+        raise ValueError(f"{shown} is a link to {quoted(Path(path).resolve())}, out of {quoted(within)}")
     kind = special_kind(path)
     if kind is not None:
-        raise ValueError(f"{quoted(path)} is {kind}, not a regular file")
-    size = os.stat(path).st_size
-    if size > limit:
-        raise ValueError(f"{quoted(path)} holds {size:,} bytes, more than the {limit:,} a uavrl file holds")
+        raise ValueError(f"{shown} is {kind}, not a regular file")
+    # opened without blocking and checked again on the open file: a FIFO swapped in after the check is not read
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as file:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"{shown} is not a regular file")
+        data = file.read(limit + 1)  # a file that grew since its size was read is cut at the limit
+        if info.st_size > limit or len(data) > limit:
+            size = max(info.st_size, len(data))
+            raise ValueError(f"{shown} holds {size:,} bytes, more than uavrl writes there ({limit:,})")
     try:
-        return Path(path).read_bytes().decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError:
-        raise ValueError(f"{quoted(path)} is not UTF-8 text") from None
+        raise ValueError(f"{shown} is not UTF-8 text") from None
 
 
 class Manifest:
@@ -281,16 +297,12 @@ class DamagedRun(ValueError):
     """A run directory whose files the report cannot use; the message names the file and why, in one line."""
 
 
-def read_small_text(path: Path) -> str:
-    """The text of a regular file of at most ``MAX_FILE_BYTES`` (a FIFO or device would block or never end)."""
+def read_small_text(path: Path, within=None) -> str:
+    """The text of a run's small file (:func:`read_regular_text`, at most ``MAX_FILE_BYTES``), a DamagedRun naming it
+    by its name when it cannot be read."""
     try:
-        info = path.stat()
-        if not stat.S_ISREG(info.st_mode):
-            raise DamagedRun(f"{path.name} is not a regular file")
-        if info.st_size > MAX_FILE_BYTES:
-            raise DamagedRun(f"{path.name} holds {info.st_size:,} bytes, more than uavrl writes ({MAX_FILE_BYTES:,})")
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise DamagedRun(f"{path.name} is not UTF-8 text") from None
+        return read_regular_text(path, MAX_FILE_BYTES, within, shown=Path(path).name)
+    except ValueError as err:
+        raise DamagedRun(str(err)) from None
     except OSError as err:
-        raise DamagedRun(f"{path.name} cannot be read ({err.strerror or err})") from None
+        raise DamagedRun(f"{Path(path).name} cannot be read ({err.strerror or err})") from None

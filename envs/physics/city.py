@@ -1,0 +1,337 @@
+"""Cities of buildings: the statistical city of Recommendation ITU-R P.1410 and line of sight from its geometry
+(docs/model.md, Cities of buildings); numpy only, no torch.
+
+ITU-R P.1410 (Propagation data and prediction methods required for the design of terrestrial broadband radio access
+systems) describes a built-up area by three numbers: ``alpha``, the ratio of land covered by buildings; ``beta``, the
+mean number of buildings per km^2; ``gamma``, the scale in metres of the Rayleigh distribution of building heights,
+``P(h) = h / gamma^2 exp(-h^2 / (2 gamma^2))``.  :func:`generate_city` lays such a city out as a Manhattan grid of
+square buildings (side ``1000 sqrt(alpha / beta)`` m, pitch ``1000 / sqrt(beta)`` m: the city of Al-Hourani,
+Kandeepan, Lardner 2014, section II-B, and of Holis and Pechac 2008), :func:`line_of_sight` tells which straight
+links clear every building, and :func:`p_los_p1410` is the Recommendation's closed-form line-of-sight probability.
+
+Example:
+    >>> city = generate_city(*P1410["urban"], width_m=500.0, depth_m=500.0, seed=0)
+    >>> round(city.side_m, 2), round(city.pitch_m, 2)  # 1000 sqrt(0.3 / 500), 1000 / sqrt(500)
+    (24.49, 44.72)
+    >>> line_of_sight(city, [[250.0, 250.0, 1000.0]], [[260.0, 240.0, 2000.0]]).tolist()  # above every roof
+    [True]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import InvalidOption
+
+# (alpha, beta per km^2, gamma m) of the four standard environments: Holis and Pechac, "Elevation dependent shadowing
+# model for mobile communications via high altitude platforms in built-up areas", IEEE Trans. Antennas Propag.
+# 56(4):1078-1084, 2008, as Al-Hourani, Kandeepan, Lardner, IEEE WCL 3(6):569-572, 2014 (section II-B) list them;
+# the names are those of radio.AL_HOURANI, whose (a, b) were fitted to these cities
+P1410 = {
+    "suburban": (0.1, 750.0, 8.0),
+    "urban": (0.3, 500.0, 15.0),
+    "dense_urban": (0.5, 300.0, 20.0),
+    "highrise": (0.5, 300.0, 50.0),
+}
+
+MAX_BUILDINGS = 4_000_000  # 5 arrays of float64: 160 MB; a 10 km x 10 km suburban city has 75,000
+CHUNK_BYTES = 64 * 2**20  # the working memory of line_of_sight's link-by-building arrays
+_PAIR_BYTES = 8 * 12  # about 12 float64 temporaries live per (link, building) pair
+
+
+@dataclass(frozen=True)
+class City:
+    """A city of box-shaped buildings on flat ground ``z = 0`` (metres; ``x`` east, ``y`` north, ``z`` up).
+
+    Building ``k`` is the box ``[x0[k], x1[k]] x [y0[k], y1[k]] x [0, height[k]]``; the buildings sit on a square
+    lattice of ``columns x rows`` sites, building ``k`` at column ``k % columns`` and row ``k // columns``, site
+    ``(i, j)`` starting at ``(origin_x + i pitch_m, origin_y + j pitch_m)``.
+
+    Args:
+        x0: the buildings' west walls, float64 ``[n]``.
+        y0: their south walls.
+        x1: their east walls.
+        y1: their north walls.
+        height: their heights (roofs at ``z = height``).
+        alpha: P.1410's ratio of land covered by buildings.
+        beta: P.1410's buildings per km^2.
+        gamma: P.1410's Rayleigh scale of the heights, m.
+        width_m: the area's extent in ``x``: ``[0, width_m]``.
+        depth_m: its extent in ``y``: ``[0, depth_m]``.
+        seed: the city's seed (:func:`generate_city`).
+        side_m: the buildings' side.
+        pitch_m: the lattice's pitch (the street width is ``pitch_m - side_m``).
+        origin_x: the west wall of the lattice's first column.
+        origin_y: the south wall of its first row.
+        columns: the lattice's columns.
+        rows: its rows.
+    """
+
+    x0: np.ndarray
+    y0: np.ndarray
+    x1: np.ndarray
+    y1: np.ndarray
+    height: np.ndarray
+    alpha: float
+    beta: float
+    gamma: float
+    width_m: float
+    depth_m: float
+    seed: int
+    side_m: float
+    pitch_m: float
+    origin_x: float
+    origin_y: float
+    columns: int
+    rows: int
+
+
+def _positive(name: str, value, high=math.inf) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InvalidOption(name, value, "must be a number")
+    if not 0 < value < high or not math.isfinite(value):
+        bound = "" if high == math.inf else f" and below {high}"
+        raise InvalidOption(name, value, f"must be a finite number above 0{bound}")
+    return float(value)
+
+
+def _sites(shift: float, pitch: float, side: float, extent: float) -> tuple[float, int]:
+    """The first wall and the number of the sites ``shift + i pitch`` (integer ``i``) of one axis whose buildings
+    ``[shift + i pitch, shift + i pitch + side]`` meet the open interval ``(0, extent)``."""
+    first = math.floor((-side - shift) / pitch) + 1
+    last = math.ceil((extent - shift) / pitch) - 1
+    return shift + first * pitch, last - first + 1
+
+
+def generate_city(alpha, beta, gamma, width_m, depth_m, seed: int = 0) -> City:
+    """The P.1410 city ``(alpha, beta, gamma)`` over the area ``[0, width_m] x [0, depth_m]``, fixed by ``seed``.
+
+    Square buildings of side ``1000 sqrt(alpha / beta)`` m stand on a square lattice of pitch ``1000 / sqrt(beta)``
+    m, so that they cover ``alpha`` of the land and number ``beta`` per km^2 (Al-Hourani et al. 2014, section II-B);
+    their heights are independent draws of Rayleigh(``gamma``).  Every building whose footprint meets the area is
+    kept whole (none is cut at the edge).  ``P1410[environment]`` gives the standard environments' parameters.
+
+    One ``numpy.random.Generator(PCG64(seed))`` draws, in order, the lattice's offset (two uniforms) and the heights
+    (row by row, west to east), so a seed gives the same city bit for bit on every machine with the same numpy.  Seeds
+    are the cities' names: a set of training cities and a disjoint set of held-out ones are two sets of seeds.
+
+    Args:
+        alpha: the ratio of land covered by buildings, in (0, 1).
+        beta: buildings per km^2, above 0.
+        gamma: the Rayleigh scale of the heights in m, above 0.
+        width_m: the area's extent in ``x`` in m, above 0.
+        depth_m: its extent in ``y`` in m, above 0.
+        seed: an integer >= 0.
+
+    Raises:
+        InvalidOption: an argument out of its range, or a city of more than ``MAX_BUILDINGS`` buildings.
+    """
+    alpha, beta, gamma = _positive("alpha", alpha, 1.0), _positive("beta", beta), _positive("gamma", gamma)
+    width_m, depth_m = _positive("width_m", width_m), _positive("depth_m", depth_m)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InvalidOption("seed", seed, "must be an integer >= 0")
+    pitch, side = 1000.0 / math.sqrt(beta), 1000.0 * math.sqrt(alpha / beta)
+    most = (math.ceil(width_m / pitch) + 1) * (math.ceil(depth_m / pitch) + 1)  # for any offset
+    if most > MAX_BUILDINGS:
+        raise InvalidOption(
+            "beta",
+            beta,
+            f"a {width_m:g} m x {depth_m:g} m city would have up to {most:,} buildings: "
+            f"at most {MAX_BUILDINGS:,} (a smaller area or fewer buildings per km^2)",
+        )
+    rng = np.random.Generator(np.random.PCG64(int(seed)))
+    # Our choice: the lattice is shifted by a uniform offset in [0, pitch)^2 drawn from the seed, so that a point of
+    # the area (a cell centre, a node) is as likely to fall on a street as on a roof, as P.1410's statistical city
+    # presumes; a fixed offset would give every city the same streets relative to the cells.
+    shift_x, shift_y = -pitch * rng.random(2)
+    (origin_x, columns), (origin_y, rows) = _sites(shift_x, pitch, side, width_m), _sites(shift_y, pitch, side, depth_m)
+    heights = rng.rayleigh(gamma, size=(rows, columns))
+    x0, y0 = np.meshgrid(origin_x + pitch * np.arange(columns), origin_y + pitch * np.arange(rows))  # [rows, columns]
+    arrays = [x0.ravel(), y0.ravel(), x0.ravel() + side, y0.ravel() + side, heights.ravel()]
+    for array in arrays:
+        array.flags.writeable = False
+    return City(
+        *arrays, alpha, beta, gamma, width_m, depth_m, int(seed), side, pitch, origin_x, origin_y, columns, rows
+    )
+
+
+def _as_points(points, name: str) -> np.ndarray:
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim == 0 or array.shape[-1] != 3:
+        raise InvalidOption(name, f"<array of shape {array.shape}>", message=f"{name}: an array of shape (..., 3)")
+    if not np.isfinite(array).all():
+        raise InvalidOption(name, message=f"{name}: every coordinate must be finite")
+    return array
+
+
+def inside_building(city: City, points) -> np.ndarray:
+    """Whether each point ``(..., 3)`` (metres) lies in the open interior of a building: ``x0 < x < x1``, ``y0 < y <
+    y1`` and ``0 < z < height``.  A point on a wall or a roof is outside (a node on a rooftop stands on it).
+
+    Args:
+        city: the city.
+        points: positions, an array ``(..., 3)``.
+    """
+    points = _as_points(points, "points")
+    flat = points.reshape(-1, 3)
+    # the lattice site under each point; only that building can contain it, since buildings do not overlap
+    column = np.floor((flat[:, 0] - city.origin_x) / city.pitch_m).astype(np.int64)
+    row = np.floor((flat[:, 1] - city.origin_y) / city.pitch_m).astype(np.int64)
+    on_lattice = (column >= 0) & (column < city.columns) & (row >= 0) & (row < city.rows)
+    k = np.where(on_lattice, row * city.columns + column, 0)
+    inside = (
+        on_lattice
+        & (city.x0[k] < flat[:, 0])
+        & (flat[:, 0] < city.x1[k])
+        & (city.y0[k] < flat[:, 1])
+        & (flat[:, 1] < city.y1[k])
+        & (0 < flat[:, 2])
+        & (flat[:, 2] < city.height[k])
+    )
+    return inside.reshape(points.shape[:-1])
+
+
+def _slab(start, step, low, high):
+    """The open interval ``(enter, leave)`` of ``t`` where ``start + t step`` lies strictly between ``low`` and
+    ``high``, for links ``[L, 1]`` against buildings ``[L, M]`` (``(-inf, inf)`` or empty for ``step == 0``)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_low, t_high = (low - start) / step, (high - start) / step
+    enter, leave = np.minimum(t_low, t_high), np.maximum(t_low, t_high)
+    parallel = np.broadcast_to(step == 0, enter.shape)
+    if parallel.any():
+        within = (low < start) & (start < high)
+        enter = np.where(parallel, np.where(within, -np.inf, np.inf), enter)
+        leave = np.where(parallel, np.where(within, np.inf, -np.inf), leave)
+    return enter, leave
+
+
+def _sites_along(city: City, start: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For links ``[L, 3]``, the first and last lattice site (along each link's major ground axis, the one it moves
+    along more) whose building its ground track may meet.  A site is a building then a street, so the site of the
+    track's lowest ``u`` is the first (rounding that ``u`` down a site loses nothing); the last has a site of margin
+    against rounding its highest ``u`` down past a building it enters."""
+    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
+    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
+    u_origin = np.where(x_major, city.origin_x, city.origin_y)
+    first = np.floor((np.minimum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64)
+    last = np.floor((np.maximum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64) + 1
+    return first, last
+
+
+def _crossed_buildings(city: City, start: np.ndarray, step: np.ndarray, first: np.ndarray, count: int):
+    """The buildings that links ``[L, 3]`` may pass through: indices ``[L, 2 count]`` and whether each is one.
+
+    Along its major ground axis ``u`` a link meets the buildings of the sites ``first, ..., first + count - 1``; over
+    one building's extent in ``u`` it moves at most a building's side along the other axis ``v``, so it meets at most
+    two rows there: the site of its lowest ``v`` over that extent and the next (a site ends in a street, so rounding
+    ``v`` across a site's edge loses no building)."""
+    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
+    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
+    v, dv = np.where(x_major, start[:, 1], start[:, 0]), np.where(x_major, step[:, 1], step[:, 0])
+    u_origin = np.where(x_major, city.origin_x, city.origin_y)[:, None]
+    v_origin = np.where(x_major, city.origin_y, city.origin_x)[:, None]
+    u_sites = np.where(x_major, city.columns, city.rows)[:, None]
+    v_sites = np.where(x_major, city.rows, city.columns)[:, None]
+    site = first[:, None] + np.arange(count)  # [L, K]
+    wall = u_origin + site * city.pitch_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_wall, t_far = (wall - u[:, None]) / du[:, None], (wall + city.side_m - u[:, None]) / du[:, None]
+    still = (du == 0)[:, None]  # then dv == 0 too: a vertical link, its whole length over one point
+    t_low = np.where(still, 0.0, np.clip(np.minimum(t_wall, t_far), 0, 1))
+    t_high = np.where(still, 1.0, np.clip(np.maximum(t_wall, t_far), 0, 1))
+    lowest_v = v[:, None] + np.minimum(t_low * dv[:, None], t_high * dv[:, None])
+    row = np.floor((lowest_v - v_origin) / city.pitch_m).astype(np.int64)
+    site, row = np.repeat(site, 2, axis=1), np.repeat(row, 2, axis=1) + np.tile([0, 1], count)  # [L, 2K]
+    valid = (site >= 0) & (site < u_sites) & (row >= 0) & (row < v_sites)
+    index = np.where(x_major[:, None], row * city.columns + site, site * city.columns + row)
+    return np.where(valid, index, 0), valid
+
+
+def line_of_sight(city: City, a, b) -> np.ndarray:
+    """Whether each straight segment ``a -> b`` clears every building: a bool array of the links' shape.
+
+    ``a`` and ``b`` are positions ``(..., 3)`` in metres that broadcast together.  A link is blocked when its segment
+    passes through the open interior of a building (the slab method: the segment's ``t`` in ``[0, 1]`` inside the
+    three open slabs of a box form a non-empty interval).  So a segment that only touches a building, grazing a roof
+    edge, running along a wall or over a roof at roof height, is in line of sight, and one with an end inside a
+    building (:func:`inside_building`) is blocked.
+
+    Each link is tested only against the buildings its ground track may cross, found by walking the lattice along
+    it (about two per building pitch of its length), in chunks of about ``CHUNK_BYTES`` of working memory; a link
+    above every roof is not tested.
+
+    Args:
+        city: the city.
+        a: one end of each link, an array ``(..., 3)``.
+        b: the other end.
+    """
+    a, b = np.broadcast_arrays(_as_points(a, "a"), _as_points(b, "b"))
+    shape = a.shape[:-1]
+    a, b = a.reshape(-1, 3), b.reshape(-1, 3)
+    clear = np.ones(len(a), dtype=bool)
+    tallest = float(city.height.max(initial=0.0))
+    links = np.flatnonzero(np.minimum(a[:, 2], b[:, 2]) < tallest)
+    first, last = _sites_along(city, a[links], b[links] - a[links])
+    order = np.argsort(first - last, kind="stable")  # the links that cross the most sites first
+    links, first, counts = links[order], first[order], (last - first + 1)[order]
+    low = (city.x0, city.y0, np.zeros_like(city.height))
+    high = (city.x1, city.y1, city.height)
+    begin = 0
+    while begin < len(links):
+        count = int(counts[begin])
+        end = begin + max(1, CHUNK_BYTES // (_PAIR_BYTES * 2 * count))
+        chunk = links[begin:end]
+        start, step = a[chunk], b[chunk] - a[chunk]
+        index, valid = _crossed_buildings(city, start, step, first[begin:end], count)
+        enter, leave = np.zeros(index.shape), np.ones(index.shape)
+        for axis in range(3):
+            axis_enter, axis_leave = _slab(
+                start[:, axis, None], step[:, axis, None], low[axis][index], high[axis][index]
+            )
+            np.maximum(enter, axis_enter, out=enter)
+            np.minimum(leave, axis_leave, out=leave)
+        clear[chunk] = ~(valid & (enter < leave)).any(axis=1)
+        begin = end
+    return clear.reshape(shape)
+
+
+def p_los_p1410(alpha, beta, gamma, h_tx, h_rx, ground_distance_m) -> np.ndarray:
+    """P.1410's probability that a link of ground distance ``r`` between heights ``h_tx`` and ``h_rx`` is in line of
+    sight, in the city ``(alpha, beta, gamma)``; arrays broadcast together.
+
+        P_LoS = prod_{n=0}^{m} [1 - exp(-(h_tx - (n + 1/2) (h_tx - h_rx) / (m + 1))^2 / (2 gamma^2))]
+        m = floor(r sqrt(alpha beta) - 1),  r in km
+
+    ``m + 1 = floor(r sqrt(alpha beta))`` buildings stand, evenly spaced, between the ends; the link clears building
+    ``n`` when it is lower than the link above its middle (Rayleigh CDF).  No building between the ends (``m < 0``)
+    gives 1.  The form of Rec. ITU-R P.1410-5 (2012), section 2.1.5, as Al-Hourani, Kandeepan, Jamalipour
+    (GLOBECOM 2014) use it, after Holis and Pechac 2008.
+
+    Args:
+        alpha: the ratio of land covered by buildings.
+        beta: buildings per km^2.
+        gamma: the Rayleigh scale of the heights, m.
+        h_tx: one end's height, m.
+        h_rx: the other end's height, m.
+        ground_distance_m: the horizontal distance ``r`` between the ends, m.
+
+    Example:
+        >>> float(p_los_p1410(0.3, 500, 15, 100.0, 1.5, 50.0))  # r sqrt(alpha beta) = 0.61: no building between
+        1.0
+        >>> round(float(p_los_p1410(0.5, 400, 20, 50.0, 1.5, 150.0)), 6)  # 2 buildings, at heights 37.9 and 13.6 m
+        0.172626
+    """
+    alpha, beta, gamma, h_tx, h_rx, r = np.broadcast_arrays(
+        *(np.asarray(v, dtype=np.float64) for v in (alpha, beta, gamma, h_tx, h_rx, ground_distance_m))
+    )
+    crossed = np.floor(r / 1000.0 * np.sqrt(alpha * beta))  # m + 1
+    p_los = np.ones(r.shape)
+    for n in range(int(crossed.max(initial=0))):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            height = h_tx - (n + 0.5) * (h_tx - h_rx) / crossed
+        factor = -np.expm1(-(height**2) / (2 * gamma**2))
+        p_los = np.where(n < crossed, p_los * factor, p_los)
+    return p_los
