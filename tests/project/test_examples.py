@@ -88,7 +88,7 @@ CHECKS = {
     "plot_02_torchrl_mappo": lambda out, _: check_training_log(out, 10),
     "plot_03_torchrl_qmix_vdn": lambda out, _: check_training_log(out, 30),
     "plot_04_gymnasium_sb3_pettingzoo": lambda out, _: (
-        printed(r"256 worlds: \(256, (\d+)\)", out),
+        printed(r"256 worlds: \(256, (\d+), \d+\)", out),  # one batched World: [worlds, UAVs, observation]
         fractions(r"MaskablePPO, 4,096 steps: return ratio -?[\d.]+, final U/U\* " + NUMBER, out, 1),
     ),
     "plot_05_yardstick": check_yardstick,
