@@ -253,7 +253,8 @@ def evaluate(
 def greedy_rollout(env, policy, start, horizon: int) -> tuple[dict, list | None]:
     """``horizon`` steps of ``policy`` from ``start``, each world once: ``(steps, batteries)``, ``steps`` the
     ``[B, H]`` outputs :func:`greedy_metrics` reads (``r_pu``, ``r_se``, ``task_switches``, ``moves``, and
-    ``positions``, ``tasks``), ``batteries`` the worlds' batteries before and after under an energy model (else
+    ``positions``, ``tasks``), ``legal`` and ``unmasked`` ``[B, H, N]`` (each action one its mask allowed; a mask
+    that allowed every action), ``batteries`` the worlds' batteries before and after under an energy model (else
     None)."""
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
@@ -266,6 +267,8 @@ def greedy_rollout(env, policy, start, horizon: int) -> tuple[dict, list | None]
         batteries.append(env.world.battery)
     steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
     steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
+    mask, played = rollout["agents", "action_mask"], rollout["agents", "action"].long().unsqueeze(-1)
+    steps.update(legal=mask.gather(-1, played).squeeze(-1), unmasked=mask.all(-1))  # [B, H, N]
     return steps, batteries
 
 

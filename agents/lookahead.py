@@ -42,7 +42,7 @@ from torch import nn
 from uavrl.agents.dqn.networks import ValidGreedy
 from uavrl.agents.dqn.setnet import SetQNet
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.lookahead_rules import check_lookahead
+from uavrl.agents.lookahead_rules import MAX_ENUMERATED, check_lookahead
 from uavrl.envs import ModelConfig
 from uavrl.envs._moved import moved_names
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, rates, relay_contributions
@@ -52,7 +52,6 @@ from uavrl.envs.solvers.exact import fixed_layout_tables
 from uavrl.envs.solvers.optimum import optimum
 from uavrl.envs.world import World
 
-MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this many (N <= 4), else one-UAV changes
 _OBJECTIVES = ("log_gap", "delta")
 
 

@@ -4,9 +4,25 @@ checks them without importing TensorDict or the Q-networks."""
 
 from __future__ import annotations
 
+from uavrl.envs.rules import refuse, whole_within
+
+MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this many (N <= 4), else one-UAV changes
+MAX_LOOKAHEAD = 100  # levels of the search, each a level of recursion: deeper would only repeat the greedy line
+DEPTH = whole_within(0, MAX_LOOKAHEAD)  # eval.lookahead's rule (uavrl/schema.py), the Python API's too
+
+
+def candidates_per_node(num_uavs: int, num_actions: int, width: int) -> int:
+    """How many joint actions the search plays at each node (:mod:`uavrl.agents.lookahead`): ``width``, at most
+    every candidate it ranks (every joint action up to :data:`MAX_ENUMERATED`, else the greedy one and each one-UAV
+    change of it); ``width=0``: all of them."""
+    ranked = num_actions**num_uavs if num_actions**num_uavs <= MAX_ENUMERATED else 1 + num_uavs * num_actions
+    return min(width, ranked) if width else ranked
+
 
 def check_lookahead(a, depth: int, agent_name: str) -> None:
-    """One-line errors for ``eval.lookahead=depth`` with agent settings ``a`` (None: an agent without settings)."""
+    """One-line errors for ``eval.lookahead=depth`` out of its range, or with agent settings ``a`` (None: an agent
+    without settings)."""
+    refuse("eval.lookahead", depth, DEPTH)
     if a is None or a.get("name") != "dqn":
         raise ValueError(f"eval.lookahead={depth} needs a Q-network agent (agent=dqn): {agent_name} has none")
     if a.head != "factored" or a.mixer not in ("vdn", "mean"):

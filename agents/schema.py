@@ -42,6 +42,7 @@ from uavrl.envs.rules import (
     one_of,
     optional,
     positive,
+    read_if,
     rules_of,
     setting,
     shown,
@@ -145,18 +146,33 @@ class DQNSchema:
         doc="agent.network=set: the layouts each team trains on ([]: env.layout)",
         factory=list,
     )
-    heads: int = setting(4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)")
+    heads: int = setting(
+        4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)", read=read_if("network", "set")
+    )
     demonstrations: str = setting(
         "none",
         one_of(*DEMONSTRATIONS, what="demonstrations"),
         "agent.network=set: oracle keeps the oracle planner's trajectories in the replay and adds DQfD's margin loss "
         "(agents/dqn/demonstrations.py); none: pure RL",
     )
-    demo_transitions: int = setting(20000, whole(1), "agent.demonstrations=oracle: transitions, split over the teams")
-    demo_batch_share: REAL = setting(
-        0.25, interval(0.0, 0.9, low_open=True), "agent.demonstrations=oracle: the demonstrations' share of a batch"
+    demo_transitions: int = setting(
+        20000,
+        whole(1),
+        "agent.demonstrations=oracle: transitions, split over the teams, kept beside the replay buffer (not in it)",
+        read=read_if("demonstrations", "oracle"),
     )
-    margin: REAL = setting(0.8, positive(), "agent.demonstrations=oracle: the margin of DQfD's supervised loss")
+    demo_batch_share: REAL = setting(
+        0.25,
+        interval(0.0, 0.9, low_open=True),
+        "agent.demonstrations=oracle: the demonstrations' share of a batch",
+        read=read_if("demonstrations", "oracle"),
+    )
+    margin: REAL = setting(
+        0.8,
+        positive(),
+        "agent.demonstrations=oracle: the margin of DQfD's supervised loss",
+        read=read_if("demonstrations", "oracle"),
+    )
     curriculum: str = setting(
         "none",
         one_of(*CURRICULA, what="curricula"),
@@ -168,17 +184,25 @@ class DQNSchema:
     depth: int = setting(
         2, whole(1), "hidden layers of the torso over the joint observation (agent.network=set: attention layers)"
     )
-    mixing_embed_dim: int = setting(32, whole(1), "qmix only")
+    mixing_embed_dim: int = setting(32, whole(1), "qmix only", read=read_if("mixer", "qmix"))
     objective: str = setting(
         "log_gap",
         one_of("delta", "log_gap", what="objectives"),
         "log_gap: the change of -log(1 - U/U* + gap_floor) (BENCHMARKS.md, The yardstick); delta: the env's reward "
         "(env.reward: delta by default, delivered for a mission's data)",
     )
-    gap_floor: REAL = setting(0.0001, positive(), "log_gap only: gaps below this fraction of U* count as closed")
+    gap_floor: REAL = setting(
+        0.0001,
+        positive(),
+        "log_gap only: gaps below this fraction of U* count as closed",
+        read=read_if("objective", "log_gap"),
+    )
     gamma: REAL = setting(0.7, UNIT, "the discount; 0.9 left greedy policies oscillating near U* (BENCHMARKS.md)")
     n_step: int = setting(
-        1, whole(1), "n-step returns: a target sums up to this many rewards of its episode before it bootstraps"
+        1,
+        whole(1),
+        "n-step returns: a target sums up to this many rewards of its episode before it bootstraps (at most "
+        "env.max_steps)",
     )
     lr: REAL = setting(0.0005, positive(), "Adam's learning rate, annealed linearly over the run to agent.lr_end")
     lr_end: REAL = setting(0.00005, positive(), "the learning rate at the end of the run")
@@ -191,10 +215,16 @@ class DQNSchema:
         "agent.network=team only",
     )
     priority_alpha: REAL = setting(
-        0.6, interval(0.0, 1.0, low_open=True), "agent.replay=prioritized: how much the TD errors count"
+        0.6,
+        interval(0.0, 1.0, low_open=True),
+        "agent.replay=prioritized: how much the TD errors count",
+        read=read_if("replay", "prioritized"),
     )
     priority_beta: REAL = setting(
-        0.4, UNIT, "agent.replay=prioritized: the importance weights' exponent, annealed linearly to 1 over the run"
+        0.4,
+        UNIT,
+        "agent.replay=prioritized: the importance weights' exponent, annealed linearly to 1 over the run",
+        read=read_if("replay", "prioritized"),
     )
     updates: int = setting(32, whole(1), "gradient steps per iteration")
     learning_starts: int = setting(2000, whole(0), "transitions in the buffer before the first gradient step")
@@ -234,6 +264,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
     each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
     network = a.get("network", "team")  # run configs saved before: no setting
+    if int(a.get("n_step", 1)) > env_cfg.max_steps:  # MultiStep's memory and time grow with it, its returns do not
+        raise ValueError(
+            f"agent.n_step={a.n_step} is invalid with env.max_steps={env_cfg.max_steps}: a target sums at most the "
+            f"rewards of its episode; give a whole number in [1, {env_cfg.max_steps}]"
+        )
     if network == "team":
         if a.mixer == "mean":
             raise ValueError(

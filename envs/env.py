@@ -26,7 +26,7 @@ from .config import (
     check_config_alone,
     make_config,
 )
-from .limits import DEFAULT_MEMORY_BUDGET
+from .limits import DEFAULT_MEMORY_BUDGET, env_bytes, frame_bytes, gib
 from .render import render as draw_world
 from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device
 
@@ -176,12 +176,13 @@ class UAVSpectrumEnv(EnvBase):
         B = check_batch_size(batch_size)
         if not isinstance(agent_rewards, bool):
             raise InvalidType("agent_rewards", agent_rewards, "give True or False")
-        check_memory(cfg, B, memory_budget)
+        check_memory(cfg, B, memory_budget, env_bytes)
         super().__init__(device=resolve_device(device), batch_size=torch.Size([B]))
         self.cfg: ModelConfig = cfg
         self.num_worlds, self.num_uavs = B, cfg.fleet_size  # spares are agents too
         self.num_actions = cfg.num_actions
         self.agent_rewards = agent_rewards
+        self.memory_budget = memory_budget  # a rollout's steps are held too
         self.world = World(cfg, B, self.device, seed, diagnostics=diagnostics, memory_budget=memory_budget)
         self._make_specs()
         self.set_seed(seed)
@@ -446,7 +447,8 @@ class UAVSpectrumEnv(EnvBase):
 
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
         """TorchRL's ``rollout`` (``args``, ``kwargs``: as TorchRL's, the policy first); one-line errors for
-        ``max_steps < 1`` and for a policy's action not ``[B, N]``.
+        ``max_steps < 1``, for more steps than ``memory_budget`` holds (every step of every world is kept: at most an
+        episode's unless ``break_when_any_done=False``) and for a policy's action not ``[B, N]``.
 
         Overridden for those alone: ``EnvBase.rollout`` hands ``max_steps`` to no hook (it runs ``range(max_steps)``
         steps after a reset, and stacks no step at all for 0), and the policy writes its action into the ``"agents"``
@@ -455,6 +457,16 @@ class UAVSpectrumEnv(EnvBase):
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
             message = f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1"
             raise (InvalidOption if isinstance(max_steps, numbers.Real) else InvalidType)("max_steps", message=message)
+        ends = kwargs.get("break_when_any_done", True) or kwargs.get("break_when_all_done", False)
+        steps = min(max_steps, self.cfg.max_steps) if ends else max_steps  # an episode ends at cfg.max_steps
+        need = steps * self.num_worlds * frame_bytes(self.cfg)
+        if need > self.memory_budget:
+            message = (
+                f"rollout(max_steps={max_steps!r}) is invalid: {steps:,} steps of {self.num_worlds:,} worlds need "
+                f"about {gib(need)}, over memory_budget={int(self.memory_budget):,} bytes: use fewer steps, or raise "
+                "the env's memory_budget"
+            )
+            raise InvalidOption("max_steps", message=message)
         try:
             return super().rollout(max_steps, *args, **kwargs)
         except RuntimeError as err:

@@ -464,9 +464,16 @@ def placement_bytes(cfg) -> int:
     return 16 * cfg.num_cells if cfg.num_cells <= KEYED_PLACEMENT_CELLS else 64 * cfg.fleet_size
 
 
+def env_bytes(cfg, batch_size: int) -> int:
+    """Peak bytes of ``UAVSpectrumEnv(batch_size, config=cfg)`` built and stepped: its World's, a step's output of
+    every world, and its specs (the unbatched shapes of a step, each held ~3 times: a spec's zero, low and high)."""
+    return world_bytes(cfg, batch_size) + (batch_size + 3) * frame_bytes(cfg)
+
+
 def frame_bytes(cfg) -> int:
-    """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key."""
-    N, energy = cfg.num_uavs, cfg.energy != "none"
+    """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key (the spares
+    are agents too)."""
+    N, energy = cfg.fleet_size, cfg.energy != "none"
     observation = 4 * N * observation_size(N, energy)
     per_step = observation + 4 * state_size(N, energy) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, ...
     return 2 * per_step

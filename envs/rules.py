@@ -36,9 +36,22 @@ REAL = Any  # a schema's real number as typed (int or float: OmegaConf would tur
 
 
 @dataclass(frozen=True)
+class Reader:
+    """A setting read only where its sibling setting ``name`` is one ``reads`` accepts (``words``: that, as typed
+    without the section: ``replay='prioritized'``); changed from its default elsewhere, it is refused, as nothing
+    would read it."""
+
+    name: str
+    reads: Callable[[Any], bool]
+    words: str
+
+
+@dataclass(frozen=True)
 class Rule:
     accepts: Callable[[Any], bool]
     allowed: str  # completes "<setting>=<value> is invalid: ..."
+    reader: Reader | None = None  # read only where this sibling allows (rules_of sets it from the schema)
+    default: Any = None  # the setting's default: the value an unread setting must keep
 
 
 def _is_whole(value) -> bool:
@@ -62,6 +75,15 @@ def interval(low: float, high: float, *, low_open: bool = False) -> Rule:
         return _is_real(v) and (low < v if low_open else low <= v) and v <= high
 
     return Rule(accepts, f"it must lie in {'(' if low_open else '['}{low}, {high}]")
+
+
+def at_least(low: float, *, whole_only: bool = False) -> Rule:
+    """A finite number ``>= low`` (``whole_only``: with no fractional part, ``2.0`` as ``2``)."""
+
+    def accepts(v):
+        return _is_real(v) and v >= low and (not whole_only or v == int(v))
+
+    return Rule(accepts, f"it must be a {'whole' if whole_only else 'finite'} number >= {low}")
 
 
 def positive() -> Rule:
@@ -99,6 +121,11 @@ def names_among(names, what: str) -> Rule:
     )
 
 
+def read_if(name: str, *values) -> Reader:
+    """A setting read only where its sibling ``name`` is one of ``values``."""
+    return Reader(name, lambda v: v in values, " or ".join(f"{name}={shown(v)}" for v in values))
+
+
 SEED = Rule(lambda v: _is_whole(v) and 0 <= v < SEED_LIMIT, "it must be a whole number in [0, 2^63)")
 DEVICE = Rule(
     lambda v: isinstance(v, str) and bool(re.fullmatch(r"cpu|cuda(:\d+)?", v)), "use 'cpu', 'cuda' or 'cuda:<index>'"
@@ -107,8 +134,13 @@ UNIT = interval(0.0, 1.0)
 
 
 # ------------------------------------------------------------------------------------- schemas and their rules
-def setting(default=dataclasses.MISSING, rule: Rule | None = None, doc: str = "", *, factory=None):
-    """A schema field: its default (``factory`` for a list), the rule its values keep and what it means."""
+def setting(
+    default=dataclasses.MISSING, rule: Rule | None = None, doc: str = "", *, factory=None, read: Reader | None = None
+):
+    """A schema field: its default (``factory`` for a list), the rule its values keep and what it means; ``read``:
+    the sibling setting that decides whether anything reads it (:func:`read_if`)."""
+    if read is not None:
+        rule = dataclasses.replace(rule, reader=read, default=default)
     metadata = {"rule": rule, "doc": doc}
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata=metadata)
@@ -166,9 +198,22 @@ def refuse(name: str, value, rule: Rule) -> None:
         raise ValueError(f"{name}={shown(value)} is invalid: {rule.allowed}")
 
 
+def refuse_unread(name: str, value, rule: Rule, sibling) -> None:
+    """A one-line ValueError for ``value`` changed from the default of a setting that nothing reads where its
+    ``rule.reader``'s sibling setting has the value ``sibling``: ``agent.priority_alpha=0.5 is invalid: only
+    agent.replay='prioritized' reads it, not agent.replay='uniform'``."""
+    if rule.reader is not None and value != rule.default and not rule.reader.reads(sibling):
+        parent = name.rpartition(".")[0] + "." if "." in name else ""
+        raise ValueError(
+            f"{name}={shown(value)} is invalid: only {parent}{rule.reader.words} reads it, not "
+            f"{parent}{rule.reader.name}={shown(sibling)}"
+        )
+
+
 def check(cfg, table: dict[str, Rule], section: str = "") -> None:
-    """A one-line ValueError for the first setting of ``table`` (within ``section`` of ``cfg``) that breaks its rule;
-    a setting missing from ``cfg`` (one a saved run's config predates) is skipped."""
+    """A one-line ValueError for the first setting of ``table`` (within ``section`` of ``cfg``) that breaks its rule,
+    or that nothing reads (:func:`refuse_unread`); a setting missing from ``cfg`` (one a saved run's config predates)
+    is skipped."""
     from omegaconf import DictConfig, ListConfig, OmegaConf
 
     prefix = f"{section}." if section else ""
@@ -181,3 +226,8 @@ def check(cfg, table: dict[str, Rule], section: str = "") -> None:
         if isinstance(value, (DictConfig, ListConfig)):
             value = OmegaConf.to_container(value, resolve=True)
         refuse(name, value, rule)
+        if rule.reader is not None:
+            sibling = name.rpartition(".")[0] + "." + rule.reader.name if "." in name else rule.reader.name
+            sibling = OmegaConf.select(cfg, sibling[len(prefix) :], default=_ABSENT)
+            if sibling is not _ABSENT:  # a saved run's config may predate the sibling
+                refuse_unread(name, value, rule, sibling)

@@ -22,6 +22,7 @@ from typing import Callable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from uavrl.agents.lookahead_rules import candidates_per_node
 from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
@@ -181,8 +182,8 @@ def _listed(changes: list[str]) -> str:
 def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typed: Typed) -> str:
     settings = [f for f in cost.factors if not f.fixed and f.size > f.least]
 
-    def lowered(f: Factor) -> frozenset:  # a setting lowered, and the null settings whose value follows from it
-        return frozenset({f.name, *(g.name for g in cost.factors if f.name in g.origin)})
+    def lowered(f: Factor) -> frozenset:  # a setting lowered, and the null settings whose value follows from it alone
+        return frozenset({f.name, *(g.name for g in cost.factors if g.origin == (f.name,))})
 
     helps = [f for f in settings if cost.estimate(lowered(f)) <= limit]
 
@@ -312,7 +313,7 @@ def check_run_costs(cfg: DictConfig, model, overrides=None) -> None:
     steps.append(product("the evaluation", [starts, horizon, *runs_shown]))
     memory.append(evaluation_costs(model, starts, horizon, tables))
     if a.name == "dqn":
-        memory.append(policy_pass(model, a, starts))
+        memory += [policy_pass(model, a, starts), *lookahead_cost(cfg, model, a, starts)]
     if cfg.eval.get("video", False):
         memory.append(video_cost(cfg, model))
     refuse_memory(memory, cfg, typed)
@@ -356,6 +357,8 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     buffer = Factor("agent.buffer_size", int(a.buffer_size))
     batch = Factor("agent.batch_size", int(a.batch_size))
     iterations, updates = Factor("agent.iterations", int(a.iterations)), Factor("agent.updates", int(a.updates))
+    n_step = Factor("agent.n_step", int(a.get("n_step", 1)), multiplies=False)
+    demos = Factor("agent.demo_transitions", int(a.get("demo_transitions", 1)))
     per_iteration = [dataclasses.replace(f, multiplies=False) for f in (updates, batch, worlds, T)]
     each = [Factor("groups (agent.sizes x agent.layouts)", len(groups), fixed=True)] if len(groups) > 1 else []
     shape = model_factors(largest, (grid_name, team_name))
@@ -406,11 +409,20 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     def world_memory(low) -> int:
         return sum(world_bytes(m, worlds.at(low)) for m in models(low))
 
-    def batch_memory(low) -> int:
-        return worlds.at(low) * T.at(low) * sum(frame_bytes(m) for m in models(low))
+    def batch_memory(low) -> int:  # n-step returns: MultiStep's copy of the frames and its padded rewards
+        copies, padded = (2, FLOAT * worlds.at(low) * (T.at(low) + n_step.at(low))) if n_step.at(low) > 1 else (1, 0)
+        return copies * worlds.at(low) * T.at(low) * sum(frame_bytes(m) for m in models(low)) + padded
 
     def buffer_memory(low) -> int:
         return buffer.at(low) * sum(stored_transition_bytes(m) for m in models(low))
+
+    def demonstration_memory(low) -> int:  # each team's kept transitions, and the oracle's worlds and episodes
+        per_group, need = max(1, demos.at(low) // len(groups)), 0
+        for m in models(low):
+            played = math.ceil(per_group / m.max_steps)
+            need += per_group * stored_transition_bytes(m) + world_bytes(m, played)
+            need += played * m.max_steps * frame_bytes(m)
+        return need
 
     def cpu_seconds(low) -> int:
         s, total_seconds, rows = agent(low), 0.0, group_batch(low)
@@ -425,7 +437,11 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
 
     memory = [
         Cost("the training worlds", (worlds, *shape, *each), world_memory),
-        Cost("each iteration's batch of transitions", (worlds, T, *shape[1:], *each), batch_memory),
+        Cost(
+            "each iteration's batch of transitions",
+            (worlds, T, *([n_step] if n_step.size > 1 else []), *shape[1:], *each),
+            batch_memory,
+        ),
         Cost("the replay buffers", (buffer, *shape[1:], *each), buffer_memory),
         Cost(
             "the networks with their targets, gradients and Adam's moments",
@@ -438,6 +454,8 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
             step_bytes,
         ),
     ]
+    if a.get("demonstrations", "none") != "none":
+        memory.append(Cost("the oracle's demonstrations", (demos, *shape[1:], *each), demonstration_memory))
     steps = [product("training", [iterations, worlds, T, *each])]
     seconds = [Cost("training", (iterations, *per_iteration, *network, *shape, *each), cpu_seconds)]
     return memory, steps, seconds
@@ -465,6 +483,28 @@ def policy_pass(model, a, starts: Factor) -> Cost:
         return rows * (FLOAT * values + greedy_cells(m))
 
     return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
+
+
+def lookahead_cost(cfg: DictConfig, model, a, starts: Factor) -> list[Cost]:
+    """The deepest level of ``eval.lookahead``'s search (:mod:`uavrl.agents.lookahead`), held at once: every
+    start's ``K^depth`` configurations (``K``: the candidates per node, :func:`candidates_per_node`) observed and
+    valued by the policy's network; none without a lookahead."""
+    depth = int(OmegaConf.select(cfg, "eval.lookahead", default=0) or 0)
+    if not depth:
+        return []
+    settings, width = _Agent.of(a), int(OmegaConf.select(cfg, "eval.lookahead_width", default=8))
+    candidates = candidates_per_node(model.num_uavs, model.num_actions, width)
+    levels = Factor("eval.lookahead", depth, multiplies=False)
+    # eval.lookahead_width=0 plays every candidate: no smaller number to lower it to, but a width to give
+    per_node = Factor("eval.lookahead_width", candidates, label="K", fixed=not width, multiplies=False)
+    hint = "" if width else "give eval.lookahead_width=<candidates per node>"
+
+    def estimate(low):
+        m, rows = _Resized(model, low), starts.at(low) * per_node.at(low) ** levels.at(low)
+        return rows * (FLOAT * team_row_values(m.fleet_size, m.num_actions, _e(m), settings) + greedy_cells(m))
+
+    what = "the lookahead's deepest level, K^eval.lookahead configurations a start"
+    return [Cost(what, (starts, levels, per_node), estimate, hint)]
 
 
 def video_cost(cfg: DictConfig, model) -> Cost:
@@ -503,7 +543,7 @@ def check_evaluation_costs(cfg: DictConfig, saved: DictConfig, model, video: boo
     tables = Factor("agent.runs", 1, fixed=True) if saved.agent.name == "tabular" else None
     parts = [evaluation_costs(model, starts, horizon, tables)]
     if saved.agent.name == "dqn":
-        parts.append(policy_pass(model, saved.agent, starts))
+        parts += [policy_pass(model, saved.agent, starts), *lookahead_cost(cfg, model, saved.agent, starts)]
     if video:
         parts.append(video_cost(cfg, model))
     refuse_memory(parts, cfg, typed)

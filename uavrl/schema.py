@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from uavrl.agents import AGENTS
+from uavrl.agents.lookahead_rules import DEPTH as LOOKAHEAD_DEPTH
 from uavrl.agents.schema import EvalSchema
 from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
@@ -39,6 +40,7 @@ from uavrl.envs.rules import (
     DEVICE,
     REAL,
     SEED,
+    Reader,
     flag,
     grid_sizes,
     names_among,
@@ -90,12 +92,15 @@ class RunEvalSchema(EvalSchema):
     video_fps: int = setting(4, whole(1), "frames (steps) per second")
     lookahead: int = setting(
         0,
-        whole(0),
+        LOOKAHEAD_DEPTH,
         "agent=dqn: depth of a search over joint actions through the model (mean channel), the learned team value at "
         "the leaves (uavrl/agents/lookahead.py); 0: the greedy policy",
     )
     lookahead_width: int = setting(
-        8, whole(0), "eval.lookahead: candidates played per node, best by the values; 0: all"
+        8,
+        whole(0),
+        "eval.lookahead: candidates played per node, best by the values; 0: all",
+        read=Reader("lookahead", lambda depth: depth != 0, "lookahead >= 1"),
     )
 
 

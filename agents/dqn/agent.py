@@ -16,7 +16,7 @@ from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.episodes import episode_metrics
 from uavrl.agents.evaluation import evaluate
 from uavrl.agents.schema import AGENTS
-from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs import InvalidOption, ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, SEED_LIMIT
 from uavrl.envs.physics.channel import rates
 from uavrl.envs.physics.fading import fading_part
@@ -113,9 +113,13 @@ class DQNAgent(Agent):
     def _training_env(self, cfg: ModelConfig, seed: int) -> UAVSpectrumEnv:
         a = self.settings
         memory_budget = a.get("memory_budget", DEFAULT_MEMORY_BUDGET)  # run directories saved without it
-        return UAVSpectrumEnv(
-            batch_size=int(a.worlds), config=cfg, seed=seed, device=self.device, memory_budget=memory_budget
-        )
+        try:
+            return UAVSpectrumEnv(
+                batch_size=int(a.worlds), config=cfg, seed=seed, device=self.device, memory_budget=memory_budget
+            )
+        except InvalidOption as err:  # its worlds and budget are the agent's settings
+            names = {"batch_size": "agent.worlds", "memory_budget": "agent.memory_budget"}
+            raise InvalidOption(names.get(err.option, err.option), message=err.renamed(names)) from None
 
     def _world_seed(self, iteration: int) -> int:
         # world seeds are int64: seeds past 2^19 wrap around

@@ -61,10 +61,11 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from ..config import InvalidOption, InvalidType, ModelConfig, action_names, check_config_alone, make_config
+from ..limits import DEFAULT_MEMORY_BUDGET
 from ..physics.channel import fixed_layout
 from ..render import RENDER_MODES as DRAWN_MODES
 from ..render import render as render_world
-from ..world import NODE_FEATURES, World, check_seed, observation_with_nodes, resolve_device
+from ..world import NODE_FEATURES, World, check_memory, check_seed, observation_with_nodes, resolve_device
 
 __all__ = [
     "ENV_ID",
@@ -378,6 +379,8 @@ class UAVSpectrumVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self.cfg = model_config(config, preset, grid, num_uavs, max_steps, overrides)
         self.num_envs = num_envs
+        # the World's own check would name its batch_size, and a memory_budget this class does not take
+        check_memory(self.cfg, num_envs, DEFAULT_MEMORY_BUDGET, batch="num_envs", budget=None)
         self._worlds = NumpyWorlds(self.cfg, num_envs, device)
         self.single_observation_space = team_observation_space(self.cfg)
         self.single_action_space = spaces.MultiDiscrete([self.cfg.num_actions] * self.cfg.fleet_size)

@@ -49,16 +49,31 @@ def check_batch_size(batch_size) -> int:
     return int(size)
 
 
-def check_memory(cfg: ModelConfig, batch_size: int, memory_budget) -> None:
+def check_memory(
+    cfg: ModelConfig,
+    batch_size: int,
+    memory_budget,
+    size=world_bytes,
+    batch: str = "batch_size",
+    budget="memory_budget",
+) -> None:
     """A one-line refusal, before anything is allocated, when ``batch_size`` worlds of ``cfg`` would take more than
-    ``memory_budget`` bytes (:func:`uavrl.envs.limits.world_bytes`)."""
+    ``memory_budget`` bytes (``size(cfg, batch_size)``: :func:`uavrl.envs.limits.world_bytes`, or the env's
+    :func:`~uavrl.envs.limits.env_bytes`), naming what to lower: the worlds (``batch``: the argument that gives
+    them) where one world fits, else the spares, the team or the grid, the first whose least would fit; ``budget``:
+    the argument that raises ``memory_budget`` (``None``: none does)."""
     if not isinstance(memory_budget, numbers.Real) or isinstance(memory_budget, bool) or not memory_budget > 0:
         raise InvalidOption("memory_budget", memory_budget, "give the bytes the worlds may take, a positive number")
-    need = world_bytes(cfg, batch_size)
-    if need > memory_budget:
-        L1, L2 = cfg.grid
-        reason = (
-            f"{batch_size:,} worlds of {cfg.num_uavs} UAVs on {L1}x{L2} need about {gib(need)}, over "
-            f"memory_budget={int(memory_budget):,} bytes: use fewer worlds, or raise memory_budget"
-        )
-        raise InvalidOption("batch_size", batch_size, reason)
+    need = size(cfg, batch_size)
+    if need <= memory_budget:
+        return
+    L1, L2 = cfg.grid
+    what = f"{batch_size:,} worlds of {cfg.fleet_size} UAVs on {L1}x{L2} need about {gib(need)}, over memory_budget="
+    what += f"{int(memory_budget):,} bytes"
+    raise_it = f", or raise {budget}" if budget else ""
+    if size(cfg, 1) <= memory_budget:
+        raise InvalidOption(batch, batch_size, f"{what}: use fewer worlds{raise_it}")
+    for name, least in (("num_spares", 0), ("num_uavs", 1)):
+        if getattr(cfg, name) > least and size(cfg.replace(**{name: least}), 1) <= memory_budget:
+            raise InvalidOption(name, getattr(cfg, name), f"{what}: lower {name}{raise_it}")
+    raise InvalidOption("grid", cfg.grid, f"{what}: lower grid{raise_it}")

@@ -225,3 +225,56 @@ def test_each_bad_value_is_refused_naming_its_setting(section, name, overrides, 
     assert line is not None, f"{' '.join(overrides)} was accepted"
     assert "\n" not in line and "Traceback" not in line, line
     assert name in line, f"the refusal does not name {name}: {line}"
+
+
+# every setting read only where a sibling setting allows (its schema's read_if): a value other than its default, the
+# overrides that leave it unread and the sibling's value the refusal names, and the overrides that make it read
+SET = "agent.network=set agent.mixer=vdn"
+UNREAD = {
+    "eval.lookahead_width": ("3", "", "eval.lookahead=0", "eval.lookahead=1"),
+    "agent.heads": ("2", "", "agent.network='team'", SET),
+    "agent.demo_transitions": ("80", SET, "agent.demonstrations='none'", f"{SET} agent.demonstrations=oracle"),
+    "agent.demo_batch_share": ("0.5", "", "agent.demonstrations='none'", f"{SET} agent.demonstrations=oracle"),
+    "agent.margin": ("2", "", "agent.demonstrations='none'", f"{SET} agent.demonstrations=oracle"),
+    "agent.mixing_embed_dim": ("8", "", "agent.mixer='vdn'", "agent.mixer=qmix"),
+    "agent.gap_floor": ("0.01", "agent.objective=delta", "agent.objective='delta'", "agent.objective=log_gap"),
+    "agent.priority_alpha": ("0.5", "", "agent.replay='uniform'", "agent.replay=prioritized"),
+    "agent.priority_beta": ("0.5", "", "agent.replay='uniform'", "agent.replay=prioritized"),
+}
+
+
+def read_only_where() -> dict:
+    """``{setting: its Rule}`` of the commands' settings read only where another allows (``read_if``)."""
+    from uavrl.settings import AGENT_SETTINGS, RUN_SETTINGS
+
+    tables = [RUN_SETTINGS, *AGENT_SETTINGS.values()]
+    return {name: rule for table in tables for name, rule in table.items() if rule.reader is not None}
+
+
+def test_every_setting_read_only_where_another_allows_has_a_case():
+    assert set(read_only_where()) == set(UNREAD)
+
+
+@pytest.mark.parametrize("name", sorted(UNREAD))
+def test_a_setting_nothing_reads_is_refused_naming_what_reads_it(name, tmp_path, monkeypatch):
+    """Changed from its default where its sibling leaves it unread: refused in one line naming the sibling's value
+    that reads it; where that value is given, accepted."""
+    monkeypatch.chdir(tmp_path)
+    value, unread, sibling, reads = UNREAD[name]
+    rule, section = read_only_where()[name], name.rpartition(".")[0]
+    agent = [] if name.startswith("eval.") else ["agent=dqn"]
+    line = refused(TRAIN, [*agent, *unread.split(), f"{name}={value}"])
+    assert line == f"{name}={value} is invalid: only {section}.{rule.reader.words} reads it, not {sibling}"
+    assert refused(TRAIN, [*agent, *reads.split(), f"{name}={value}"]) is None
+
+
+def test_an_agent_built_in_python_refuses_an_unread_setting_as_the_command_line_does(compose_cfg):
+    from uavrl.agents.dqn import DQNAgent
+    from uavrl.config import model_config
+
+    cfg = compose_cfg("agent=dqn", "agent.priority_alpha=0.5")
+    with pytest.raises(ValueError) as raised:
+        DQNAgent(model_config(cfg), cfg, "cpu", 0)
+    assert str(raised.value) == (
+        "agent.priority_alpha=0.5 is invalid: only agent.replay='prioritized' reads it, not agent.replay='uniform'"
+    )

@@ -61,6 +61,45 @@ CLI_CASES = [
     ("reproduce table2 grids=[2] num_uavs=21 steps=10", "num_uavs=21 is invalid"),
     ("reproduce table2 memory_budget=0", "memory_budget=0 is invalid"),
     ("reproduce table2 step_budget=-1", "step_budget=-1 is invalid"),
+    # the round's options: n-step returns, the lookahead, the demonstrations; an energy model's battery
+    (
+        "train agent=dqn agent.n_step=1000000000000",
+        "error: agent.n_step=1000000000000 is invalid with env.max_steps=30: a target sums at most the rewards of its "
+        "episode; give a whole number in [1, 30]",
+    ),
+    (
+        "train agent=dqn eval.lookahead=12 eval.lookahead_width=0",
+        "error: eval.lookahead=12 is invalid: the lookahead's deepest level, K^eval.lookahead configurations a start "
+        "(eval.num_starts = 64; with eval.lookahead 12, K 36) needs about 4.1e+24 bytes, over "
+        "agent.memory_budget=4294967296: lower eval.lookahead, give eval.lookahead_width=<candidates per node>, or "
+        "raise agent.memory_budget=<bytes>",
+    ),
+    (
+        "train agent=dqn eval.lookahead=12",
+        "error: eval.lookahead=12 is invalid: the lookahead's deepest level, K^eval.lookahead configurations a start "
+        "(eval.num_starts = 64; with eval.lookahead 12, K 8) needs about",
+    ),
+    (
+        "train agent=dqn eval.lookahead=1000000000",
+        "error: eval.lookahead=1000000000 is invalid: it must be a whole number in [0, 100]",
+    ),
+    (
+        "train agent=dqn agent.network=set agent.mixer=vdn agent.demonstrations=oracle "
+        "agent.demo_transitions=1000000000000",
+        "error: agent.demo_transitions=1000000000000 is invalid: the oracle's demonstrations (agent.demo_transitions "
+        "= 1,000,000,000,000; with env.num_uavs 2) needs about",
+    ),
+    (
+        "train agent=dqn env.energy=rotary_wing env.base=[-1,0] env.battery_wh=1e12",
+        "error: env.battery_wh=1e12 is invalid: the evaluation (eval.num_starts x eval.horizon (null: the whole "
+        "mission) = 64 x 27,100,895,583,948; with the cells of env.grid 36, env.num_uavs 2) needs about 1.4e+18 bytes, "
+        "over agent.memory_budget=4294967296: change env.battery_wh, give eval.horizon=<smaller>, or raise "
+        "agent.memory_budget=<bytes>",
+    ),
+    (
+        "train env.energy=follow_up env.base=[-1,0] env.recharge_steps=5 env.num_spares=1000000 agent=dqn",
+        "error: env.num_spares=1000000 is invalid: the training worlds",
+    ),
 ]
 
 
@@ -173,6 +212,43 @@ API_CASES = [
 ]
 
 
+# memory refusals name the argument that grows it: the worlds where one fits, else the spares, the team or the grid
+ENERGY = dict(energy="follow_up", base=(-1, 0), recharge_steps=3)
+API_CASES += [
+    (
+        lambda: UAVSpectrumEnv(batch_size=2, grid=(3, 3), num_spares=10**6, **ENERGY),
+        InvalidOption,
+        "num_spares=1000000 is invalid: 2 worlds of 1000002 UAVs on 3x3 need about 200,002,980,015,876 bytes (182 "
+        "TiB), over memory_budget=4,294,967,296 bytes: lower num_spares, or raise memory_budget",
+    ),
+    (
+        lambda: UAVSpectrumEnv(batch_size=2, grid=(100_000, 100_000)),
+        InvalidOption,
+        "grid=(100000, 100000) is invalid: 2 worlds of 2 UAVs on 100000x100000 need about 10,200,000,005,704 bytes "
+        "(9.28 TiB), over memory_budget=4,294,967,296 bytes: lower grid, or raise memory_budget",
+    ),
+    (
+        lambda: UAVSpectrumEnv(batch_size=2, grid=(1000, 1000), num_uavs=200_000),
+        InvalidOption,
+        "num_uavs=200000 is invalid: 2 worlds of 200000 UAVs on 1000x1000 need about",
+    ),
+    (
+        lambda: UAVSpectrumEnv(batch_size=2, grid=(3, 3)).rollout(10**12, break_when_any_done=False),
+        InvalidOption,
+        "rollout(max_steps=1000000000000) is invalid: 1,000,000,000,000 steps of 2 worlds need about "
+        "1,424,000,000,000,000 bytes (1.3e+03 TiB), over memory_budget=4,294,967,296 bytes: use fewer steps, or raise "
+        "the env's memory_budget",
+    ),
+    (
+        lambda: UAVSpectrumEnv(batch_size=2, grid=(3, 3), memory_budget=10**6).rollout(
+            10_000, break_when_any_done=False
+        ),
+        InvalidOption,
+        "rollout(max_steps=10000) is invalid: 10,000 steps of 2 worlds need about",
+    ),
+]
+
+
 @pytest.mark.parametrize("call, error, words", API_CASES, ids=[words for _, _, words in API_CASES])
 def test_python_api_numbers_are_one_line(call, error, words):
     with pytest.raises(error) as raised:
@@ -265,3 +341,89 @@ def test_the_range_a_refusal_gives_is_accepted_at_both_ends(name):
         u_star = world.optimum()[0]
         assert torch.isfinite(u_star).all() and (u_star > 0).all()
         assert math.isfinite(float(world.cell_contributions.max()))
+
+
+def test_a_rollout_that_ends_with_its_episode_is_not_refused_for_its_max_steps():
+    """TorchRL's rollout stops where an episode ends (``break_when_any_done``, its default): only the episode's steps
+    are held, so a large ``max_steps`` is no cost there."""
+    env = UAVSpectrumEnv(batch_size=2, grid=(3, 3), max_steps=5)
+    assert env.rollout(10**12).shape == torch.Size([2, 5])
+
+
+def test_the_batterys_refusal_does_not_advise_the_grid(command_exit, tmp_path):
+    """The mission's horizon follows from the battery and the grid together: a smaller grid alone would not bring a
+    huge battery's evaluation within the budget, so it is not advised."""
+    error = command_exit("train env.energy=rotary_wing env.base=[-1,0] env.battery_wh=1e12", tmp_path)
+    assert error.startswith("error: env.battery_wh=1e12 is invalid") and "lower env.grid" not in error, error
+
+
+def test_n_step_returns_count_in_the_batch_memory(compose_cfg):
+    """MultiStep copies the batch's frames: at a budget between the two, one-step returns pass and 30-step ones are
+    refused, naming the batch."""
+    from uavrl.config import model_config
+    from uavrl.costs import Factor, dqn_costs
+    from uavrl.train import check_settings
+
+    big = ("agent=dqn", "agent.worlds=100000", "train.time_budget=1000000", "train.step_budget=10000000000000")
+
+    def batch_bytes(n_step):
+        cfg = compose_cfg(*big, f"agent.n_step={n_step}")
+        model = model_config(cfg)
+        memory = dqn_costs(cfg, model, Factor("env.max_steps", model.max_steps))[0]
+        return next(part for part in memory if "batch of" in part.what).amount
+
+    one, thirty = batch_bytes(1), batch_bytes(30)
+    assert thirty > 2 * one
+    budget = f"agent.memory_budget={(one + thirty) // 2}"
+    check_settings(compose_cfg(*big, "agent.n_step=1", budget))
+    with pytest.raises(ValueError, match=r"each iteration's batch of transitions .* with agent.n_step 30"):
+        check_settings(compose_cfg(*big, "agent.n_step=30", budget))
+
+
+def test_the_lookahead_is_estimated_for_an_evaluated_checkpoint_too(compose_cfg):
+    """``python -m uavrl.evaluate eval.lookahead=...`` is estimated on the saved agent before anything is built."""
+    from uavrl.config import model_config
+    from uavrl.costs import check_evaluation_costs
+
+    saved = compose_cfg("agent=dqn")
+    cfg = compose_cfg("eval.lookahead=12", "eval.lookahead_width=0")
+    with pytest.raises(ValueError, match=r"^eval.lookahead=12 is invalid: the lookahead's deepest level"):
+        check_evaluation_costs(cfg, saved, model_config(saved), video=False)
+    check_evaluation_costs(compose_cfg("eval.lookahead=2"), saved, model_config(saved), video=False)
+
+
+def test_the_lookahead_depth_is_refused_in_python_as_on_the_command_line():
+    from uavrl.agents.lookahead_rules import check_lookahead
+
+    with pytest.raises(ValueError) as refused:
+        check_lookahead(None, 10**9, "RandomAgent")
+    assert str(refused.value) == "eval.lookahead=1000000000 is invalid: it must be a whole number in [0, 100]"
+
+
+def test_a_dqn_agent_built_in_python_names_its_worlds(compose_cfg):
+    """Its training env's batch is ``agent.worlds``: a refusal names that, not the env's internal ``batch_size``."""
+    from uavrl.agents.dqn import DQNAgent
+    from uavrl.config import model_config
+
+    cfg = compose_cfg("agent=dqn", "agent.worlds=10000000000")
+    with pytest.raises(InvalidOption) as refused:
+        DQNAgent(model_config(cfg), cfg, "cpu", 0)
+    assert str(refused.value).startswith(
+        "agent.worlds=10000000000 is invalid: 10,000,000,000 worlds of 2 UAVs on 6x6 need about "
+    ) and str(refused.value).endswith(
+        "over agent.memory_budget=4,294,967,296 bytes: use fewer worlds, or raise memory_budget"
+    )
+
+
+@pytest.mark.gym
+def test_the_gymnasium_vector_env_names_its_num_envs():
+    """Its worlds are ``num_envs`` (it takes no memory_budget): a refusal names them, not the World's batch_size."""
+    pytest.importorskip("gymnasium")
+    from uavrl.envs.adapters.gym_env import UAVSpectrumVectorEnv
+
+    with pytest.raises(InvalidOption) as refused:
+        UAVSpectrumVectorEnv(num_envs=10**10)
+    assert str(refused.value) == (
+        "num_envs=10000000000 is invalid: 10,000,000,000 worlds of 2 UAVs on 6x6 need about 15,200,001,073,520 bytes "
+        "(13.8 TiB), over memory_budget=4,294,967,296 bytes: use fewer worlds"
+    )

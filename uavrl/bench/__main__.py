@@ -26,7 +26,7 @@ from uavrl.bench import cache
 from uavrl.bench.leaderboard import leaderboard_command
 from uavrl.bench.results import TEXT, check_out, interval, read
 from uavrl.bench.stats import probability_of_improvement
-from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS
+from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, check_budget
 from uavrl.envs._moved import moved_names
 from uavrl.envs.rules import refuse, whole_within
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
@@ -68,17 +68,8 @@ def parse(args: list[str]) -> dict:
         if key in settings:
             raise ValueError(f"{arg} is invalid: {key} was given twice")
         settings[key] = value
-    for key in ("budget.env_steps", "budget.cpu_seconds", "budget.gpu_seconds"):
-        if key in settings:
-            try:
-                number = float(settings[key])
-            except ValueError:
-                number = -1.0
-            if not number >= 0 or number == float("inf"):
-                raise ValueError(f"{key}={settings[key]} is invalid: give a number >= 0")
-            if key == "budget.env_steps" and not number.is_integer():  # 2.7 steps is no budget, and not 2
-                raise ValueError(f"{key}={settings[key]} is invalid: give a whole number >= 0")
-            settings[key] = int(number) if key == "budget.env_steps" else number
+    budget = check_budget({key.removeprefix("budget."): v for key, v in settings.items() if key.startswith("budget.")})
+    settings |= {f"budget.{key}": number for key, number in budget.items()}
     if "num_threads" in settings:
         typed = settings["num_threads"]
         refuse(

@@ -27,7 +27,7 @@ from uavrl.agents.references import LEVELS, start_references, u_star_gap
 from uavrl.bench import cache
 from uavrl.bench.results import new_results
 from uavrl.bench.stats import aggregate
-from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task
+from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task, check_budget
 from uavrl.cli import compose_config
 from uavrl.config import model_config
 from uavrl.envs.env import UAVSpectrumEnv
@@ -209,12 +209,22 @@ def normalised(values, random_values, reference_values) -> list[float]:
     return [(v - low) / max(gap, FLOOR * mean_gap) for v, low, gap in zip(values, random_values, gaps, strict=True)]
 
 
-def score_task(task: Task, policies, references: dict) -> dict:
-    """One task's entry of a results file for ``policies`` (one per independent training run)."""
+def score_task(task: Task, policies, references: dict, name: str = "the submission") -> dict:
+    """One task's entry of a results file for ``policies`` (one per independent training run); a one-line ValueError
+    naming the submission ``name`` for a policy that played a forbidden action wherever its ``action_mask`` forbade
+    any (the env plays them as no move: nothing the policy chose would be scored).  A mask check per rollout: the
+    scores of a policy that plays allowed actions are untouched."""
     refs = evaluation_references(references["starts"])
     values, scores, summaries = [], [], []
     for policy in policies:
         played = _rollout(task, policy)
+        masked = ~played["steps"]["unmasked"]  # where a choice was forbidden
+        if masked.any() and not played["steps"]["legal"][masked].any():
+            raise ValueError(
+                f"{name}: its policy played an action that ('agents', 'action_mask') forbids wherever the mask "
+                f"forbade any ({int(masked.sum())} UAV steps) on task {task.name}: the env plays such an action as no "
+                "move; choose among the actions the mask allows"
+            )
         run_values, _ = _values(task, played)
         values.append(run_values.tolist())
         scores.append(
@@ -266,7 +276,9 @@ def score_suite(
         policy_factory: ``env -> policy`` (or a list of policies, one per training run); raises
             :class:`NotApplicable` where it cannot act.
         name: the submission's name in tables and the leaderboard.
-        budget: what training cost, as the submitter states it (``env_steps``, ``cpu_seconds``, ``gpu_seconds``).
+        budget: what training cost, as the submitter states it (``env_steps``, ``cpu_seconds``, ``gpu_seconds``:
+            :func:`~uavrl.bench.tasks.check_budget`); refused in one line before any work where a value breaks its
+            rule.
         source: how the policies were obtained (the command that reproduces the results).
         cache_dir: where the references are kept (None: computed, not kept; by default ``$UAVRL_BENCH_CACHE``, else
             ``~/.cache/uavrl/bench``).
@@ -284,7 +296,7 @@ def score_suite(
         if unknown:
             raise ValueError(f"tasks={unknown[0]} is invalid: suite {suite} has {', '.join(t.name for t in chosen)}")
         chosen = [task for task in chosen if task.name in tasks]
-    results = new_results(suite, name, budget or {}, source, partial=tasks is not None)
+    results = new_results(suite, name, check_budget(budget), source, partial=tasks is not None)
     if train_command:
         results["submission"]["train_command"] = train_command
     for task in chosen:
@@ -297,7 +309,14 @@ def score_suite(
         except NotApplicable as why:
             entry.update(status="n/a", reason=str(why))
         else:
-            entry.update(score_task(task, policies if isinstance(policies, list) else [policies], references))
+            policies = policies if isinstance(policies, list) else [policies]
+            if not policies or not all(callable(policy) for policy in policies):
+                raise TypeError(
+                    f"{name}: its policy_factory returned {policies[0] if len(policies) == 1 else policies!r} for task "
+                    f"{task.name}: return a TorchRL policy (it writes ('agents', 'action')), a list of them, or raise "
+                    "NotApplicable"
+                )
+            entry.update(score_task(task, policies, references, name))
         results["tasks"].append(entry)
         if progress is not None:
             progress(f"{_progress_line(entry)} ({time.process_time() - began:.1f} CPU s)")

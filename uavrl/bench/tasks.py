@@ -33,6 +33,7 @@ import hashlib
 import json
 
 from uavrl.envs._moved import moved_names
+from uavrl.envs.rules import at_least, shown
 
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
 TASK_SEED_STRIDE = 2**24  # each task's starts: seeds task.seed .. task.seed + num_starts - 1
@@ -128,6 +129,36 @@ SUITES_TEXT = ", ".join(SUITES)
 # uavrl 0.2's model() and horizon() of a task are uavrl.bench.run's (they compose the scenario with Hydra):
 # deprecated aliases
 __getattr__ = moved_names(__name__, "uavrl.bench.run")
+
+
+# what training cost, as a submission states it: score_suite's budget= and the command line's budget.<key>=
+BUDGET = {"env_steps": at_least(0, whole_only=True), "cpu_seconds": at_least(0), "gpu_seconds": at_least(0)}
+
+
+def check_budget(budget) -> dict:
+    """A submission's training budget (:data:`BUDGET`; ``None``: none stated) with ``env_steps`` as an int, or a
+    one-line ValueError naming ``budget.<key>`` for an unknown key or a value that breaks its rule.  Text (the
+    command line's ``budget.<key>=<text>``) is read as a number first and shown as typed."""
+    if budget is None:
+        return {}
+    if not isinstance(budget, dict):
+        raise TypeError(f"budget={budget!r} is invalid: give a dict of {', '.join(BUDGET)}, or None")
+    checked = {}
+    for key, value in budget.items():
+        if key not in BUDGET:
+            raise ValueError(f"budget.{key}={value} is invalid: unknown key; a budget states {', '.join(BUDGET)}")
+        number = value
+        if isinstance(value, str):
+            try:
+                number = float(value)
+            except ValueError:
+                pass
+        if not BUDGET[key].accepts(number):
+            raise ValueError(
+                f"budget.{key}={value if isinstance(value, str) else shown(value)} is invalid: {BUDGET[key].allowed}"
+            )
+        checked[key] = int(number) if key == "env_steps" else float(number)
+    return checked
 
 
 def training_seed_bound(max_training_seed: int, step_budget: int) -> int:

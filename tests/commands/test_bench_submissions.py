@@ -1,0 +1,125 @@
+"""What a submission states and plays, checked by the benchmark before it scores (no rliable needed: every case here
+is refused, or scored by one task's :func:`~uavrl.bench.run.score_task`, before any aggregate).
+
+One budget rule (:func:`uavrl.bench.tasks.check_budget`) for ``score_suite(budget=...)`` and the command line's
+``budget.<key>=``; a policy factory must return policies; a policy must not play what its action mask forbids."""
+
+import math
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from uavrl.bench.run import score_suite, score_task, task_references
+from uavrl.bench.tasks import TASKS, check_budget
+
+BAD_BUDGETS = [
+    ({"env_steps": -5, "cpu_seconds": math.nan}, "budget.env_steps=-5 is invalid: it must be a whole number >= 0"),
+    ({"cpu_seconds": math.nan}, "budget.cpu_seconds=nan is invalid: it must be a finite number >= 0"),
+    ({"gpu_seconds": math.inf}, "budget.gpu_seconds=inf is invalid: it must be a finite number >= 0"),
+    ({"env_steps": 2.7}, "budget.env_steps=2.7 is invalid: it must be a whole number >= 0"),
+    ({"env_steps": True}, "budget.env_steps=true is invalid: it must be a whole number >= 0"),
+    ({"env_steps": "many"}, "budget.env_steps=many is invalid: it must be a whole number >= 0"),
+    ({"steps": 2}, "budget.steps=2 is invalid: unknown key; a budget states env_steps, cpu_seconds, gpu_seconds"),
+]
+
+
+def oracle(env):
+    from uavrl.agents.baselines import OraclePolicy
+
+    return OraclePolicy(env.cfg)
+
+
+@pytest.mark.parametrize("budget, message", BAD_BUDGETS, ids=[m.split(" is")[0] for _, m in BAD_BUDGETS])
+def test_score_suite_refuses_a_bad_budget_before_any_work(budget, message, tmp_path):
+    with pytest.raises(ValueError) as refused:
+        score_suite("tiny", oracle, name="sub", budget=budget, cache_dir=tmp_path)
+    assert str(refused.value) == message
+    assert list(tmp_path.iterdir()) == [], "references were computed before the budget was checked"
+
+
+@pytest.mark.parametrize(
+    "typed, message",
+    [
+        ("budget.env_steps=2.7", "budget.env_steps=2.7 is invalid: it must be a whole number >= 0"),
+        ("budget.env_steps=-5", "budget.env_steps=-5 is invalid: it must be a whole number >= 0"),
+        ("budget.cpu_seconds=nan", "budget.cpu_seconds=nan is invalid: it must be a finite number >= 0"),
+        ("budget.gpu_seconds=1e400", "budget.gpu_seconds=1e400 is invalid: it must be a finite number >= 0"),
+    ],
+)
+def test_the_command_line_refuses_a_bad_budget_as_python_does_before_torch(typed, message):
+    code = (
+        "import sys; from uavrl.bench.__main__ import main\n"
+        f"try:\n    main(['tiny', 'agent=random', {typed!r}])\nexcept ValueError as err:\n    print(err)\n"
+        "print('torch' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.splitlines() == [message, "False"]
+
+
+def test_a_budget_is_read_as_numbers_with_whole_env_steps():
+    from uavrl.bench.__main__ import parse
+
+    assert check_budget(None) == {}
+    assert check_budget({"env_steps": 3.0, "cpu_seconds": 0}) == {"env_steps": 3, "cpu_seconds": 0.0}
+    settings = parse(["agent=random", "budget.env_steps=1e6", "budget.cpu_seconds=12.5"])
+    assert (settings["budget.env_steps"], settings["budget.cpu_seconds"]) == (1_000_000, 12.5)
+    assert type(settings["budget.env_steps"]) is int
+    with pytest.raises(TypeError, match=r"^budget=\[1\] is invalid: give a dict of env_steps"):
+        check_budget([1])
+
+
+def test_a_factory_that_returns_no_policy_is_refused_naming_the_submission():
+    """TorchRL's rollout would play its random policy for ``None``: scored as the submission's, without a word."""
+    with pytest.raises(TypeError) as refused:
+        score_suite("tiny", lambda env: None, name="sub", cache_dir=None, tasks=["tiny_3x3"])
+    assert str(refused.value) == (
+        "sub: its policy_factory returned None for task tiny_3x3: return a TorchRL policy (it writes ('agents', "
+        "'action')), a list of them, or raise NotApplicable"
+    )
+
+
+def playing(choose):
+    """A policy that plays ``choose(mask [B, N, A]) -> [B, N]``."""
+
+    def policy(td):
+        td.set(("agents", "action"), choose(td.get(("agents", "action_mask"))))
+        return td
+
+    return policy
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    task = TASKS["tiny_3x3"]
+    return task, task_references(task, None)
+
+
+def test_a_policy_that_plays_what_its_mask_forbids_is_refused(tiny):
+    """Wherever its mask forbids an action, it plays one: the env plays those as no move, so its score would be
+    a policy that stays put, not what it chose."""
+    task, references = tiny
+    forbidden_first = playing(lambda mask: (~mask).float().argmax(-1))  # where nothing is forbidden: action 0
+    with pytest.raises(ValueError) as refused:
+        score_task(task, [forbidden_first], references, "sub")
+    assert str(refused.value).startswith(
+        "sub: its policy played an action that ('agents', 'action_mask') forbids wherever the mask forbade any ("
+    )
+    assert str(refused.value).endswith(
+        "UAV steps) on task tiny_3x3: the env plays such an action as no move; choose among the actions the mask allows"
+    )
+
+
+def test_legal_policies_are_scored_as_before(tiny):
+    """The check only reads the rollout: the oracle and the random policy score exactly the values their references
+    hold (computed by the same rollouts, unchecked), and a policy that always moves up (forbidden on the top row
+    only) is scored."""
+    from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+    from uavrl.bench.run import RANDOM_SEED, model
+
+    task, references = tiny
+    for name, policy in (("oracle", OraclePolicy(model(task))), ("random", RandomPolicy(seed=RANDOM_SEED))):
+        assert score_task(task, [policy], references)["values"] == [references["baselines"][name]["values"]]
+    up = score_task(task, [playing(lambda mask: torch.zeros(mask.shape[:-1], dtype=torch.long))], references)
+    assert up["status"] == "scored"
