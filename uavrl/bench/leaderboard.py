@@ -5,9 +5,10 @@
 One table per suite, a row per results file of that suite (best IQM first): the IQM of the normalised scores with
 its 95% stratified bootstrap CI (over the tasks the policy can act in, their number given when not all), the mean
 score per task (n/a where the policy cannot act), the training budget and the command that reproduces the row; a
-figure per suite (``docs/figures/leaderboard-<suite>.png``) beside it.  Entries that are not scored yet are listed
-with the command that would score them (:data:`NOT_YET_SCORED`).  The page's text before the generated part
-(:data:`MARKER`) is kept as written.
+figure per suite (``docs/figures/leaderboard-<suite>.png``) beside it.  Every string of a results file enters the
+page escaped (:func:`uavrl.bench.results.markdown_text`): a file can add no HTML, link, heading or row.  Entries that
+are not scored yet are listed with the command that would score them (:data:`NOT_YET_SCORED`).  The page's text
+before the generated part (:data:`MARKER`) is kept as written.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from uavrl.bench.results import _budget_words, figure, interval, read
+from uavrl.bench.results import _budget_words, figure, interval, markdown_text, read
 from uavrl.bench.tasks import SUITES
 from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
 
@@ -49,9 +50,11 @@ def suite_table(suite: str, files: list[dict]) -> list[str]:
         scored = f" ({len(agg['tasks'])} of {len(tasks)} tasks)" if 0 < len(agg.get("tasks", [])) < len(tasks) else ""
         iqm = interval(agg["iqm"], agg["iqm_ci"]) + scored if agg.get("tasks") else "n/a"
         sub = results["submission"]
-        command = f"`{sub['train_command']}`, then " if sub.get("train_command") else ""
+        train = markdown_text(sub.get("train_command") or "", code=True)
+        command = f"{train}, then " if train else ""
         lines.append(
-            f"| {sub['name']} | {iqm} | {' | '.join(cells)} | {_budget(sub['budget'])} | {command}`{sub['source']}` |"
+            f"| {markdown_text(sub['name'])} | {iqm} | {' | '.join(cells)} | {_budget(sub['budget'])} | "
+            f"{command}{markdown_text(sub['source'], code=True)} |"
         )
     return lines
 
@@ -65,7 +68,7 @@ def page(results_files: list[dict], figures: dict[str, str]) -> str:
             continue
         lines += [f"### Suite `{suite}`", "", *suite_table(suite, files), ""]
         if suite in figures:
-            lines += [f"![suite {suite}: scores per task and performance profiles]({figures[suite]})", ""]
+            lines += [f"![suite {suite}: mean score per task, IQM and performance profiles]({figures[suite]})", ""]
     lines += _environments(results_files)
     scored = {r["submission"]["name"] for r in results_files}
     left = [(name, suites, command) for name, suites, command in NOT_YET_SCORED if name not in scored]
@@ -76,7 +79,10 @@ def page(results_files: list[dict], figures: dict[str, str]) -> str:
             "| submission | suites | the command that would score it |",
             "|---|---|---|",
         ]
-        lines += [f"| {name} | {suites} | `{command}` |" for name, suites, command in left]
+        lines += [
+            f"| {markdown_text(name)} | {markdown_text(suites)} | {markdown_text(command, code=True)} |"
+            for name, suites, command in left
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -85,12 +91,12 @@ def _environments(results_files: list[dict]) -> list[str]:
     BenchMARL rows need its torchrl release)."""
     groups: dict[str, list[str]] = {}
     for results in results_files:
-        env = results["environment"]
+        env = {key: markdown_text(value) for key, value in results["environment"].items()}
         where = (
             f"uavrl {env['uavrl']}, torch {env['torch']}, torchrl {env['torchrl']} on {env['cpus']} CPUs "
-            f"({env['machine']}), {env['torch_threads']} torch thread{'' if env['torch_threads'] == 1 else 's'}"
+            f"({env['machine']}), {env['torch_threads']} torch thread{'' if env['torch_threads'] == '1' else 's'}"
         )
-        groups.setdefault(where, []).append(results["submission"]["name"])
+        groups.setdefault(where, []).append(markdown_text(results["submission"]["name"]))
     if not groups:
         return []
     ranked = sorted(groups, key=lambda where: -len(groups[where]))
