@@ -48,6 +48,8 @@ import numbers
 import torch
 
 from uavrl.agents.episodes import episode_metrics
+from uavrl.agents.lookahead_rules import candidates_per_node
+from uavrl.agents.network_sizes import policy_row_bytes
 from uavrl.agents.references import (
     LEVELS,
     cached_references,
@@ -461,6 +463,8 @@ def evaluate_agent(agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width:
     """
     if lookahead:
         return evaluate_with_lookahead(agent, cfg, lookahead, lookahead_width, **kwargs)
+    if lookahead_width != 8:  # as eval.lookahead_width=... is refused without eval.lookahead
+        raise InvalidOption("lookahead_width", lookahead_width, "only lookahead >= 1 reads it, not lookahead=0")
     results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):
@@ -475,6 +479,17 @@ def evaluate_with_lookahead(agent, cfg: ModelConfig, lookahead: int, lookahead_w
     from uavrl.agents.lookahead import lookahead_policy  # tensordict: the tabular commands evaluate without it
 
     policy = lookahead_policy(agent, cfg, lookahead, lookahead_width)
+    # the search holds its deepest level at once: refused before it starts, as uavrl.costs refuses eval.lookahead
+    num_starts, budget = kwargs.get("num_starts", NUM_STARTS), kwargs.get("memory_budget", DEFAULT_MEMORY_BUDGET)
+    per_node = candidates_per_node(cfg.num_uavs, cfg.num_actions, lookahead_width)
+    need = num_starts * per_node**lookahead * policy_row_bytes(cfg, agent.settings)
+    if need > budget:
+        raise InvalidOption(
+            "lookahead",
+            message=f"lookahead={lookahead} is invalid: the search's deepest level, {per_node}^{lookahead} "
+            f"configurations for each of {num_starts} starts, needs about {gib(need)}, over memory_budget={budget}: "
+            "lower lookahead, give lookahead_width=<candidates per node>, or raise memory_budget=<bytes>",
+        )
     metrics = evaluate(policy, cfg, **kwargs)
     search = policy.lookahead
     metrics["eval/lookahead"] = float(lookahead)

@@ -86,3 +86,17 @@ def team_row_values(num_uavs: int, num_actions: int, energy: bool, a) -> int:
     if a.mixer == "qmix":
         values += state_size(N, energy) + 2 * int(a.mixing_embed_dim) * (N + 3)
     return 2 * values
+
+
+def greedy_cells(model) -> int:
+    """The cells of the greedy valid action's occupancy table (``ValidGreedy``): the grid's and two more where that
+    is fewer than N^2 A comparisons of targets with claims, else none (its cost then follows the team, not the grid)."""
+    cells = model.num_cells + 2
+    return cells if cells <= model.fleet_size**2 * model.num_actions else 0
+
+
+def policy_row_bytes(model, a) -> int:
+    """Bytes of one world's row when the Q-network of settings ``a`` values it and picks its greedy valid action:
+    the network's float32 values (:func:`team_row_values`) and the occupancy table (:func:`greedy_cells`)."""
+    values = team_row_values(model.fleet_size, model.num_actions, model.energy != "none", a)
+    return FLOAT * values + greedy_cells(model)

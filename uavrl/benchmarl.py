@@ -23,6 +23,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from uavrl.cli import BENCHMARL_INSTALL as INSTALL
 from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, config_dir, model_config
 from uavrl.costs import check_benchmarl_costs
@@ -36,7 +37,6 @@ from uavrl.settings import BENCHMARL_SETTINGS
 # aliases
 __getattr__ = moved_names(__name__, "uavrl.experiment.benchmarl")
 
-INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'
 # BenchMARL's own config groups (pkg://benchmarl.conf); everything else on the command line is ours
 BENCHMARL_GROUPS = ("experiment", "algorithm", "model", "critic_model")
 

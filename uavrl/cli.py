@@ -32,6 +32,7 @@ from uavrl.experiment.io import claim_dir
 from uavrl.schema import BenchmarlSchema, ReproduceSchema, RunSchema
 
 Command = Callable[[DictConfig, list], object]
+BENCHMARL_INSTALL = 'pip install torch==2.13.0 -e ".[benchmarl]"'  # the extra uavrl.benchmarl and its library need
 # settings that moved: an override of the old name says the new one
 RENAMED = MOVED
 # settings that hold a file system path (every command's, by their rule): a path Hydra's override grammar cannot read

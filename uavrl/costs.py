@@ -26,11 +26,12 @@ from uavrl.agents.lookahead_rules import candidates_per_node
 from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
+    greedy_cells,
+    policy_row_bytes,
     qmix_parameters,
     set_parameters,
     team_parameters,
     team_row_macs,
-    team_row_values,
 )
 from uavrl.agents.schema import START_BLOCK, TabularSchema, training_models
 from uavrl.envs.config import ModelConfig, make_config
@@ -400,11 +401,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
 
     def step_bytes(low) -> int:
         s, rows = agent(low), group_batch(low)
-        return sum(
-            rows * (frame_bytes(m) + FLOAT * team_row_values(m.fleet_size, m.num_actions, _e(m), s))
-            + rows * greedy_cells(m)  # the greedy action's occupancy table
-            for m in models(low)
-        )
+        return sum(rows * (frame_bytes(m) + policy_row_bytes(m, s)) for m in models(low))
 
     def world_memory(low) -> int:
         return sum(world_bytes(m, worlds.at(low)) for m in models(low))
@@ -465,22 +462,13 @@ def _e(model) -> bool:
     return model.energy != "none"
 
 
-def greedy_cells(model) -> int:
-    """The cells of the greedy valid action's occupancy table (``ValidGreedy``): the grid's and two more where that
-    is fewer than N^2 A comparisons of targets with claims, else none (its cost then follows the team, not the grid)."""
-    cells = model.num_cells + 2
-    return cells if cells <= model.fleet_size**2 * model.num_actions else 0
-
-
 def policy_pass(model, a, starts: Factor) -> Cost:
     """The DQN policy's forward pass over the evaluation's starts: its activations and the greedy action's
-    occupancy table (:func:`greedy_cells`)."""
+    occupancy table (:func:`~uavrl.agents.network_sizes.policy_row_bytes`)."""
     settings = _Agent.of(a)
 
     def estimate(low):
-        m, rows = _Resized(model, low), starts.at(low)
-        values = team_row_values(m.fleet_size, m.num_actions, _e(m), settings)
-        return rows * (FLOAT * values + greedy_cells(m))
+        return starts.at(low) * policy_row_bytes(_Resized(model, low), settings)
 
     return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
 
@@ -501,7 +489,7 @@ def lookahead_cost(cfg: DictConfig, model, a, starts: Factor) -> list[Cost]:
 
     def estimate(low):
         m, rows = _Resized(model, low), starts.at(low) * per_node.at(low) ** levels.at(low)
-        return rows * (FLOAT * team_row_values(m.fleet_size, m.num_actions, _e(m), settings) + greedy_cells(m))
+        return rows * policy_row_bytes(m, settings)
 
     what = "the lookahead's deepest level, K^eval.lookahead configurations a start"
     return [Cost(what, (starts, levels, per_node), estimate, hint)]

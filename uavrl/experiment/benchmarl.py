@@ -22,7 +22,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from uavrl.cli import compose_config
+from uavrl.cli import BENCHMARL_INSTALL, compose_config
 from uavrl.config import model_config
 from uavrl.experiment.checkpoints import CheckpointError, read_torch
 from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text, special_kind
@@ -30,6 +30,12 @@ from uavrl.experiment.logger import RunLogger
 from uavrl.experiment.rundir import RunDirectory
 from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
 from uavrl.experiment.saved import SavedYamlLoader
+
+try:
+    from uavrl.agents.benchmarl import UAVTask, YardstickCallback
+except ImportError:  # no BenchMARL: load_experiment still refuses, naming it, a run directory it could not use
+    if importlib.util.find_spec("benchmarl") is not None:
+        raise
 
 
 def run_training(cfg: DictConfig, algorithm: str) -> Path:
@@ -66,8 +72,6 @@ def build_experiment(cfg: DictConfig, save_folder: Path, callbacks=(), **experim
         load_experiment_config_from_hydra,
         load_model_config_from_hydra,
     )
-
-    from uavrl.agents.benchmarl import UAVTask
 
     experiment_config = load_experiment_config_from_hydra(cfg.experiment)
     experiment_config.save_folder = str(save_folder.resolve())
@@ -128,9 +132,7 @@ def load_experiment(run_dir):
     if not last.resolve().is_relative_to(run_dir.resolve()):
         raise ValueError(f"{quoted(last)} is a link to {quoted(last.resolve())}, out of {given}")
     if importlib.util.find_spec("benchmarl") is None:
-        from uavrl.benchmarl import INSTALL
-
-        raise ImportError(f"load_experiment({given}) needs BenchMARL, which is not installed: {INSTALL}")
+        raise ImportError(f"load_experiment({given}) needs BenchMARL, which is not installed: {BENCHMARL_INSTALL}")
     import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
 
     try:
@@ -157,8 +159,6 @@ def run_experiment(cfg: DictConfig, algorithm: str, run_dir: Path) -> Path:
     """BenchMARL's experiment of ``cfg`` run in the held ``run_dir``, its policy evaluated with ours at each of its
     evaluations and at the end; writes ``config.yaml``, ``curve.json`` and ``metrics.json``, prints the summary and
     returns ``run_dir``."""
-    from uavrl.agents.benchmarl import YardstickCallback
-
     torch.set_num_threads(int(cfg.num_threads))
     env_cfg = model_config(cfg)
     save_text(OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True)), run_dir / "config.yaml")
