@@ -10,20 +10,33 @@ weights_only=True)``, which rebuilds tensors, numbers, strings and containers
 and refuses anything else (a pickled function call among them), so a run
 directory from anyone can be evaluated or resumed.  A file that holds other
 objects is refused in one line, and is not skipped over for an older one: it
-was not written by uavrl.  Only the standard library is imported here; torch is
-imported when a checkpoint is read or written.
+was not written by uavrl.
+
+A checkpoint is read only as its run directory's own (:func:`load_checkpoint`): a file inside that directory (not a
+link out of it), whose saved run (agent, network, model, seed) is the one the directory's ``config.yaml`` records.
+Another run's checkpoint copied or linked there is refused in one line, never resumed into the directory or fallen
+back to.  Only the standard library and PyYAML are imported here; torch is imported when a checkpoint is read or
+written.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import re
 import warnings
 from pathlib import Path
 
-from uavrl.experiment.io import quoted, save_torch, special_kind
+import yaml
+
+from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_torch, special_kind
 
 CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"
+RUN_CONFIG = "config.yaml"  # the run's resolved config, which its checkpoints must match
+# what tells one run from another: a checkpoint whose saved config differs from its directory's config.yaml in any of
+# these is another run's (what a run may change when resumed, its threads, progress bar and directory, is left out)
+RUN_IDENTITY = ("agent", "seed", "env", "scenario")
 _ENTRIES = ("agent", "iteration", "config")  # what every uavrl checkpoint holds
 # A DQN checkpoint of an earlier version holds its replay buffer as a TensorDict, pickled as a call of the first
 # name on the second and the stored entries; read, they stand for _stored_tensordict and _tensordict_class, which
@@ -39,12 +52,48 @@ class ForeignObjects(CheckpointError):
     """A file holds objects uavrl never writes: refused before any of them is rebuilt, so none of its code ran."""
 
 
+class NotThisRun(CheckpointError):
+    """A checkpoint (or ``config.yaml``) that is not its run directory's own: another run's, a link out of the
+    directory, or a ``config.yaml`` it cannot be checked against; refused, never adopted or fallen back to."""
+
+
+class SavedYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
+    nested aliases expand to billions of values."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
+        return super().compose_node(parent, index)
+
+
 def checkpoint_files(path) -> list[Path]:
-    """The files to try, newest first: those of a run directory, or the one file ``path``."""
+    """The files to try, newest first: those of a run directory, or the one file ``path`` (a link that leads nowhere
+    among them, for its refusal to say so)."""
     path = Path(path)
     if path.is_dir():
-        return [f for f in (path / CHECKPOINT, path / PREVIOUS_CHECKPOINT) if f.exists()]
+        return [f for f in (path / CHECKPOINT, path / PREVIOUS_CHECKPOINT) if os.path.lexists(f)]
     return [path] if path.exists() else []
+
+
+def run_dir_of(path) -> Path:
+    """The run directory of a checkpoint given as ``path``: ``path`` itself, or the directory of the file given."""
+    path = Path(path)
+    return path if path.is_dir() else path.parent
+
+
+def link_out(file: Path, run_dir: Path) -> str | None:
+    """What ``file`` is when it is a symbolic link that leads out of ``run_dir`` or nowhere (``a symbolic link to
+    '/x/checkpoint.pt', outside ...``), else None: a run's files are its own, inside it."""
+    if not file.is_symlink() or special_kind(file) is not None:  # a link to a FIFO or device is refused as that
+        return None
+    target = Path(os.path.realpath(file))
+    if not target.exists():
+        return "a symbolic link that leads nowhere (a loop, or its target is gone)"
+    if not target.is_relative_to(os.path.realpath(run_dir)):
+        return f"a symbolic link to {quoted(target)}, outside the run directory"
+    return None
 
 
 def read_torch(path: Path):
@@ -138,11 +187,16 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
     files = checkpoint_files(path)
     if not files:
         raise FileNotFoundError(no_checkpoint(path, setting))
+    run_dir = run_dir_of(path)
+    run_config = saved_run_identity(run_dir, given)
     notes = [f"{CHECKPOINT}: missing"] if Path(path).is_dir() and files[0].name != CHECKPOINT else []
     skipped = []
     for file in files:
+        outside = link_out(file, run_dir)
+        if outside is not None:
+            raise NotThisRun(f"{given}: {file.name} is {outside}: a run's checkpoints are files of its own; refused")
         try:
-            return _read(file), file, notes + skipped
+            state = _read(file)
         except ForeignObjects as err:
             raise ForeignObjects(
                 f"{given}: {quoted(file)}: {err}: it is not a uavrl file, or it was altered; refused, and "
@@ -150,13 +204,111 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
             ) from None
         except CheckpointError as err:
             skipped.append(f"{file.name}: {err}")
+            continue
+        check_belongs(state, file, run_config, run_dir / RUN_CONFIG, given, notes + skipped)
+        return state, file, notes + skipped
     raise CheckpointError(f"{given}: no readable checkpoint ({'; '.join(notes + skipped)})")
+
+
+class RunIdentity(dict):
+    """The settings that tell a run from another (:data:`RUN_IDENTITY`), flat (``agent.name``), and ``label``: the
+    agent as runs are filed (``dqn-set``)."""
+
+    label: str
+
+
+def identity(saved: dict, source: str) -> RunIdentity:
+    """:class:`RunIdentity` of the config ``saved`` as a run directory holds it (earlier versions' names moved where
+    they live now); a one-line ValueError beginning with ``source`` when it is no uavrl run's config."""
+    from omegaconf import OmegaConf
+
+    from uavrl.config import saved_config  # the settings' rules: only once a file is read
+    from uavrl.experiment.runs import agent_label
+
+    cfg = saved_config(saved, source)
+    found = RunIdentity()
+    found.label = agent_label(cfg)
+
+    def add(value, name: str) -> None:
+        if isinstance(value, dict) and value:
+            for key, item in value.items():
+                add(item, f"{name}.{key}")
+        else:
+            found[name] = value
+
+    for section, value in OmegaConf.to_container(cfg).items():
+        if section in RUN_IDENTITY:
+            add(value, section)
+    return found
+
+
+def saved_run_identity(run_dir: Path, given: str) -> RunIdentity | None:
+    """:func:`identity` of the run directory's ``config.yaml``; None where there is none; a one-line NotThisRun
+    when it is there but cannot be read as a run's config (no checkpoint there could be told to be the run's)."""
+    path = run_dir / RUN_CONFIG
+    if not os.path.lexists(path):
+        return None
+    why = link_out(path, run_dir)
+    if why is None:
+        try:
+            data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
+            why = None if isinstance(data, dict) else f"it holds {type(data).__name__}, not a mapping of settings"
+        except DamagedRun as err:
+            why = str(err).removeprefix(f"{RUN_CONFIG} ")
+        except (yaml.YAMLError, RecursionError, ValueError) as err:
+            why = f"it is not valid YAML ({' '.join(str(getattr(err, 'problem', None) or err).split())})"
+    advice = "no checkpoint there can be told to be that run's: restore it, or move it away"
+    if why is not None:
+        raise NotThisRun(f"{given}: {quoted(path)} is not readable as the run's config ({why}); {advice}")
+    try:
+        return identity(data, quoted(path))
+    except ValueError as err:
+        raise NotThisRun(f"{given}: {err}; {advice}") from None
+
+
+FIRST_TOLD = ("agent.name", "agent.network", "seed")  # the differences a refusal names first
+
+
+def check_belongs(state: dict, file: Path, run: RunIdentity | None, config_path: Path, given: str, notes) -> None:
+    """A one-line NotThisRun naming ``file`` unless the run that saved ``state`` is the one the directory's
+    ``config.yaml`` records (``run``: its :func:`identity`; None: no ``config.yaml``, nothing to match); a
+    CheckpointError when the checkpoint's own config is no uavrl run's.  A setting one version has and another
+    lacks tells nothing apart."""
+    try:
+        saved = identity(state["config"], quoted(file))
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
+    if run is None:
+        return
+    differing = [key for key in saved if key in run and saved[key] != run[key]]
+    if not differing:
+        return
+    key = next((k for k in FIRST_TOLD if k in differing), differing[0])
+    typed = "agent" if key == "agent.name" else key  # as a command line chooses it: agent=dqn
+    ours = f"{quoted(config_path)} is a {run.label} run's" if saved.label != run.label else quoted(config_path)
+    found = (
+        f"is a {saved.label} run's checkpoint ({typed}={_shown(saved[key])}), but {ours} ({typed}={_shown(run[key])})"
+        if saved.label != run.label
+        else f"is another run's checkpoint ({typed}={_shown(saved[key])}), but {ours} has {typed}={_shown(run[key])}"
+    )
+    after = f" (after {'; '.join(notes)})" if notes else ""
+    raise NotThisRun(
+        f"{given}: {file.name}{after} {found}: it belongs to another run; refused, nothing written (give the directory "
+        f"of the run it belongs to, or put back this run's own {file.name})"
+    )
+
+
+def _shown(value) -> str:
+    """A setting's value as typed on a command line: ``tabular``, ``[3, 3]``, ``null``."""
+    return value if isinstance(value, str) else json.dumps(value)
 
 
 def no_checkpoint(path, setting: str) -> str:
     """Why ``setting=path`` has no checkpoint to read, and what to give instead."""
     path = Path(path)
     given = f"{setting}={quoted(path)}"
+    if os.path.lexists(path) and not path.exists():
+        return f"{given} is a symbolic link that leads nowhere (a loop, or its target is gone)"
     if not path.exists():
         return f"{given} does not exist (give a run directory or its {CHECKPOINT})"
     benchmarl = benchmarl_run(path)

@@ -15,26 +15,17 @@ from uavrl.agents import agent_class
 from uavrl.agents.schema import network_refusal
 from uavrl.config import model_config, saved_config
 from uavrl.costs import check_evaluation_costs, check_evaluation_floor
-from uavrl.experiment.checkpoints import (
+from uavrl.experiment.checkpoints import (  # SavedYamlLoader: where the report and benchmarl import it from
     CheckpointError,
+    SavedYamlLoader,
     checkpoint_files,
     load_checkpoint,
     no_checkpoint,
     restore_agent,
+    run_dir_of,
 )
 from uavrl.experiment.io import DamagedRun, quoted, read_small_text
 from uavrl.settings import RUN_SETTINGS, check_read, check_run, check_typed
-
-
-class SavedYamlLoader(yaml.SafeLoader):
-    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
-    nested aliases expand to billions of values."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
-        return super().compose_node(parent, index)
 
 
 def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None) -> None:
@@ -78,7 +69,7 @@ def saved_run_config(checkpoint) -> DictConfig | None:
 
 def output_dir(checkpoint) -> Path:
     """Where an evaluation of ``checkpoint`` (a run directory or a file in one) writes: the run directory."""
-    return Path(checkpoint) if Path(checkpoint).is_dir() else Path(checkpoint).parent
+    return run_dir_of(checkpoint)
 
 
 def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str) -> DictConfig:
