@@ -39,10 +39,23 @@ def print_videos(cfg: DictConfig, overrides) -> None:
         cfg: the composed config.
         overrides: the command line's overrides.
     """
+    check_one_run(overrides)
     check_evaluation(cfg, video=True, overrides=overrides)
     from uavrl.experiment import rendering  # torch, the agents, matplotlib: only once the settings are good
 
     rendering.print_videos(cfg, overrides, checked=True)
+
+
+def check_one_run(overrides) -> None:
+    """A one-line ValueError when the command line names several runs (``render a b``, or ``checkpoint=`` twice):
+    render watches one, and a composed config would keep only the last."""
+    runs = [o for o in overrides or () if o.lstrip("+~").split("=", 1)[0] == "checkpoint"]
+    if len(runs) > 1:
+        given = " ".join(o.split("=", 1)[1] for o in runs)
+        raise ValueError(
+            f"{' '.join(runs)} is invalid: render watches one run, and {len(runs)} were given: give one (each in "
+            f'turn: for run in {given}; do python -m uavrl.render "$run"; done)'
+        )
 
 
 def as_overrides(args: list[str]) -> list[str]:

@@ -188,7 +188,8 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
     if not files:
         raise FileNotFoundError(no_checkpoint(path, setting))
     run_dir = run_dir_of(path)
-    run_config = saved_run_identity(run_dir, given)
+    run_config = read_run_config(run_dir, given)
+    run = None if run_config is None else identity(run_config)
     notes = [f"{CHECKPOINT}: missing"] if Path(path).is_dir() and files[0].name != CHECKPOINT else []
     skipped = []
     for file in files:
@@ -205,7 +206,7 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
         except CheckpointError as err:
             skipped.append(f"{file.name}: {err}")
             continue
-        check_belongs(state, file, run_config, run_dir / RUN_CONFIG, given, notes + skipped)
+        check_belongs(state, file, run, run_dir / RUN_CONFIG, given, notes + skipped)
         return state, file, notes + skipped
     raise CheckpointError(f"{given}: no readable checkpoint ({'; '.join(notes + skipped)})")
 
@@ -217,15 +218,12 @@ class RunIdentity(dict):
     label: str
 
 
-def identity(saved: dict, source: str) -> RunIdentity:
-    """:class:`RunIdentity` of the config ``saved`` as a run directory holds it (earlier versions' names moved where
-    they live now); a one-line ValueError beginning with ``source`` when it is no uavrl run's config."""
+def identity(cfg) -> RunIdentity:
+    """:class:`RunIdentity` of a saved run's config ``cfg`` (as :func:`uavrl.config.saved_config` reads it)."""
     from omegaconf import OmegaConf
 
-    from uavrl.config import saved_config  # the settings' rules: only once a file is read
     from uavrl.experiment.runs import agent_label
 
-    cfg = saved_config(saved, source)
     found = RunIdentity()
     found.label = agent_label(cfg)
 
@@ -242,13 +240,17 @@ def identity(saved: dict, source: str) -> RunIdentity:
     return found
 
 
-def saved_run_identity(run_dir: Path, given: str) -> RunIdentity | None:
-    """:func:`identity` of the run directory's ``config.yaml``; None where there is none; a one-line NotThisRun
-    when it is there but cannot be read as a run's config (no checkpoint there could be told to be the run's)."""
-    path = run_dir / RUN_CONFIG
+def read_run_config(run_dir, given: str):
+    """The run directory's ``config.yaml`` as :func:`uavrl.config.saved_config` reads it (a DictConfig), read without
+    torch; None where there is none; a one-line NotThisRun beginning with ``given`` (``checkpoint=<dir>``) when it is
+    there but is no run's config that uavrl can read: a link out of the directory, no regular file, too large, not
+    YAML, not a uavrl run's settings (no checkpoint there could then be told to be the run's)."""
+    from uavrl.config import saved_config  # the settings' rules: only once a file is read
+
+    path = Path(run_dir) / RUN_CONFIG
     if not os.path.lexists(path):
         return None
-    why = link_out(path, run_dir)
+    why = link_out(path, Path(run_dir))
     if why is None:
         try:
             data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
@@ -261,7 +263,7 @@ def saved_run_identity(run_dir: Path, given: str) -> RunIdentity | None:
     if why is not None:
         raise NotThisRun(f"{given}: {quoted(path)} is not readable as the run's config ({why}); {advice}")
     try:
-        return identity(data, quoted(path))
+        return saved_config(data, quoted(path))
     except ValueError as err:
         raise NotThisRun(f"{given}: {err}; {advice}") from None
 
@@ -274,8 +276,10 @@ def check_belongs(state: dict, file: Path, run: RunIdentity | None, config_path:
     ``config.yaml`` records (``run``: its :func:`identity`; None: no ``config.yaml``, nothing to match); a
     CheckpointError when the checkpoint's own config is no uavrl run's.  A setting one version has and another
     lacks tells nothing apart."""
+    from uavrl.config import saved_config
+
     try:
-        saved = identity(state["config"], quoted(file))
+        saved = identity(saved_config(state["config"], quoted(file)))
     except ValueError as err:
         raise CheckpointError(str(err)) from None
     if run is None:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
@@ -15,16 +14,17 @@ from uavrl.agents import agent_class
 from uavrl.agents.schema import network_refusal
 from uavrl.config import model_config, saved_config
 from uavrl.costs import check_evaluation_costs, check_evaluation_floor
-from uavrl.experiment.checkpoints import (  # SavedYamlLoader: where the report and benchmarl import it from
+from uavrl.experiment.checkpoints import (
     CheckpointError,
-    SavedYamlLoader,
     checkpoint_files,
     load_checkpoint,
     no_checkpoint,
+    read_run_config,
     restore_agent,
     run_dir_of,
 )
-from uavrl.experiment.io import DamagedRun, quoted, read_small_text
+from uavrl.experiment.checkpoints import SavedYamlLoader as SavedYamlLoader  # where benchmarl imports it from
+from uavrl.experiment.io import quoted
 from uavrl.settings import RUN_SETTINGS, check_read, check_run, check_typed
 
 
@@ -51,20 +51,22 @@ def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None)
     saved = saved_run_config(cfg.checkpoint)
     if saved is not None:
         evaluated = evaluated_config(saved, cfg, overrides or (), f"checkpoint={quoted(cfg.checkpoint)}")
-        check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+        try:
+            check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+        except (OmegaConfBaseException, AttributeError, KeyError, TypeError) as err:  # as saved_agent's: a config.yaml
+            reason = " ".join(f"{type(err).__name__}: {err}".split())  # whose agent section is another agent's
+            config = quoted(output_dir(cfg.checkpoint) / "config.yaml")
+            raise CheckpointError(
+                f"checkpoint={quoted(cfg.checkpoint)}: {config}: its saved config does not fit a {saved.agent.name} "
+                f"agent ({reason})"
+            ) from None
 
 
 def saved_run_config(checkpoint) -> DictConfig | None:
     """The run's config as ``uavrl.train`` saved it beside the checkpoint (``config.yaml``), read without torch;
-    ``None`` where there is none or it cannot be read (the checkpoint's own copy is checked once it is loaded)."""
-    path = output_dir(checkpoint) / "config.yaml"
-    if not path.is_file():
-        return None
-    try:
-        data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
-        return saved_config(data, quoted(path)) if isinstance(data, dict) else None
-    except (DamagedRun, yaml.YAMLError, RecursionError, ValueError):
-        return None
+    ``None`` where there is none; a one-line refusal where it is there but unreadable
+    (:func:`uavrl.experiment.checkpoints.read_run_config`: no checkpoint there could be told to be the run's)."""
+    return read_run_config(output_dir(checkpoint), f"checkpoint={quoted(checkpoint)}")
 
 
 def output_dir(checkpoint) -> Path:
