@@ -6,7 +6,8 @@ first ``eval.video_starts`` starts, the same starts the yardstick measures, for
 start: the policy left, the oracle right), and writes ``video.gif`` (and
 ``video.mp4`` where PyAV is installed: ``pip install -e ".[video]"``) beside the
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
-checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
+checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.  It watches one run: two run
+directories (or ``checkpoint=`` twice) are refused in one line that says how to render each in turn.
 
 Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.missions.mission_figure`): the batteries
 of the mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
