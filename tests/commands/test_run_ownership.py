@@ -121,6 +121,14 @@ FOREIGN = {
         "checkpoint.pt is a tabular run's checkpoint (agent=tabular), but {config} is a dqn run's "
         "(agent=dqn): it belongs to another run; refused, nothing written",
     ),
+    "a tabular checkpoint in a dqn run without its config.yaml": (
+        lambda runs, run: (
+            replace(run / "checkpoint.pt", runs["tabular"] / "checkpoint.pt"),
+            (run / "config.yaml").unlink(),
+        ),
+        "dqn",
+        "checkpoint.pt is a tabular run's checkpoint (agent=tabular), but {metrics} is a dqn run's (agent=dqn)",
+    ),
     "a size-free network's checkpoint in a team network's run": (
         lambda runs, run: replace(run / "checkpoint.pt", runs["dqn_set"] / "checkpoint.pt"),
         "dqn",
@@ -195,7 +203,7 @@ def test_a_file_that_is_not_the_runs_own_is_refused_before_anything_is_written(
         "seed1_config": q(runs["seed1"] / "config.yaml"),
     }
     assert error.startswith(f"error: {setting(command)}={q(run)}: "), error
-    assert words.format(config=q(run / "config.yaml"), **paths) in error, error
+    assert words.format(config=q(run / "config.yaml"), metrics=q(run / "metrics.json"), **paths) in error, error
 
 
 def test_the_tabular_checkpoint_in_a_dqn_run_is_refused_by_render_and_load_checkpoint(runs, tmp_path, command_exit):
@@ -269,6 +277,10 @@ def test_a_copy_of_a_run_and_a_link_inside_it_are_the_runs_own(runs, tmp_path, c
     torch.save(state, run / "checkpoint.pt.new")
     os.replace(run / "checkpoint.pt.new", run / "checkpoint.pt")
     assert load_checkpoint(run, "checkpoint")[1] == run / "checkpoint.pt"
+    # without config.yaml, a size-free run is its metrics.json's dqn run
+    size_free = copy_of(runs, "dqn_set", tmp_path)
+    (size_free / "config.yaml").unlink()
+    assert load_checkpoint(size_free, "checkpoint")[1] == size_free / "checkpoint.pt"
 
 
 def test_render_of_two_runs_is_one_line(runs, tmp_path, command_exit):

@@ -189,7 +189,7 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
         raise FileNotFoundError(no_checkpoint(path, setting))
     run_dir = run_dir_of(path)
     run_config = read_run_config(run_dir, given)
-    run = None if run_config is None else identity(run_config)
+    run = metrics_identity(run_dir) if run_config is None else identity(run_config, run_dir / RUN_CONFIG)
     notes = [f"{CHECKPOINT}: missing"] if Path(path).is_dir() and files[0].name != CHECKPOINT else []
     skipped = []
     for file in files:
@@ -206,26 +206,28 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
         except CheckpointError as err:
             skipped.append(f"{file.name}: {err}")
             continue
-        check_belongs(state, file, run, run_dir / RUN_CONFIG, given, notes + skipped)
+        check_belongs(state, file, run, given, notes + skipped)
         return state, file, notes + skipped
     raise CheckpointError(f"{given}: no readable checkpoint ({'; '.join(notes + skipped)})")
 
 
 class RunIdentity(dict):
-    """The settings that tell a run from another (:data:`RUN_IDENTITY`), flat (``agent.name``), and ``label``: the
-    agent as runs are filed (``dqn-set``)."""
+    """The settings that tell a run from another (:data:`RUN_IDENTITY`), flat (``agent.name``); ``label``: the agent
+    as runs are filed (``dqn-set``); ``source``: the file they were read from."""
 
     label: str
+    source: Path | None = None
 
 
-def identity(cfg) -> RunIdentity:
-    """:class:`RunIdentity` of a saved run's config ``cfg`` (as :func:`uavrl.config.saved_config` reads it)."""
+def identity(cfg, source: Path | None = None) -> RunIdentity:
+    """:class:`RunIdentity` of a saved run's config ``cfg`` (as :func:`uavrl.config.saved_config` reads it), read
+    from the file ``source``."""
     from omegaconf import OmegaConf
 
     from uavrl.experiment.runs import agent_label
 
     found = RunIdentity()
-    found.label = agent_label(cfg)
+    found.label, found.source = agent_label(cfg), source
 
     def add(value, name: str) -> None:
         if isinstance(value, dict) and value:
@@ -268,12 +270,27 @@ def read_run_config(run_dir, given: str):
         raise NotThisRun(f"{given}: {err}; {advice}") from None
 
 
+def metrics_identity(run_dir: Path) -> RunIdentity | None:
+    """The run a directory without ``config.yaml`` holds as its ``metrics.json`` names it (its agent and environment:
+    a resume would write over it); None where there is none that can be read."""
+    path = run_dir / "metrics.json"
+    try:
+        metrics = json.loads(read_small_text(path)) if os.path.lexists(path) else None
+    except (DamagedRun, ValueError, RecursionError):
+        return None
+    if not isinstance(metrics, dict) or not all(isinstance(metrics.get(key), str) for key in ("agent", "env")):
+        return None
+    found = RunIdentity({"agent.name": metrics["agent"], "env.name": metrics["env"]})
+    found.label, found.source = metrics["agent"], path  # a size-free network's metrics name the dqn
+    return found
+
+
 FIRST_TOLD = ("agent.name", "agent.network", "seed")  # the differences a refusal names first
 
 
-def check_belongs(state: dict, file: Path, run: RunIdentity | None, config_path: Path, given: str, notes) -> None:
-    """A one-line NotThisRun naming ``file`` unless the run that saved ``state`` is the one the directory's
-    ``config.yaml`` records (``run``: its :func:`identity`; None: no ``config.yaml``, nothing to match); a
+def check_belongs(state: dict, file: Path, run: RunIdentity | None, given: str, notes) -> None:
+    """A one-line NotThisRun naming ``file`` unless the run that saved ``state`` is the one its directory records
+    (``run``: the :func:`identity` of its ``config.yaml``, else :func:`metrics_identity`; None: nothing to match); a
     CheckpointError when the checkpoint's own config is no uavrl run's.  A setting one version has and another
     lacks tells nothing apart."""
     from uavrl.config import saved_config
@@ -289,11 +306,11 @@ def check_belongs(state: dict, file: Path, run: RunIdentity | None, config_path:
         return
     key = next((k for k in FIRST_TOLD if k in differing), differing[0])
     typed = "agent" if key == "agent.name" else key  # as a command line chooses it: agent=dqn
-    ours = f"{quoted(config_path)} is a {run.label} run's" if saved.label != run.label else quoted(config_path)
+    theirs, ours, source = f"{typed}={_shown(saved[key])}", f"{typed}={_shown(run[key])}", quoted(run.source)
     found = (
-        f"is a {saved.label} run's checkpoint ({typed}={_shown(saved[key])}), but {ours} ({typed}={_shown(run[key])})"
-        if saved.label != run.label
-        else f"is another run's checkpoint ({typed}={_shown(saved[key])}), but {ours} has {typed}={_shown(run[key])}"
+        f"is a {saved.label} run's checkpoint ({theirs}), but {source} is a {run.label} run's ({ours})"
+        if key in ("agent.name", "agent.network")
+        else f"is another run's checkpoint ({theirs}), but {source} has {ours}"
     )
     after = f" (after {'; '.join(notes)})" if notes else ""
     raise NotThisRun(
