@@ -182,7 +182,7 @@ FOREIGN = {
     "a config.yaml that is a list": (
         lambda runs, run: (run / "config.yaml").write_text("- seed: 0\n"),
         "tabular",
-        "{config} is not readable as the run's config (it holds list, not a mapping of settings)",
+        "{config} is not readable as the run's config (it holds a list, not a mapping of settings)",
     ),
 }
 

@@ -256,7 +256,8 @@ def read_run_config(run_dir, given: str):
     if why is None:
         try:
             data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
-            why = None if isinstance(data, dict) else f"it holds {type(data).__name__}, not a mapping of settings"
+            if not isinstance(data, dict):
+                why = "it is empty" if data is None else f"it holds a {type(data).__name__}, not a mapping of settings"
         except DamagedRun as err:
             why = str(err).removeprefix(f"{RUN_CONFIG} ")
         except (yaml.YAMLError, RecursionError, ValueError) as err:
@@ -379,7 +380,7 @@ def run_directory(path, setting: str) -> Path:
             f"{setting}={quoted(path)} is invalid: give the run directory, {setting}={directory} (it "
             "continues from the newest readable checkpoint there)"
         )
-    return path.parent if path.is_file() else path
+    return run_dir_of(path)
 
 
 def restore_agent(agent, state: dict, file: Path, name: str) -> None:
