@@ -27,10 +27,11 @@ from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.costs import check_run_costs
 from uavrl.envs._moved import moved_names
-from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint, read_run_config, run_directory
+from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint, run_directory
 from uavrl.experiment.io import quoted, read_regular_text, special_kind
 from uavrl.experiment.rundir import check_run_files, tidy
 from uavrl.experiment.runs import already_a_run
+from uavrl.experiment.saved import read_run_config
 from uavrl.settings import (
     AGENT_SETTINGS,
     RUN_SETTINGS,

@@ -20,7 +20,8 @@ import pytest
 import torch
 import yaml
 
-from uavrl.experiment.checkpoints import NotThisRun, load_checkpoint
+from uavrl.experiment.checkpoints import NotThisRun
+from uavrl.experiment.saved import load_run_checkpoint
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
@@ -206,17 +207,17 @@ def test_a_file_that_is_not_the_runs_own_is_refused_before_anything_is_written(
     assert words.format(config=q(run / "config.yaml"), metrics=q(run / "metrics.json"), **paths) in error, error
 
 
-def test_the_tabular_checkpoint_in_a_dqn_run_is_refused_by_render_and_load_checkpoint(runs, tmp_path, command_exit):
+def test_the_tabular_checkpoint_in_a_dqn_run_is_refused_by_render_and_load_run_checkpoint(runs, tmp_path, command_exit):
     run = copy_of(runs, "dqn", tmp_path / "runs")
     replace(run / "checkpoint.pt", runs["tabular"] / "checkpoint.pt")
     cwd = tmp_path / "cwd"
     cwd.mkdir()
     assert "checkpoint.pt is a tabular run's checkpoint (agent=tabular)" in refused(command_exit, "render", run, cwd)
     with pytest.raises(NotThisRun, match=r"^run_dir=.*: checkpoint.pt is a tabular run's checkpoint"):
-        load_checkpoint(run, "run_dir")
+        load_run_checkpoint(run, "run_dir")
     # given as the file, it is refused as the directory's all the same (an evaluation writes beside it)
     with pytest.raises(NotThisRun, match=r"checkpoint.pt is a tabular run's checkpoint"):
-        load_checkpoint(run / "checkpoint.pt", "checkpoint")
+        load_run_checkpoint(run / "checkpoint.pt", "checkpoint")
 
 
 def test_a_config_yaml_edited_to_another_agent_is_refused_by_each_command(runs, tmp_path, command_exit):
@@ -276,11 +277,11 @@ def test_a_copy_of_a_run_and_a_link_inside_it_are_the_runs_own(runs, tmp_path, c
     del state["config"]["env"]["num_spares"]
     torch.save(state, run / "checkpoint.pt.new")
     os.replace(run / "checkpoint.pt.new", run / "checkpoint.pt")
-    assert load_checkpoint(run, "checkpoint")[1] == run / "checkpoint.pt"
+    assert load_run_checkpoint(run, "checkpoint")[1] == run / "checkpoint.pt"
     # without config.yaml, a size-free run is its metrics.json's dqn run
     size_free = copy_of(runs, "dqn_set", tmp_path)
     (size_free / "config.yaml").unlink()
-    assert load_checkpoint(size_free, "checkpoint")[1] == size_free / "checkpoint.pt"
+    assert load_run_checkpoint(size_free, "checkpoint")[1] == size_free / "checkpoint.pt"
 
 
 def test_render_of_two_runs_is_one_line(runs, tmp_path, command_exit):

@@ -12,31 +12,22 @@ directory from anyone can be evaluated or resumed.  A file that holds other
 objects is refused in one line, and is not skipped over for an older one: it
 was not written by uavrl.
 
-A checkpoint is read only as its run directory's own (:func:`load_checkpoint`): a file inside that directory (not a
-link out of it), whose saved run (agent, network, model, seed) is the one the directory's ``config.yaml`` records.
-Another run's checkpoint copied or linked there is refused in one line, never resumed into the directory or fallen
-back to.  Only the standard library and PyYAML are imported here; torch is imported when a checkpoint is read or
-written.
+A checkpoint is read only as its run directory's own: a file inside that directory (a link out of it is refused), and
+with ``belongs`` (:func:`uavrl.experiment.saved.load_run_checkpoint`'s check) one whose saved run is the directory's.
+Only the standard library is imported here; torch is imported when a checkpoint is read or written.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import warnings
 from pathlib import Path
 
-import yaml
-
-from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_torch, special_kind
+from uavrl.experiment.io import quoted, save_torch, special_kind
 
 CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"
-RUN_CONFIG = "config.yaml"  # the run's resolved config, which its checkpoints must match
-# what tells one run from another: a checkpoint whose saved config differs from its directory's config.yaml in any of
-# these is another run's (what a run may change when resumed, its threads, progress bar and directory, is left out)
-RUN_IDENTITY = ("agent", "seed", "env", "scenario")
 _ENTRIES = ("agent", "iteration", "config")  # what every uavrl checkpoint holds
 # A DQN checkpoint of an earlier version holds its replay buffer as a TensorDict, pickled as a call of the first
 # name on the second and the stored entries; read, they stand for _stored_tensordict and _tensordict_class, which
@@ -55,17 +46,6 @@ class ForeignObjects(CheckpointError):
 class NotThisRun(CheckpointError):
     """A checkpoint (or ``config.yaml``) that is not its run directory's own: another run's, a link out of the
     directory, or a ``config.yaml`` it cannot be checked against; refused, never adopted or fallen back to."""
-
-
-class SavedYamlLoader(yaml.SafeLoader):
-    """PyYAML's safe loader (plain data, no tags that build objects) without aliases: uavrl writes none, and a few
-    nested aliases expand to billions of values."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise yaml.MarkedYAMLError(problem="an alias (*name), which uavrl never writes", problem_mark=mark)
-        return super().compose_node(parent, index)
 
 
 def checkpoint_files(path) -> list[Path]:
@@ -174,22 +154,26 @@ def _read(path: Path) -> dict:
     return state
 
 
-def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
+def load_checkpoint(path, setting: str, belongs=None) -> tuple[dict, Path, list[str]]:
     """The newest readable checkpoint of a run directory (or of the file ``path``), given as ``setting=path``.
 
     Returns ``(state, its file, notes)`` where ``notes`` says, one entry per
     newer file that is missing or could not be read, which and why.  Raises
     FileNotFoundError when there is no checkpoint file and CheckpointError
     when none is readable or one holds objects uavrl does not write; their
-    messages begin with ``setting=path``.
+    messages begin with ``setting=path``.  A file that is a link out of the run directory is refused (NotThisRun).
+
+    Args:
+        path: a run directory, or a checkpoint file in one.
+        setting: how ``path`` was given (``checkpoint``, ``resume``, ``run_dir``), named by a refusal.
+        belongs: ``belongs(state, file, notes)`` raises when a readable checkpoint is not the run directory's own
+            (:func:`uavrl.experiment.saved.load_run_checkpoint`'s check): refused, never skipped for an older one.
     """
     given = f"{setting}={quoted(path)}"
     files = checkpoint_files(path)
     if not files:
         raise FileNotFoundError(no_checkpoint(path, setting))
     run_dir = run_dir_of(path)
-    run_config = read_run_config(run_dir, given)
-    run = metrics_identity(run_dir) if run_config is None else identity(run_config, run_dir / RUN_CONFIG)
     notes = [f"{CHECKPOINT}: missing"] if Path(path).is_dir() and files[0].name != CHECKPOINT else []
     skipped = []
     for file in files:
@@ -206,123 +190,10 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
         except CheckpointError as err:
             skipped.append(f"{file.name}: {err}")
             continue
-        check_belongs(state, file, run, given, notes + skipped)
+        if belongs is not None:
+            belongs(state, file, notes + skipped)
         return state, file, notes + skipped
     raise CheckpointError(f"{given}: no readable checkpoint ({'; '.join(notes + skipped)})")
-
-
-class RunIdentity(dict):
-    """The settings that tell a run from another (:data:`RUN_IDENTITY`), flat (``agent.name``); ``label``: the agent
-    as runs are filed (``dqn-set``); ``source``: the file they were read from."""
-
-    label: str
-    source: Path | None = None
-
-
-def identity(cfg, source: Path | None = None) -> RunIdentity:
-    """:class:`RunIdentity` of a saved run's config ``cfg`` (as :func:`uavrl.config.saved_config` reads it), read
-    from the file ``source``."""
-    from omegaconf import OmegaConf
-
-    from uavrl.experiment.runs import agent_label
-
-    found = RunIdentity()
-    found.label, found.source = agent_label(cfg), source
-
-    def add(value, name: str) -> None:
-        if isinstance(value, dict) and value:
-            for key, item in value.items():
-                add(item, f"{name}.{key}")
-        else:
-            found[name] = value
-
-    for section, value in OmegaConf.to_container(cfg).items():
-        if section in RUN_IDENTITY:
-            add(value, section)
-    return found
-
-
-def read_run_config(run_dir, given: str):
-    """The run directory's ``config.yaml`` as :func:`uavrl.config.saved_config` reads it (a DictConfig), read without
-    torch; None where there is none; a one-line NotThisRun beginning with ``given`` (``checkpoint=<dir>``) when it is
-    there but is no run's config that uavrl can read: a link out of the directory, no regular file, too large, not
-    YAML, not a uavrl run's settings (no checkpoint there could then be told to be the run's)."""
-    from uavrl.config import saved_config  # the settings' rules: only once a file is read
-
-    path = Path(run_dir) / RUN_CONFIG
-    if not os.path.lexists(path):
-        return None
-    why = link_out(path, Path(run_dir))
-    if why is None:
-        try:
-            data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
-            if not isinstance(data, dict):
-                why = "it is empty" if data is None else f"it holds a {type(data).__name__}, not a mapping of settings"
-        except DamagedRun as err:
-            why = str(err).removeprefix(f"{RUN_CONFIG} ")
-        except (yaml.YAMLError, RecursionError, ValueError) as err:
-            why = f"it is not valid YAML ({' '.join(str(getattr(err, 'problem', None) or err).split())})"
-    advice = "no checkpoint there can be told to be that run's: restore it, or move it away"
-    if why is not None:
-        raise NotThisRun(f"{given}: {quoted(path)} is not readable as the run's config ({why}); {advice}")
-    try:
-        return saved_config(data, quoted(path))
-    except ValueError as err:
-        raise NotThisRun(f"{given}: {err}; {advice}") from None
-
-
-def metrics_identity(run_dir: Path) -> RunIdentity | None:
-    """The run a directory without ``config.yaml`` holds as its ``metrics.json`` names it (its agent and environment:
-    a resume would write over it); None where there is none that can be read."""
-    path = run_dir / "metrics.json"
-    try:
-        metrics = json.loads(read_small_text(path)) if os.path.lexists(path) else None
-    except (DamagedRun, ValueError, RecursionError):
-        return None
-    if not isinstance(metrics, dict) or not all(isinstance(metrics.get(key), str) for key in ("agent", "env")):
-        return None
-    found = RunIdentity({"agent.name": metrics["agent"], "env.name": metrics["env"]})
-    found.label, found.source = metrics["agent"], path  # a size-free network's metrics name the dqn
-    return found
-
-
-FIRST_TOLD = ("agent.name", "agent.network", "seed")  # the differences a refusal names first
-
-
-def check_belongs(state: dict, file: Path, run: RunIdentity | None, given: str, notes) -> None:
-    """A one-line NotThisRun naming ``file`` unless the run that saved ``state`` is the one its directory records
-    (``run``: the :func:`identity` of its ``config.yaml``, else :func:`metrics_identity`; None: nothing to match); a
-    CheckpointError when the checkpoint's own config is no uavrl run's.  A setting one version has and another
-    lacks tells nothing apart."""
-    from uavrl.config import saved_config
-
-    try:
-        saved = identity(saved_config(state["config"], quoted(file)))
-    except ValueError as err:
-        raise CheckpointError(str(err)) from None
-    if run is None:
-        return
-    differing = [key for key in saved if key in run and saved[key] != run[key]]
-    if not differing:
-        return
-    key = next((k for k in FIRST_TOLD if k in differing), differing[0])
-    typed = "agent" if key == "agent.name" else key  # as a command line chooses it: agent=dqn
-    theirs, ours, source = f"{typed}={_shown(saved[key])}", f"{typed}={_shown(run[key])}", quoted(run.source)
-    found = (
-        f"is a {saved.label} run's checkpoint ({theirs}), but {source} is a {run.label} run's ({ours})"
-        if key in ("agent.name", "agent.network")
-        else f"is another run's checkpoint ({theirs}), but {source} has {ours}"
-    )
-    after = f" (after {'; '.join(notes)})" if notes else ""
-    raise NotThisRun(
-        f"{given}: {file.name}{after} {found}: it belongs to another run; refused, nothing written (give the directory "
-        f"of the run it belongs to, or put back this run's own {file.name})"
-    )
-
-
-def _shown(value) -> str:
-    """A setting's value as typed on a command line: ``tabular``, ``[3, 3]``, ``null``."""
-    return value if isinstance(value, str) else json.dumps(value)
 
 
 def no_checkpoint(path, setting: str) -> str:

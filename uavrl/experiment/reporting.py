@@ -26,7 +26,6 @@ import yaml
 
 from uavrl.envs.limits import default_horizon
 from uavrl.envs.rules import Rule, rules_of, shown, whole
-from uavrl.experiment.checkpoints import SavedYamlLoader
 from uavrl.experiment.io import (
     EVENTS,
     DamagedRun,
@@ -39,6 +38,7 @@ from uavrl.experiment.io import (
 )
 from uavrl.experiment.plots import pyplot, save_figure
 from uavrl.experiment.runs import BASELINE_AGENTS, flat_settings
+from uavrl.experiment.saved import SavedYamlLoader
 from uavrl.schema import RunSchema
 
 # the yardstick first (agents/evaluation.py), then the paper's final utility and the cost
