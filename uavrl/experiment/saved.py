@@ -1,7 +1,8 @@
 """A saved run read without torch: where an evaluation of it writes, its ``config.yaml``, the model an evaluation
 of it acts in, and the check of that evaluation (:func:`check_evaluation`: ``uavrl.evaluate``'s and
-``uavrl.render``'s settings check, before either imports torch); and its agent rebuilt (:func:`load_agent`, which
-imports torch when called)."""
+``uavrl.render``'s settings check, before either imports torch); its checkpoints read as its own only
+(:func:`load_run_checkpoint`: another run's checkpoint copied or linked into the directory is refused); and its agent
+rebuilt (:func:`load_agent`, which imports torch when called)."""
 
 from __future__ import annotations
 
