@@ -6,7 +6,8 @@ first ``eval.video_starts`` starts, the same starts the yardstick measures, for
 start: the policy left, the oracle right), and writes ``video.gif`` (and
 ``video.mp4`` where PyAV is installed: ``pip install -e ".[video]"``) beside the
 checkpoint, ``eval.video_fps`` steps per second.  ``python -m uavrl.evaluate
-checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.
+checkpoint=<run dir> eval.video=true`` writes the same video with the metrics.  It watches one run: two run
+directories (or ``checkpoint=`` twice) are refused in one line that says how to render each in turn.
 
 Under an energy model it also writes ``battery.png`` (:func:`uavrl.experiment.missions.mission_figure`): the batteries
 of the mission the policy plays from the evaluation's first start for ``eval.horizon`` steps (default: the evaluation's,
@@ -39,10 +40,23 @@ def print_videos(cfg: DictConfig, overrides) -> None:
         cfg: the composed config.
         overrides: the command line's overrides.
     """
+    check_one_run(overrides)
     check_evaluation(cfg, video=True, overrides=overrides)
     from uavrl.experiment import rendering  # torch, the agents, matplotlib: only once the settings are good
 
     rendering.print_videos(cfg, overrides, checked=True)
+
+
+def check_one_run(overrides) -> None:
+    """A one-line ValueError when the command line names several runs (``render a b``, or ``checkpoint=`` twice):
+    render watches one, and a composed config would keep only the last."""
+    runs = [o for o in overrides or () if o.lstrip("+~").split("=", 1)[0] == "checkpoint"]
+    if len(runs) > 1:
+        given = " ".join(o.split("=", 1)[1] for o in runs)
+        raise ValueError(
+            f"{' '.join(runs)} is invalid: render watches one run, and {len(runs)} were given: give one (each in "
+            f'turn: for run in {given}; do python -m uavrl.render "$run"; done)'
+        )
 
 
 def as_overrides(args: list[str]) -> list[str]:

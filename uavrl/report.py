@@ -20,7 +20,8 @@ interpolation ``${...}``) is skipped: one ``warning:`` line on stderr names
 it and why, ``report.md`` lists it, and the other runs are reported.  Saved
 files are read as plain data: YAML without tags or aliases, interpolations
 never resolved.  A NaN, infinite or null metric is missing (``-``, or
-``(n=k)`` beside the seeds that have it), never ``nan``.
+``(n=k)`` beside the seeds that have it), never ``nan``; where no run of a setting has one metric to plot,
+``report.md`` says so in place of its metrics figure.
 
 The command line is checked before numpy and matplotlib are imported; the report itself is
 :func:`uavrl.experiment.reporting.report`'s.

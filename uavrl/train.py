@@ -29,8 +29,9 @@ from uavrl.costs import check_run_costs
 from uavrl.envs._moved import moved_names
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint, run_directory
 from uavrl.experiment.io import quoted, read_regular_text, special_kind
-from uavrl.experiment.rundir import tidy
+from uavrl.experiment.rundir import check_run_files, tidy
 from uavrl.experiment.runs import already_a_run
+from uavrl.experiment.saved import read_run_config
 from uavrl.settings import (
     AGENT_SETTINGS,
     RUN_SETTINGS,
@@ -81,8 +82,12 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     model = model_config(cfg)
     check_agent_settings(cfg, model)
     check_run_costs(cfg, model, overrides)
-    if cfg.resume and not checkpoint_files(run_directory(cfg.resume, "resume")):
-        raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
+    if cfg.resume:
+        resumed = run_directory(cfg.resume, "resume")
+        if not checkpoint_files(resumed):
+            raise FileNotFoundError(no_checkpoint(cfg.resume, "resume"))
+        check_run_files(resumed, "resume")
+        read_run_config(resumed, f"resume={quoted(cfg.resume)}")  # refused here, before torch, if unreadable
     run_dir = Path(cfg.run_dir) if cfg.run_dir and not cfg.resume else None
     if run_dir is not None and os.path.lexists(run_dir) and not run_dir.is_dir():
         kind = special_kind(run_dir) or "a file"

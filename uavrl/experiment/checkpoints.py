@@ -10,12 +10,16 @@ weights_only=True)``, which rebuilds tensors, numbers, strings and containers
 and refuses anything else (a pickled function call among them), so a run
 directory from anyone can be evaluated or resumed.  A file that holds other
 objects is refused in one line, and is not skipped over for an older one: it
-was not written by uavrl.  Only the standard library is imported here; torch is
-imported when a checkpoint is read or written.
+was not written by uavrl.
+
+A checkpoint is read only as its run directory's own: a file inside that directory (a link out of it is refused), and
+with ``belongs`` (:func:`uavrl.experiment.saved.load_run_checkpoint`'s check) one whose saved run is the directory's.
+Only the standard library is imported here; torch is imported when a checkpoint is read or written.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
 from pathlib import Path
@@ -39,12 +43,37 @@ class ForeignObjects(CheckpointError):
     """A file holds objects uavrl never writes: refused before any of them is rebuilt, so none of its code ran."""
 
 
+class NotThisRun(CheckpointError):
+    """A checkpoint (or ``config.yaml``) that is not its run directory's own: another run's, a link out of the
+    directory, or a ``config.yaml`` it cannot be checked against; refused, never adopted or fallen back to."""
+
+
 def checkpoint_files(path) -> list[Path]:
-    """The files to try, newest first: those of a run directory, or the one file ``path``."""
+    """The files to try, newest first: those of a run directory, or the one file ``path`` (a link that leads nowhere
+    among them, for its refusal to say so)."""
     path = Path(path)
     if path.is_dir():
-        return [f for f in (path / CHECKPOINT, path / PREVIOUS_CHECKPOINT) if f.exists()]
+        return [f for f in (path / CHECKPOINT, path / PREVIOUS_CHECKPOINT) if os.path.lexists(f)]
     return [path] if path.exists() else []
+
+
+def run_dir_of(path) -> Path:
+    """The run directory of a checkpoint given as ``path``: ``path`` itself, or the directory of the file given."""
+    path = Path(path)
+    return path if path.is_dir() else path.parent
+
+
+def link_out(file: Path, run_dir: Path) -> str | None:
+    """What ``file`` is when it is a symbolic link that leads out of ``run_dir`` or nowhere (``a symbolic link to
+    '/x/checkpoint.pt', outside ...``), else None: a run's files are its own, inside it."""
+    if not file.is_symlink() or special_kind(file) is not None:  # a link to a FIFO or device is refused as that
+        return None
+    target = Path(os.path.realpath(file))
+    if not target.exists():
+        return "a symbolic link that leads nowhere (a loop, or its target is gone)"
+    if not target.is_relative_to(os.path.realpath(run_dir)):
+        return f"a symbolic link to {quoted(target)}, outside the run directory"
+    return None
 
 
 def read_torch(path: Path):
@@ -125,24 +154,34 @@ def _read(path: Path) -> dict:
     return state
 
 
-def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
+def load_checkpoint(path, setting: str, belongs=None) -> tuple[dict, Path, list[str]]:
     """The newest readable checkpoint of a run directory (or of the file ``path``), given as ``setting=path``.
 
     Returns ``(state, its file, notes)`` where ``notes`` says, one entry per
     newer file that is missing or could not be read, which and why.  Raises
     FileNotFoundError when there is no checkpoint file and CheckpointError
     when none is readable or one holds objects uavrl does not write; their
-    messages begin with ``setting=path``.
+    messages begin with ``setting=path``.  A file that is a link out of the run directory is refused (NotThisRun).
+
+    Args:
+        path: a run directory, or a checkpoint file in one.
+        setting: how ``path`` was given (``checkpoint``, ``resume``, ``run_dir``), named by a refusal.
+        belongs: ``belongs(state, file, notes)`` raises when a readable checkpoint is not the run directory's own
+            (:func:`uavrl.experiment.saved.load_run_checkpoint`'s check): refused, never skipped for an older one.
     """
     given = f"{setting}={quoted(path)}"
     files = checkpoint_files(path)
     if not files:
         raise FileNotFoundError(no_checkpoint(path, setting))
+    run_dir = run_dir_of(path)
     notes = [f"{CHECKPOINT}: missing"] if Path(path).is_dir() and files[0].name != CHECKPOINT else []
     skipped = []
     for file in files:
+        outside = link_out(file, run_dir)
+        if outside is not None:
+            raise NotThisRun(f"{given}: {file.name} is {outside}: a run's checkpoints are files of its own; refused")
         try:
-            return _read(file), file, notes + skipped
+            state = _read(file)
         except ForeignObjects as err:
             raise ForeignObjects(
                 f"{given}: {quoted(file)}: {err}: it is not a uavrl file, or it was altered; refused, and "
@@ -150,6 +189,10 @@ def load_checkpoint(path, setting: str) -> tuple[dict, Path, list[str]]:
             ) from None
         except CheckpointError as err:
             skipped.append(f"{file.name}: {err}")
+            continue
+        if belongs is not None:
+            belongs(state, file, notes + skipped)
+        return state, file, notes + skipped
     raise CheckpointError(f"{given}: no readable checkpoint ({'; '.join(notes + skipped)})")
 
 
@@ -157,6 +200,8 @@ def no_checkpoint(path, setting: str) -> str:
     """Why ``setting=path`` has no checkpoint to read, and what to give instead."""
     path = Path(path)
     given = f"{setting}={quoted(path)}"
+    if os.path.lexists(path) and not path.exists():
+        return f"{given} is a symbolic link that leads nowhere (a loop, or its target is gone)"
     if not path.exists():
         return f"{given} does not exist (give a run directory or its {CHECKPOINT})"
     benchmarl = benchmarl_run(path)
@@ -206,7 +251,7 @@ def run_directory(path, setting: str) -> Path:
             f"{setting}={quoted(path)} is invalid: give the run directory, {setting}={directory} (it "
             "continues from the newest readable checkpoint there)"
         )
-    return path.parent if path.is_file() else path
+    return run_dir_of(path)
 
 
 def restore_agent(agent, state: dict, file: Path, name: str) -> None:

@@ -27,6 +27,7 @@ import yaml
 from uavrl.envs.limits import default_horizon
 from uavrl.envs.rules import Rule, rules_of, shown, whole
 from uavrl.experiment.io import (
+    EVENTS,
     DamagedRun,
     Manifest,
     make_dirs,
@@ -280,6 +281,9 @@ def load_run(run_dir: Path) -> Run:
     """The run in ``run_dir``; :class:`DamagedRun` when its files cannot be used."""
     metrics, named_agent = read_metrics(run_dir / "metrics.json")
     config = read_config(run_dir / "config.yaml")
+    for events in sorted(run_dir.glob(EVENTS)):  # the curves' files: a FIFO would block TensorBoard's reader
+        if special_kind(events) is not None:
+            raise DamagedRun(f"{events.name} is {special_kind(events)}, not a regular file")
     checked(config, REQUIRED_SETTINGS, required=True)
     checked(config, OPTIONAL_SETTINGS, required=False)
     agent = config.get("agent.name", named_agent)
@@ -451,13 +455,16 @@ def padded_limits(values: list[float]) -> tuple[float, float]:
     return low - pad, high + pad
 
 
-def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path:
+def metrics_figure(label: str, cells: list[Cell], out: Path, resamples: int, seed: int) -> Path | None:
     """Per metric, one panel: each learner's seeds (grey) and mean with its interval (its colour), the baselines'
-    means as lines; one legend for the figure below the panels, naming every agent with its seeds."""
+    means as lines; one legend for the figure below the panels, naming every agent with its seeds.  None, and no
+    figure, where no run has a metric to plot (each NaN, infinite or null)."""
     from matplotlib.lines import Line2D
 
     learners = [c for c in cells if not c.is_baseline]
     plotted = [m for m in METRICS if m != "train_seconds" and any(c.values(m) for c in cells)]
+    if not plotted:
+        return None
     columns = min(len(plotted), 4)
     rows = -(-len(plotted) // columns)
     figure, axes = pyplot().subplots(
@@ -599,7 +606,10 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     for label, setting_cells in cells.items():
         lines += ["", f"## {label}", "", describe(setting_cells[0].runs[0]), "", *table(setting_cells, resamples, seed)]
         figure = metrics_figure(label, setting_cells, out, resamples, seed)
-        lines += ["", f"![{label}: metrics]({figure.name})"]
+        if figure is None:
+            lines += ["", "No metric to plot: each is NaN, infinite or null in these runs' metrics.json."]
+        else:
+            lines += ["", f"![{label}: metrics]({figure.name})"]
         curve_figure = curves_figure(label, setting_cells, out, seed)
         if curve_figure is not None:
             lines += ["", f"![{label}: learning curves]({curve_figure.name})"]

@@ -28,7 +28,16 @@ import threading
 from pathlib import Path
 
 from uavrl.cli import typed
-from uavrl.experiment.io import EVENTS, WriteError, make_dirs, orphans, quoted, read_regular_text, save_text
+from uavrl.experiment.io import (
+    EVENTS,
+    WriteError,
+    make_dirs,
+    orphans,
+    quoted,
+    read_regular_text,
+    save_text,
+    special_kind,
+)
 
 LOCK = ".uavrl.lock"
 HOLDER = ".uavrl.lock.holder"
@@ -82,6 +91,20 @@ def check_directory(path, setting: str) -> None:
     if path.exists() and not path.is_dir():
         advice = f"resume={quoted(path.parent)}" if setting == "resume" else "a directory (new, or without a run)"
         raise NotADirectoryError(f"{setting}={quoted(path)} is a file, not a directory: give {advice}")
+
+
+def check_run_files(path, setting: str) -> None:
+    """A one-line ValueError, before a resumed run writes anything, when a file of ``path`` that the run reads back or
+    replaces (its checkpoints, ``config.yaml``, ``metrics.json``, TensorBoard's events) is a directory, a FIFO or a
+    device, itself or through a link: reading one blocks or never ends, and writing over one fails half way."""
+    path = Path(path)
+    for file in [*(path / name for name in RUN_FILES if name != HOLDER), *sorted(path.glob(EVENTS))]:
+        kind = special_kind(file)
+        if kind is not None:
+            raise ValueError(
+                f"{setting}={quoted(path)}: {file.name} is {kind}, not a regular file, and the run reads it back or "
+                "writes it anew: move it away"
+            )
 
 
 def hold(path, setting: str, created: bool = False, created_parents=()) -> RunDirectory:

@@ -1,10 +1,13 @@
 """A saved run read without torch: where an evaluation of it writes, its ``config.yaml``, the model an evaluation
 of it acts in, and the check of that evaluation (:func:`check_evaluation`: ``uavrl.evaluate``'s and
-``uavrl.render``'s settings check, before either imports torch); and its agent rebuilt (:func:`load_agent`, which
-imports torch when called)."""
+``uavrl.render``'s settings check, before either imports torch); its checkpoints read as its own only
+(:func:`load_run_checkpoint`: another run's checkpoint copied or linked into the directory is refused); and its agent
+rebuilt (:func:`load_agent`, which imports torch when called)."""
 
 from __future__ import annotations
 
+import json
+import os
 from pathlib import Path
 
 import yaml
@@ -17,12 +20,16 @@ from uavrl.config import model_config, saved_config
 from uavrl.costs import check_evaluation_costs, check_evaluation_floor
 from uavrl.experiment.checkpoints import (
     CheckpointError,
+    NotThisRun,
     checkpoint_files,
+    link_out,
     load_checkpoint,
     no_checkpoint,
     restore_agent,
+    run_dir_of,
 )
 from uavrl.experiment.io import DamagedRun, quoted, read_small_text
+from uavrl.experiment.runs import agent_label
 from uavrl.settings import RUN_SETTINGS, check_read, check_run, check_typed
 
 
@@ -60,25 +67,27 @@ def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None)
     saved = saved_run_config(cfg.checkpoint)
     if saved is not None:
         evaluated = evaluated_config(saved, cfg, overrides or (), f"checkpoint={quoted(cfg.checkpoint)}")
-        check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+        try:
+            check_evaluation_costs(cfg, saved, model_config(evaluated), video, overrides)
+        except (OmegaConfBaseException, AttributeError, KeyError, TypeError) as err:  # as saved_agent's: a config.yaml
+            reason = " ".join(f"{type(err).__name__}: {err}".split())  # whose agent section is another agent's
+            config = quoted(output_dir(cfg.checkpoint) / "config.yaml")
+            raise CheckpointError(
+                f"checkpoint={quoted(cfg.checkpoint)}: {config}: its saved config does not fit a {saved.agent.name} "
+                f"agent ({reason})"
+            ) from None
 
 
 def saved_run_config(checkpoint) -> DictConfig | None:
     """The run's config as ``uavrl.train`` saved it beside the checkpoint (``config.yaml``), read without torch;
-    ``None`` where there is none or it cannot be read (the checkpoint's own copy is checked once it is loaded)."""
-    path = output_dir(checkpoint) / "config.yaml"
-    if not path.is_file():
-        return None
-    try:
-        data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
-        return saved_config(data, quoted(path)) if isinstance(data, dict) else None
-    except (DamagedRun, yaml.YAMLError, RecursionError, ValueError):
-        return None
+    ``None`` where there is none; a one-line refusal where it is there but unreadable
+    (:func:`uavrl.experiment.checkpoints.read_run_config`: no checkpoint there could be told to be the run's)."""
+    return read_run_config(output_dir(checkpoint), f"checkpoint={quoted(checkpoint)}")
 
 
 def output_dir(checkpoint) -> Path:
     """Where an evaluation of ``checkpoint`` (a run directory or a file in one) writes: the run directory."""
-    return Path(checkpoint) if Path(checkpoint).is_dir() else Path(checkpoint).parent
+    return run_dir_of(checkpoint)
 
 
 def evaluated_config(saved: DictConfig, cfg: DictConfig, overrides, source: str) -> DictConfig:
@@ -130,7 +139,7 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     """
     import torch
 
-    state, file, notes = load_checkpoint(path, setting)
+    state, file, notes = load_run_checkpoint(path, setting)
     source = quoted(file)
     try:
         cfg = saved_config(state["config"], source)
@@ -140,3 +149,142 @@ def load_agent(path, device="cpu", setting: str = "checkpoint"):
     restore_agent(agent, state, file, cfg.agent.name)
     fallback = f"{'; '.join(notes)}: using {source} (iteration {state['iteration']})" if notes else None
     return agent, cfg, fallback
+
+
+RUN_CONFIG = "config.yaml"  # the run's resolved config, which its checkpoints must match
+# what tells one run from another: a checkpoint whose saved config differs from its directory's config.yaml in any of
+# these is another run's (what a run may change when resumed, its threads, progress bar and directory, is left out)
+RUN_IDENTITY = ("agent", "seed", "env", "scenario")
+
+
+def load_run_checkpoint(path, setting: str = "checkpoint") -> tuple[dict, Path, list[str]]:
+    """:func:`uavrl.experiment.checkpoints.load_checkpoint` of a run directory's own checkpoints only: one (or the
+    ``checkpoint.prev.pt`` fallen back to) whose saved agent, network, model or seed differs from the directory's
+    ``config.yaml`` (without one: its ``metrics.json``'s agent and environment), a link out of the directory, or any
+    checkpoint beside a ``config.yaml`` that cannot be read, is refused in one line (NotThisRun) naming the file,
+    before anything is written.
+
+    Args:
+        path: a run directory, or a checkpoint file in one.
+        setting: how ``path`` was given (``checkpoint``, ``resume``, ``run_dir``), named by a refusal.
+
+    Returns:
+        ``(state, its file, notes)``, as :func:`~uavrl.experiment.checkpoints.load_checkpoint`'s.
+    """
+    if not checkpoint_files(path):
+        raise FileNotFoundError(no_checkpoint(path, setting))
+    given, run_dir = f"{setting}={quoted(path)}", run_dir_of(path)
+    config = read_run_config(run_dir, given)
+    run = metrics_identity(run_dir) if config is None else identity(config, run_dir / RUN_CONFIG)
+    return load_checkpoint(path, setting, lambda state, file, notes: check_belongs(state, file, run, given, notes))
+
+
+class RunIdentity(dict):
+    """The settings that tell a run from another (:data:`RUN_IDENTITY`), flat (``agent.name``); ``label``: the agent
+    as runs are filed (``dqn-set``); ``source``: the file they were read from."""
+
+    label: str
+    source: Path | None = None
+
+
+def identity(cfg, source: Path | None = None) -> RunIdentity:
+    """:class:`RunIdentity` of a saved run's config ``cfg`` (as :func:`uavrl.config.saved_config` reads it), read
+    from the file ``source``."""
+    found = RunIdentity()
+    found.label, found.source = agent_label(cfg), source
+
+    def add(value, name: str) -> None:
+        if isinstance(value, dict) and value:
+            for key, item in value.items():
+                add(item, f"{name}.{key}")
+        else:
+            found[name] = value
+
+    for section, value in OmegaConf.to_container(cfg).items():
+        if section in RUN_IDENTITY:
+            add(value, section)
+    return found
+
+
+def read_run_config(run_dir, given: str) -> DictConfig | None:
+    """The run directory's ``config.yaml`` as :func:`uavrl.config.saved_config` reads it, read without torch; None
+    where there is none; a one-line NotThisRun when it is there but is no run's config that uavrl can read: a link out
+    of the directory, no regular file, too large, not YAML, not a uavrl run's settings (no checkpoint there could then
+    be told to be the run's).
+
+    Args:
+        run_dir: the run directory.
+        given: how the user gave it (``checkpoint=<dir>``), which a refusal begins with.
+    """
+    path = Path(run_dir) / RUN_CONFIG
+    if not os.path.lexists(path):
+        return None
+    why = link_out(path, Path(run_dir))
+    if why is None:
+        try:
+            data = yaml.load(read_small_text(path), Loader=SavedYamlLoader)
+            if not isinstance(data, dict):
+                why = "it is empty" if data is None else f"it holds a {type(data).__name__}, not a mapping of settings"
+        except DamagedRun as err:
+            why = str(err).removeprefix(f"{RUN_CONFIG} ")
+        except (yaml.YAMLError, RecursionError, ValueError) as err:
+            why = f"it is not valid YAML ({' '.join(str(getattr(err, 'problem', None) or err).split())})"
+    advice = "no checkpoint there can be told to be that run's: restore it, or move it away"
+    if why is not None:
+        raise NotThisRun(f"{given}: {quoted(path)} is not readable as the run's config ({why}); {advice}")
+    try:
+        return saved_config(data, quoted(path))
+    except ValueError as err:
+        raise NotThisRun(f"{given}: {err}; {advice}") from None
+
+
+def metrics_identity(run_dir: Path) -> RunIdentity | None:
+    """The run a directory without ``config.yaml`` holds as its ``metrics.json`` names it (its agent and environment:
+    a resume would write over it); None where there is none that can be read."""
+    path = run_dir / "metrics.json"
+    try:
+        metrics = json.loads(read_small_text(path)) if os.path.lexists(path) else None
+    except (DamagedRun, ValueError, RecursionError):
+        return None
+    if not isinstance(metrics, dict) or not all(isinstance(metrics.get(key), str) for key in ("agent", "env")):
+        return None
+    found = RunIdentity({"agent.name": metrics["agent"], "env.name": metrics["env"]})
+    found.label, found.source = metrics["agent"], path  # a size-free network's metrics name the dqn
+    return found
+
+
+FIRST_TOLD = ("agent.name", "agent.network", "seed")  # the differences a refusal names first
+
+
+def check_belongs(state: dict, file: Path, run: RunIdentity | None, given: str, notes) -> None:
+    """A one-line NotThisRun naming ``file`` unless the run that saved ``state`` is the one its directory records
+    (``run``: the :func:`identity` of its ``config.yaml``, else :func:`metrics_identity`; None: nothing to match); a
+    CheckpointError when the checkpoint's own config is no uavrl run's.  A setting one version has and another
+    lacks tells nothing apart."""
+    try:
+        saved = identity(saved_config(state["config"], quoted(file)))
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
+    if run is None:
+        return
+    differing = [key for key in saved if key in run and saved[key] != run[key]]
+    if not differing:
+        return
+    key = next((k for k in FIRST_TOLD if k in differing), differing[0])
+    typed = "agent" if key == "agent.name" else key  # as a command line chooses it: agent=dqn
+    theirs, ours, source = f"{typed}={_shown(saved[key])}", f"{typed}={_shown(run[key])}", quoted(run.source)
+    found = (
+        f"is a {saved.label} run's checkpoint ({theirs}), but {source} is a {run.label} run's ({ours})"
+        if key in ("agent.name", "agent.network")
+        else f"is another run's checkpoint ({theirs}), but {source} has {ours}"
+    )
+    after = f" (after {'; '.join(notes)})" if notes else ""
+    raise NotThisRun(
+        f"{given}: {file.name}{after} {found}: it belongs to another run; refused, nothing written (give the directory "
+        f"of the run it belongs to, or put back this run's own {file.name})"
+    )
+
+
+def _shown(value) -> str:
+    """A setting's value as typed on a command line: ``tabular``, ``[3, 3]``, ``null``."""
+    return value if isinstance(value, str) else json.dumps(value)

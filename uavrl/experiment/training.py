@@ -31,7 +31,6 @@ from uavrl.experiment.checkpoints import (
     CheckpointWriter,
     check_resumable,
     checkpoint_files,
-    load_checkpoint,
     restore_agent,
     run_directory,
 )
@@ -52,7 +51,7 @@ from uavrl.experiment.runs import (
     size_free_teams,
     yardstick_line,
 )
-from uavrl.experiment.saved import saved_agent
+from uavrl.experiment.saved import load_run_checkpoint, saved_agent
 from uavrl.settings import (
     check_run,
 )
@@ -85,7 +84,7 @@ def resumed_config(cfg: DictConfig, overrides) -> tuple[DictConfig, dict, Path, 
     Explicit overrides must agree with the saved run.
     """
     run_dir = run_directory(cfg.resume, "resume")
-    checkpoint, file, skipped = load_checkpoint(run_dir, "resume")
+    checkpoint, file, skipped = load_run_checkpoint(run_dir, "resume")
     if skipped:
         iteration = checkpoint["iteration"]
         print(f"warning: {'; '.join(skipped)}: resuming from {file.name}, iteration {iteration}", file=sys.stderr)
