@@ -48,7 +48,7 @@ import numbers
 import torch
 
 from uavrl.agents.episodes import episode_metrics
-from uavrl.agents.lookahead_rules import candidates_per_node
+from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node
 from uavrl.agents.network_sizes import policy_row_bytes
 from uavrl.agents.references import (
     LEVELS,
@@ -440,7 +440,9 @@ def mission_metrics(cfg: ModelConfig, steps, away, utility, references, batterie
     return out
 
 
-def evaluate_agent(agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width: int = 8, **kwargs) -> dict[str, float]:
+def evaluate_agent(
+    agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width: int = WIDTH, **kwargs
+) -> dict[str, float]:
     """Average :func:`evaluate` over an agent's greedy policies (one per independent run; ``agent.evaluate``);
     the worst start's optimality.  ``lookahead`` > 0 (``eval.lookahead``): its depth-``lookahead`` search instead
     (:mod:`uavrl.agents.lookahead`).
@@ -463,7 +465,7 @@ def evaluate_agent(agent, cfg: ModelConfig, lookahead: int = 0, lookahead_width:
     """
     if lookahead:
         return evaluate_with_lookahead(agent, cfg, lookahead, lookahead_width, **kwargs)
-    if lookahead_width != 8:  # as eval.lookahead_width=... is refused without eval.lookahead
+    if lookahead_width != WIDTH:  # as eval.lookahead_width=... is refused without eval.lookahead
         raise InvalidOption("lookahead_width", lookahead_width, "only lookahead >= 1 reads it, not lookahead=0")
     results = agent.evaluate(cfg, **kwargs)
     out = {}

@@ -8,6 +8,7 @@ from uavrl.envs.rules import refuse, whole_within
 
 MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this many (N <= 4), else one-UAV changes
 MAX_LOOKAHEAD = 100  # levels of the search, each a level of recursion: deeper would only repeat the greedy line
+WIDTH = 8  # eval.lookahead_width's default: candidates played per node
 DEPTH = whole_within(0, MAX_LOOKAHEAD)  # eval.lookahead's rule (uavrl/schema.py), the Python API's too
 
 
@@ -40,4 +41,4 @@ def lookahead_settings(cfg, agent_settings=None) -> dict:
     a = agent_settings if agent_settings is not None else cfg.get("agent")
     if depth and a is not None:
         check_lookahead(a, depth, f"agent={a.name}")
-    return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", 8))} if depth else {}
+    return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", WIDTH))} if depth else {}

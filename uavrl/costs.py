@@ -22,7 +22,7 @@ from typing import Callable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
-from uavrl.agents.lookahead_rules import candidates_per_node
+from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node
 from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
@@ -480,7 +480,7 @@ def lookahead_cost(cfg: DictConfig, model, a, starts: Factor) -> list[Cost]:
     depth = int(OmegaConf.select(cfg, "eval.lookahead", default=0) or 0)
     if not depth:
         return []
-    settings, width = _Agent.of(a), int(OmegaConf.select(cfg, "eval.lookahead_width", default=8))
+    settings, width = _Agent.of(a), int(OmegaConf.select(cfg, "eval.lookahead_width", default=WIDTH))
     candidates = candidates_per_node(model.num_uavs, model.num_actions, width)
     levels = Factor("eval.lookahead", depth, multiplies=False)
     # eval.lookahead_width=0 plays every candidate: no smaller number to lower it to, but a width to give

@@ -33,6 +33,7 @@ from typing import Any, Optional
 
 from uavrl.agents import AGENTS
 from uavrl.agents.lookahead_rules import DEPTH as LOOKAHEAD_DEPTH
+from uavrl.agents.lookahead_rules import WIDTH
 from uavrl.agents.schema import EvalSchema
 from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
@@ -97,7 +98,7 @@ class RunEvalSchema(EvalSchema):
         "the leaves (uavrl/agents/lookahead.py); 0: the greedy policy",
     )
     lookahead_width: int = setting(
-        8,
+        WIDTH,
         whole(0),
         "eval.lookahead: candidates played per node, best by the values; 0: all",
         read=Reader("lookahead", lambda depth: depth != 0, "lookahead >= 1"),

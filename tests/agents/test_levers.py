@@ -13,10 +13,10 @@ from uavrl.agents import agent_class
 from uavrl.agents.dqn.curriculum import Curriculum
 from uavrl.agents.dqn.demonstrations import margin_loss, oracle_transitions
 from uavrl.agents.dqn.setnet import SetQCore, SetQNet
-from uavrl.agents.evaluation import evaluate_with_lookahead
+from uavrl.agents.evaluation import evaluate_agent, evaluate_with_lookahead
 from uavrl.agents.lookahead import LookaheadPolicy, lookahead_policy
 from uavrl.config import config_dir, model_config
-from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs import InvalidOption, UAVSpectrumEnv, make_config
 from uavrl.envs.solvers import exact
 from uavrl.experiment.runs import optimality_line
 
@@ -255,3 +255,33 @@ def test_evaluate_checks_the_lookahead_against_the_checkpoints_agent_not_its_own
     assert lookahead_settings(evaluate_cfg, saved.agent) == {"lookahead": 1, "lookahead_width": 8}
     with pytest.raises(ValueError, match="agent=tabular"):
         lookahead_settings(evaluate_cfg, evaluate_cfg.agent)
+
+
+def test_the_python_lookahead_is_refused_before_its_deepest_level_outgrows_the_memory_budget():
+
+    cfg = compose_cfg("agent.layouts=[random]")
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), seed=0)
+    env_cfg = make_config("paper", grid=(4, 4), num_uavs=2, layout="random")
+    with pytest.raises(InvalidOption) as err:
+        evaluate_agent(agent, env_cfg, lookahead=12, lookahead_width=0, num_starts=4)
+    assert str(err.value).startswith(
+        "lookahead=12 is invalid: the search's deepest level, 36^12 configurations for each of 4 starts, needs about "
+    )
+    assert str(err.value).endswith(
+        "over memory_budget=4294967296: lower lookahead, give lookahead_width=<candidates per node>, or raise "
+        "memory_budget=<bytes>"
+    )
+    # the same search within a budget runs; a smaller budget refuses it
+    assert evaluate_agent(agent, env_cfg, lookahead=1, lookahead_width=0, num_starts=4)["eval/lookahead"] == 1.0
+    with pytest.raises(InvalidOption, match="^lookahead=1 is invalid: .* over memory_budget=1000:"):
+        evaluate_agent(agent, env_cfg, lookahead=1, lookahead_width=0, num_starts=4, memory_budget=1000)
+
+
+def test_the_python_lookahead_width_is_refused_without_a_lookahead():
+    from uavrl.agents.baselines import RandomAgent
+
+    cfg = make_config("paper", grid=(4, 4), num_uavs=2)
+    with pytest.raises(
+        InvalidOption, match=r"^lookahead_width=3 is invalid: only lookahead >= 1 reads it, not lookahead=0$"
+    ):
+        evaluate_agent(RandomAgent(cfg, None, "cpu", 0), cfg, lookahead_width=3, num_starts=2)
