@@ -20,8 +20,9 @@ a wall-clock timeout (the new group's cases also under an address-space cap, ``-
 - ``refused, names another``: one line, but none of what was typed;
 - ``traceback``, ``hang`` (past the timeout), ``out of memory`` (killed, or ``MemoryError``);
 - ``accepted``: exit status 0 (a silent accept: every case here is a mistake);
-- ``data loss``: a sentinel file or a run's files changed or gone (every fixture file is hashed before and after;
-  with ``--jobs`` above 1 a loss is charged to the case that ends first: rerun it with ``--only`` to pin it).
+- ``data loss``: a sentinel file or a run's files changed or gone (every fixture file is hashed before and after
+  each case, and put back when changed; with ``--jobs`` above 1 a loss is charged to the case that ends first: rerun
+  it with ``--jobs 1 --only <word>`` to pin it).
 
 For ``uavrl.bench`` a refusal may name any word typed: a setting's key, the suite, a path (a file inside a directory
 typed counts, its path starting with the directory's).  It prints each case's class as it ends (to stderr), then
@@ -679,6 +680,20 @@ def snapshot(root: Path) -> dict[str, str]:
     return kept
 
 
+def restore(path: Path, content: bytes | None) -> bool:
+    """Write a fixture's file back as it was (a file, link or nothing in its place); whether it could."""
+    if content is None or path.is_dir() and not path.is_symlink():
+        return False
+    try:
+        if path.is_symlink() or path.exists():
+            path.unlink()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(content)
+    except OSError:
+        return False
+    return True
+
+
 def typed_words(command: str, args: list[str]) -> list[str]:
     """What a refusal may name: each setting typed (its key), each flag, each path argument (for ``uavrl.bench`` also
     a word that is no command or suite, and a path typed as a value)."""
@@ -830,6 +845,7 @@ def main() -> None:
             if any(group == "new" for group, *_ in cases):
                 places = make_new_fixtures(root, places)
             before = snapshot(root)
+            originals = {name: (root / name).read_bytes() for name in before if (root / name).stat().st_size <= 2**26}
             lock = threading.Lock()
 
             def one(case):
@@ -838,8 +854,12 @@ def main() -> None:
                 result = run_case(command, args, root, options.timeout, memory if group == "new" else None)
                 with lock:  # the fixtures' own files only (a case that runs may write runs of its own beside them)
                     now = snapshot(root)
-                    lost = any(now.get(name) != digest for name, digest in before.items())
+                    changed = [name for name, digest in before.items() if now.get(name) != digest]
+                    for name in changed:  # put back, so that the next case that loses it is caught too
+                        if restore(root / name, originals.get(name)):
+                            now[name] = before[name]
                     before.update({name: now.get(name) for name in before})
+                    lost = bool(changed)
                     outcome = classify(command, args, result, lost)
                     print(f"{outcome:>22}  [{group}] uavrl.{command} {text}", file=sys.stderr, flush=True)
                 return group, command, text, result, outcome
