@@ -267,11 +267,11 @@ CASES = [
 
 # the new group: the benchmark, the DQN's and the evaluation's newer options, large grids and swapped run
 # directories.  Placeholders as above, and: {dqn} a team DQN run, {res} a results file of ours (res/ a folder of
-# damaged ones), {cache} the references' cache it filled (cache-* damaged copies, cache-ro read-only), {lb} folders
-# of results files for the leaderboard, {zerolink} a link to /dev/zero, {sparse} a 20 GB sparse file, {ro} a
-# read-only directory, {swap*} copies of {dqn} holding the tabular run's checkpoint.pt (copied, linked, as
-# checkpoint.prev.pt beside a damaged checkpoint.pt; {swapset}: {tab} holding the size-free run's), one per command;
-# {swapmetrics_report}: {dqn} holding the tabular run's metrics.json
+# damaged ones), {cache} the references' cache it filled (cache-* damaged copies), {lb} folders of results files for
+# the leaderboard, {zerolink} a link to /dev/zero, {sparse} a 20 GB sparse file, {ro} a read-only directory,
+# {fifo_bench} and {fifo_leaderboard} FIFOs of their own, {swap*} copies of {dqn} holding the tabular run's
+# checkpoint.pt (copied, linked, as checkpoint.prev.pt beside a damaged checkpoint.pt; {swapset}: {tab} holding the
+# size-free run's), one per command; {swapmetrics_report}: {dqn} holding the tabular run's metrics.json
 T = f"{TINY_DQN} eval.num_starts=2"
 S = f"agent=dqn agent.network=set {TINY_DQN} eval.num_starts=2"
 B = "tiny agent=random tasks=[tiny_3x3] cache_dir={cache}"  # a quick, valid benchmark run: the cases add one mistake
@@ -331,7 +331,7 @@ NEW_CASES = [
     ("bench", B + " out={dqn}/checkpoint.pt"),
     ("bench", B + " out={empty}"),
     ("bench", B + " out={file}/r.json"),
-    ("bench", B + " out={fifo}"),
+    ("bench", B + " out={fifo_bench}"),
     ("bench", B + " out={ro}/r.json"),
     ("bench", B + " out={tmp}/thesis.png"),
     # ---------------------------------------------------------------- bench: the references' cache
@@ -390,7 +390,7 @@ NEW_CASES = [
     ("bench", "leaderboard results={lb}/partial out={tmp}/lb-13.md"),
     ("bench", "leaderboard results={lb}/linkout out={tmp}/lb-14.md"),
     ("bench", "leaderboard results={lb}/ok out={tmp}/notes.md"),
-    ("bench", "leaderboard results={lb}/ok out={fifo}"),
+    ("bench", "leaderboard results={lb}/ok out={fifo_leaderboard}"),
     ("bench", "leaderboard results={lb}/ok out={empty}"),
     ("bench", "leaderboard results={lb}/ok out={file}/page.md"),
     ("bench", "leaderboard results={lb}/ok out={zerolink}"),
@@ -642,6 +642,9 @@ def make_new_fixtures(root: Path, places: dict[str, str]) -> dict[str, str]:
     # run directories holding another run's checkpoint, one copy per command that reads them
     new = {"dqn": str(root / "dqn"), "res": str(root / "ours.json"), "cache": str(root / "cache"), "lb": str(lb)}
     new |= {"zerolink": str(root / "zero.lnk"), "sparse": str(root / "big.json"), "ro": str(root / "ro")}
+    for command in ("bench", "leaderboard"):  # a FIFO of its own for each case that may write over one
+        os.mkfifo(root / f"fifo-{command}")
+        new[f"fifo_{command}"] = str(root / f"fifo-{command}")
     tab_checkpoint = root / "tab" / "checkpoint.pt"
     for command in ("train", "evaluate", "render", "report", "bench"):
         for kind, source in (("swap", "dqn"), ("swaplink", "dqn"), ("swapprev", "dqn"), ("swapset", "tab")):
