@@ -1,23 +1,33 @@
 """Hostile command lines against every command, each run as a whole process, and what each one got.
 
-    python benchmarks/hostile_cli.py [--timeout 60] [--jobs 2] [--only WORD] [--out results.json]
+    python benchmarks/hostile_cli.py [--group old|new|all] [--timeout 60] [--jobs 2] [--only WORD] [--out results.json]
 
 Every case is a mistake a user could type (sizes that cannot fit, settings that cannot go together, values of the
 wrong kind, paths that are no run, options a part does not read), on ``uavrl.train``, ``uavrl.evaluate``,
-``uavrl.render``, ``uavrl.reproduce``, ``uavrl.report``, ``uavrl.benchmarl`` and ``uavrl.schema``.  The script
-first makes its own fixtures in a temporary directory (a tabular run and a size-free DQN run, trained for a few
-seconds; a text file, a FIFO, a directory with no run; a sentinel ``notes.txt`` in each), then runs each case from
-there with a wall-clock timeout and classifies it:
+``uavrl.render``, ``uavrl.reproduce``, ``uavrl.report``, ``uavrl.benchmarl`` and ``uavrl.schema`` (the ``old``
+group); the ``new`` group holds the benchmark (``uavrl.bench``: its suites and settings, results files, the
+references' cache, ``compare``, ``leaderboard``, ``list``), the DQN's and the evaluation's newer options (n-step
+returns, prioritized replay, the curriculum, demonstrations, the lookahead), large grids and run directories holding
+another run's checkpoint.  The script first makes its own fixtures in a temporary directory (a tabular run and a
+size-free DQN run, trained for a few seconds; a text file, a FIFO, a directory with no run; a sentinel ``notes.txt``
+in each; for the new group also a team DQN run, copies of it holding the tabular run's checkpoint, a results file of
+ours and malformed ones, caches with damaged or re-signed entries, links to ``/dev/zero``, 20 GB sparse files, a
+read-only directory and a user's ``notes.md``, ``thesis.md`` and ``thesis.png``), then runs each case from there with
+a wall-clock timeout (the new group's cases also under an address-space cap, ``--memory-gib``) and classifies it:
 
 - ``refused``: exit status 1 and one line ``error: ...`` naming a setting the case typed (for ``report``, its flag
   or path);
 - ``refused, names another``: one line, but none of what was typed;
 - ``traceback``, ``hang`` (past the timeout), ``out of memory`` (killed, or ``MemoryError``);
 - ``accepted``: exit status 0 (a silent accept: every case here is a mistake);
-- ``data loss``: a sentinel file or a run's files changed or gone.
+- ``data loss``: a sentinel file or a run's files changed or gone (every fixture file is hashed before and after
+  each case, and put back when changed; with ``--jobs`` above 1 a loss is charged to the case that ends first: rerun
+  it with ``--jobs 1 --only <word>`` to pin it).
 
-It prints a table of the counts, the cases that were not refused cleanly, and the median wall and CPU seconds of a
-refusal (CPU: user + system of the process, which the load of other processes does not inflate).
+For ``uavrl.bench`` a refusal may name any word typed: a setting's key, the suite, a path (a file inside a directory
+typed counts, its path starting with the directory's).  It prints each case's class as it ends (to stderr), then
+a table of the counts per group, the cases that were not refused cleanly, and the median wall and CPU seconds of a
+refusal per group (CPU: user + system of the process, which the load of other processes does not inflate).
 """
 
 from __future__ import annotations
@@ -26,7 +36,9 @@ import argparse
 import hashlib
 import json
 import os
+import resource
 import shlex
+import shutil
 import signal
 import statistics
 import subprocess
@@ -253,7 +265,246 @@ CASES = [
     ("schema", "docs/settings.md"),
 ]
 
+# the new group: the benchmark, the DQN's and the evaluation's newer options, large grids and swapped run
+# directories.  Placeholders as above, and: {dqn} a team DQN run, {res} a results file of ours (res/ a folder of
+# damaged ones), {cache} the references' cache it filled (cache-* damaged copies), {lb} folders of results files for
+# the leaderboard, {zerolink} a link to /dev/zero, {sparse} a 20 GB sparse file, {ro} a read-only directory,
+# {fifo_bench} and {fifo_leaderboard} FIFOs of their own, {swap*} copies of {dqn} holding the tabular run's
+# checkpoint.pt (copied, linked, as checkpoint.prev.pt beside a damaged checkpoint.pt; {swapset}: {tab} holding the
+# size-free run's), one per command; {swapmetrics_report}: {dqn} holding the tabular run's metrics.json
+T = f"{TINY_DQN} eval.num_starts=2"
+S = f"agent=dqn agent.network=set {TINY_DQN} eval.num_starts=2"
+B = "tiny agent=random tasks=[tiny_3x3] cache_dir={cache}"  # a quick, valid benchmark run: the cases add one mistake
+NEW_CASES = [
+    # ---------------------------------------------------------------- bench: the suite and the policy
+    ("bench", "tiyn agent=random"),
+    ("bench", "TINY agent=random"),
+    ("bench", "tiny_3x3 agent=random"),
+    ("bench", "tiny agent=random,oracle"),
+    ("bench", "tiny agent=random checkpoint={set}"),
+    ("bench", "tiny agent=dqn"),
+    ("bench", "tiny agent=Random"),
+    ("bench", "tiny agent="),
+    ("bench", "tiny checkpoint="),
+    ("bench", "tiny checkpoint={fifo}"),
+    ("bench", "tiny checkpoint={file}"),
+    ("bench", "tiny checkpoint={zero}"),
+    ("bench", "tiny checkpoint={empty}"),
+    ("bench", "tiny checkpoint={tmp}/nothing"),
+    ("bench", "tiny checkpoint={zerolink}"),
+    ("bench", "tiny checkpoint={sparse}"),
+    ("bench", "tiny checkpoint={res}"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] extra"),
+    ("bench", "tiny agent=random --out=x.json"),
+    ("bench", "tiny agent=random seed=1"),
+    ("bench", "tiny agent=random device=cuda"),
+    ("bench", "tiny agent=random eval.num_starts=1000000000"),
+    # ---------------------------------------------------------------- bench: budget, threads, tasks, name
+    ("bench", B + " budget.env_steps=-5"),
+    ("bench", B + " budget.env_steps=2.7"),
+    ("bench", B + " budget.env_steps=1e400"),
+    ("bench", B + " budget.env_steps="),
+    ("bench", B + " budget.cpu_seconds=nan"),
+    ("bench", B + " budget.cpu_seconds=-inf"),
+    ("bench", B + " budget.gpu_seconds=-1"),
+    ("bench", B + " budget.gpu_seconds=1e309"),
+    ("bench", B + " budget.wall_seconds=5"),
+    ("bench", B + " budget.env_steps=5 budget.env_steps=6"),
+    ("bench", B + " num_threads=5000"),
+    ("bench", B + " num_threads=0"),
+    ("bench", B + " num_threads=1_000_000"),
+    ("bench", "tiny agent=random cache_dir={cache} tasks=[]"),
+    ("bench", "tiny agent=random cache_dir={cache} tasks=[paper_6x6]"),
+    ("bench", "tiny agent=random cache_dir={cache} tasks=[tiny_3x3,tiny_3x3]"),
+    ("bench", "tiny agent=random cache_dir={cache} tasks=[tiny_3x3,nope]"),
+    ("bench", "tiny agent=random cache_dir={cache} tasks=[[tiny_3x3]]"),
+    ("bench", B + " name="),
+    ("bench", B + " name=a name=b"),
+    ("bench", B + " name=../../escape out={tmp}/escape.json"),
+    # ---------------------------------------------------------------- bench: where the results go
+    ("bench", B + " out="),
+    ("bench", B + " out={file}"),
+    ("bench", B + " out={tmp}/thesis.json"),
+    ("bench", B + " out={tmp}/notes.md"),
+    ("bench", B + " out={tmp}/notes.txt"),
+    ("bench", B + " out={dqn}/metrics.json"),
+    ("bench", B + " out={dqn}/checkpoint.pt"),
+    ("bench", B + " out={empty}"),
+    ("bench", B + " out={file}/r.json"),
+    ("bench", B + " out={fifo_bench}"),
+    ("bench", B + " out={ro}/r.json"),
+    ("bench", B + " out={tmp}/thesis.png"),
+    # ---------------------------------------------------------------- bench: the references' cache
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={file}"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={fifo}"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={zerolink}"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-fifo"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-zero"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-sparse"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-deep"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-types"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-short"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-worse"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={tmp}/cache-nan"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir={ro}"),
+    ("bench", "tiny agent=random tasks=[tiny_3x3] cache_dir="),
+    # ---------------------------------------------------------------- bench compare
+    ("bench", "compare"),
+    ("bench", "compare {res}"),
+    ("bench", "compare {res} {res} {res}"),
+    ("bench", "compare {res} {tmp}/nothing.json"),
+    ("bench", "compare {res} {tmp}/res/fifo.json"),
+    ("bench", "compare {res} {tmp}/res/zero.json"),
+    ("bench", "compare {res} {tmp}/res/sparse.json"),
+    ("bench", "compare {res} {empty}"),
+    ("bench", "compare {res} {file}"),
+    ("bench", "compare {res} {tab}/metrics.json"),
+    ("bench", "compare {res} {tab}"),
+    ("bench", "compare {res} {tmp}/res/nosuite.json"),
+    ("bench", "compare {res} {tmp}/res/deep.json"),
+    ("bench", "compare {res} {tmp}/res/strscore.json"),
+    ("bench", "compare {res} {tmp}/res/naniqm.json"),
+    ("bench", "compare {res} {tmp}/res/othersuite.json"),
+    ("bench", "compare {res} {tmp}/res/version2.json"),
+    ("bench", "compare {res} {tmp}/res/versiontrue.json"),
+    ("bench", "compare {res} {tmp}/res/nosubmission.json"),
+    ("bench", "compare {res} {tmp}/res/taskstext.json"),
+    ("bench", "compare {res} {tmp}/res/notasks.json"),
+    ("bench", "compare {res} {tmp}/res/scoresshort.json"),
+    ("bench", "compare {res} {tmp}/res/list.json"),
+    ("bench", "compare {res} {tmp}/res/latin1.json"),
+    # ---------------------------------------------------------------- bench leaderboard
+    ("bench", "leaderboard results={tmp}/nothing out={tmp}/lb-0.md"),
+    ("bench", "leaderboard results={file} out={tmp}/lb-1.md"),
+    ("bench", "leaderboard results={fifo} out={tmp}/lb-2.md"),
+    ("bench", "leaderboard results={lb}/fifo out={tmp}/lb-3.md"),
+    ("bench", "leaderboard results={lb}/zero out={tmp}/lb-4.md"),
+    ("bench", "leaderboard results={lb}/sparse out={tmp}/lb-5.md"),
+    ("bench", "leaderboard results={lb}/nosuite out={tmp}/lb-6.md"),
+    ("bench", "leaderboard results={lb}/unknownsuite out={tmp}/lb-7.md"),
+    ("bench", "leaderboard results={lb}/naniqm out={tmp}/lb-8.md"),
+    ("bench", "leaderboard results={lb}/deep out={tmp}/lb-9.md"),
+    ("bench", "leaderboard results={lb}/strscore out={tmp}/lb-10.md"),
+    ("bench", "leaderboard results={lb}/noenvironment out={tmp}/lb-11.md"),
+    ("bench", "leaderboard results={lb}/empty out={tmp}/lb-12.md"),
+    ("bench", "leaderboard results={lb}/partial out={tmp}/lb-13.md"),
+    ("bench", "leaderboard results={lb}/linkout out={tmp}/lb-14.md"),
+    ("bench", "leaderboard results={lb}/ok out={tmp}/notes.md"),
+    ("bench", "leaderboard results={lb}/ok out={fifo_leaderboard}"),
+    ("bench", "leaderboard results={lb}/ok out={empty}"),
+    ("bench", "leaderboard results={lb}/ok out={file}/page.md"),
+    ("bench", "leaderboard results={lb}/ok out={zerolink}"),
+    ("bench", "leaderboard results={lb}/ok out={sparse}"),
+    ("bench", "leaderboard results={lb}/ok out={tmp}/thesis.png"),
+    ("bench", "leaderboard results={lb}/ok out={ro}/page.md"),
+    ("bench", "leaderboard results={lb}/ok results={lb}/naniqm out={tmp}/lb-15.md"),
+    ("bench", "leaderboard results={lb}/ok out="),
+    ("bench", "leaderboard results= out={tmp}/lb-16.md"),
+    ("bench", "leaderboard results={lb}/ok out={tmp}/lb-17.md paper"),
+    ("bench", "leaderboard results={lb}/ok out={tmp}/user/page.md"),
+    # ---------------------------------------------------------------- bench list
+    ("bench", "list paper"),
+    ("bench", "list --suite=energy"),
+    # ---------------------------------------------------------------- a run directory holding another run's files
+    ("train", "resume={swap_train}"),
+    ("train", "resume={swaplink_train}"),
+    ("train", "resume={swapprev_train}"),
+    ("train", "resume={swapset_train}"),
+    ("evaluate", "checkpoint={swap_evaluate} eval.num_starts=2"),
+    ("evaluate", "checkpoint={swaplink_evaluate} eval.num_starts=2"),
+    ("evaluate", "checkpoint={swapprev_evaluate} eval.num_starts=2"),
+    ("evaluate", "checkpoint={swapset_evaluate} eval.num_starts=2"),
+    ("render", "{swap_render} eval.video_starts=1"),
+    ("render", "{swapprev_render} eval.video_starts=1"),
+    ("report", "{swapmetrics_report}"),
+    ("bench", "tiny checkpoint={swap_bench} tasks=[tiny_3x3] cache_dir={cache} out={tmp}/swap.json"),
+    ("bench", "tiny checkpoint={swapprev_bench} tasks=[tiny_3x3] cache_dir={cache} out={tmp}/swapprev.json"),
+    ("render", "{set} {tab} eval.video_starts=1"),
+    # ---------------------------------------------------------------- train: n-step returns
+    ("train", f"agent=dqn {T} agent.n_step=1000000000000"),
+    ("train", f"agent=dqn {T} agent.n_step=0"),
+    ("train", f"agent=dqn {T} agent.n_step=-3"),
+    ("train", f"agent=dqn {T} agent.n_step=2.5"),
+    ("train", f"agent=dqn {T} agent.n_step=nan"),
+    ("train", f"agent=dqn {T} agent.n_step=[3]"),
+    ("train", "agent=tabular agent.episodes=2 agent.runs=1 eval.num_starts=2 agent.n_step=3"),
+    ("train", "resume={dqn_resume1} agent.n_step=4"),
+    ("evaluate", "checkpoint={dqn} eval.num_starts=2 agent.n_step=5"),
+    # ---------------------------------------------------------------- train: prioritized replay
+    ("train", f"{S} agent.replay=prioritized"),
+    ("train", f"agent=dqn {T} agent.replay=Prioritized"),
+    ("train", f"agent=dqn {T} agent.replay=per"),
+    ("train", f"agent=dqn {T} agent.priority_alpha=0.5"),
+    ("train", f"agent=dqn {T} agent.priority_beta=0.7"),
+    ("train", f"agent=dqn {T} agent.replay=prioritized agent.priority_alpha=0"),
+    ("train", f"agent=dqn {T} agent.replay=prioritized agent.priority_alpha=1.5"),
+    ("train", f"agent=dqn {T} agent.replay=prioritized agent.priority_beta=-0.1"),
+    ("train", f"agent=dqn {T} agent.replay=prioritized agent.priority_beta=nan"),
+    ("train", f"agent=dqn {T} agent.replay=prioritized agent.buffer_size=100000000000"),
+    ("train", "resume={dqn_resume2} agent.replay=prioritized"),
+    # ---------------------------------------------------------------- train: the curriculum
+    ("train", f"agent=dqn {T} agent.curriculum=loss"),
+    ("train", f"{S} agent.curriculum=hardest"),
+    ("train", f"{S} agent.curriculum=loss"),
+    ("train", "agent=tabular agent.episodes=2 agent.runs=1 eval.num_starts=2 agent.curriculum=loss"),
+    # ---------------------------------------------------------------- train: demonstrations
+    ("train", f"agent=dqn {T} agent.demonstrations=oracle"),
+    ("train", f"{S} agent.demonstrations=expert"),
+    ("train", f"{S} agent.demo_transitions=5000"),
+    ("train", f"{S} agent.margin=0.5"),
+    ("train", f"{S} agent.demo_batch_share=0.5"),
+    ("train", f"{S} agent.demonstrations=oracle agent.demo_batch_share=0.95"),
+    ("train", f"{S} agent.demonstrations=oracle agent.demo_batch_share=0"),
+    ("train", f"{S} agent.demonstrations=oracle agent.margin=-1"),
+    ("train", f"{S} agent.demonstrations=oracle agent.demo_transitions=0"),
+    ("train", f"{S} agent.demonstrations=oracle agent.demo_transitions=100000 agent.buffer_size=64"),
+    ("train", f"{S} agent.demonstrations=oracle agent.demo_transitions=1000000000000"),
+    ("train", f"{S} agent.demonstrations=oracle {E}"),
+    ("train", "agent=tabular agent.episodes=2 agent.runs=1 eval.num_starts=2 agent.demonstrations=oracle"),
+    # ---------------------------------------------------------------- the lookahead
+    ("train", "agent=tabular agent.episodes=2 agent.runs=1 eval.num_starts=2 eval.lookahead=2"),
+    ("train", "agent=random eval.num_starts=2 eval.lookahead=2"),
+    ("train", f"agent=dqn {T} eval.lookahead=-1"),
+    ("train", f"agent=dqn {T} eval.lookahead=1.5"),
+    ("train", f"agent=dqn {T} eval.lookahead=true"),
+    ("train", f"agent=dqn {T} eval.lookahead=1000000000"),
+    ("train", f"agent=dqn {T} eval.lookahead=12 eval.lookahead_width=0"),
+    ("train", f"agent=dqn {T} eval.lookahead_width=4"),
+    ("train", f"agent=dqn {T} eval.lookahead=2 eval.lookahead_width=-1"),
+    ("train", f"agent=dqn {T} eval.lookahead=2 eval.lookahead_width=2.5"),
+    ("evaluate", "checkpoint={dqn} eval.num_starts=2 eval.lookahead=1000000000"),
+    ("evaluate", "checkpoint={dqn} eval.num_starts=2 eval.lookahead=10 eval.lookahead_width=0"),
+    ("evaluate", "checkpoint={tab} eval.num_starts=2 eval.lookahead=2"),
+    ("evaluate", "checkpoint={dqn} eval.num_starts=2 eval.lookahead_width=3"),
+    ("render", "{dqn} eval.video_starts=1 eval.lookahead=1000000000"),
+    # ---------------------------------------------------------------- large grids and teams
+    ("train", f"agent=dqn {T} env.grid=[100000,100000] agent.n_step=3"),
+    ("train", f"agent=dqn {T} env.grid=[20000,20000] agent.replay=prioritized"),
+    ("train", f"{S} agent.sizes=[[2,100000,100000]]"),
+    ("train", f"{S} agent.demonstrations=oracle agent.sizes=[[2,5000,5000]]"),
+    ("train", "agent=oracle eval.num_starts=2 env.grid=[1000000,1000000]"),
+    ("train", "agent=random eval.num_starts=2 env.grid=[2147483648,2]"),
+    ("train", "agent=random eval.num_starts=2 env.grid=[4294967297,1]"),
+    ("train", "agent=oracle eval.num_starts=2 env.grid=[5000,5000] env.num_uavs=40"),
+    ("train", f"agent=random eval.num_starts=2 {F} env.recharge_steps=2 env.num_spares=1000000"),
+    ("train", f"agent=random eval.num_starts=2 {E} env.battery_wh=1e12"),
+    ("train", f"agent=dqn {T} agent.worlds=100000000 env.grid=[4,4]"),
+    ("evaluate", "checkpoint={set} eval.num_starts=1 env.grid=[50000,50000] env.num_uavs=50"),
+    ("evaluate", "checkpoint={set} eval.num_starts=100000000 env.grid=[100,100] env.num_uavs=20"),
+]
+
+GROUPS = {"old": CASES, "new": NEW_CASES}
 OUTCOMES = ("refused", "refused, names another", "traceback", "hang", "out of memory", "accepted", "data loss")
+# the files a command must leave as they are: the users' own and the runs' (dotfiles, events and caches may change)
+SENTINELS = {"notes.txt", "notes.md", "thesis.md", "thesis.png", "file.txt", "leaderboard-paper.png"}
+SENTINELS |= {"checkpoint.pt", "checkpoint.prev.pt", "config.yaml", "metrics.json", "ours.json", "ours.md", "ours.png"}
+SPARSE_BYTES = 20 * 2**30
+BENCH_WORDS = ("compare", "leaderboard", "list", "paper", "core", "energy", "zero_shot", "tiny")
+
+
+def python_module(root: Path, module: str, *args: str) -> None:
+    """``python -m <module> <args>`` in ``root``, which must succeed (a fixture)."""
+    subprocess.run([sys.executable, "-m", module, *args], check=True, capture_output=True, cwd=root)
 
 
 def make_fixtures(root: Path) -> dict[str, str]:
@@ -263,8 +514,7 @@ def make_fixtures(root: Path) -> dict[str, str]:
         "set": f"agent=dqn agent.network=set agent.mixer=vdn {TINY_DQN} agent.batch_size=8 eval.num_starts=2",
     }
     for name, overrides in runs.items():
-        command = [sys.executable, "-m", "uavrl.train", *overrides.split(), "progress=false", f"run_dir={root / name}"]
-        subprocess.run(command, check=True, capture_output=True, cwd=root)
+        python_module(root, "uavrl.train", *overrides.split(), "progress=false", f"run_dir={root / name}")
     (root / "file.txt").write_text("not a run\n")
     os.mkfifo(root / "fifo")
     (root / "empty").mkdir()
@@ -276,17 +526,180 @@ def make_fixtures(root: Path) -> dict[str, str]:
     return places | {"file": str(root / "file.txt"), "tmp": str(root)}
 
 
+def sparse_file(path: Path) -> None:
+    with open(path, "wb") as handle:
+        handle.truncate(SPARSE_BYTES)
+
+
+def read_only(path: Path) -> None:
+    """``path`` made read-only even for root (immutable), else by its mode."""
+    path.mkdir(parents=True, exist_ok=True)
+    if subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode != 0:
+        path.chmod(0o555)
+
+
+def damaged_results(base: dict) -> dict[str, str]:
+    """Results files that say the right format and version and are malformed beyond it, as text by name."""
+
+    def changed(change) -> str:
+        results = json.loads(json.dumps(base))
+        change(results)
+        return json.dumps(results)
+
+    def nan_iqm(r):
+        r["aggregate"].update(iqm=float("nan"), iqm_ci=[float("nan")] * 2)
+        r["tasks"][0]["mean_score"] = float("nan")
+
+    head = json.dumps({"format": base["format"], "version": base["version"], "suite": base["suite"]})[:-1]
+    return {
+        "nosuite": changed(lambda r: r.pop("suite")),
+        "deep": head + ', "tasks": ' + "[" * 100_000 + "]" * 100_000 + "}",
+        "strscore": changed(lambda r: (r["aggregate"].update(iqm="high"), r["tasks"][0].update(mean_score="high"))),
+        "naniqm": changed(nan_iqm),
+        "othersuite": changed(lambda r: r.update(suite="energy")),
+        "unknownsuite": changed(lambda r: r.update(suite="nope")),
+        "version2": changed(lambda r: r.update(version=2)),
+        "versiontrue": changed(lambda r: r.update(version=True)),
+        "nosubmission": changed(lambda r: r.pop("submission")),
+        "noenvironment": changed(lambda r: r.pop("environment")),
+        "taskstext": changed(lambda r: r.update(tasks="tiny_3x3")),
+        "notasks": changed(lambda r: r.update(tasks=[], aggregate={})),
+        "scoresshort": changed(lambda r: r["tasks"][0].update(scores=[[0.5]], values=[[0.0]])),
+        "list": json.dumps([base]),
+        "latin1": head + ', "name": "caf\xe9"}',
+    }
+
+
+def signed(key: str, payload: dict) -> str:
+    """A cache entry holding ``payload``, its checksum recomputed as anyone can (uavrl.bench.cache)."""
+    digest = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+    return json.dumps({"key": key, "sha256": digest, "payload": payload})
+
+
+def make_new_fixtures(root: Path, places: dict[str, str]) -> dict[str, str]:
+    """The new group's fixtures (module doc, and the comment above NEW_CASES); returns their placeholders."""
+    python_module(root, "uavrl.train", "agent=dqn", *TINY_DQN.split(), "eval.num_starts=2", "progress=false",
+                  f"run_dir={root / 'dqn'}")  # fmt: skip
+    python_module(root, "uavrl.bench", "tiny", "agent=random", "tasks=[tiny_3x3]", f"cache_dir={root / 'cache'}",
+                  f"out={root / 'ours.json'}")  # fmt: skip
+    (root / "notes.md").write_text("# my notes\n")
+    (root / "thesis.md").write_text("# chapter 3: results\n")
+    (root / "thesis.png").write_bytes(b"\x89PNG a user's figure")
+    (root / "zero.lnk").symlink_to("/dev/zero")
+    sparse_file(root / "big.json")
+    read_only(root / "ro")
+    (root / "user" / "figures").mkdir(parents=True)
+    (root / "user" / "figures" / "leaderboard-paper.png").write_bytes(b"a user's figure")
+    # results files: ours, damaged ones beside it, and folders for the leaderboard (a full-protocol file of suite
+    # paper, the only kind its page shows, and one damaged file beside it)
+    ours = json.loads((root / "ours.json").read_text())
+    res = root / "res"
+    res.mkdir()
+    for name, text in damaged_results(ours).items():
+        (res / f"{name}.json").write_bytes(text.encode("latin-1" if name == "latin1" else "utf-8"))
+    os.mkfifo(res / "fifo.json")
+    (res / "zero.json").symlink_to("/dev/zero")
+    sparse_file(res / "sparse.json")
+    full = json.loads(json.dumps(ours))
+    full.update(suite="paper", protocol="full")
+    full["tasks"][0]["task"] = "paper_6x6"
+    lb = root / "lb"
+    damaged = damaged_results(full)
+    for name in ("ok", "fifo", "zero", "sparse", "nosuite", "unknownsuite", "naniqm", "deep", "strscore",
+                 "noenvironment", "linkout"):  # fmt: skip
+        (lb / name).mkdir(parents=True)
+        (lb / name / "paper.json").write_text(json.dumps(full))
+        if name in damaged:
+            (lb / name / "bad.json").write_text(damaged[name])
+    os.mkfifo(lb / "fifo" / "bad.json")
+    (lb / "zero" / "bad.json").symlink_to("/dev/zero")
+    sparse_file(lb / "sparse" / "bad.json")
+    outside = json.loads(json.dumps(full))
+    outside["submission"]["name"] = "from outside the folder"
+    (root / "outside.json").write_text(json.dumps(outside))
+    (lb / "linkout" / "bad.json").symlink_to(root / "outside.json")
+    (lb / "empty").mkdir()
+    (lb / "partial").mkdir()
+    (lb / "partial" / "ours.json").write_text(json.dumps(ours))
+    # caches: the entry of tiny_3x3 as a FIFO, a link to /dev/zero, sparse, too deep, and re-signed with bad payloads
+    entry = next((root / "cache").glob("*.json"))
+    key, payload = entry.stem, json.loads(entry.read_text())["payload"]
+    reference, random_values = payload["reference"]["values"], payload["baselines"]["random"]["values"]
+    resigned = {
+        "types": {**payload, "reference": {**payload["reference"], "values": ["x"] * len(reference)}},
+        "short": {**payload, "reference": {**payload["reference"], "values": reference[:3]}},
+        "worse": {**payload, "reference": {**payload["reference"], "values": [v - 1 for v in random_values]}},
+        "nan": {**payload, "reference": {**payload["reference"], "values": [float("nan")] * len(reference)}},
+    }
+    for name in ("fifo", "zero", "sparse", "deep", *resigned):
+        (root / f"cache-{name}").mkdir()
+    os.mkfifo(root / "cache-fifo" / entry.name)
+    (root / "cache-zero" / entry.name).symlink_to("/dev/zero")
+    sparse_file(root / "cache-sparse" / entry.name)
+    (root / "cache-deep" / entry.name).write_text('{"key": "' + key + '", "payload": ' + "[" * 100_000 + "]" * 100_000)
+    for name, changed in resigned.items():
+        (root / f"cache-{name}" / entry.name).write_text(signed(key, changed))
+    # run directories holding another run's checkpoint, one copy per command that reads them
+    new = {"dqn": str(root / "dqn"), "res": str(root / "ours.json"), "cache": str(root / "cache"), "lb": str(lb)}
+    new |= {"zerolink": str(root / "zero.lnk"), "sparse": str(root / "big.json"), "ro": str(root / "ro")}
+    for command in ("bench", "leaderboard"):  # a FIFO of its own for each case that may write over one
+        os.mkfifo(root / f"fifo-{command}")
+        new[f"fifo_{command}"] = str(root / f"fifo-{command}")
+    tab_checkpoint = root / "tab" / "checkpoint.pt"
+    for command in ("train", "evaluate", "render", "report", "bench"):
+        for kind, source in (("swap", "dqn"), ("swaplink", "dqn"), ("swapprev", "dqn"), ("swapset", "tab")):
+            copy = Path(shutil.copytree(root / source, root / f"{kind}-{command}", symlinks=True))
+            checkpoint = copy / "checkpoint.pt"
+            if kind == "swap":
+                shutil.copy(tab_checkpoint, checkpoint)
+            elif kind == "swaplink":
+                checkpoint.unlink()
+                checkpoint.symlink_to(tab_checkpoint)
+            elif kind == "swapprev":
+                checkpoint.write_bytes(b"")
+                shutil.copy(tab_checkpoint, copy / "checkpoint.prev.pt")
+            else:
+                shutil.copy(root / "set" / "checkpoint.pt", checkpoint)
+            new[f"{kind}_{command}"] = str(copy)
+    swapped = Path(shutil.copytree(root / "dqn", root / "swapmetrics-report"))
+    shutil.copy(root / "tab" / "metrics.json", swapped / "metrics.json")
+    new["swapmetrics_report"] = str(swapped)
+    for name in ("dqn_resume1", "dqn_resume2"):
+        new[name] = str(shutil.copytree(root / "dqn", root / name))
+    return places | new
+
+
 def snapshot(root: Path) -> dict[str, str]:
-    """A digest of every file the fixtures hold that a command must not change: the sentinels and the runs' files."""
+    """A digest of every file the fixtures hold that a command must not change: the sentinels, the runs' files and
+    the results files (a 20 GB sparse file by its size and time)."""
     kept = {}
     for path in root.rglob("*"):
-        if path.is_file() and (path.name in ("notes.txt", "checkpoint.pt", "config.yaml", "metrics.json")):
-            kept[str(path.relative_to(root))] = hashlib.sha256(path.read_bytes()).hexdigest()
+        name = str(path.relative_to(root))
+        watched = path.name in SENTINELS or name.startswith(("res/", "lb/"))
+        if watched and path.is_file() and not path.is_symlink():
+            status = path.stat()
+            content = f"{status.st_size} {status.st_mtime_ns}".encode() if status.st_size > 2**26 else path.read_bytes()
+            kept[name] = hashlib.sha256(content).hexdigest()
     return kept
 
 
+def restore(path: Path, content: bytes | None) -> bool:
+    """Write a fixture's file back as it was (a file, link or nothing in its place); whether it could."""
+    if content is None or path.is_dir() and not path.is_symlink():
+        return False
+    try:
+        if path.is_symlink() or path.exists():
+            path.unlink()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(content)
+    except OSError:
+        return False
+    return True
+
+
 def typed_words(command: str, args: list[str]) -> list[str]:
-    """What a refusal may name: each setting typed (its key), each flag, each path argument."""
+    """What a refusal may name: each setting typed (its key), each flag, each path argument (for ``uavrl.bench`` also
+    a word that is no command or suite, and a path typed as a value)."""
     words = []
     for arg in args:
         key, equals, value = arg.partition("=")
@@ -294,17 +707,25 @@ def typed_words(command: str, args: list[str]) -> list[str]:
             words.append(key)
         elif equals:
             words.append(key.lstrip("+~"))
+            if command == "bench" and "/" in value:
+                words.append(value)
         elif not arg.startswith("-"):
-            words.append(arg if command in ("report", "render") else key)
-    return [w for w in words if w]
+            words.append(arg if command in ("report", "render", "bench") else key)
+    chosen = [w for w in words if w and not (command == "bench" and w in BENCH_WORDS)]
+    return chosen or args[:1]  # a bare command word: its refusal names it
 
 
-def run_case(command: str, args: list[str], cwd: Path, timeout: float) -> dict:
+def run_case(command: str, args: list[str], cwd: Path, timeout: float, memory: int | None = None) -> dict:
     """The case as a process of its own (its CPU time read by ``/usr/bin/time``), killed with its children at
-    ``timeout``."""
+    ``timeout``, its address space capped at ``memory`` bytes when given."""
     argv = [sys.executable, "-m", f"uavrl.{command}", *args]
     if command in ("train", "evaluate", "render", "reproduce"):
         argv.append("progress=false")
+
+    def cap() -> None:
+        if memory:
+            resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
     with tempfile.NamedTemporaryFile("r", suffix=".time") as clock:
         started = time.perf_counter()
         for attempt in range(10):  # a machine out of processes for a moment (EAGAIN) is waited for
@@ -316,6 +737,7 @@ def run_case(command: str, args: list[str], cwd: Path, timeout: float) -> dict:
                     stderr=subprocess.PIPE,
                     start_new_session=True,
                     text=True,
+                    preexec_fn=cap,
                 )
                 break
             except BlockingIOError:
@@ -346,13 +768,22 @@ def run_case(command: str, args: list[str], cwd: Path, timeout: float) -> dict:
     }
 
 
+OUT_OF_MEMORY = (
+    "MemoryError",
+    "out of memory",
+    "can't allocate memory",
+    "cannot allocate memory",
+    "unable to allocate",
+)
+
+
 def classify(command: str, args: list[str], result: dict, lost: bool) -> str:
     stderr = result["stderr"].strip()
     if lost:
         return "data loss"
     if result["timed_out"]:
         return "hang"
-    if result["rc"] in (-9, 137) or "MemoryError" in stderr or "out of memory" in stderr.lower():
+    if result["rc"] in (-9, 137) or any(words.lower() in stderr.lower() for words in OUT_OF_MEMORY):
         return "out of memory"
     if "Traceback (most recent call last)" in stderr:
         return "traceback"
@@ -368,51 +799,83 @@ def classify(command: str, args: list[str], result: dict, lost: bool) -> str:
     return "refused, names another"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--timeout", type=float, default=60.0, help="seconds before a case counts as a hang")
-    parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
-    parser.add_argument("--only", help="only the cases of this command")
-    parser.add_argument("--out", help="write every case's result here as JSON")
-    options = parser.parse_args()
-    cases = [(c, a) for c, a in CASES if options.only in (None, c)]
-    with tempfile.TemporaryDirectory(prefix="hostile-") as tmp:
-        root = Path(tmp)
-        places = make_fixtures(root)
-        before = snapshot(root)
-        lock = threading.Lock()
-
-        def one(case):
-            command, text = case
-            args = shlex.split(text.format(**places))
-            result = run_case(command, args, root, options.timeout)
-            with lock:  # the fixtures' own files only (a case that runs may write runs of its own beside them)
-                now = snapshot(root)
-                lost = any(now.get(name) != digest for name, digest in before.items())
-                before.update({name: now.get(name) for name in before})
-            return command, text, result, classify(command, args, result, lost)
-
-        with ThreadPoolExecutor(options.jobs) as pool:
-            results = list(pool.map(one, cases))
-    counts = {outcome: sum(1 for *_, o in results if o == outcome) for outcome in OUTCOMES}
-    refusals = [r for _, _, r, o in results if o.startswith("refused")]
+def summary(results: list[tuple], options) -> None:
+    """The counts per group, the median refusal times per group and every case not refused cleanly."""
+    groups = list(dict.fromkeys(group for group, *_ in results))
+    columns = [*groups, "all"] if len(groups) > 1 else groups
+    chosen = {g: [r for r in results if g in ("all", r[0])] for g in columns}
     machine = f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}, Python {sys.version.split()[0]}"
     print(f"{len(results)} cases, {machine}, timeout {options.timeout:g} s, {options.jobs} at once\n")
-    print("| outcome | cases |\n|---|---:|")
-    for outcome, n in counts.items():
-        print(f"| {outcome} | {n} |")
-    walls = [r["wall"] for r in refusals]
-    cpus = [r["cpu"] for r in refusals if r["cpu"] is not None]
-    if walls:
-        print(f"\nrefusals: median {statistics.median(walls):.2f} s wall (max {max(walls):.1f} s), ", end="")
-        print(f"median {statistics.median(cpus):.2f} s CPU (max {max(cpus):.1f} s)" if cpus else "")
+    print("| outcome | " + " | ".join(f"{g} cases" for g in columns) + " |\n|---|" + "---:|" * len(columns))
+    for outcome in OUTCOMES:
+        print(f"| {outcome} | " + " | ".join(str(sum(r[-1] == outcome for r in chosen[g])) for g in columns) + " |")
+    print("| **all** | " + " | ".join(str(len(chosen[g])) for g in columns) + " |")
+    for g in columns:
+        refusals = [r[3] for r in chosen[g] if r[-1].startswith("refused")]
+        walls = [r["wall"] for r in refusals]
+        cpus = [r["cpu"] for r in refusals if r["cpu"] is not None]
+        if walls:
+            print(f"\n{g}: refusals median {statistics.median(walls):.2f} s wall (max {max(walls):.1f} s), ", end="")
+            print(f"median {statistics.median(cpus):.2f} s CPU (max {max(cpus):.1f} s)" if cpus else "")
     print("\nnot refused cleanly:")
-    for command, text, result, outcome in results:
+    for group, command, text, result, outcome in results:
         if outcome != "refused":
             last = (result["stderr"].strip().splitlines() or [""])[-1][:160]
-            print(f"- [{outcome}] uavrl.{command} {text}: {last}")
+            print(f"- [{group}] [{outcome}] uavrl.{command} {text}: {last}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--group", choices=("old", "new", "all"), default="all", help="which cases (module doc)")
+    parser.add_argument("--timeout", type=float, default=60.0, help="seconds before a case counts as a hang")
+    parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
+    parser.add_argument("--memory-gib", type=float, default=6, help="address space of each new case's process")
+    parser.add_argument("--only", help="only the cases of this command, or whose arguments hold this word")
+    parser.add_argument("--out", help="write every case's result here as JSON")
+    options = parser.parse_args()
+    cases = [
+        (group, command, text)
+        for group, listed in GROUPS.items()
+        if options.group in ("all", group)
+        for command, text in listed
+        if options.only in (None, command) or options.only in text
+    ]
+    memory = int(options.memory_gib * 2**30)
+    with tempfile.TemporaryDirectory(prefix="hostile-") as tmp:
+        root = Path(tmp)
+        try:
+            places = make_fixtures(root)
+            if any(group == "new" for group, *_ in cases):
+                places = make_new_fixtures(root, places)
+            before = snapshot(root)
+            originals = {name: (root / name).read_bytes() for name in before if (root / name).stat().st_size <= 2**26}
+            lock = threading.Lock()
+
+            def one(case):
+                group, command, text = case
+                args = shlex.split(text.format(**places))
+                result = run_case(command, args, root, options.timeout, memory if group == "new" else None)
+                with lock:  # the fixtures' own files only (a case that runs may write runs of its own beside them)
+                    now = snapshot(root)
+                    changed = [name for name, digest in before.items() if now.get(name) != digest]
+                    for name in changed:  # put back, so that the next case that loses it is caught too
+                        if restore(root / name, originals.get(name)):
+                            now[name] = before[name]
+                    before.update({name: now.get(name) for name in before})
+                    lost = bool(changed)
+                    outcome = classify(command, args, result, lost)
+                    print(f"{outcome:>22}  [{group}] uavrl.{command} {text}", file=sys.stderr, flush=True)
+                return group, command, text, result, outcome
+
+            with ThreadPoolExecutor(options.jobs) as pool:
+                results = list(pool.map(one, cases))
+        finally:
+            subprocess.run(["chattr", "-i", str(root / "ro")], capture_output=True)
+            if (root / "ro").exists():
+                (root / "ro").chmod(0o755)
+    summary(results, options)
     if options.out:
-        rows = [{"command": c, "args": t, "outcome": o, **r} for c, t, r, o in results]
+        rows = [{"group": g, "command": c, "args": t, "outcome": o, **r} for g, c, t, r, o in results]
         Path(options.out).write_text(json.dumps(rows, indent=1))
 
 
