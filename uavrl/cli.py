@@ -157,6 +157,11 @@ def readable(args: list[str]) -> list[str]:
             readable_args.append(f"{key}={hydra_quoted(value)}")
             continue
         readable_args.append(arg)
+    keys = [arg.partition("=")[0].lstrip("+~") for arg in readable_args if "=" in arg and not arg.startswith("-")]
+    twice = next((key for key in keys if keys.count(key) > 1), None)
+    if twice:  # Hydra keeps the last value without a word
+        given = " ".join(arg for arg in args if arg.partition("=")[0].lstrip("+~") == twice)
+        raise SystemExit(f"error: {given} is invalid: {twice} is given {keys.count(twice)} times: give it once")
     return readable_args
 
 

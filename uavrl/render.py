@@ -40,7 +40,6 @@ def print_videos(cfg: DictConfig, overrides) -> None:
         cfg: the composed config.
         overrides: the command line's overrides.
     """
-    check_one_run(overrides)
     check_evaluation(cfg, video=True, overrides=overrides)
     from uavrl.experiment import rendering  # torch, the agents, matplotlib: only once the settings are good
 
@@ -71,4 +70,8 @@ def as_overrides(args: list[str]) -> list[str]:
 
 if __name__ == "__main__":
     sys.argv[1:] = as_overrides(sys.argv[1:])
+    try:  # before the command line's rule of one value a setting, which would say less
+        check_one_run(sys.argv[1:])
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
     run_command("config", print_videos, RUN_OPTION_SETTINGS)

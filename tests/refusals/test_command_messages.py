@@ -143,3 +143,22 @@ def test_a_share_of_starts_never_rounds_a_miss_up_to_all(fraction, shown):
 
     assert share_of_starts(fraction) == shown
     assert yardstick_line(None, {"eval/reach_999": fraction}) == f"yardstick: 0.999 U* reached from {shown} of starts"
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [
+        ("train seed=1 seed=2", "error: seed=1 seed=2 is invalid: seed is given 2 times: give it once"),
+        (
+            "evaluate checkpoint=a checkpoint=b",
+            "error: checkpoint=a checkpoint=b is invalid: checkpoint is given 2 times: give it once",
+        ),
+        (
+            "train env.grid=[4,4] +env.grid=[5,5] env.grid=[6,6]",
+            "error: env.grid=[4,4] +env.grid=[5,5] env.grid=[6,6] is invalid: env.grid is given 3 times: give it once",
+        ),
+    ],
+)
+def test_a_setting_typed_twice_is_refused_not_the_last_kept(line, expected, tmp_path, command_exit):
+    assert command_exit(line, tmp_path) == expected
+    assert not any(tmp_path.iterdir())
