@@ -123,3 +123,46 @@ def test_legal_policies_are_scored_as_before(tiny):
         assert score_task(task, [policy], references)["values"] == [references["baselines"][name]["values"]]
     up = score_task(task, [playing(lambda mask: torch.zeros(mask.shape[:-1], dtype=torch.long))], references)
     assert up["status"] == "scored"
+
+
+BAD_ARGUMENTS = [
+    (dict(name=None), "name=None is invalid: give one line of text, not empty"),
+    (dict(name=""), "name='' is invalid: give one line of text, not empty"),
+    (dict(name="a\nb"), "name='a\\nb' is invalid: give one line of text, not empty"),
+    (dict(source=None), "source=None is invalid: give one line of text, not empty"),
+    (dict(train_command=123), "train_command=123 is invalid: give one line of text, not empty"),
+    (dict(tasks=[]), "tasks=[] is invalid: give a list of the suite's task names, or None for all"),
+    (dict(tasks="tiny_3x3"), "tasks='tiny_3x3' is invalid: give a list of the suite's task names, or None for all"),
+    (dict(tasks=["tiny_3x3", "tiny_3x3"]), "tasks=['tiny_3x3', 'tiny_3x3'] is invalid: a task is named twice"),
+    (dict(tasks=["nope"]), "tasks='nope' is invalid: suite tiny has tiny_3x3, tiny_energy"),
+    (dict(progress="yes"), "progress='yes' is invalid: give a callable taking one line, or None"),
+    (dict(cache_dir=""), "cache_dir='' is invalid: give a directory's path, or None to keep no cache"),
+    (dict(suite=["tiny"]), "suite=['tiny'] is invalid: give one of paper, core, energy, zero_shot, tiny"),
+    (dict(policy_factory="oracle"), "policy_factory='oracle' is invalid: give a callable env -> policy (module doc)"),
+]
+
+
+@pytest.mark.parametrize("changes, message", BAD_ARGUMENTS, ids=[m.split(" is")[0] for _, m in BAD_ARGUMENTS])
+def test_score_suite_refuses_a_bad_argument_in_one_line_before_any_work(changes, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # cache_dir='' would be the working directory
+    arguments = dict(suite="tiny", policy_factory=oracle, name="sub", cache_dir=tmp_path / "cache") | changes
+    with pytest.raises((ValueError, TypeError)) as refused:
+        score_suite(arguments.pop("suite"), arguments.pop("policy_factory"), **arguments)
+    assert str(refused.value) == message
+    assert list(tmp_path.iterdir()) == [], "something was written before the arguments were checked"
+
+
+@pytest.mark.parametrize(
+    ("typed", "message"),
+    [
+        ("tasks=[]", "tasks=[] is invalid: give task names, e.g. tasks=[tiny_3x3] (python -m uavrl.bench list)"),
+        ("tasks=[[tiny_3x3]]", "tasks=[[tiny_3x3]] is invalid: give task names, e.g. tasks=[tiny_3x3] (python -m"),
+        ("tasks=[tiny_3x3,tiny_3x3]", "tasks=[tiny_3x3,tiny_3x3] is invalid: a task is named twice"),
+    ],
+)
+def test_the_command_line_refuses_a_bad_task_list(typed, message):
+    from uavrl.bench.__main__ import parse
+
+    with pytest.raises(ValueError) as refused:
+        parse(["agent=random", typed])
+    assert str(refused.value).startswith(message)

@@ -20,6 +20,7 @@ among them.
 
 from __future__ import annotations
 
+import re
 import sys
 
 from uavrl.bench import cache
@@ -80,9 +81,15 @@ def parse(args: list[str]) -> dict:
         if key in settings and not (settings[key].strip() and TEXT.accepts(settings[key])):
             raise ValueError(f"{key}={settings[key]!r} is invalid: {TEXT.allowed} (at most 4,000 characters)")
     if "tasks" in settings:
-        settings["tasks"] = [t.strip() for t in settings["tasks"].strip("[]").split(",") if t.strip()]
-        if not settings["tasks"]:
-            raise ValueError(f"tasks={settings['tasks']} is invalid: name at least one task")
+        typed = settings["tasks"]
+        listed = typed[1:-1] if typed.startswith("[") and typed.endswith("]") else typed
+        settings["tasks"] = [task.strip() for task in listed.split(",")]
+        if not all(re.fullmatch(r"[\w.-]+", task) for task in settings["tasks"]):
+            raise ValueError(
+                f"tasks={typed} is invalid: give task names, e.g. tasks=[tiny_3x3] (python -m uavrl.bench list)"
+            )
+        if len(set(settings["tasks"])) < len(settings["tasks"]):
+            raise ValueError(f"tasks={typed} is invalid: a task is named twice")
     if ("checkpoint" in settings) == ("agent" in settings):
         raise ValueError("give one of checkpoint=<run dir> or agent=<baseline> (not both, not neither)")
     if "agent" in settings and settings["agent"] not in BASELINES:

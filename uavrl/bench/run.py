@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from functools import lru_cache
+from os import PathLike
 from pathlib import Path
 
 import torch
@@ -25,11 +26,12 @@ from uavrl.agents.evaluation import greedy_metrics, greedy_rollout
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.agents.references import LEVELS, start_references, u_star_gap
 from uavrl.bench import cache
-from uavrl.bench.results import new_results
+from uavrl.bench.results import TEXT, new_results
 from uavrl.bench.stats import aggregate
 from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, Task, check_budget
 from uavrl.cli import compose_config
 from uavrl.config import model_config
+from uavrl.envs import InvalidOption, InvalidType
 from uavrl.envs.env import UAVSpectrumEnv
 from uavrl.envs.limits import evaluation_horizon
 
@@ -251,9 +253,30 @@ def _mean_summary(summaries: list[dict]) -> dict:
 
 def suite_tasks(suite: str) -> list[Task]:
     """The tasks of ``suite`` (a suite's name), a one-line error naming the suites otherwise."""
-    if suite not in SUITES:
-        raise ValueError(f"suite {suite!r} is invalid: give one of {SUITES_TEXT}")
+    if not isinstance(suite, str) or suite not in SUITES:
+        raise InvalidOption("suite", suite, f"give one of {SUITES_TEXT}")
     return SUITES[suite]
+
+
+def check_submission(policy_factory, name, source, tasks, train_command, progress, cache_dir) -> None:
+    """:func:`score_suite`'s arguments beside the suite and the budget, refused in one line before any work: what
+    a results file will hold of them must be one line of text (:data:`uavrl.bench.results.TEXT`, as its reader
+    demands), the tasks distinct names, the factory and ``progress`` callables."""
+    if not callable(policy_factory):
+        raise InvalidType("policy_factory", policy_factory, "give a callable env -> policy (module doc)")
+    for argument, value in (("name", name), ("source", source), ("train_command", train_command)):
+        if (value is not None or argument != "train_command") and not (TEXT.accepts(value) and value.strip()):
+            raise InvalidOption(argument, value, TEXT.allowed.replace("it must be", "give") + ", not empty")
+    if tasks is not None:
+        names = list(tasks) if isinstance(tasks, (list, tuple)) else None
+        if not names or not all(isinstance(task, str) for task in names):
+            raise InvalidOption("tasks", tasks, "give a list of the suite's task names, or None for all")
+        if len(set(names)) < len(names):
+            raise InvalidOption("tasks", tasks, "a task is named twice")
+    if progress is not None and not callable(progress):
+        raise InvalidType("progress", progress, "give a callable taking one line, or None")
+    if cache_dir is not None and not (isinstance(cache_dir, (str, PathLike)) and str(cache_dir)):
+        raise InvalidOption("cache_dir", cache_dir, "give a directory's path, or None to keep no cache")
 
 
 def score_suite(
@@ -288,15 +311,17 @@ def score_suite(
     """
     if isinstance(cache_dir, cache.DefaultDir):
         cache_dir = cache.default_dir()
+    chosen = suite_tasks(suite)
+    check_submission(policy_factory, name, source, tasks, train_command, progress, cache_dir)
+    budget = check_budget(budget)
     if cache_dir is not None:
         cache.check_dir(cache_dir)  # before any reference is computed
-    chosen = suite_tasks(suite)
     if tasks is not None:
         unknown = [t for t in tasks if t not in {task.name for task in chosen}]
         if unknown:
-            raise ValueError(f"tasks={unknown[0]} is invalid: suite {suite} has {', '.join(t.name for t in chosen)}")
+            raise InvalidOption("tasks", unknown[0], f"suite {suite} has {', '.join(t.name for t in chosen)}")
         chosen = [task for task in chosen if task.name in tasks]
-    results = new_results(suite, name, check_budget(budget), source, partial=tasks is not None)
+    results = new_results(suite, name, budget, source, partial=tasks is not None)
     if train_command:
         results["submission"]["train_command"] = train_command
     for task in chosen:
