@@ -303,6 +303,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
             f"agent.replay={a.replay!r} is invalid with agent.network='set': each team's share of a batch is drawn "
             "uniformly from its own buffer (agent.curriculum sets the shares); use agent.replay=uniform"
         )
+    if a.get("curriculum", "none") != "none" and len(training_models(env_cfg, a)) == 1:
+        raise ValueError(
+            f"agent.curriculum={a.curriculum!r} is invalid with one team and layout to train on: it shares each batch "
+            "among several; give agent.sizes or agent.layouts, or agent.curriculum=none"
+        )
     if a.get("demonstrations", "none") != "none" and env_cfg.energy != "none":
         raise ValueError(
             f"agent.demonstrations={a.demonstrations!r} is invalid with env.energy={env_cfg.energy!r}: the oracle's "

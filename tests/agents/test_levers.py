@@ -125,6 +125,10 @@ def test_curriculum_shares_follow_the_recent_losses():
         (["agent.demonstrations=expert"], "agent.demonstrations='expert' is invalid"),
         (["agent.demo_batch_share=1.5"], "agent.demo_batch_share=1.5 is invalid"),
         (["agent.curriculum=grow"], "agent.curriculum='grow' is invalid"),
+        (
+            ["agent.curriculum=loss", "agent.sizes=[]", "agent.layouts=[]"],
+            "^agent.curriculum='loss' is invalid with one ",
+        ),
         (["agent.demonstrations=oracle", "env.energy=rotary_wing", "env.base=[-1,0]"], "env.energy"),
     ],
 )
