@@ -19,6 +19,8 @@ a wall-clock timeout (the new group's cases also under an address-space cap, ``-
   or path);
 - ``refused, names another``: one line, but none of what was typed;
 - ``traceback``, ``hang`` (past the timeout), ``out of memory`` (killed, or ``MemoryError``);
+- ``honoured``: exit status 0 where going on is the documented answer, saying so (:data:`HONOURED`: a damaged
+  cache entry recomputed with a warning, a label that looks like a path);
 - ``accepted``: exit status 0 (a silent accept: every case here is a mistake);
 - ``data loss``: a sentinel file or a run's files changed or gone (every fixture file is hashed before and after
   each case, and put back when changed; with ``--jobs`` above 1 a loss is charged to the case that ends first: rerun
@@ -36,6 +38,7 @@ import argparse
 import hashlib
 import json
 import os
+import re
 import resource
 import shlex
 import shutil
@@ -494,7 +497,29 @@ NEW_CASES = [
 ]
 
 GROUPS = {"old": CASES, "new": NEW_CASES}
-OUTCOMES = ("refused", "refused, names another", "traceback", "hang", "out of memory", "accepted", "data loss")
+CACHE_RECOMPUTED = r"warning: the references' cache entry .* is damaged \(.*\): recomputed and rewritten"
+# cases whose documented answer is to go on and say so: the pattern its output must hold (else it is "accepted")
+HONOURED = {
+    # the cache is the benchmark's own derived data: a damaged or forged entry is recomputed (docs/leaderboard.md)
+    **{
+        f"tiny agent=random tasks=[tiny_3x3] cache_dir={{tmp}}/cache-{kind}": CACHE_RECOMPUTED
+        for kind in ("fifo", "zero", "sparse", "deep", "types", "short", "worse", "nan")
+    },
+    # a submission's name is a label, escaped in every page, never a path: out= is written where it was asked
+    B + " name=../../escape out={tmp}/escape.json": r"escape\.json",
+    # the oracle's demonstrations are kept in their own store beside the replay buffer (DQfD; docs/settings.md)
+    f"{S} agent.demonstrations=oracle agent.demo_transitions=100000 agent.buffer_size=64": r"evaluate it again",
+}
+OUTCOMES = (
+    "refused",
+    "refused, names another",
+    "honoured",
+    "traceback",
+    "hang",
+    "out of memory",
+    "accepted",
+    "data loss",
+)
 # the files a command must leave as they are: the users' own and the runs' (dotfiles, events and caches may change)
 SENTINELS = {"notes.txt", "notes.md", "thesis.md", "thesis.png", "file.txt", "leaderboard-paper.png"}
 SENTINELS |= {"checkpoint.pt", "checkpoint.prev.pt", "config.yaml", "metrics.json", "ours.json", "ours.md", "ours.png"}
@@ -777,7 +802,7 @@ OUT_OF_MEMORY = (
 )
 
 
-def classify(command: str, args: list[str], result: dict, lost: bool) -> str:
+def classify(command: str, args: list[str], result: dict, lost: bool, text: str = "") -> str:
     stderr = result["stderr"].strip()
     if lost:
         return "data loss"
@@ -788,7 +813,8 @@ def classify(command: str, args: list[str], result: dict, lost: bool) -> str:
     if "Traceback (most recent call last)" in stderr:
         return "traceback"
     if result["rc"] == 0:
-        return "accepted"
+        honoured = text in HONOURED and re.search(HONOURED[text], result.get("stdout", "") + stderr)
+        return "honoured" if honoured else "accepted"
     lines = [line for line in stderr.splitlines() if line.strip()]
     words = typed_words(command, args)
     if command == "report":  # argparse's own refusals: "usage: ..." then "error: ..."
@@ -819,7 +845,7 @@ def summary(results: list[tuple], options) -> None:
             print(f"median {statistics.median(cpus):.2f} s CPU (max {max(cpus):.1f} s)" if cpus else "")
     print("\nnot refused cleanly:")
     for group, command, text, result, outcome in results:
-        if outcome != "refused":
+        if outcome not in ("refused", "honoured"):
             last = (result["stderr"].strip().splitlines() or [""])[-1][:160]
             print(f"- [{group}] [{outcome}] uavrl.{command} {text}: {last}")
 
@@ -863,7 +889,7 @@ def main() -> None:
                             now[name] = before[name]
                     before.update({name: now.get(name) for name in before})
                     lost = bool(changed)
-                    outcome = classify(command, args, result, lost)
+                    outcome = classify(command, args, result, lost, text)
                     print(f"{outcome:>22}  [{group}] uavrl.{command} {text}", file=sys.stderr, flush=True)
                 return group, command, text, result, outcome
 

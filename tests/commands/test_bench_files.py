@@ -202,6 +202,7 @@ def test_a_malformed_but_versioned_results_file_is_refused_naming_file_and_field
         ('{"format": "uavrl-bench-results", "version": 1, "suite": ' + "[" * 100_000, "nests deeper than"),
         ("[" * 500 + "]" * 500, "not a uavrl benchmark results file"),
         ('{"format": "uavrl-bench-results", "version": "1"}', 'results version "1", this uavrl reads version 1'),
+        ('{"format": "uavrl-bench-results", "version": true}', "results version true, this uavrl reads version 1"),
         ("{bad", "is not valid JSON (Expecting property name"),
     ],
 )
@@ -299,6 +300,10 @@ def test_cache_keeps_json_and_recomputes_a_damaged_entry(tmp_path, capsys):
         (lambda p: p["baselines"].pop("oracle"), "payload.baselines.oracle is missing"),
         (lambda p: p["reference"].update(values=[1.0]), "payload.baselines.random.values is invalid: it must hold 1"),
         (lambda p: p.update(horizon=True), "payload.horizon=true is invalid: it must be a whole number >= 1"),
+        (
+            lambda p: p["reference"].update(values=[0.0, 0.0]),
+            "payload.reference.values is invalid: the reference must beat the random policy on average",
+        ),
     ],
 )
 def test_a_resigned_cache_entry_is_recomputed_with_one_warning(change, said, tmp_path, capsys):
@@ -487,7 +492,7 @@ def test_the_run_costs_are_read_guarded(tmp_path):
         ("num_threads=" + "9" * 5000, "num_threads='999"),
         ("budget.env_steps=2.7", "budget.env_steps=2.7 is invalid: it must be a whole number >= 0"),
         ("name=a\nb", "name='a\\nb' is invalid: it must be one line of text"),
-        ("name=", "name='' is invalid: it must be one line of text"),
+        ("name=", "name= is invalid: give a value (name=<...>)"),
         ("train_command=x\x00", "train_command='x\\x00' is invalid: it must be one line of text"),
     ],
 )
@@ -549,6 +554,24 @@ def test_the_leaderboard_reads_its_results_guarded(kind, results_dir, tmp_path):
     outside = {"zero": "/dev/zero", "outside": tmp_path / "outside-other.json"}  # a link out: refused unread
     said = f"is a link to {outside[kind]}, out of {results_dir}" if kind in outside else HOSTILE[kind]
     assert one_line(err) == f"{entry} {said}" and not page.exists()
+
+
+def test_the_leaderboard_needs_a_results_file_of_the_full_protocol(good, tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    page = tmp_path / "page.md"
+    with pytest.raises(ValueError) as err:
+        leaderboard.write(empty, page)
+    assert one_line(err) == (
+        f"results={empty} is invalid: it holds no results file of the full protocol (none): a leaderboard ranks full "
+        "runs of a suite"
+    )
+    partial = tmp_path / "partial"
+    partial.mkdir()
+    written(partial / "mine.json", {**good, "protocol": PARTIAL})
+    with pytest.raises(ValueError, match=r"of the full protocol \(1 of partial protocol only\)"):
+        leaderboard.write(partial, page)
+    assert not page.exists()
 
 
 @pytest.mark.parametrize("kind", ["file", "fifo", "missing"])

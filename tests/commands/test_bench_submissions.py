@@ -166,3 +166,21 @@ def test_the_command_line_refuses_a_bad_task_list(typed, message):
     with pytest.raises(ValueError) as refused:
         parse(["agent=random", typed])
     assert str(refused.value).startswith(message)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["tiny", "agent=random", "cache_dir="], "cache_dir= is invalid: give a value (cache_dir=<...>)"),
+        (["tiny", "agent=random", "out="], "out= is invalid: give a value (out=<...>)"),
+        (["leaderboard", "results="], "results= is invalid: give a path"),
+        (["list", "paper"], "paper is invalid: list takes no arguments; it prints every suite's tasks"),
+    ],
+)
+def test_the_command_line_refuses_an_empty_path_or_a_stray_argument(argv, message, tmp_path, monkeypatch):
+    from uavrl.bench.__main__ import main
+
+    monkeypatch.chdir(tmp_path)  # an empty path would be the working directory
+    with pytest.raises(ValueError) as refused:
+        main(argv)
+    assert str(refused.value) == message and not any(tmp_path.iterdir())

@@ -162,6 +162,18 @@ DAMAGED_RUNS = [
     ("metrics huge", " " * (1 << 20) + "{}", None, "metrics.json holds 1,048,578 bytes, more than uavrl writes"),
     ("metrics not utf-8", b"\xff\xfe{}", None, "metrics.json is not UTF-8 text"),
     ("metrics fifo", "fifo", None, "metrics.json is a FIFO, not a regular file"),
+    (
+        "another run's metrics",
+        json.dumps({"eval/return_ratio": 0.5, "agent": "dqn", "env": "paper"}),
+        None,
+        "metrics.json is agent=dqn's, but config.yaml is agent.name=tabular's: it belongs to another run",
+    ),
+    (
+        "another setting's metrics",
+        json.dumps({"eval/return_ratio": 0.5, "agent": "tabular", "env": "a2g_urban"}),
+        None,
+        "metrics.json is env=a2g_urban's, but config.yaml is env.name=paper's: it belongs to another run",
+    ),
     ("invalid yaml", None, "seed: [1\nenv: {", "config.yaml is not valid YAML"),
     ("config list", None, "- seed\n- env\n", "config.yaml holds a list, not a mapping of settings"),
     ("empty config", None, "", "config.yaml holds null, not a mapping of settings"),

@@ -68,6 +68,8 @@ def parse(args: list[str]) -> dict:
             raise ValueError(f"{arg} is invalid: unknown setting {key!r}; the settings are {', '.join(SETTINGS)}")
         if key in settings:
             raise ValueError(f"{arg} is invalid: {key} was given twice")
+        if not value:  # an empty path would be the working directory
+            raise ValueError(f"{arg} is invalid: give a value ({key}=<...>)")
         settings[key] = value
     budget = check_budget({key.removeprefix("budget."): v for key, v in settings.items() if key.startswith("budget.")})
     settings |= {f"budget.{key}": number for key, number in budget.items()}
@@ -144,6 +146,8 @@ def main(argv: list[str]) -> None:
     elif command == "leaderboard":
         leaderboard_command(rest)
     elif command == "list":
+        if rest:
+            raise ValueError(f"{' '.join(rest)} is invalid: list takes no arguments; it prints every suite's tasks")
         list_command()
     elif command in SUITES:
         settings = parse(rest)

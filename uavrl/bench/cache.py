@@ -97,6 +97,9 @@ def check_payload(payload) -> None:
     for name, values in lists.items():
         if len(values) != starts:
             raise Invalid(f"payload.{name} is invalid: it must hold {starts} values, one per start")
+    if not sum(payload["reference"]["values"]) > sum(payload["baselines"]["random"]["values"]):
+        # what uavrl.bench.run.normalised divides by: a reference computed here always beats random
+        raise Invalid("payload.reference.values is invalid: the reference must beat the random policy on average")
 
 
 def load(directory: Path, key: str) -> dict | None:

@@ -151,6 +151,12 @@ def write(results_dir: Path = DEFAULT_RESULTS, out: Path = DEFAULT_OUT) -> Path:
     out = Path(out)
     head = page_head(out)
     files = read_results_dir(results_dir)
+    if not any(r["protocol"] == "full" for r in files):
+        holds = f"{len(files)} of partial protocol only" if files else "none"
+        raise ValueError(
+            f"results={quoted(results_dir)} is invalid: it holds no results file of the full protocol ({holds}): "
+            "a leaderboard ranks full runs of a suite"
+        )
     figures = {}
     for suite, png in zip(SUITES, figure_paths(out), strict=True):
         chosen = [r for r in files if r["suite"] == suite and r["protocol"] == "full"]
@@ -170,5 +176,7 @@ def leaderboard_command(args: list[str]) -> None:
             raise ValueError(f"{arg} is invalid: leaderboard takes results=<dir of results files> and out=<page.md>")
         if key in settings:
             raise ValueError(f"{arg} is invalid: {key} was given twice")
+        if not value:  # Path("") is the working directory
+            raise ValueError(f"{arg} is invalid: give a path")
         settings[key] = Path(value)
     print(f"wrote {write(settings.get('results', DEFAULT_RESULTS), settings.get('out', DEFAULT_OUT))}")

@@ -250,7 +250,7 @@ def read(path, within=None) -> dict:
         raise ValueError(f"{quoted(path)} is not valid JSON ({err})") from None
     if not isinstance(results, dict) or results.get("format") != FORMAT:
         raise ValueError(f"{quoted(path)}: not a uavrl benchmark results file (no format {FORMAT!r})")
-    if results.get("version") != VERSION:
+    if type(results.get("version")) is not int or results["version"] != VERSION:  # true == 1 in Python
         raise ValueError(
             f"{quoted(path)}: results version {_shown(results.get('version'))}, this uavrl reads version {VERSION}"
         )

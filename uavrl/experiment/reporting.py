@@ -233,7 +233,7 @@ def read_config(path: Path) -> dict:
 
 def read_metrics(path: Path) -> tuple[dict, object]:
     """The report's metrics of a saved ``metrics.json`` as finite floats (NaN, infinite and null ones left out) and
-    the agent it names."""
+    the agent and setting it names (``{"agent": ..., "env": ...}``, None where it names none)."""
     text = read_small_text(path)
     if not text.strip():
         raise DamagedRun("metrics.json is empty")
@@ -264,7 +264,7 @@ def read_metrics(path: Path) -> tuple[dict, object]:
             continue
         if math.isfinite(number):
             metrics[name] = number
-    return metrics, data.get("agent")
+    return metrics, {"agent": data.get("agent"), "env": data.get("env")}
 
 
 def checked(config: dict, rules: dict[str, Rule], required: bool) -> None:
@@ -279,14 +279,20 @@ def checked(config: dict, rules: dict[str, Rule], required: bool) -> None:
 
 def load_run(run_dir: Path) -> Run:
     """The run in ``run_dir``; :class:`DamagedRun` when its files cannot be used."""
-    metrics, named_agent = read_metrics(run_dir / "metrics.json")
+    metrics, named = read_metrics(run_dir / "metrics.json")
     config = read_config(run_dir / "config.yaml")
+    for name in ("agent", "env"):  # a run's metrics name its agent and setting: another run's metrics.json is refused
+        if isinstance(named[name], str) and config.get(f"{name}.name", named[name]) != named[name]:
+            raise DamagedRun(
+                f"metrics.json is {name}={named[name]}'s, but config.yaml is {name}.name={config[name + '.name']}'s: "
+                "it belongs to another run"
+            )
     for events in sorted(run_dir.glob(EVENTS)):  # the curves' files: a FIFO would block TensorBoard's reader
         if special_kind(events) is not None:
             raise DamagedRun(f"{events.name} is {special_kind(events)}, not a regular file")
     checked(config, REQUIRED_SETTINGS, required=True)
     checked(config, OPTIONAL_SETTINGS, required=False)
-    agent = config.get("agent.name", named_agent)
+    agent = config.get("agent.name", named["agent"])
     if not NAME.accepts(agent):
         where = "metrics.json: agent" if "agent.name" not in config else "config.yaml: agent.name"
         raise DamagedRun(f"{where}={brief(agent)} is invalid: {NAME.allowed}")
