@@ -15,10 +15,12 @@ import os
 import platform
 import re
 import unicodedata
+from os import PathLike
 from pathlib import Path
 
 import uavrl
 from uavrl.bench.tasks import SUITES
+from uavrl.envs.config import InvalidType
 from uavrl.envs.rules import Rule, flag, interval, one_of, optional, whole
 from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
 from uavrl.experiment.plots import pyplot, save_figure
@@ -178,6 +180,16 @@ def conform(value, schema, field: str = "") -> None:
             conform(item, known.get(key, known.get("*")), place)
 
 
+def checked(results) -> None:
+    """:func:`check_results` of results given in Python (to :func:`markdown`, :func:`save`), refused naming them."""
+    if not isinstance(results, dict):
+        raise InvalidType("results", results, "give a results dict as uavrl.bench.run.score_suite returns it")
+    try:
+        check_results(results)
+    except Invalid as err:
+        raise Invalid(f"results is invalid: {err}") from None
+
+
 def check_results(results) -> None:
     """An :class:`Invalid` naming the first field of ``results`` that is not as :func:`uavrl.bench.run.score_suite`
     writes it: its schema, then what ties the fields together (the suite's tasks, each once, with the suite's specs;
@@ -241,23 +253,23 @@ def read(path, within=None) -> dict:
     try:
         text = read_regular_text(path, within=within)
     except OSError as err:
-        raise ValueError(f"{quoted(path)} cannot be read ({err.strerror or err})") from None
+        raise Invalid(f"{quoted(path)} cannot be read ({err.strerror or err})") from None
     try:
         results = json.loads(text)
     except RecursionError:
-        raise ValueError(f"{quoted(path)} nests deeper than a results file does") from None
+        raise Invalid(f"{quoted(path)} nests deeper than a results file does") from None
     except ValueError as err:
-        raise ValueError(f"{quoted(path)} is not valid JSON ({err})") from None
+        raise Invalid(f"{quoted(path)} is not valid JSON ({err})") from None
     if not isinstance(results, dict) or results.get("format") != FORMAT:
-        raise ValueError(f"{quoted(path)}: not a uavrl benchmark results file (no format {FORMAT!r})")
+        raise Invalid(f"{quoted(path)}: not a uavrl benchmark results file (no format {FORMAT!r})")
     if type(results.get("version")) is not int or results["version"] != VERSION:  # true == 1 in Python
-        raise ValueError(
+        raise Invalid(
             f"{quoted(path)}: results version {_shown(results.get('version'))}, this uavrl reads version {VERSION}"
         )
     try:
         check_results(results)
     except Invalid as err:
-        raise ValueError(f"{quoted(path)}: {err}") from None
+        raise Invalid(f"{quoted(path)}: {err}") from None
     return results
 
 
@@ -311,6 +323,8 @@ def markdown_text(value, code: bool = False) -> str:
 def markdown(results: dict) -> str:
     """The results as Markdown: the submission, then a row per task, then the aggregate; every string of the file
     escaped (:func:`markdown_text`)."""
+    if not isinstance(results, dict) or not isinstance(results.get("submission"), dict):
+        raise InvalidType("results", results, "give a results dict as uavrl.bench.run.score_suite returns it")
     sub = results["submission"]
     lines = [
         "| submission | suite | protocol | budget | command |",
@@ -435,10 +449,12 @@ def check_out(path, setting: str = "out") -> None:
     write: one not ending in ``.json``; one whose folder cannot be made; a JSON there that is no results file of
     uavrl's; a ``.md`` or ``.png`` beside it when no results file of uavrl's is there (a user's notes or figure).
     The table and figure beside a results file of uavrl's are its own, replaced with it."""
+    if not isinstance(path, (str, PathLike)) or not str(path):
+        raise InvalidType(setting, path, "give the results file's path (a .json file)")
     path = Path(path)
     given = f"{setting}={quoted(path)}"
     if path.suffix != ".json":
-        raise ValueError(f"{given} is invalid: give a .json file (its table .md and figure .png go beside it)")
+        raise Invalid(f"{given} is invalid: give a .json file (its table .md and figure .png go beside it)")
     folder = path.parent
     while not folder.exists() and folder != folder.parent:  # the first folder that exists holds the ones to make
         folder = folder.parent
@@ -469,6 +485,7 @@ def check_out(path, setting: str = "out") -> None:
 def save(results: dict, path) -> list[Path]:
     """Write ``path`` (the JSON) and beside it ``.md`` (the table) and ``.png`` (the figure); the paths written.
     Files of those names that the benchmark did not write are refused first, in one line (:func:`check_out`)."""
+    checked(results)
     check_out(path, "path")
     path, table, png = outputs(path)
     save_text(json.dumps(results, indent=1, sort_keys=True) + "\n", path)  # atomic: a reader never sees half a file

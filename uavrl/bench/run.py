@@ -222,10 +222,11 @@ def score_task(task: Task, policies, references: dict, name: str = "the submissi
         played = _rollout(task, policy)
         masked = ~played["steps"]["unmasked"]  # where a choice was forbidden
         if masked.any() and not played["steps"]["legal"][masked].any():
-            raise ValueError(
-                f"{name}: its policy played an action that ('agents', 'action_mask') forbids wherever the mask "
+            raise InvalidOption(
+                "policy_factory",
+                message=f"{name}: its policy played an action that ('agents', 'action_mask') forbids wherever the mask "
                 f"forbade any ({int(masked.sum())} UAV steps) on task {task.name}: the env plays such an action as no "
-                "move; choose among the actions the mask allows"
+                "move; choose among the actions the mask allows",
             )
         run_values, _ = _values(task, played)
         values.append(run_values.tolist())
@@ -336,10 +337,11 @@ def score_suite(
         else:
             policies = policies if isinstance(policies, list) else [policies]
             if not policies or not all(callable(policy) for policy in policies):
-                raise TypeError(
-                    f"{name}: its policy_factory returned {policies[0] if len(policies) == 1 else policies!r} for task "
-                    f"{task.name}: return a TorchRL policy (it writes ('agents', 'action')), a list of them, or raise "
-                    "NotApplicable"
+                returned = policies[0] if len(policies) == 1 else policies
+                raise InvalidType(
+                    "policy_factory",
+                    message=f"{name}: its policy_factory returned {returned!r} for task {task.name}: return a TorchRL "
+                    "policy (it writes ('agents', 'action')), a list of them, or raise NotApplicable",
                 )
             entry.update(score_task(task, policies, references, name))
         results["tasks"].append(entry)
@@ -378,5 +380,5 @@ def _progress_line(entry: dict) -> str:
 def task_by_name(name: str) -> Task:
     """A task of any suite by its name."""
     if name not in TASKS:
-        raise ValueError(f"task {name!r} is invalid: give one of {', '.join(TASKS)}")
+        raise InvalidOption("task", name, f"give one of {', '.join(TASKS)}")
     return TASKS[name]

@@ -33,6 +33,7 @@ import hashlib
 import json
 
 from uavrl.envs._moved import moved_names
+from uavrl.envs.config import InvalidOption, InvalidType
 from uavrl.envs.rules import at_least, shown
 
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there
@@ -142,11 +143,16 @@ def check_budget(budget) -> dict:
     if budget is None:
         return {}
     if not isinstance(budget, dict):
-        raise TypeError(f"budget={budget!r} is invalid: give a dict of {', '.join(BUDGET)}, or None")
+        raise InvalidType(
+            "budget", message=f"budget={budget!r} is invalid: give a dict of {', '.join(BUDGET)}, or None"
+        )
     checked = {}
     for key, value in budget.items():
         if key not in BUDGET:
-            raise ValueError(f"budget.{key}={value} is invalid: unknown key; a budget states {', '.join(BUDGET)}")
+            raise InvalidOption(
+                f"budget.{key}",
+                message=f"budget.{key}={value} is invalid: unknown key; a budget states {', '.join(BUDGET)}",
+            )
         number = value
         if isinstance(value, str):
             try:
@@ -154,9 +160,8 @@ def check_budget(budget) -> dict:
             except ValueError:
                 pass
         if not BUDGET[key].accepts(number):
-            raise ValueError(
-                f"budget.{key}={value if isinstance(value, str) else shown(value)} is invalid: {BUDGET[key].allowed}"
-            )
+            typed = value if isinstance(value, str) else shown(value)
+            raise InvalidOption(f"budget.{key}", message=f"budget.{key}={typed} is invalid: {BUDGET[key].allowed}")
         checked[key] = int(number) if key == "env_steps" else float(number)
     return checked
 

@@ -24,6 +24,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from uavrl.cli import BENCHMARL_INSTALL, compose_config
 from uavrl.config import model_config
+from uavrl.envs import InvalidOption, InvalidType
 from uavrl.experiment.checkpoints import CheckpointError, read_torch
 from uavrl.experiment.io import DamagedRun, quoted, read_small_text, save_json, save_text, special_kind
 from uavrl.experiment.logger import RunLogger
@@ -31,10 +32,18 @@ from uavrl.experiment.rundir import RunDirectory
 from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
 from uavrl.experiment.saved import SavedYamlLoader
 
+
+def _installed(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ValueError:  # imported already, without a spec (a stand-in in sys.modules): there to be used
+        return True
+
+
 try:
     from uavrl.agents.benchmarl import UAVTask, YardstickCallback
 except ImportError:  # no BenchMARL: load_experiment still refuses, naming it, a run directory it could not use
-    if importlib.util.find_spec("benchmarl") is not None:
+    if _installed("benchmarl"):
         raise
 
 
@@ -103,13 +112,18 @@ def load_experiment(run_dir):
         run_dir: the run directory (``run_dir=`` of the command): a str or a path.
     """
     if not isinstance(run_dir, (str, os.PathLike)) or not isinstance(os.fspath(run_dir), str):
-        raise TypeError(f"run_dir={run_dir!r} is invalid: give the run directory's path (a str or a pathlib.Path)")
+        raise InvalidType(
+            "run_dir",
+            message=f"run_dir={run_dir!r} is invalid: give the run directory's path (a str or a pathlib.Path)",
+        )
     run_dir = Path(run_dir)
     given = f"run_dir={quoted(run_dir)}"
     if not run_dir.is_dir():
         if not os.path.lexists(run_dir):
-            raise ValueError(f"{given} is invalid: no such directory")
-        raise ValueError(f"{given} is invalid: it is {special_kind(run_dir) or 'a file'}, not a directory")
+            raise InvalidOption("run_dir", message=f"{given} is invalid: no such directory")
+        raise InvalidOption(
+            "run_dir", message=f"{given} is invalid: it is {special_kind(run_dir) or 'a file'}, not a directory"
+        )
     no_run = f"{given} is no finished run of python -m uavrl.benchmarl"
     cannot = f"{no_run}: its metrics.json and config.yaml cannot be read as the command writes them"
     try:
@@ -118,39 +132,41 @@ def load_experiment(run_dir):
         algorithm, task = metrics["agent"].removeprefix("benchmarl_"), saved["task"]["name"]
     except DamagedRun as err:  # a file there that the guarded reader refuses (a FIFO, a link out, ...): named
         missing = not all(os.path.lexists(run_dir / name) for name in ("metrics.json", "config.yaml"))
-        raise ValueError(cannot if missing else f"{cannot} ({err})") from None
+        raise InvalidOption("run_dir", message=cannot if missing else f"{cannot} ({err})") from None
     except (OSError, ValueError, yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError):
-        raise ValueError(cannot) from None
+        raise InvalidOption("run_dir", message=cannot) from None
     for what, name in (("metrics.json's agent", metrics["agent"]), ("config.yaml's task.name", task)):
         if not isinstance(name, str) or not re.fullmatch(r"\w+", name.removeprefix("benchmarl_")):
-            raise ValueError(f"{no_run}: {what}={name!r} names no algorithm or task of it")
+            raise InvalidOption("run_dir", message=f"{no_run}: {what}={name!r} names no algorithm or task of it")
     frames = {p: p.stem.rpartition("_")[2] for p in run_dir.glob("*/checkpoints/checkpoint_*.pt")}
     checkpoints = sorted((p for p, n in frames.items() if n.isdigit()), key=lambda p: int(frames[p]))
     if not checkpoints:
-        raise ValueError(f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
+        raise InvalidOption("run_dir", message=f"{no_run}: it holds no checkpoint */checkpoints/checkpoint_<frames>.pt")
     last = checkpoints[-1]
     if not last.resolve().is_relative_to(run_dir.resolve()):
-        raise ValueError(f"{quoted(last)} is a link to {quoted(last.resolve())}, out of {given}")
-    if importlib.util.find_spec("benchmarl") is None:
+        raise InvalidOption("run_dir", message=f"{quoted(last)} is a link to {quoted(last.resolve())}, out of {given}")
+    if not _installed("benchmarl"):
         raise ImportError(f"load_experiment({given}) needs BenchMARL, which is not installed: {BENCHMARL_INSTALL}")
     import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
 
     try:
         cfg = OmegaConf.merge(compose_config("benchmarl", [f"algorithm={algorithm}", f"task=uavrl/{task}"]), saved)
     except (SystemExit, OmegaConfBaseException) as err:  # Hydra's refusal of an algorithm or task it does not have
-        raise ValueError(f"{no_run}: its config.yaml does not compose ({str(err).removeprefix('error: ')})") from None
+        raise InvalidOption(
+            "run_dir", message=f"{no_run}: its config.yaml does not compose ({str(err).removeprefix('error: ')})"
+        ) from None
     try:
         state = read_torch(last)
     except CheckpointError as err:  # torch's unpickler refuses anything but tensors and plain containers
-        raise ValueError(f"{quoted(last)} cannot be read as weights ({err})") from None
+        raise InvalidOption("run_dir", message=f"{quoted(last)} cannot be read as weights ({err})") from None
     folder = tempfile.mkdtemp(prefix="uavrl-benchmarl-")
     experiment = build_experiment(cfg, Path(folder), loggers=[])
     weakref.finalize(experiment, shutil.rmtree, folder, ignore_errors=True)  # the folder goes with the experiment
     try:
         experiment.load_state_dict(state)
     except (KeyError, RuntimeError, TypeError, ValueError, AttributeError) as err:
-        raise ValueError(
-            f"{quoted(last)} does not fit the run's config.yaml ({str(err).splitlines()[0][:200]})"
+        raise InvalidOption(
+            "run_dir", message=f"{quoted(last)} does not fit the run's config.yaml ({str(err).splitlines()[0][:200]})"
         ) from None
     return experiment
 

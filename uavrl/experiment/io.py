@@ -54,6 +54,11 @@ def special_kind(path) -> str | None:
     return next((kind for test, kind in kinds if test(mode)), "not a regular file")
 
 
+class RefusedFile(ValueError):
+    """A file refused unread (:func:`read_regular_text`): a link out of its directory, no regular file, too large, or
+    no UTF-8 text; the message names it and why, in one line."""
+
+
 def read_regular_text(path, limit: int = 16 * 2**20, within=None, shown: str | None = None) -> str:
     """The text of the regular file ``path`` (at most ``limit`` bytes): every reader of uavrl reads through this.
 
@@ -65,24 +70,24 @@ def read_regular_text(path, limit: int = 16 * 2**20, within=None, shown: str | N
     """
     shown = quoted(path) if shown is None else shown
     if within is not None and not Path(path).resolve().is_relative_to(Path(within).resolve()):
-        raise ValueError(f"{shown} is a link to {quoted(Path(path).resolve())}, out of {quoted(within)}")
+        raise RefusedFile(f"{shown} is a link to {quoted(Path(path).resolve())}, out of {quoted(within)}")
     kind = special_kind(path)
     if kind is not None:
-        raise ValueError(f"{shown} is {kind}, not a regular file")
+        raise RefusedFile(f"{shown} is {kind}, not a regular file")
     # opened without blocking and checked again on the open file: a FIFO swapped in after the check is not read
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as file:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"{shown} is not a regular file")
+            raise RefusedFile(f"{shown} is not a regular file")
         data = file.read(limit + 1)  # a file that grew since its size was read is cut at the limit
         if info.st_size > limit or len(data) > limit:
             size = max(info.st_size, len(data))
-            raise ValueError(f"{shown} holds {size:,} bytes, more than uavrl writes there ({limit:,})")
+            raise RefusedFile(f"{shown} holds {size:,} bytes, more than uavrl writes there ({limit:,})")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
-        raise ValueError(f"{shown} is not UTF-8 text") from None
+        raise RefusedFile(f"{shown} is not UTF-8 text") from None
 
 
 class Manifest:
@@ -106,12 +111,12 @@ class Manifest:
             try:
                 listed = json.loads(read_regular_text(self.path))
             except (ValueError, OSError) as err:
-                raise ValueError(
+                raise RefusedFile(
                     f"{setting}={quoted(self.folder)}: its record of uavrl's files is unreadable ({err}): "
                     "give another folder"
                 ) from None
             if not isinstance(listed, list) or not all(isinstance(name, str) and _inside(name) for name in listed):
-                raise ValueError(
+                raise RefusedFile(
                     f"{setting}={quoted(self.folder)}: {quoted(self.path)} is not a list of file names inside it: "
                     "give another folder"
                 )
