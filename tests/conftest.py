@@ -107,7 +107,8 @@ def command_exit(monkeypatch):
         word = [args.pop(0)] if args and "=" not in args[0] and not args[0].startswith("-") else []
         module = f"uavrl.{command}"
         monkeypatch.chdir(cwd)
-        monkeypatch.setattr(sys, "argv", [module, *word, "progress=false", *args])
+        quiet = [] if any(arg.startswith("progress=") for arg in args) else ["progress=false"]  # typed once
+        monkeypatch.setattr(sys, "argv", [module, *word, *quiet, *args])
         with pytest.raises(SystemExit) as exit:
             runpy.run_path(importlib.util.find_spec(module).origin, run_name="__main__")
         return exit.value.code

@@ -203,6 +203,15 @@ def smoke(arguments: list[str]) -> list[str]:
     return []
 
 
+def smoked(arguments: list[str]) -> list[str]:
+    """``arguments`` (``uavrl.<command> <overrides>``) with the smoke overrides in place of the reader's own values of
+    the same settings (a setting typed twice is refused)."""
+    extra = smoke(arguments)
+    replaced = {override.split("=", 1)[0] for override in extra}
+    kept = [arg for arg in arguments[1:] if arg.lstrip("+~").split("=", 1)[0] not in replaced or "=" not in arg]
+    return [arguments[0], *kept, *extra]
+
+
 def check_command(arguments: list[str]) -> None:
     """Compose ``python -m uavrl.<command> <overrides>`` with its smoke overrides and check its settings as the command
     does before torch is imported (a one-line SystemExit or ValueError when one is invalid)."""
@@ -215,7 +224,7 @@ def check_command(arguments: list[str]) -> None:
         raise ValueError(f"python -m uavrl.{command}: no such command")
     if command not in CONFIG_OF:
         return
-    overrides = [arg for arg in [*arguments[1:], *smoke(arguments)] if not arg.startswith("-") and "=" in arg]
+    overrides = [arg for arg in smoked(arguments)[1:] if not arg.startswith("-") and "=" in arg]
     positional = arguments[1] if arguments[1:2] and "=" not in arguments[1] and arguments[1][0] != "-" else None
     if positional is not None:  # reproduce table2|figures, render <run dir>
         overrides.append(f"command={positional}" if command == "reproduce" else f"checkpoint={positional}")
@@ -244,9 +253,9 @@ export MPLBACKEND=Agg
 export PATH={shlex.quote(str(Path(sys.executable).parent))}:"$PATH"
 python() {{
     if [ "$1" = -m ] && [[ "$2" == uavrl.* ]]; then
-        local extra
-        mapfile -t extra < <({shlex.quote(sys.executable)} {shlex.quote(__file__)} smoke "${{@:2}}")
-        set -- "$@" "${{extra[@]}}"
+        local smoked
+        mapfile -t smoked < <({shlex.quote(sys.executable)} {shlex.quote(__file__)} smoked "${{@:2}}")
+        set -- -m "${{smoked[@]}}"
     fi
     {shlex.quote(sys.executable)} "$@"
 }}
@@ -338,6 +347,11 @@ def test_smoke_overrides_shorten_the_commands():
     reproduce = compose_config("reproduce", ["command=table2", *smoke(["uavrl.reproduce", "table2"])])
     assert reproduce.runs * reproduce.episodes * len(reproduce.grids) <= 20
     assert smoke(["uavrl.train", "resume=runs/x"]) == ["progress=false"]  # a resumed run keeps its settings
+    assert smoked(["uavrl.train", "agent=dqn", "agent.iterations=50", "seed=1"])[:3] == [
+        "uavrl.train",
+        "agent=dqn",
+        "seed=1",
+    ]
 
 
 def test_harness_reads_blocks_and_skips(tmp_path: Path, monkeypatch):
@@ -394,5 +408,5 @@ def test_link_check_finds_dead_links(tmp_path: Path):
     assert check_links.main([str(tmp_path)]) == 1
 
 
-if __name__ == "__main__" and sys.argv[1:2] == ["smoke"]:
-    sys.stdout.write("".join(f"{override}\n" for override in smoke(sys.argv[2:])))
+if __name__ == "__main__" and sys.argv[1:2] == ["smoked"]:
+    sys.stdout.write("".join(f"{argument}\n" for argument in smoked(sys.argv[2:])))
