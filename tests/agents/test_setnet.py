@@ -143,6 +143,7 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
         compose_cfg(
             *TINY,
             "agent.network=team",
+            "agent.heads=4",
             "agent.mixer=vdn",
             "agent.sizes=[]",
             "agent.iterations=2",
@@ -176,8 +177,14 @@ def test_the_evaluate_command_runs_zero_shot_and_refuses_a_per_size_network(tmp_
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["agent.network=team", "agent.sizes=[]"], "agent.mixer='mean' is invalid with agent.network='team'"),
-        (["agent.network=team", "agent.mixer=vdn"], "agent.sizes=[[2,3,3],[3,4,4]] is invalid with agent.network"),
+        (
+            ["agent.network=team", "agent.heads=4", "agent.sizes=[]"],
+            "agent.mixer='mean' is invalid with agent.network='team'",
+        ),
+        (
+            ["agent.network=team", "agent.heads=4", "agent.mixer=vdn"],
+            "agent.sizes=[[2,3,3],[3,4,4]] is invalid with agent.network",
+        ),
         (["agent.mixer=qmix"], "agent.mixer='qmix' is invalid with agent.network='set'"),
         (["agent.head=joint"], "agent.head='joint' is invalid with agent.network='set'"),
         (["agent.replay=prioritized"], "agent.replay='prioritized' is invalid with agent.network='set'"),
@@ -199,11 +206,11 @@ def test_the_registry_picks_the_network_and_each_class_refuses_the_other(set_cfg
     """agent=dqn is one name with two classes: the settings choose, and neither class turns into the other."""
     cfg = set_cfg()
     assert agent_class("dqn", cfg.agent) is SetDQNAgent
-    assert agent_class("dqn", set_cfg("agent.network=team", "agent.mixer=vdn").agent) is DQNAgent
+    assert agent_class("dqn", set_cfg("agent.network=team", "agent.heads=4", "agent.mixer=vdn").agent) is DQNAgent
     assert agent_class("dqn") is DQNAgent
     with pytest.raises(ValueError, match="agent.network='set' is invalid for DQNAgent, the per-size network"):
         DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
-    team = set_cfg("agent.network=team", "agent.mixer=vdn", "agent.sizes=[]")
+    team = set_cfg("agent.network=team", "agent.heads=4", "agent.mixer=vdn", "agent.sizes=[]")
     with pytest.raises(ValueError, match="agent.network='team' is invalid for SetDQNAgent"):
         SetDQNAgent(model_config(team), team, torch.device("cpu"), 0)
 

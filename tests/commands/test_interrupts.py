@@ -248,9 +248,15 @@ def test_a_refused_late_setting_leaves_no_run_directory(tmp_path):
     assert "num_uavs=5" in result.stderr and list(tmp_path.iterdir()) == []
 
 
+def replaced(settings: list[str], overrides) -> list[str]:
+    """``settings`` without those ``overrides`` set again (a setting typed twice is refused)."""
+    keys = {override.split("=", 1)[0] for override in overrides}
+    return [setting for setting in settings if setting.split("=", 1)[0] not in keys]
+
+
 def start(run_dir, *overrides, cwd=None) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "uavrl.train", *LONG, *overrides, f"run_dir='{run_dir}'"],
+        [sys.executable, "-m", "uavrl.train", *replaced(LONG, overrides), *overrides, f"run_dir='{run_dir}'"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
