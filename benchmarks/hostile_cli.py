@@ -491,7 +491,7 @@ NEW_CASES = [
     ("train", "agent=oracle eval.num_starts=2 env.grid=[5000,5000] env.num_uavs=40"),
     ("train", f"agent=random eval.num_starts=2 {F} env.recharge_steps=2 env.num_spares=1000000"),
     ("train", f"agent=random eval.num_starts=2 {E} env.battery_wh=1e12"),
-    ("train", f"agent=dqn {T} agent.worlds=100000000 env.grid=[4,4]"),
+    ("train", f"agent=dqn {T.replace('agent.worlds=2', 'agent.worlds=100000000')} env.grid=[4,4]"),
     ("evaluate", "checkpoint={set} eval.num_starts=1 env.grid=[50000,50000] env.num_uavs=50"),
     ("evaluate", "checkpoint={set} eval.num_starts=100000000 env.grid=[100,100] env.num_uavs=20"),
 ]
@@ -536,7 +536,7 @@ def make_fixtures(root: Path) -> dict[str, str]:
     """Two small runs, the special files and a sentinel ``notes.txt`` in every directory; returns the placeholders."""
     runs = {
         "tab": "agent=tabular agent.episodes=2 agent.runs=1 eval.num_starts=2",
-        "set": f"agent=dqn agent.network=set agent.mixer=vdn {TINY_DQN} agent.batch_size=8 eval.num_starts=2",
+        "set": f"agent=dqn agent.network=set agent.mixer=vdn {TINY_DQN} eval.num_starts=2",
     }
     for name, overrides in runs.items():
         python_module(root, "uavrl.train", *overrides.split(), "progress=false", f"run_dir={root / name}")
