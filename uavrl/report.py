@@ -72,7 +72,7 @@ def main(argv=None) -> None:
 
     try:
         path = reporting.report(args.paths, args.out or args.paths[0], args.resamples, args.seed)
-    except OSError as err:
+    except (OSError, reporting.DamagedRun) as err:
         raise SystemExit(f"error: {err}") from None
     print(f"report: {path} (figures beside it)")
 

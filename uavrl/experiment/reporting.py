@@ -590,6 +590,8 @@ def report(paths, out, resamples: int = 10_000, seed: int = 0) -> Path:
     """
     out = Path(out)
     runs, skipped = find_runs(paths)
+    if not runs and len(skipped) == 1:  # the one run given: why it cannot be reported is the whole error
+        raise DamagedRun(f"{quoted(skipped[0][0])}: {skipped[0][1]}; no other run to report")
     for run_dir, why in skipped:
         print(f"warning: skipped {quoted(run_dir)}: {why}", file=sys.stderr)
     if not runs:
