@@ -120,7 +120,6 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
             ["{tmp}/damaged"],
             "damaged/run': metrics.json holds a list, not an object of metrics; no other run to report",
         ),
-        (["{tmp}/damaged", "{tmp}/damaged", "--out", "{tmp}/o"], "damaged (2 with damaged files, skipped)"),
         (["{tmp}/empty"], "no run directory"),
         (["{tmp}/empty", "{tmp}/empty"], "--out is needed with several directories"),
         (["{tmp}/empty", "--resamples", "0"], "--resamples=0 is invalid"),
