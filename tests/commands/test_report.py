@@ -118,7 +118,7 @@ def test_report_tables_flag_few_seeds_and_show_the_iqm(study, tmp_path):
         (["{tmp}/no where"], "/no where': no such directory"),
         (
             ["{tmp}/damaged"],
-            "damaged/run': metrics.json holds a list, not an object of metrics; no other run to report",
+            "damaged/run: metrics.json holds a list, not an object of metrics; no other run to report",
         ),
         (["{tmp}/empty"], "no run directory"),
         (["{tmp}/empty", "{tmp}/empty"], "--out is needed with several directories"),
