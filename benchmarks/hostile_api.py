@@ -47,7 +47,7 @@ CLASSES = ("typed", "one line", "honoured", "traceback", "hang", "OOM", "silent 
 
 # run in every case's process before the case: the names the cases use
 PRELUDE = """
-import json, os, shutil, subprocess, sys
+import json, os, re, shutil, subprocess, sys
 from pathlib import Path
 import numpy as np
 import torch
@@ -173,6 +173,22 @@ def score(factory=random_factory, **options):
     if "cache_dir" not in options:
         options["cache_dir"] = cache()
     return score_suite(options.pop("suite", "tiny"), factory, **options)
+
+def recomputed(directory):
+    '''score_suite over a damaged cache ``directory``: honoured when it says, in one warning, that it recomputed the
+    damaged entry and rewrote it (the cache is the benchmark's own derived data: docs/leaderboard.md).'''
+    import contextlib, io, re
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said):
+        score(cache_dir=directory)
+    warning = r"^warning: the references' cache entry .* is damaged \\(.*\\): recomputed and rewritten$"
+    verdict(bool(re.match(warning, said.getvalue().strip())))
+
+def in_code(page, text):
+    '''``text`` shows in ``page`` only inside inline code spans (where Markdown makes no markup of it).'''
+    import re
+    spans = [m.group(2) for m in re.finditer(r"(`+)(.+?)\\1", page)]
+    return page.count(text) == sum(span.count(text) for span in spans)
 
 def acting(function):
     '''A factory of the TorchRL policy ``action = function(action_mask)``.'''
@@ -483,22 +499,22 @@ NEW_CASES = [
     ("score_suite", "cache_dir=a file", "cache_dir", "(TMP / 'f').write_text('x'); score(cache_dir=TMP / 'f')"),
     ("score_suite", "cache_dir=''", "cache_dir", "score(cache_dir='')"),
     ("score_suite", "cache_dir=123", "cache_dir", "score(cache_dir=123)"),
-    ("score_suite", "cache entry a FIFO", "cache", "score(cache_dir=cache(replaced(os.mkfifo)))"),
+    ("score_suite", "cache entry a FIFO", "cache", "recomputed(cache(replaced(os.mkfifo)))"),
     ("score_suite", "cache entry -> /dev/zero", "cache",
-     "score(cache_dir=cache(replaced(lambda p: p.symlink_to('/dev/zero'))))"),
-    ("score_suite", "cache entry a 20 GB sparse file", "cache", "score(cache_dir=cache(replaced(sparse)))"),
+     "recomputed(cache(replaced(lambda p: p.symlink_to('/dev/zero'))))"),
+    ("score_suite", "cache entry a 20 GB sparse file", "cache", "recomputed(cache(replaced(sparse)))"),
     ("score_suite", "cache entry re-signed: reference values of text", "cache",
-     "score(cache_dir=cache(resigned(lambda p: p['reference'].update(values=['x'] * 32))))"),
+     "recomputed(cache(resigned(lambda p: p['reference'].update(values=['x'] * 32))))"),
     ("score_suite", "cache entry re-signed: random values a dict", "cache",
-     "score(cache_dir=cache(resigned(lambda p: p['baselines']['random'].update(values={'a': 1}))))"),
+     "recomputed(cache(resigned(lambda p: p['baselines']['random'].update(values={'a': 1}))))"),
     ("score_suite", "cache entry re-signed: reference NaN", "cache",
-     "score(cache_dir=cache(resigned(lambda p: p['reference'].update(values=[float('nan')] * 32))))"),
+     "recomputed(cache(resigned(lambda p: p['reference'].update(values=[float('nan')] * 32))))"),
     ("score_suite", "cache entry re-signed: starts of another dtype", "cache",
-     "score(cache_dir=cache(resigned(lambda p: p['starts']['best_return'].update(dtype='__class__'))))"),
+     "recomputed(cache(resigned(lambda p: p['starts']['best_return'].update(dtype='__class__'))))"),
     ("score_suite", "cache entry re-signed: payload a list", "cache",
-     "score(cache_dir=cache(resigned(lambda p: p.clear())))"),
+     "recomputed(cache(resigned(lambda p: p.clear())))"),
     # ------------------------------------------------------------------ results.read
-    ("results.read", "a FIFO", "path", "from uavrl.bench.results import read; os.mkfifo(TMP / 'r.json'); "
+    ("results.read", "a FIFO", "r.json", "from uavrl.bench.results import read; os.mkfifo(TMP / 'r.json'); "
      "read(TMP / 'r.json')"),
     ("results.read", "a link to /dev/zero", "r.json",
      "from uavrl.bench.results import read; (TMP / 'r.json').symlink_to('/dev/zero'); read(TMP / 'r.json')"),
@@ -551,7 +567,7 @@ NEW_CASES = [
      "verdict('\\n# heading' not in markdown(r))"),
     ("results.markdown", "source with a backtick and <img> (honoured: escaped)", "source",
      "from uavrl.bench.results import markdown; r = ours(); "
-     "r['submission']['source'] = 'x` <img src=x onerror=alert(1)> `'; verdict('<img' not in markdown(r))"),
+     "r['submission']['source'] = 'x` <img src=x onerror=alert(1)> `'; verdict(in_code(markdown(r), '<img'))"),
     ("results.markdown", "task name '| x |' (honoured: escaped)", "task",
      "from uavrl.bench.results import markdown; r = ours(); r['tasks'][0]['task'] = 'a | 9.999 | b'; "
      "verdict('| a | 9.999 | b |' not in markdown(r))"),
@@ -561,13 +577,15 @@ NEW_CASES = [
     ("leaderboard page", "name with '\\n# heading' (honoured: escaped or refused)", "name",
      "page_kept(full(name='x\\n# heading'), lambda page: '\\n# heading' not in page)"),
     ("leaderboard page", "name '[click](javascript:...)' (honoured: escaped or refused)", "name",
-     "page_kept(full(name='[click](javascript:alert(1))'), lambda page: '](javascript:' not in page)"),
+     "page_kept(full(name='[click](javascript:alert(1))'), "
+     "lambda page: re.search(r'(?<!\\\\)\\]\\(javascript:', page) is None)"),
     ("leaderboard page", "name 'a | b | c' (honoured: escaped or refused)", "name",
      "page_kept(full(name='a | b | c'), lambda page: '| a | b | c |' not in page)"),
     ("leaderboard page", "train_command with a backtick and <img> (honoured: escaped or refused)", "train_command",
-     "page_kept(full(train_command='x` <img src=x onerror=alert(1)> `'), lambda page: '<img' not in page)"),
+     "page_kept(full(train_command='x` <img src=x onerror=alert(1)> `'), lambda page: in_code(page, '<img'))"),
     ("leaderboard page", "source holding the page's marker (honoured: escaped or refused)", "source",
-     "page_kept(full(source=MARKER), lambda page: page.count(MARKER) == 1)"),
+     "page_kept(full(source=MARKER), "  # the generated part starts at the marker's own line, whatever the page shows
+     "lambda page: page.index(MARKER) == page.index(chr(10) + MARKER + chr(10)) + 1)"),
     ("leaderboard page", "torch version '2.13\\n\\n# pwned' (honoured: escaped or refused)", "environment",
      "r = full(); r['environment']['torch'] = '2.13\\n\\n# pwned'; "
      "page_kept(r, lambda page: '\\n# pwned' not in page)"),

@@ -447,13 +447,19 @@ class UAVSpectrumEnv(EnvBase):
 
     def rollout(self, max_steps: int, *args, **kwargs) -> TensorDictBase:
         """TorchRL's ``rollout`` (``args``, ``kwargs``: as TorchRL's, the policy first); one-line errors for
-        ``max_steps < 1``, for more steps than ``memory_budget`` holds (every step of every world is kept: at most an
-        episode's unless ``break_when_any_done=False``) and for a policy's action not ``[B, N]``.
+        ``max_steps < 1``, for a policy that is not callable, for more steps than ``memory_budget`` holds (every step
+        of every world is kept: at most an episode's unless ``break_when_any_done=False``) and for a policy's action
+        not ``[B, N]``.
 
         Overridden for those alone: ``EnvBase.rollout`` hands ``max_steps`` to no hook (it runs ``range(max_steps)``
         steps after a reset, and stacks no step at all for 0), and the policy writes its action into the ``"agents"``
         group inside the rollout's loop, where tensordict refuses a wrong shape before ``step`` is called.
         """
+        policy = args[0] if args else kwargs.get("policy")
+        if policy is not None and not callable(policy):
+            raise InvalidType(
+                "policy", policy, "give a TorchRL policy (a module that writes ('agents', 'action')), or None"
+            )
         if not isinstance(max_steps, numbers.Integral) or isinstance(max_steps, bool) or max_steps < 1:
             message = f"rollout(max_steps={max_steps!r}) is invalid: give a whole number of steps >= 1"
             raise (InvalidOption if isinstance(max_steps, numbers.Real) else InvalidType)("max_steps", message=message)

@@ -250,6 +250,8 @@ def check_results(results) -> None:
 def read(path, within=None) -> dict:
     """The results file at ``path``, refused in one line that names it (and the field) when it is not one this
     version writes (:func:`check_results`); ``within``: the directory it was found in, which it may not link out of."""
+    if not isinstance(path, (str, PathLike)) or not str(path):
+        raise InvalidType("path", path, "give the results file's path")
     try:
         text = read_regular_text(path, within=within)
     except OSError as err:
@@ -336,11 +338,13 @@ def markdown(results: dict) -> str:
         "| task | score (0 random, 1 reference) | reference | value | U / U* | reach 0.999 U* | steps / fewest |",
         "|---|---|---|---|---|---|---|",
     ]
-    for task in results["tasks"]:
+    for index, task in enumerate(results["tasks"]):
         name, ref = markdown_text(task["task"]), markdown_text(task["references"]["reference"]["kind"])
         if task["status"] != "scored":
             lines.append(f"| {name} | n/a | {ref} | {markdown_text(task['reason'])} | | | |")
             continue
+        if not NUMBER.accepts(task["mean_score"]):  # the numbers the table prints: as results.read checks them
+            raise Invalid(f"results is invalid: tasks[{index}].mean_score={task['mean_score']!r}: {NUMBER.allowed}")
         s = task["summary"]
         mean_value = sum(v for run in task["values"] for v in run) / sum(len(run) for run in task["values"])
         steps = f"{s['eval/step_ratio_999']:.2f}" if "eval/step_ratio_999" in s else "-"
