@@ -48,7 +48,7 @@ def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None)
     """The settings of an evaluation (``video``: with a video, default ``eval.video``), refused in one line before
     anything heavy is imported: with the run's saved ``config.yaml`` beside the checkpoint, also the ``env.*`` of a
     zero-shot evaluation and what the evaluation of that model costs (``overrides``: the command line's, so a
-    refusal names what was typed).
+    refusal names what was typed); last, the checkpoint read with torch alone (:func:`load_run_checkpoint`).
 
     Args:
         cfg: the composed config (``checkpoint=`` and the ``eval.*`` settings).
@@ -76,6 +76,8 @@ def check_evaluation(cfg: DictConfig, video: bool | None = None, overrides=None)
                 f"checkpoint={quoted(cfg.checkpoint)}: {config}: its saved config does not fit a {saved.agent.name} "
                 f"agent ({reason})"
             ) from None
+    # torch alone reads it: a file that is no checkpoint of this run is refused before the agents and TorchRL load
+    load_run_checkpoint(cfg.checkpoint)
 
 
 def saved_run_config(checkpoint) -> DictConfig | None:
