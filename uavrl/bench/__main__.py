@@ -31,6 +31,7 @@ from uavrl.bench.tasks import SUITES, SUITES_TEXT, TASKS, check_budget
 from uavrl.envs._moved import moved_names
 from uavrl.envs.rules import refuse, whole_within
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint
+from uavrl.experiment.saved import load_run_checkpoint
 from uavrl.schema import MAX_THREADS
 
 # uavrl 0.2's names of this module that moved to the library (score_command, baseline_factory, ...): deprecated
@@ -103,6 +104,8 @@ def parse(args: list[str]) -> dict:
         check_out(settings["out"])
     if "cache_dir" in settings:
         cache.check_dir(settings["cache_dir"])
+    if "checkpoint" in settings:  # last, with torch alone: no checkpoint of its run is refused before TorchRL loads
+        load_run_checkpoint(settings["checkpoint"])
     return settings
 
 
