@@ -454,7 +454,8 @@ def small_disk(tmp_path):
 @pytest.mark.slow
 def test_a_real_full_disk_names_the_file_and_an_already_full_one_leaves_no_run_directory(small_disk):
     # a DQN whose replay buffer (100,000 compact transitions, ~2.5 MB) does not fit the 1 MB disk
-    big = [*DQN, "agent.buffer_size=100000", "agent.iterations=4", *COMMON]
+    larger = ["agent.buffer_size=100000", "agent.iterations=4"]
+    big = [*replaced(DQN, larger), *larger, *COMMON]
     result = subprocess.run(
         [sys.executable, "-m", "uavrl.train", *big, f"run_dir={small_disk / 'run'}"], capture_output=True, text=True
     )
