@@ -153,3 +153,21 @@ def run_sweep():
 def tiny_tabular():
     """Overrides of a tabular run of a second or two (a sweep's job in the sweep tests)."""
     return ["agent=tabular", "agent.episodes=2", "env.max_steps=20", "agent.runs=2", "eval.num_starts=4"]
+
+
+@pytest.fixture
+def bench_refusal_before_torch():
+    """``run(args)``: ``python -m uavrl.bench <args>`` in a fresh interpreter; its one-line ValueError, and whether
+    torch was imported before it (the benchmark checks its settings without torch)."""
+    return _bench_refusal
+
+
+def _bench_refusal(args: list[str]) -> tuple[str, bool]:
+    code = (
+        "import sys; from uavrl.bench.__main__ import main\n"
+        f"try:\n    main({args!r})\nexcept ValueError as err:\n    print(err)\n"
+        "print('torch' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    line, torch_loaded = out.strip().splitlines()
+    return line, torch_loaded == "True"

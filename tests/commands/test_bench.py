@@ -159,15 +159,9 @@ def test_rescoring_a_checkpoint_reproduces_its_results_bit_for_bit(tmp_path, sco
         (["tiny", "checkpoint=no/such/run"], "checkpoint=no/such/run does not exist"),
     ],
 )
-def test_bad_input_is_one_line_before_torch(args, message):
-    code = (
-        "import sys; from uavrl.bench.__main__ import main\n"
-        f"try:\n    main({args!r})\nexcept ValueError as err:\n    print(err)\n"
-        "print('torch' in sys.modules)"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    line, torch_loaded = out.strip().splitlines()
-    assert message in line and torch_loaded == "False"
+def test_bad_input_is_one_line_before_torch(args, message, bench_refusal_before_torch):
+    line, torch_loaded = bench_refusal_before_torch(args)
+    assert message in line and not torch_loaded
 
 
 def test_leaderboard_page_from_results_files(tmp_path, scored, monkeypatch):
