@@ -5,8 +5,10 @@ Per Markdown file, in file order and in a fresh temporary directory (the working
 - a ```python block runs in-process; the blocks of one file share one namespace;
 - a ```bash block runs line by line through bash (a line ending in ``\\`` continues on the next), so a later
   command finds the run directory an earlier one wrote (``run_dir=runs/NAME``);
-- ``python -m uavrl.train|evaluate|render|reproduce|benchmarl`` get small "smoke" overrides appended (:func:`smoke`;
-  Hydra's later overrides win), so they run in seconds with the reader's settings otherwise;
+- ``python -m uavrl.train|evaluate|render|reproduce|benchmarl`` get small "smoke" overrides in place of the reader's
+  values of the same settings (:func:`smoked`), so they run in seconds with the reader's settings otherwise;
+- a block with ``<!-- doc-test: prints TEXT -->`` on the line right below its closing fence must print ``TEXT``
+  (its lines' standard output and error, or a Python block's standard output): what the page says it shows;
 - a block with ``<!-- doc-test: skip REASON -->`` on the line right above its fence does not run (a ``pip install``,
   a GPU-only line), and neither does a block that needs an extra that is not installed (Ray, Gymnasium, BenchMARL,
   ...), nor the blocks after it (they may use what it makes): the test then says so as a skip, after running the
@@ -17,14 +19,15 @@ settings with the smoke overrides, checking them as the commands do before torch
 a mistyped setting in the docs fails here in a second. Running the blocks is ``slow`` (CI's docs leg runs it with every
 extra installed; in-process, a page's snippets hold up to ~0.8 GB, over the fast suite's memory).
 
-``python tests/project/test_doc_blocks.py smoke ARGS`` prints the overrides appended to ``python ARGS`` (one a line):
-the
+``python tests/project/test_doc_blocks.py smoked ARGS`` prints ``ARGS`` with the smoke overrides (one a line): the
 bash blocks' ``python`` calls it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import io
 import re
 import shlex
 import subprocess
@@ -36,6 +39,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SKIP_COMMENT = re.compile(r"^<!--\s*doc-test:\s*skip\b\s*(?P<reason>.*?)\s*-->$")
+PRINTS_COMMENT = re.compile(r"^<!--\s*doc-test:\s*prints\s+(?P<text>.+?)\s*-->$")
 FENCE = re.compile(r"^(?P<indent> {0,3})(?P<fence>`{3,}|~{3,})\s*(?P<info>[^`\s]*)")
 RUN_LANGUAGES = {"python": "python", "py": "python", "bash": "bash", "sh": "bash", "shell": "bash"}
 LINE_TIMEOUT_S = 600  # a line still running by then (a server, a full-size run) fails the test instead of hanging it
@@ -100,6 +104,7 @@ class Block:
     language: str  # "python", "bash", or the info string of a block that is not run
     text: str
     skip_reason: str | None  # the doc-test skip comment's reason, when the block carries one
+    prints: str | None = None  # what the doc-test prints comment below it says the block prints
 
     @property
     def where(self) -> str:
@@ -126,10 +131,10 @@ def blocks_of(path: Path) -> list[Block]:
             raise ValueError(f"{path.relative_to(ROOT)}:{start + 1}: the code block is never closed")
         above = lines[start - 1].strip() if start > 0 else ""
         skip = SKIP_COMMENT.match(above)
+        prints = PRINTS_COMMENT.match(lines[index + 1].strip()) if index + 1 < len(lines) else None
         info = opening.group("info").lower()
-        blocks.append(
-            Block(path, start + 1, RUN_LANGUAGES.get(info, info or "text"), "\n".join(body), skip and skip["reason"])
-        )
+        language, text = RUN_LANGUAGES.get(info, info or "text"), "\n".join(body)
+        blocks.append(Block(path, start + 1, language, text, skip and skip["reason"], prints and prints["text"]))
         index += 1
     return blocks
 
@@ -263,7 +268,9 @@ python3() {{ python "$@"; }}
 """
 
 
-def run_bash_line(line: str, cwd: Path, where: str) -> None:
+def run_bash_line(line: str, cwd: Path, where: str) -> str:
+    """``line`` run through bash from ``cwd``; its standard output and error, or an AssertionError naming ``where``
+    when it fails or runs past :data:`LINE_TIMEOUT_S`."""
     try:
         done = subprocess.run(
             ["bash", "-c", bash_prelude() + line],
@@ -277,11 +284,17 @@ def run_bash_line(line: str, cwd: Path, where: str) -> None:
     if done.returncode != 0:
         output = (done.stdout + done.stderr).strip().splitlines()[-20:]
         raise AssertionError(f"{where}: `{line}` exited {done.returncode}:\n" + "\n".join(output))
+    return done.stdout + done.stderr
 
 
-def run_python_block(block: Block, namespace: dict) -> None:
+def run_python_block(block: Block, namespace: dict) -> str:
+    """``block`` run in ``namespace``; what it printed (also shown, as pytest captures it)."""
     code = compile("\n" * (block.line) + block.text, str(block.path), "exec")  # tracebacks name the file's lines
-    exec(code, namespace)
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(code, namespace)
+    sys.stdout.write(printed.getvalue())
+    return printed.getvalue()
 
 
 # ---------------------------------------------------------------------------------------------------------- tests
@@ -328,10 +341,11 @@ def test_blocks_run(path: Path, tmp_path: Path, monkeypatch):
             skipped.append(f"{block.where} and the blocks after it (needs {', '.join(needs)})")
             break
         if block.language == "python":
-            run_python_block(block, namespace)
+            output = run_python_block(block, namespace)
         else:
-            for line in bash_lines(block.text):
-                run_bash_line(line, tmp_path, block.where)
+            output = "".join(run_bash_line(line, tmp_path, block.where) for line in bash_lines(block.text))
+        if block.prints is not None and block.prints not in output:
+            raise AssertionError(f"{block.where}: the page says it prints {block.prints!r}; it printed:\n{output}")
     if skipped:
         pytest.skip(f"ran the blocks before; not installed for: {'; '.join(skipped)}")
 
@@ -379,6 +393,21 @@ def test_harness_reads_blocks_and_skips(tmp_path: Path, monkeypatch):
         check_command(["uavrl.train", "agent=tabular", "agent.alpha=2"])
     with pytest.raises(SystemExit, match="no_such_setting"):
         check_command(["uavrl.train", "agent=tabular", "agent.no_such_setting=1"])
+
+
+def test_a_block_prints_what_its_page_says(tmp_path: Path, monkeypatch):
+    """``<!-- doc-test: prints TEXT -->`` below a block: its output must hold TEXT, or the page's test fails."""
+    page = tmp_path / "page.md"
+    page.write_text(
+        "```python\nprint(6 * 7)\n```\n<!-- doc-test: prints 42 -->\n\n"
+        "```bash\necho one && echo two >&2\n```\n<!-- doc-test: prints two -->\n"
+    )
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert [block.prints for block in blocks_of(page)] == ["42", "two"]
+    test_blocks_run(page, tmp_path, monkeypatch)
+    page.write_text(page.read_text().replace("prints 42", "prints 43"))
+    with pytest.raises(AssertionError, match="page.md:1: the page says it prints '43'; it printed:\n42"):
+        test_blocks_run(page, tmp_path, monkeypatch)
 
 
 def test_link_check_finds_dead_links(tmp_path: Path):
