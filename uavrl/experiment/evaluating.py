@@ -6,7 +6,8 @@ evaluation, written beside its checkpoint.
 earlier evaluation there with other settings or of another checkpoint stays: this one then goes to ``eval-2.json``,
 ...; the settings of each are recorded in ``.uavrl-evaluations.json``); :func:`print_evaluation` prints the summary
 in words.  A size-free network is evaluated zero-shot on another team size or grid (``eval-<N>uav-<L1>x<L2>.json``).
-The settings are checked first, without torch (:func:`uavrl.experiment.saved.check_evaluation`).
+The settings are checked first, without torch, then the checkpoint read with torch alone
+(:func:`uavrl.experiment.saved.check_evaluation`).
 """
 
 from __future__ import annotations
