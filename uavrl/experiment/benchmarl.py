@@ -7,7 +7,6 @@ refused, and named, without it."""
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import os
 import re
@@ -32,19 +31,12 @@ from uavrl.experiment.rundir import RunDirectory
 from uavrl.experiment.runs import already_finished, claim_run_dir, eval_settings, finished, yardstick_line
 from uavrl.experiment.saved import SavedYamlLoader
 
-
-def _installed(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ValueError:  # imported already, without a spec (a stand-in in sys.modules): there to be used
-        return True
-
-
 try:
     from uavrl.agents.benchmarl import UAVTask, YardstickCallback
-except ImportError:  # no BenchMARL: load_experiment still refuses, naming it, a run directory it could not use
-    if _installed("benchmarl"):
+except ModuleNotFoundError as missing:  # no BenchMARL: load_experiment still refuses, naming it, a run it cannot use
+    if missing.name.split(".")[0] != "benchmarl":
         raise
+    UAVTask = YardstickCallback = None
 
 
 def run_training(cfg: DictConfig, algorithm: str) -> Path:
@@ -145,7 +137,7 @@ def load_experiment(run_dir):
     last = checkpoints[-1]
     if not last.resolve().is_relative_to(run_dir.resolve()):
         raise InvalidOption("run_dir", message=f"{quoted(last)} is a link to {quoted(last.resolve())}, out of {given}")
-    if not _installed("benchmarl"):
+    if UAVTask is None:
         raise ImportError(f"load_experiment({given}) needs BenchMARL, which is not installed: {BENCHMARL_INSTALL}")
     import benchmarl  # noqa: F401  registers its config schemas with Hydra's ConfigStore
 
