@@ -19,7 +19,7 @@ from os import PathLike
 from pathlib import Path
 
 import uavrl
-from uavrl.bench.tasks import SUITES
+from uavrl.bench.tasks import BUDGET, SUITES
 from uavrl.envs.config import InvalidType
 from uavrl.envs.rules import Rule, flag, interval, one_of, optional, whole
 from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
@@ -80,7 +80,6 @@ def _numbers(depth: int, words: str) -> Rule:
 NUMBER = _numbers(0, "a finite number")
 NUMBERS = _numbers(1, "a list of finite numbers (one per start)")
 TABLE = _numbers(2, "a list of lists of finite numbers (one list per training run, one number per start)")
-AT_LEAST_0 = Rule(lambda v: NUMBER.accepts(v) and v >= 0, "it must be a finite number >= 0")
 TEXT = Rule(lambda v: isinstance(v, str) and v.isprintable() and len(v) <= 4000, "it must be one line of text")
 PAIR = Rule(lambda v: NUMBERS.accepts(v) and len(v) == 2, "it must be [low, high], two finite numbers")
 METRICS = {"*": NUMBER}
@@ -122,7 +121,7 @@ SCHEMA = {
         "name": TEXT,
         "source": TEXT,
         "train_command?": TEXT,
-        "budget": {"env_steps?": whole(0), "cpu_seconds?": AT_LEAST_0, "gpu_seconds?": AT_LEAST_0},
+        "budget": {f"{key}?": rule for key, rule in BUDGET.items()},  # the rule a submission's budget is checked by
     },
     "environment": {
         **{
@@ -181,7 +180,7 @@ def conform(value, schema, field: str = "") -> None:
 
 
 def checked(results) -> None:
-    """:func:`check_results` of results given in Python (to :func:`markdown`, :func:`save`), refused naming them."""
+    """:func:`check_results` of results given in Python (to :func:`save`), refused naming them."""
     if not isinstance(results, dict):
         raise InvalidType("results", results, "give a results dict as uavrl.bench.run.score_suite returns it")
     try:

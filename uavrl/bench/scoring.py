@@ -13,8 +13,9 @@ from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.agents.planner import PlannerPolicy
 from uavrl.agents.schema import network_refusal
 from uavrl.bench import cache
-from uavrl.bench.results import AT_LEAST_0, check_out, markdown, save
+from uavrl.bench.results import check_out, markdown, save
 from uavrl.bench.run import RANDOM_SEED, NotApplicable, score_suite
+from uavrl.bench.tasks import BUDGET
 from uavrl.config import model_config
 from uavrl.experiment.io import quoted, read_small_text
 from uavrl.experiment.runs import agent_label
@@ -66,7 +67,7 @@ def run_costs(checkpoint) -> dict:
     seconds = metrics.get("train_cpu_seconds") if isinstance(metrics, dict) else None
     if seconds is None:
         return {}
-    if not AT_LEAST_0.accepts(seconds):
+    if not BUDGET["cpu_seconds"].accepts(seconds):
         raise ValueError(f"{refusal} (metrics.json: train_cpu_seconds={seconds!r}): give budget.cpu_seconds=<seconds>")
     return {"cpu_seconds": float(seconds)}
 
