@@ -22,7 +22,7 @@ from pathlib import Path
 import uavrl
 from uavrl.bench.results import NUMBER, NUMBERS, TABLE, TEXT, Invalid, conform
 from uavrl.envs.rules import Rule, flag, one_of, optional, whole
-from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
+from uavrl.experiment.io import nearest_existing, quoted, read_regular_text, save_text, special_kind
 
 REFERENCES_VERSION = 1  # bump when what a reference means changes: every entry is then recomputed
 
@@ -129,9 +129,7 @@ def check_dir(directory, setting: str = "cache_dir") -> None:
     """Refuse in one line a cache ``directory`` (given as ``setting``) that is no directory, or whose entries could
     not be written (checked before any reference is computed, so none is computed in vain)."""
     directory = Path(directory)
-    existing = directory
-    while not existing.exists() and existing != existing.parent:  # the first folder that exists holds the new ones
-        existing = existing.parent
+    existing = nearest_existing(directory)
     given = f"{setting}={quoted(directory)}"
     if not existing.is_dir():
         kind = special_kind(existing) or "a file"

@@ -22,7 +22,7 @@ import uavrl
 from uavrl.bench.tasks import BUDGET, SUITES
 from uavrl.envs.config import InvalidType
 from uavrl.envs.rules import Rule, flag, interval, one_of, optional, whole
-from uavrl.experiment.io import quoted, read_regular_text, save_text, special_kind
+from uavrl.experiment.io import nearest_existing, quoted, read_regular_text, save_text, special_kind
 from uavrl.experiment.plots import pyplot, save_figure
 
 FORMAT, VERSION = "uavrl-bench-results", 1
@@ -458,9 +458,7 @@ def check_out(path, setting: str = "out") -> None:
     given = f"{setting}={quoted(path)}"
     if path.suffix != ".json":
         raise Invalid(f"{given} is invalid: give a .json file (its table .md and figure .png go beside it)")
-    folder = path.parent
-    while not folder.exists() and folder != folder.parent:  # the first folder that exists holds the ones to make
-        folder = folder.parent
+    folder = nearest_existing(path.parent)
     if not folder.is_dir():
         raise NotADirectoryError(
             f"{given} is invalid: {quoted(folder)} is {special_kind(folder) or 'a file'}, not a folder"

@@ -40,6 +40,14 @@ class WriteError(OSError):
         return f"could not {self.verb} {quoted(self.filename)}: {self.strerror}"
 
 
+def nearest_existing(path) -> Path:
+    """``path``, or the nearest folder above it that exists: where the folders missing below it would be made."""
+    path = Path(path)
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
 def special_kind(path) -> str | None:
     """What ``path`` is when it exists and is no regular file (``a FIFO``, ``a directory``), else None: reading a FIFO
     or a device blocks or never ends, so every reader asks this first."""
