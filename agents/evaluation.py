@@ -48,8 +48,7 @@ import numbers
 import torch
 
 from uavrl.agents.episodes import episode_metrics
-from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node
-from uavrl.agents.network_sizes import policy_row_bytes
+from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, deepest_level_bytes
 from uavrl.agents.references import (
     LEVELS,
     cached_references,
@@ -484,7 +483,7 @@ def evaluate_with_lookahead(agent, cfg: ModelConfig, lookahead: int, lookahead_w
     # the search holds its deepest level at once: refused before it starts, as uavrl.costs refuses eval.lookahead
     num_starts, budget = kwargs.get("num_starts", NUM_STARTS), kwargs.get("memory_budget", DEFAULT_MEMORY_BUDGET)
     per_node = candidates_per_node(cfg.num_uavs, cfg.num_actions, lookahead_width)
-    need = num_starts * per_node**lookahead * policy_row_bytes(cfg, agent.settings)
+    need = deepest_level_bytes(cfg, agent.settings, num_starts, lookahead, per_node)
     if need > budget:
         raise InvalidOption(
             "lookahead",

@@ -4,6 +4,7 @@ checks them without importing TensorDict or the Q-networks."""
 
 from __future__ import annotations
 
+from uavrl.agents.network_sizes import policy_row_bytes
 from uavrl.envs.rules import refuse, whole_within
 
 MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this many (N <= 4), else one-UAV changes
@@ -18,6 +19,12 @@ def candidates_per_node(num_uavs: int, num_actions: int, width: int) -> int:
     change of it); ``width=0``: all of them."""
     ranked = num_actions**num_uavs if num_actions**num_uavs <= MAX_ENUMERATED else 1 + num_uavs * num_actions
     return min(width, ranked) if width else ranked
+
+
+def deepest_level_bytes(model, settings, starts: int, depth: int, per_node: int) -> int:
+    """Bytes of the search's deepest level, held at once: each of ``starts`` starts' ``per_node^depth``
+    configurations valued by the Q-network of ``settings`` (:func:`~uavrl.agents.network_sizes.policy_row_bytes`)."""
+    return starts * per_node**depth * policy_row_bytes(model, settings)
 
 
 def check_lookahead(a, depth: int, agent_name: str) -> None:

@@ -22,7 +22,7 @@ from typing import Callable
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
-from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node
+from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, deepest_level_bytes
 from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
@@ -488,8 +488,7 @@ def lookahead_cost(cfg: DictConfig, model, a, starts: Factor) -> list[Cost]:
     hint = "" if width else "give eval.lookahead_width=<candidates per node>"
 
     def estimate(low):
-        m, rows = _Resized(model, low), starts.at(low) * per_node.at(low) ** levels.at(low)
-        return rows * policy_row_bytes(m, settings)
+        return deepest_level_bytes(_Resized(model, low), settings, starts.at(low), levels.at(low), per_node.at(low))
 
     what = "the lookahead's deepest level, K^eval.lookahead configurations a start"
     return [Cost(what, (starts, levels, per_node), estimate, hint)]
