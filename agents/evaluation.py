@@ -48,7 +48,7 @@ import numbers
 import torch
 
 from uavrl.agents.episodes import episode_metrics
-from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, deepest_level_bytes
+from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, check_width_read, deepest_level_bytes
 from uavrl.agents.references import (
     LEVELS,
     cached_references,
@@ -464,8 +464,7 @@ def evaluate_agent(
     """
     if lookahead:
         return evaluate_with_lookahead(agent, cfg, lookahead, lookahead_width, **kwargs)
-    if lookahead_width != WIDTH:  # as eval.lookahead_width=... is refused without eval.lookahead
-        raise InvalidOption("lookahead_width", lookahead_width, "only lookahead >= 1 reads it, not lookahead=0")
+    check_width_read(lookahead_width, lookahead)
     results = agent.evaluate(cfg, **kwargs)
     out = {}
     for key in dict.fromkeys(k for r in results for k in r):

@@ -5,12 +5,21 @@ checks them without importing TensorDict or the Q-networks."""
 from __future__ import annotations
 
 from uavrl.agents.network_sizes import policy_row_bytes
-from uavrl.envs.rules import refuse, whole_within
+from uavrl.envs.config import InvalidOption
+from uavrl.envs.rules import Reader, refuse, whole_within
 
 MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this many (N <= 4), else one-UAV changes
 MAX_LOOKAHEAD = 100  # levels of the search, each a level of recursion: deeper would only repeat the greedy line
 WIDTH = 8  # eval.lookahead_width's default: candidates played per node
 DEPTH = whole_within(0, MAX_LOOKAHEAD)  # eval.lookahead's rule (uavrl/schema.py), the Python API's too
+# eval.lookahead_width's rule and its reader (uavrl/schema.py), the Python API's too
+WIDTH_READ = Reader("lookahead", lambda depth: depth != 0, "lookahead >= 1")
+
+
+def check_width_read(width, depth) -> None:
+    """``evaluate_agent``'s ``lookahead_width`` refused, as ``eval.lookahead_width`` is, where no lookahead reads it."""
+    if width != WIDTH and not WIDTH_READ.reads(depth):
+        raise InvalidOption("lookahead_width", width, f"only {WIDTH_READ.words} reads it, not lookahead={depth}")
 
 
 def candidates_per_node(num_uavs: int, num_actions: int, width: int) -> int:

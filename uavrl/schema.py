@@ -33,7 +33,7 @@ from typing import Any, Optional
 
 from uavrl.agents import AGENTS
 from uavrl.agents.lookahead_rules import DEPTH as LOOKAHEAD_DEPTH
-from uavrl.agents.lookahead_rules import WIDTH
+from uavrl.agents.lookahead_rules import WIDTH, WIDTH_READ
 from uavrl.agents.schema import EvalSchema
 from uavrl.envs.config import PHYSICAL_OPTIONS, PRESETS, ModelConfig, make_config, preset_options
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
@@ -41,7 +41,6 @@ from uavrl.envs.rules import (
     DEVICE,
     REAL,
     SEED,
-    Reader,
     flag,
     grid_sizes,
     names_among,
@@ -101,7 +100,7 @@ class RunEvalSchema(EvalSchema):
         WIDTH,
         whole(0),
         "eval.lookahead: candidates played per node, best by the values; 0: all",
-        read=Reader("lookahead", lambda depth: depth != 0, "lookahead >= 1"),
+        read=WIDTH_READ,
     )
 
 
