@@ -12,7 +12,7 @@ MAX_ENUMERATED = 6**4  # every allowed joint action is a candidate up to this ma
 MAX_LOOKAHEAD = 100  # levels of the search, each a level of recursion: deeper would only repeat the greedy line
 WIDTH = 8  # eval.lookahead_width's default: candidates played per node
 DEPTH = whole_within(0, MAX_LOOKAHEAD)  # eval.lookahead's rule (uavrl/schema.py), the Python API's too
-# eval.lookahead_width's rule and its reader (uavrl/schema.py), the Python API's too
+# what reads eval.lookahead_width (uavrl/schema.py) and evaluate_agent's lookahead_width: a lookahead
 WIDTH_READ = Reader("lookahead", lambda depth: depth != 0, "lookahead >= 1")
 
 
