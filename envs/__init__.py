@@ -20,7 +20,8 @@ import importlib.abc
 import importlib.machinery
 import sys
 
-from .config import ACTION_NAMES, NUM_ACTIONS, InvalidOption, InvalidType, ModelConfig, make_config
+from .config import ACTION_NAMES, NUM_ACTIONS, ModelConfig, make_config
+from .errors import InvalidOption, InvalidType
 
 _LAZY = {
     "UAVSpectrumEnv": "env",

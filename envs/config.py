@@ -16,9 +16,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-import re
 from dataclasses import dataclass, field
 
+from .errors import InvalidOption
 from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_problem
 from .physics import power, radio
 
@@ -40,6 +40,11 @@ ENERGY_OPTIONS = ("base", "battery_init", "recharge_steps", "num_spares")
 ROTARY_WING_OPTIONS = ("battery_wh", "slot_s", "circuit_power_w")
 CHANNELS = radio.CHANNELS
 ENVIRONMENTS = radio.ENVIRONMENTS
+CITIES = ("none", *radio.P1410)  # docs/model.md, Cities of buildings: ITU-R P.1410's four environments
+LOS_MODELS = ("geometric", "statistical")
+# the options only a city reads (docs/model.md, Cities of buildings)
+CITY_OPTIONS = ("city_alpha", "city_beta", "city_gamma", "city_seed", "los")
+CITY_SEED_LIMIT = 2**63  # a city's seed is an int64, as a world's is
 PRESETS = ("paper", "reference_code", "a2g_urban")
 # the options only the power laws read, and those only the physical channels read (docs/model.md, Channel models)
 POWER_LAW_OPTIONS = ("alpha", "g0", "p_pt", "p_s", "p_u", "noise")
@@ -51,31 +56,6 @@ def action_names(num_actions: int) -> str:
     and ``return`` (6) with recharging."""
     names = ACTION_NAMES + ("return",) * (num_actions - NUM_ACTIONS)
     return f"0..{len(names) - 1} ({', '.join(names)})"
-
-
-class InvalidOption(ValueError):
-    """``option=value is invalid: reason``, with ``option`` kept so a command line can name it as its user typed it.
-
-    Args:
-        option: the argument or option refused, kept as ``.option``.
-        value: its value, shown with ``repr``.
-        reason: why, and what to give instead.
-        message: the whole line in place of the three, for an argument whose value is better described than printed
-            (a tensor).
-    """
-
-    def __init__(self, option: str, value=None, reason: str = "", *, message: str | None = None):
-        super().__init__(message or f"{option}={value!r} is invalid: {reason}")
-        self.option = option
-
-    def renamed(self, names: dict[str, str]) -> str:
-        """The message with each ``option=`` in ``names`` written as ``names[option]=`` (``grid=`` as ``env.grid=``)."""
-        return re.sub(r"\b([a-z_0-9]+)=", lambda m: f"{names.get(m.group(1), m.group(1))}=", str(self))
-
-
-class InvalidType(InvalidOption, TypeError):
-    """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: reason``; ``message`` the
-    whole line in their place (arguments as :class:`InvalidOption`'s)."""
 
 
 # the model's arguments of UAVSpectrumEnv and the adapters besides config=, and their defaults
@@ -141,6 +121,14 @@ class ModelConfig:
         p_pt_dbm: PT's transmit power in dBm (physical models).
         p_s_dbm: S's transmit power in dBm (physical models).
         p_u_dbm: a UAV's transmit power in dBm (physical models).
+        city: a city of buildings over the area (a physical channel): ``"none"``, or the ITU-R P.1410 environment
+            ``"suburban"``, ``"urban"``, ``"dense_urban"`` or ``"highrise"`` whose (alpha, beta, gamma) it has.
+        city_alpha: the city's ratio of land covered by buildings, in (0, 1); None: the environment's.
+        city_beta: its buildings per km^2; None: the environment's.
+        city_gamma: the Rayleigh scale of its building heights in m; None: the environment's.
+        city_seed: which city of those parameters (an integer >= 0): the seed that lays it out.
+        los: whether a link of a city is in line of sight: ``"geometric"`` (its segment clears every building) or
+            ``"statistical"`` (the channel's probability of the elevation angle, as without a city).
         direct_links: add the direct links PT to PR and S to E inside the rates' logarithms.
         lease_rule: the emergency network gets no rate unless some UAV relays for the primary one (docs/model.md,
             The picture).
@@ -173,7 +161,7 @@ class ModelConfig:
         >>> cfg.replace(num_uavs=20)
         Traceback (most recent call last):
         ...
-        uavrl.envs.config.InvalidOption: num_uavs=20 is invalid: a 4x4 grid holds 1 to 16 UAVs (one per cell)
+        uavrl.envs.errors.InvalidOption: num_uavs=20 is invalid: a 4x4 grid holds 1 to 16 UAVs (one per cell)
     """
 
     grid: tuple[int, int] = (6, 6)
@@ -200,6 +188,12 @@ class ModelConfig:
     p_pt_dbm: float = 46.0
     p_s_dbm: float = 23.0
     p_u_dbm: float = 23.0
+    city: str = "none"
+    city_alpha: float | None = None
+    city_beta: float | None = None
+    city_gamma: float | None = None
+    city_seed: int = 0
+    los: str = "geometric"
     direct_links: bool = False
     lease_rule: bool = True
     rate_model: str = "af"
@@ -269,6 +263,7 @@ class ModelConfig:
                 raise InvalidOption("altitude_m", self.altitude_m, reason)
         if self.is_physical:
             self._check_radio()
+        self._check_city()
         self._check_physics()
         self._check_energy()
 
@@ -314,6 +309,54 @@ class ModelConfig:
         if problem is not None:
             name, reason = problem
             raise InvalidOption(name, getattr(self, name), reason)
+
+    def _check_city(self):
+        """A city's options: refused where no city reads them, a city only under a physical channel (the power laws
+        have no line-of-sight state), Al-Hourani's excess losses fitted to the city's own environment, numbers within
+        P.1410's ranges (docs/model.md, Cities of buildings)."""
+        _choice("city", self.city, CITIES)
+        _choice("los", self.los, LOS_MODELS)
+        if self.city == "none":
+            for name in CITY_OPTIONS:
+                if getattr(self, name) != _DEFAULTS[name]:
+                    raise InvalidOption(name, getattr(self, name), "only a city reads it, not city='none'")
+            return
+        if not self.is_physical:
+            physical = ", ".join(map(repr, radio.PHYSICAL_CHANNELS))
+            reason = f"channel={self.channel!r} has no line-of-sight state for buildings to decide: use {physical}"
+            raise InvalidOption("city", self.city, reason)
+        if self.channel == "al_hourani" and self.environment != self.city:
+            # eta_LoS and eta_NLoS were fitted to one environment's cities: the city's, unless said otherwise
+            blamed = "city" if self.environment == _DEFAULTS["environment"] else "environment"
+            reason = (
+                f"channel='al_hourani' takes its excess losses from environment={self.environment!r} and the city is "
+                f"{self.city!r}: give environment={self.city!r} too"
+            )
+            raise InvalidOption(blamed, getattr(self, blamed), reason)
+        for name, high in (("city_alpha", 1.0), ("city_beta", math.inf), ("city_gamma", math.inf)):
+            value = getattr(self, name)
+            if value is not None and not (is_number(value) and 0 < value < high):
+                bound = " and below 1" if high == 1.0 else ""
+                raise InvalidOption(name, value, f"it must be a finite number above 0{bound}, or None for the city's")
+        if not _is_int(self.city_seed) or not 0 <= self.city_seed < CITY_SEED_LIMIT:
+            raise InvalidOption("city_seed", self.city_seed, "give a whole number from 0 to 2**63 - 1")
+        object.__setattr__(self, "city_seed", int(self.city_seed))
+
+    @property
+    def city_parameters(self) -> tuple[float, float, float] | None:
+        """The city's ITU-R P.1410 ``(alpha, beta per km^2, gamma m)``: its environment's, each replaced where given;
+        ``None`` without a city."""
+        if self.city == "none":
+            return None
+        given = (self.city_alpha, self.city_beta, self.city_gamma)
+        return tuple(
+            float(own if value is None else value) for own, value in zip(radio.P1410[self.city], given, strict=True)
+        )
+
+    @property
+    def geometric_los(self) -> bool:
+        """Whether a link's line of sight comes from the city's buildings (``los="geometric"`` in a city)."""
+        return self.city != "none" and self.los == "geometric"
 
     def _check_physics(self):
         """A one-line refusal when the numbers would give NaN, infinite or everywhere-zero rates

@@ -19,13 +19,12 @@ from torchrl.envs import EnvBase
 from .config import (
     NUM_ACTIONS,
     RETURN,
-    InvalidOption,
-    InvalidType,
     ModelConfig,
     action_names,
     check_config_alone,
     make_config,
 )
+from .errors import InvalidOption, InvalidType
 from .limits import DEFAULT_MEMORY_BUDGET, env_bytes, frame_bytes, gib
 from .render import render as draw_world
 from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device

@@ -60,7 +60,8 @@ from gymnasium.vector.utils import batch_space
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from ..config import InvalidOption, InvalidType, ModelConfig, action_names, check_config_alone, make_config
+from ..config import ModelConfig, action_names, check_config_alone, make_config
+from ..errors import InvalidOption, InvalidType
 from ..limits import DEFAULT_MEMORY_BUDGET
 from ..physics.channel import fixed_layout
 from ..render import RENDER_MODES as DRAWN_MODES

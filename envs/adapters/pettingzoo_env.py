@@ -33,7 +33,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from ..config import InvalidOption, InvalidType, ModelConfig
+from ..config import ModelConfig
+from ..errors import InvalidOption, InvalidType
 from ..world import World, check_seed
 from .gym_env import (
     RENDER_FPS,

@@ -31,6 +31,7 @@ import torch
 
 from ..config import RELAYING, ModelConfig
 from ..limits import fixed_node_positions
+from .buildings import city_part
 from .pathloss import gain_from_db, link_states_db, mean_path_loss_db
 
 PT, PR, S, E = range(4)
@@ -45,7 +46,8 @@ def fixed_layout(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Te
         device: their torch device.
 
     Returns:
-        ``(x, y, z)`` in cells of PT, PR, S and E, one row each.
+        ``(x, y, z)`` in cells of PT, PR, S and E, one row each; in a city PT and PR stand on the roof of the building
+        they are in, if any.
 
     Example:
         >>> from uavrl.envs import make_config
@@ -56,7 +58,11 @@ def fixed_layout(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Te
                 [ 6.,  2.,  4.]], dtype=torch.float64)
     """
     rows = fixed_node_positions(cfg.layout, cfg.grid, cfg.height)
-    return None if rows is None else torch.tensor(rows, dtype=dtype, device=device)
+    if rows is None:
+        return None
+    city = city_part(cfg)
+    nodes = torch.tensor(rows, dtype=dtype, device=device)
+    return nodes if city is None else city.on_roofs(nodes)
 
 
 def cell_xyz(cfg: ModelConfig, dtype=torch.float64, device=None) -> torch.Tensor:

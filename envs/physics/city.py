@@ -24,18 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import InvalidOption
-
-# (alpha, beta per km^2, gamma m) of the four standard environments: Holis and Pechac, "Elevation dependent shadowing
-# model for mobile communications via high altitude platforms in built-up areas", IEEE Trans. Antennas Propag.
-# 56(4):1078-1084, 2008, as Al-Hourani, Kandeepan, Lardner, IEEE WCL 3(6):569-572, 2014 (section II-B) list them;
-# the names are those of radio.AL_HOURANI, whose (a, b) were fitted to these cities
-P1410 = {
-    "suburban": (0.1, 750.0, 8.0),
-    "urban": (0.3, 500.0, 15.0),
-    "dense_urban": (0.5, 300.0, 20.0),
-    "highrise": (0.5, 300.0, 50.0),
-}
+from ..errors import InvalidOption
+from .radio import P1410 as P1410  # the standard environments, kept here beside the cities they describe
 
 MAX_BUILDINGS = 4_000_000  # 5 arrays of float64: 160 MB; a 10 km x 10 km suburban city has 75,000
 CHUNK_BYTES = 64 * 2**20  # the working memory of line_of_sight's link-by-building arrays
@@ -167,6 +157,31 @@ def _as_points(points, name: str) -> np.ndarray:
     return array
 
 
+def roof_height(city: City, xy) -> np.ndarray:
+    """The height of the roof over each ground point ``(..., 2)`` (metres): the building's whose footprint holds the
+    point in its open interior, 0 on a street or a wall (and outside the lattice).
+
+    Args:
+        city: the city.
+        xy: ground positions, an array ``(..., 2)``.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    flat = xy.reshape(-1, 2)
+    # the lattice site under each point; only that building can hold it, since buildings do not overlap
+    column = np.floor((flat[:, 0] - city.origin_x) / city.pitch_m).astype(np.int64)
+    row = np.floor((flat[:, 1] - city.origin_y) / city.pitch_m).astype(np.int64)
+    on_lattice = (column >= 0) & (column < city.columns) & (row >= 0) & (row < city.rows)
+    k = np.where(on_lattice, row * city.columns + column, 0)
+    under = (
+        on_lattice
+        & (city.x0[k] < flat[:, 0])
+        & (flat[:, 0] < city.x1[k])
+        & (city.y0[k] < flat[:, 1])
+        & (flat[:, 1] < city.y1[k])
+    )
+    return np.where(under, city.height[k], 0.0).reshape(xy.shape[:-1])
+
+
 def inside_building(city: City, points) -> np.ndarray:
     """Whether each point ``(..., 3)`` (metres) lies in the open interior of a building: ``x0 < x < x1``, ``y0 < y <
     y1`` and ``0 < z < height``.  A point on a wall or a roof is outside (a node on a rooftop stands on it).
@@ -176,22 +191,7 @@ def inside_building(city: City, points) -> np.ndarray:
         points: positions, an array ``(..., 3)``.
     """
     points = _as_points(points, "points")
-    flat = points.reshape(-1, 3)
-    # the lattice site under each point; only that building can contain it, since buildings do not overlap
-    column = np.floor((flat[:, 0] - city.origin_x) / city.pitch_m).astype(np.int64)
-    row = np.floor((flat[:, 1] - city.origin_y) / city.pitch_m).astype(np.int64)
-    on_lattice = (column >= 0) & (column < city.columns) & (row >= 0) & (row < city.rows)
-    k = np.where(on_lattice, row * city.columns + column, 0)
-    inside = (
-        on_lattice
-        & (city.x0[k] < flat[:, 0])
-        & (flat[:, 0] < city.x1[k])
-        & (city.y0[k] < flat[:, 1])
-        & (flat[:, 1] < city.y1[k])
-        & (0 < flat[:, 2])
-        & (flat[:, 2] < city.height[k])
-    )
-    return inside.reshape(points.shape[:-1])
+    return (0 < points[..., 2]) & (points[..., 2] < roof_height(city, points[..., :2]))
 
 
 def _slab(start, step, low, high):

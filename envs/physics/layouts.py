@@ -24,6 +24,7 @@ import torch
 
 from ..config import ModelConfig
 from . import streams
+from .buildings import city_part
 from .channel import fixed_layout
 
 
@@ -39,6 +40,7 @@ class Layouts:
     def __init__(self, cfg: ModelConfig, device="cpu"):
         self.cfg = cfg
         self.fixed = fixed_layout(cfg, torch.float64, device)  # ModelConfig refused one with a node on a UAV cell
+        self.city = city_part(cfg)
 
     def sample(self, keys: torch.Tensor, counters: torch.Tensor) -> torch.Tensor:
         """``layout=random``: ``[k, 4, 3]`` nodes of ``k`` worlds (``keys``, ``counters`` ``[k]``: their streams),
@@ -46,7 +48,8 @@ class Layouts:
 
         PT-PR and S-E must be at least 0.6 grid diagonals apart.  Decision: S and E
         (at UAV altitude) must also be at least half a cell from every cell centre,
-        so no UAV is ever at distance 0 from a node.  Rejection rounds run until
+        so no UAV is ever at distance 0 from a node; in a city, S and E are outside every building and PT and PR
+        stand on the roof of the building they are in, if any.  Rejection rounds run until
         every world is accepted; each world uses only its own stream.
         """
         (L1, L2), h, dev = self.cfg.grid, self.cfg.height, keys.device
@@ -66,9 +69,10 @@ class Layouts:
                         [xy[..., 0].round().clamp(0, L1 - 1), xy[..., 1].round().clamp(0, L2 - 1)], -1
                     )
                     ok &= (torch.linalg.vector_norm(xy - nearest, dim=-1) >= 0.5).all(-1)
-                nodes[pending[ok], 2 * pair : 2 * pair + 2] = torch.cat(
-                    [xy[ok], xy.new_full((int(ok.sum()), 2, 1), z)], -1
-                )
+                drawn = torch.cat([xy, xy.new_full((len(xy), 2, 1), z)], -1)
+                if self.city is not None and z > 0:  # S and E fly in the open
+                    ok &= ~self.city.inside(drawn).any(-1)
+                nodes[pending[ok], 2 * pair : 2 * pair + 2] = drawn[ok]
                 pending = pending[~ok]
                 rnd += 1
-        return nodes
+        return nodes if self.city is None else self.city.on_roofs(nodes)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import torch
 
 from . import radio
+from .buildings import city_part
 from .radio import AL_HOURANI, TR36777, tr36777_los_parameters, tr36777_losses_db
 
 AIR_TO_GROUND = (True, True, False, False)  # per node (PT, PR, S, E): is the UAV's link to it air-to-ground?
@@ -128,8 +129,9 @@ def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[tor
     (cells).
 
     Air-to-ground links (PT, PR) follow ``cfg.channel``; air-to-air ones (S, E) are free space in line of sight
-    (``P_LoS = 1``).  ``h`` is the UAV's height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D
-    distance, all in metres.
+    (``P_LoS = 1``).  In a city with ``los="geometric"`` an air-to-ground link's ``P_LoS`` is 1 when its segment clears
+    every building and 0 otherwise (:mod:`.buildings`), so the mean is the LoS or the NLoS loss.  ``h`` is the UAV's
+    height above the ground node, ``d_2D`` the horizontal and ``d_3D`` the 3-D distance, all in metres.
 
     Args:
         uav_xyz: the UAVs' positions ``[..., N, 3]`` in cells.
@@ -147,6 +149,8 @@ def link_states_db(uav_xyz: torch.Tensor, nodes: torch.Tensor, cfg) -> tuple[tor
     air = torch.tensor(AIR_TO_GROUND, device=uav_xyz.device)
     free = free_space_db(distance, cfg.carrier_ghz)
     p_los, los, nlos = ground
+    if cfg.geometric_los:  # a city's link is in line of sight or not: its segment clears every building or not
+        p_los = city_part(cfg).line_of_sight(uav_xyz, nodes).to(p_los.dtype)
     return torch.where(air, p_los, torch.ones_like(p_los)), torch.where(air, los, free), torch.where(air, nlos, free)
 
 

@@ -33,6 +33,16 @@ AL_HOURANI = {
     "highrise": (27.23, 0.08, 2.3, 34.0),
 }
 ENVIRONMENTS = tuple(AL_HOURANI)
+# (alpha, beta per km^2, gamma m) of the four standard environments: Holis and Pechac, "Elevation dependent shadowing
+# model for mobile communications via high altitude platforms in built-up areas", IEEE Trans. Antennas Propag.
+# 56(4):1078-1084, 2008, as Al-Hourani, Kandeepan, Lardner, IEEE WCL 3(6):569-572, 2014 (section II-B) list them;
+# the names are those of radio.AL_HOURANI, whose (a, b) were fitted to these cities
+P1410 = {
+    "suburban": (0.1, 750.0, 8.0),
+    "urban": (0.3, 500.0, 15.0),
+    "dense_urban": (0.5, 300.0, 20.0),
+    "highrise": (0.5, 300.0, 50.0),
+}
 # The letter models low-altitude platforms and names no height range (its fits are in the elevation angle alone);
 # ITU Radio Regulations No. 1.66A puts high-altitude platform stations at 20 to 50 km: below 20 km (our choice)
 AL_HOURANI_HEIGHT_M = (0.0, 20_000.0)  # (low, high): h in it

@@ -14,6 +14,8 @@ the per-world random streams.  The parts are
 - ``reward`` (:class:`uavrl.envs.physics.rewards.TeamReward`): ``env.reward`` from the rates;
 - ``energy`` (:mod:`uavrl.envs.physics.energy`, under ``env.energy`` other than ``none``): the batteries, who serves,
   termination.
+- ``city`` (:mod:`uavrl.envs.physics.buildings`, under ``env.city`` other than ``none``): the ITU-R P.1410 city the
+  channel decides line of sight in, the roofs PT and PR stand on, where S and E may fly.
 
 A step is their pipeline: dynamics, rates, reward, termination, observation.  :meth:`World.reset` and
 :meth:`World.step` return plain tensors (observations, masks, rates, rewards);

@@ -7,7 +7,8 @@ import numbers
 
 import torch
 
-from ..config import InvalidOption, InvalidType, ModelConfig
+from ..config import ModelConfig
+from ..errors import InvalidOption, InvalidType
 from ..limits import SEED_LIMIT, gib, world_bytes
 
 

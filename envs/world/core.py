@@ -175,8 +175,11 @@ class World(LayoutTables, Observations, SolverQueries):
 
     @property
     def parts(self) -> dict:
-        """The model's parts by name (docs/architecture.md, The World's parts); ``energy`` under an energy model."""
+        """The model's parts by name (docs/architecture.md, The World's parts); ``city`` in a city, ``energy`` under an
+        energy model."""
         parts = {"layouts": self.layouts, "fading": self.fading, "dynamics": self.dynamics, "reward": self.reward}
+        if self.layouts.city is not None:
+            parts["city"] = self.layouts.city
         return parts if self.energy is None else {**parts, "energy": self.energy}
 
     def set_seed(self, seed: int | None):

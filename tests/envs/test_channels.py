@@ -82,7 +82,9 @@ def rma_av(r, h, f_ghz):
 
 def losses(channel, environment, f_ghz, h):
     """``mean_path_loss_db`` of a UAV at every horizontal distance from a ground node (PT) and an aerial one (S)."""
-    cfg = SimpleNamespace(channel=channel, environment=environment, carrier_ghz=f_ghz, cell_size=1.0)
+    cfg = SimpleNamespace(
+        channel=channel, environment=environment, carrier_ghz=f_ghz, cell_size=1.0, geometric_los=False
+    )
     uavs = torch.tensor([[r, 0.0, h] for r in HORIZONTAL], dtype=torch.float64)
     nodes = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, h], [0.0, 0.0, h]], dtype=torch.float64)
     return mean_path_loss_db(uavs, nodes, cfg)

@@ -96,7 +96,13 @@ def test_no_module_imports_upward():
 
 # envs/'s layers in import order (docs/architecture.md): a module imports only earlier layers, or its own subpackage
 ENVS_LAYERS = [
-    {"_moved", "compat", "physics.radio", "physics.power"},  # _moved: standard library; compat: TorchRL only
+    {
+        "_moved",
+        "compat",
+        "errors",
+        "physics.radio",
+        "physics.power",
+    },  # _moved, errors: standard library; compat: TorchRL
     {"limits"},
     {"rules"},
     {"config"},

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import uavrl
 from uavrl.bench.tasks import BUDGET, SUITES
-from uavrl.envs.config import InvalidType
+from uavrl.envs.errors import InvalidType
 from uavrl.envs.rules import Rule, flag, interval, one_of, optional, whole
 from uavrl.experiment.io import nearest_existing, quoted, read_regular_text, save_text, special_kind
 from uavrl.experiment.plots import pyplot, save_figure

@@ -33,7 +33,7 @@ import hashlib
 import json
 
 from uavrl.envs._moved import moved_names
-from uavrl.envs.config import InvalidOption, InvalidType
+from uavrl.envs.errors import InvalidOption, InvalidType
 from uavrl.envs.rules import at_least, shown
 
 SEED_BASE = 2**62  # the held-out starts' streams: seeds [2^62, 2^63); no training command draws one there

@@ -8,7 +8,8 @@ import warnings
 
 from uavrl.agents.schema import network_refusal
 from uavrl.config import model_config
-from uavrl.envs.config import InvalidOption, InvalidType, ModelConfig
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.errors import InvalidOption, InvalidType
 from uavrl.envs.world import resolve_device
 from uavrl.experiment.saved import load_agent
 
