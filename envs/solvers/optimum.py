@@ -107,7 +107,7 @@ def solve(cell_contrib: torch.Tensor, direct: torch.Tensor, cfg: ModelConfig, me
         cfg: the model (its ``num_uavs`` and rate model).
         method: as :func:`optimum`'s.
     """
-    N, C = cfg.num_uavs, cfg.num_cells
+    N, C = cfg.num_uavs, cell_contrib.shape[1]  # the positions a UAV may take: the table's rows
     brute_size = math.comb(C, N) * 2**N
     if method not in ("auto", "brute", "exchange", "search"):
         raise InvalidOption("method", method, "allowed values are 'auto', 'brute', 'exchange', 'search'")
