@@ -23,8 +23,11 @@ from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_p
 from .physics import power, radio
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
-NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; an energy model with recharging adds RETURN
+NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; altitude levels add CLIMB, DESCEND, recharging RETURN
 RETURN = NUM_ACTIONS  # "return": fly home to recharge (docs/model.md, Energy and lifetime)
+CLIMB, DESCEND = NUM_ACTIONS, NUM_ACTIONS + 1  # one level up or down (docs/model.md, Altitude as a decision)
+VERTICAL_NAMES = ("climb", "descend")
+MAX_LEVELS = 64  # altitude levels: more would not be a decision between heights but a continuum
 SENSING, RELAYING = 0, 1
 
 LAYOUTS = ("line", "random", "reference_code")
@@ -53,8 +56,9 @@ PHYSICAL_OPTIONS = ("environment", "carrier_ghz", "bandwidth_mhz", "noise_figure
 
 def action_names(num_actions: int) -> str:
     """A UAV's ``num_actions`` actions in words for a one-line error: ``0..5 (up, down, left, right, sense, relay)``,
-    and ``return`` (6) with recharging."""
-    names = ACTION_NAMES + ("return",) * (num_actions - NUM_ACTIONS)
+    and ``return`` (6) with recharging, or ``climb`` (6) and ``descend`` (7) with altitude levels (the two never
+    together)."""
+    names = ACTION_NAMES + {NUM_ACTIONS + 1: ("return",), NUM_ACTIONS + 2: VERTICAL_NAMES}.get(num_actions, ())
     return f"0..{len(names) - 1} ({', '.join(names)})"
 
 
@@ -102,6 +106,8 @@ class ModelConfig:
         cell_size: a cell's side in m.
         altitude: the UAVs' (and S's and E's) height in cells; None: ``L1`` (or ``altitude_m``).
         altitude_m: the same height in m; give at most one of the two.
+        altitudes_m: the UAVs' altitude levels in m, ascending (None: one level, the height above); the UAVs climb
+            and descend one level a step, and S and E fly at the height above.
         channel: the mean gain of a link: ``"paper"``, ``"reference_code"`` (power laws), ``"al_hourani"``,
             ``"tr36777_uma"``, ``"tr36777_umi"`` or ``"tr36777_rma"`` (physical models).
         alpha: the power law's path-loss exponent; None: the channel's own (2 for ``paper``, 4 for
@@ -171,6 +177,7 @@ class ModelConfig:
     cell_size: float = 10.0
     altitude: float | None = None
     altitude_m: float | None = None
+    altitudes_m: tuple[float, ...] | None = None
     channel: str = "paper"
     alpha: float | None = None
     g0: float | None = None
@@ -266,6 +273,7 @@ class ModelConfig:
         self._check_city()
         self._check_physics()
         self._check_energy()
+        self._check_levels()
 
     def _resolve_channel(self):
         """``g0`` and ``alpha`` of ``None`` become the power law's own; a channel refuses the options it does not read
@@ -309,6 +317,43 @@ class ModelConfig:
         if problem is not None:
             name, reason = problem
             raise InvalidOption(name, getattr(self, name), reason)
+
+    def _check_levels(self):
+        """Altitude levels: ascending distinct finite heights in m, each one where the channel holds and the rates are
+        finite, as the one height is checked; not beside an energy model (whose step costs know no climb)."""
+        if self.altitudes_m is None:
+            return
+        levels = self.altitudes_m
+        if isinstance(levels, (str, bytes)) or not hasattr(levels, "__len__") or not 1 <= len(levels) <= MAX_LEVELS:
+            reason = f"give a list of 1 to {MAX_LEVELS} heights in m, ascending, e.g. [30, 100, 300]"
+            raise InvalidOption("altitudes_m", levels, reason)
+        if not all(is_number(h) and h > 0 for h in levels) or list(levels) != sorted(set(levels)):
+            raise InvalidOption("altitudes_m", list(levels), "give distinct finite heights above 0 m, ascending")
+        object.__setattr__(self, "altitudes_m", tuple(float(h) for h in levels))
+        if self.energy != "none":
+            reason = "the energy models cost a move in the plane only: altitude levels need energy='none'"
+            raise InvalidOption("altitudes_m", list(levels), reason)
+        for metres in self.altitudes_m:
+            values = {name: getattr(self, name) for name in (*_PHYSICS_OPTIONS, "altitude_m")}
+            values |= {"altitude": metres / self.cell_size, "altitude_m": metres}
+            problem = (radio_problem(values) if self.is_physical else None) or (None, physics_problem(values))
+            if problem[1] is not None:
+                raise InvalidOption("altitudes_m", list(self.altitudes_m), f"the level {metres:g} m: {problem[1]}")
+
+    @property
+    def num_levels(self) -> int:
+        """The UAVs' altitude levels: 1 unless ``altitudes_m`` gives several."""
+        return 1 if self.altitudes_m is None else len(self.altitudes_m)
+
+    @property
+    def level_heights(self) -> tuple[float, ...]:
+        """The UAVs' heights in cells, one per level (``height`` alone without ``altitudes_m``)."""
+        return (self.height,) if self.altitudes_m is None else tuple(h / self.cell_size for h in self.altitudes_m)
+
+    @property
+    def num_positions(self) -> int:
+        """The (cell, level) positions a UAV may take at most (those inside no building, in a city)."""
+        return self.num_cells * self.num_levels
 
     def _check_city(self):
         """A city's options: refused where no city reads them, a city only under a physical channel (the power laws
@@ -560,17 +605,24 @@ class ModelConfig:
 
     @property
     def num_actions(self) -> int:
-        """A UAV's actions: the paper's 6, and ``return`` (:data:`RETURN`) under an energy model that recharges."""
-        return NUM_ACTIONS + (self.recharge_steps is not None)
+        """A UAV's actions: the paper's 6, ``climb`` and ``descend`` (:data:`CLIMB`, :data:`DESCEND`) with altitude
+        levels, ``return`` (:data:`RETURN`) under an energy model that recharges."""
+        return NUM_ACTIONS + (self.recharge_steps is not None) + 2 * (self.num_levels > 1)
+
+    @property
+    def joint_action_base(self) -> int:
+        """A UAV's actions within a joint action of the tabular learner and the exact solvers: ``num_actions``
+        without ``return``."""
+        return NUM_ACTIONS + 2 * (self.num_levels > 1)
 
     @property
     def num_joint_actions(self) -> int:
-        return NUM_ACTIONS**self.num_uavs
+        return self.joint_action_base**self.num_uavs
 
     @property
     def num_states(self) -> int:
         """Size of the tabular state space (docs/model.md, the tabular learner), a Python int of any size."""
-        base = 2 * self.num_cells if self.state_includes_tasks else self.num_cells
+        base = 2 * self.num_positions if self.state_includes_tasks else self.num_positions
         return base**self.num_uavs
 
     @property

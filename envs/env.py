@@ -17,7 +17,6 @@ from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
 from .config import (
-    NUM_ACTIONS,
     RETURN,
     ModelConfig,
     action_names,
@@ -237,6 +236,8 @@ class UAVSpectrumEnv(EnvBase):
             tasks=Categorical(2, (N,), dtype=torch.long, device=self.device),
             device=self.device,
         )
+        if self.cfg.num_levels > 1:  # each UAV's altitude level, 0 the lowest
+            obs["levels"] = Categorical(self.cfg.num_levels, (N,), dtype=torch.long, device=self.device)
         if self.world.diagnostics:
             for key in ("r_pu", "r_se", "utility"):
                 obs[key] = Unbounded((1,), dtype=torch.float32, device=self.device)
@@ -290,7 +291,7 @@ class UAVSpectrumEnv(EnvBase):
             out["nodes"] = self.world.nodes
         if self.agent_rewards and "reward" in out:
             group["reward"] = out.pop("reward").unsqueeze(1).expand(B, N, 1).clone()
-        if self.num_actions > NUM_ACTIONS:  # "return" is refused where not valid: random actions (rollout) keep off it
+        if self.cfg.recharge_steps is not None:  # "return" is refused where not valid: random actions keep off it
             # the mask kept on the action spec, as TorchRL's PettingZoo wrapper keeps its groups' masks
             self.input_spec["full_action_spec", "agents", "action"].update_mask(group["action_mask"])
         out["agents"] = TensorDict._new_unsafe(group, batch_size=torch.Size((B, N)), device=dev)
@@ -367,9 +368,9 @@ class UAVSpectrumEnv(EnvBase):
             bad = (lo if lo < 0 else hi).item()
             message = f"('agents', 'action') holds {bad}: actions are {action_names(self.num_actions)}"
             raise InvalidOption(ACTION_KEY, message=message)
-        if hi == RETURN:  # "return" is a serving UAV's only: on the grid
+        if hi == RETURN and self.cfg.recharge_steps is not None:  # "return" is a serving UAV's only: on the grid
             # the World's cells, not the spec's mask: Categorical.to(device) drops the mask (env.to before a step)
-            away = (action == RETURN) & (self.world.state.cell >= self.cfg.num_cells)
+            away = (action == RETURN) & (self.world.state.cell >= self.world.num_positions)
             if away.any():
                 world, uav = (int(i) for i in away.nonzero()[0])
                 raise InvalidOption(

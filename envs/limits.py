@@ -34,6 +34,7 @@ from .physics import radio
 NODE_NAMES = ("PT", "PR", "S", "E")
 OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours
 NODE_FEATURES = 12  # PT, PR, S, E as (x / L1, y / L2, z / h): the last entries of the state
+VERTICAL_FEATURES = 5  # with altitude levels, a UAV's level and the contributions a climb and a descent reach
 SEED_LIMIT = 2**63  # seeds are int64: a seed (a run's, a world's) is a whole number in [0, 2^63), wrapped below it
 _LOG_MAX = math.log10(sys.float_info.max)  # float64's largest number, 1.8e308
 _LOG_MIN = math.log10(sys.float_info.min)  # its smallest normal number, 2.2e-308
@@ -365,24 +366,27 @@ DEFAULT_MEMORY_BUDGET = 4 * 2**30  # bytes a World (or a command's largest alloc
 EXACT_SOLVER_BUDGET = 2**30  # uavrl.envs.solvers.exact.MEMORY_BUDGET: beyond it the evaluation uses lower bounds
 
 
-def num_configurations(grid: tuple[int, int], num_uavs: int) -> int:
-    """Sets of N (cell, task) pairs on distinct cells: ``C(C, N) 2^N``."""
-    return math.comb(grid[0] * grid[1], num_uavs) * 2**num_uavs
+def num_configurations(num_positions: int, num_uavs: int) -> int:
+    """Sets of N (position, task) pairs on distinct positions: ``C(P, N) 2^N``."""
+    return math.comb(num_positions, num_uavs) * 2**num_uavs
 
 
-def required_bytes(grid: tuple[int, int], num_uavs: int) -> int:
-    """Memory of the exact solver (:class:`uavrl.envs.solvers.exact.ConfigurationSpace`): the int32 successor table, the
-    configurations and one chunked sweep of ``2^23`` gathered values."""
-    K, A = num_configurations(grid, num_uavs), 6**num_uavs
+def required_bytes(num_positions: int, num_uavs: int, num_actions: int = 6) -> int:
+    """Memory of the exact solver (:class:`uavrl.envs.solvers.exact.ConfigurationSpace`) over ``num_positions``
+    positions and ``num_actions`` per UAV: the int32 successor table, the configurations and one chunked sweep of
+    ``2^23`` gathered values."""
+    K, A = num_configurations(num_positions, num_uavs), num_actions**num_uavs
     return K * A * 4 + K * num_uavs * 16 + K * 8 * 8 + (1 << 23) * 16
 
 
-def exact_solver_fits(grid: tuple[int, int], num_uavs: int, memory_budget: int = EXACT_SOLVER_BUDGET) -> bool:
+def exact_solver_fits(
+    num_positions: int, num_uavs: int, memory_budget: int = EXACT_SOLVER_BUDGET, num_actions: int = 6
+) -> bool:
     """Whether :func:`required_bytes` is within ``memory_budget``; a team whose joint actions alone are over it is
     answered without counting the configurations (a binomial that takes seconds for 10^5 UAVs)."""
-    if num_uavs * math.log(6) + math.log(4) > math.log(max(memory_budget, 1)):
+    if num_uavs * math.log(num_actions) + math.log(4) > math.log(max(memory_budget, 1)):
         return False
-    return required_bytes(grid, num_uavs) <= memory_budget
+    return required_bytes(num_positions, num_uavs, num_actions) <= memory_budget
 
 
 def table_bytes(cfg, num_tables: int) -> int:
@@ -407,22 +411,25 @@ def row_itemsize(cfg) -> int:
     return 4 if cfg.num_states < 2**31 else 8
 
 
-def observation_size(num_uavs: int, energy: bool) -> int:
+def observation_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
     """Per-UAV observation entries of a World of ``num_uavs`` UAVs (spares included): its own (x, y, task) and
     contributions at its own and 4 next cells, the others' (x, y, task); under an energy model (``energy``) then its
-    battery and service flag, and the others'.  The World's, the networks' and the costs' one formula.
+    battery and service flag, and the others'; with altitude levels (``levels``) then its level and the contributions
+    at the positions a climb and a descent reach (:data:`VERTICAL_FEATURES`), and the others' levels.  The World's,
+    the networks' and the costs' one formula.
 
     Example:
-        >>> observation_size(2, energy=False), observation_size(2, energy=True)
-        (16, 20)
+        >>> observation_size(2, energy=False), observation_size(2, energy=True), observation_size(2, False, True)
+        (16, 20, 22)
     """
-    return OWN_FEATURES + 3 * (num_uavs - 1) + (2 * num_uavs if energy else 0)
+    vertical = VERTICAL_FEATURES + num_uavs - 1 if levels else 0
+    return OWN_FEATURES + 3 * (num_uavs - 1) + (2 * num_uavs if energy else 0) + vertical
 
 
-def state_size(num_uavs: int, energy: bool) -> int:
+def state_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
     """Entries of a world's state: per UAV (x, y, task) and its contributions at its cell (under an energy model then
-    its battery and service flag), then the 4 nodes' (x, y, z)."""
-    return (7 if energy else 5) * num_uavs + NODE_FEATURES
+    its battery and service flag; with altitude levels then its level), then the 4 nodes' (x, y, z)."""
+    return (7 if energy else 5) * num_uavs + (num_uavs if levels else 0) + NODE_FEATURES
 
 
 PAIR_FEATURES = 3  # the size-free network's view of another UAV: (dx, dy) by the grid's span, exp(-its distance)
@@ -543,9 +550,10 @@ def evaluation_bytes(cfg, num_starts: int, horizon: int, tables: int = 0) -> int
     else:
         play = num_starts * horizon * frame_bytes(cfg)
     layouts = num_starts if cfg.layout == "random" else 1
-    if exact_solver_fits(cfg.grid, cfg.num_uavs):
+    P, N, A = cfg.num_positions, cfg.num_uavs, cfg.joint_action_base
+    if exact_solver_fits(P, N, num_actions=A):
         # the solver's tables and each layout's values over its configurations
-        solver, configurations = required_bytes(cfg.grid, cfg.num_uavs), num_configurations(cfg.grid, cfg.num_uavs)
+        solver, configurations = required_bytes(P, N, A), num_configurations(P, N)
         references = solver + layouts * configurations * 8 * 4
     else:
         references = bounds_bytes(cfg, num_starts, horizon)

@@ -113,12 +113,14 @@ def _city_part(name, parameters, seed, grid, cell_size, height, layout) -> CityP
 
 def city_part(cfg) -> CityPart | None:
     """The city part of the model ``cfg`` (``None`` under ``city="none"``), built once per city, grid and height and
-    shared.  A model whose UAVs (all at one height) or fixed S and E would hover inside a building is refused in one
-    line naming the height as given."""
+    shared.  A model whose UAVs (at one level) or fixed S and E would hover inside a building is refused in one line
+    naming the height as given; with altitude levels, the positions inside buildings are left out
+    (:mod:`.positions`)."""
     if cfg.city == "none":
         return None
     part = _city_part(cfg.city, cfg.city_parameters, cfg.city_seed, cfg.grid, cfg.cell_size, cfg.height, cfg.layout)
     blocked, nodes_blocked, tallest = part.blocked
+    blocked *= cfg.num_levels == 1  # with altitude levels a position inside a building is one a UAV cannot take
     if blocked or nodes_blocked:
         name = "altitude_m" if cfg.altitude_m is not None else "altitude"
         reason = (

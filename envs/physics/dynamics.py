@@ -1,7 +1,8 @@
 """The dynamics part: the UAVs' state, and how a reset and a joint action change it (docs/model.md, What a UAV can
 do in one step).
 
-The state is one ``[B, N]`` tensor per name of :data:`UAV_STATE`: ``cell`` (``y L1 + x``) and ``task`` (0 sensing,
+The state is one ``[B, N]`` tensor per name of :data:`UAV_STATE`: ``cell``, the UAV's position (its cell ``y L1 + x``
+at one level; with altitude levels a (cell, level) position of :mod:`.positions`) and ``task`` (0 sensing,
 1 relaying).  :class:`Dynamics` gives
 
 - ``start(keys, counters)``: the first values of ``k`` worlds at a reset, by name, from their random streams;
@@ -32,13 +33,14 @@ from __future__ import annotations
 
 import torch
 
-from ..config import RELAYING, SENSING, ModelConfig
+from ..config import NUM_ACTIONS, RELAYING, SENSING, ModelConfig
 from ..limits import KEYED_PLACEMENT_CELLS
 from . import streams
-from .grid import grid_neighbours
+from .positions import model_positions
 
 UAV_STATE = ("cell", "task")  # the per-UAV variables, each a [B, N] tensor of the World's state
-NO_OP = 4  # "sense": the one action of a UAV out of service under an energy model (uavrl.envs.physics.energy)
+SENSE, RELAY = 4, 5  # the task actions
+NO_OP = SENSE  # the one action of a UAV out of service under an energy model (uavrl.envs.physics.energy)
 
 
 def _lookup(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
@@ -51,17 +53,25 @@ class Dynamics:
 
     def __init__(self, cfg: ModelConfig, device="cpu"):
         self.cfg = cfg
-        C, A = cfg.num_cells, cfg.num_actions
+        A = cfg.num_actions
         self.num_actions = A
+        self.positions = model_positions(cfg, device)
+        C = len(self.positions)  # the positions a UAV may take: the cells, at every altitude level
+        self.num_positions = C
         cell = torch.arange(C, device=device)
-        self.neighbours = grid_neighbours(cfg.grid, device)  # [C, 4] target cell of each move, -1 off the grid
-        # move_to[A c + a]: the cell after action a alone from cell c (a move off the grid, sensing, relaying stay,
-        # and "return", whose flight home is the energy part's)
-        stays = cell[:, None].expand(C, A - 4)
-        self.move_to = torch.cat([self.neighbours.where(self.neighbours >= 0, cell[:, None]), stays], -1).flatten()
-        # task_after[2 a + task]: the task after action a (4 senses, 5 relays, a move keeps it)
-        self.task_after = torch.tensor([0, 1] * 4 + [SENSING] * 2 + [RELAYING] * 2 + [0, 1] * (A - 6), device=device)
-        self.cell_mask = torch.cat([self.neighbours >= 0, torch.ones(C, A - 4, dtype=torch.bool, device=device)], -1)
+        # [C, M] target position of each move (4 in the plane, climb and descend with levels), -1 where none
+        self.neighbours = self.positions.neighbours
+        # each action's move: its column of neighbours, or none (sensing, relaying and "return", whose flight home is
+        # the energy part's, stay)
+        column = [0, 1, 2, 3, None, None] + ([4, 5] if cfg.num_levels > 1 else []) + [None] * (A - NUM_ACTIONS)
+        column = column[:A]
+        targets = torch.stack([cell if m is None else self.neighbours[:, m] for m in column], -1)  # [C, A], -1: none
+        # move_to[A c + a]: the position after action a alone from position c (a move nowhere stays)
+        self.move_to = targets.where(targets >= 0, cell[:, None]).flatten()
+        # task_after[2 a + task]: the task after action a (4 senses, 5 relays, every other keeps it)
+        after = {SENSE: [SENSING] * 2, RELAY: [RELAYING] * 2}
+        self.task_after = torch.tensor([t for a in range(A) for t in after.get(a, [0, 1])], device=device)
+        self.cell_mask = targets >= 0
         # under an energy model a UAV out of service sits on one more cell, C, off the grid: it stays there, and
         # "sense" is its only action (uavrl.envs.physics.energy)
         self.slots = C + (cfg.energy != "none")
@@ -76,18 +86,18 @@ class Dynamics:
 
         The cells: on up to :data:`~uavrl.envs.limits.KEYED_PLACEMENT_CELLS` cells the N smallest of C random keys,
         beyond it :func:`~.streams.distinct_cells` (both uniform over the ordered N-tuples of distinct cells)."""
-        cfg, N = self.cfg, self.cfg.num_uavs
-        if cfg.num_cells <= KEYED_PLACEMENT_CELLS:
-            keyed = streams.random_bits(keys, counters, streams.POSITIONS, cfg.num_cells)
+        cfg, N, C = self.cfg, self.cfg.num_uavs, self.num_positions
+        if C <= KEYED_PLACEMENT_CELLS:
+            keyed = streams.random_bits(keys, counters, streams.POSITIONS, C)
             cell = keyed.topk(N, dim=-1, largest=False).indices
         else:
-            cell = streams.distinct_cells(keys, counters, streams.POSITIONS, cfg.num_cells, N)
+            cell = streams.distinct_cells(keys, counters, streams.POSITIONS, C, N)
         if cfg.init_tasks == "random":
             task = streams.random_bits(keys, counters, streams.TASKS, N) & 1
         else:
             task = torch.full((len(keys), N), RELAYING if cfg.init_tasks == "relaying" else SENSING, device=keys.device)
         if cfg.num_spares:  # the spares wait at the base, sensing nothing, on the cell off the grid
-            cell = torch.cat([cell, cell.new_full((len(keys), cfg.num_spares), cfg.num_cells)], -1)
+            cell = torch.cat([cell, cell.new_full((len(keys), cfg.num_spares), C)], -1)
             task = torch.cat([task, task.new_full((len(keys), cfg.num_spares), SENSING)], -1)
         return {"cell": cell, "task": task}
 

@@ -69,44 +69,53 @@ def manhattan(cells: torch.Tensor, others: torch.Tensor, width: int) -> torch.Te
     return delta[..., 0] + delta[..., 1]
 
 
-def decode_joint_actions(num_uavs: int, device=None) -> torch.Tensor:
-    """``[6^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i 6^i`` of ``num_uavs`` UAVs, on ``device``.
+def decode_joint_actions(num_uavs: int, device=None, num_actions: int = NUM_ACTIONS) -> torch.Tensor:
+    """``[A^N, N]`` per-UAV actions of every joint action ``j = sum_i a_i A^i`` of ``num_uavs`` UAVs of
+    ``num_actions`` actions ``A`` each (6; 8 with altitude levels), on ``device``.
 
-    A team's joint action indexes the rows: UAV ``i``'s action is digit ``i`` of ``j`` in base 6. More than 7 UAVs
-    (6^8 joint actions) is refused.
+    A team's joint action indexes the rows: UAV ``i``'s action is digit ``i`` of ``j`` in base ``A``. More than
+    ``MAX_JOINT_ACTIONS`` joint actions (6^7) is refused.
 
     >>> decode_joint_actions(2)[[0, 1, 6, 35]].tolist()
     [[0, 0], [1, 0], [0, 1], [5, 5]]
     """
-    if NUM_ACTIONS**num_uavs > MAX_JOINT_ACTIONS:
-        raise ValueError(f"num_uavs={num_uavs} has 6^{num_uavs} joint actions: joint-action tables allow N <= 7")
-    j = torch.arange(NUM_ACTIONS**num_uavs, device=device)
-    return torch.stack([(j // NUM_ACTIONS**i) % NUM_ACTIONS for i in range(num_uavs)], -1)
+    if num_actions**num_uavs > MAX_JOINT_ACTIONS:
+        raise ValueError(
+            f"num_uavs={num_uavs} has {num_actions}^{num_uavs} joint actions: joint-action tables allow at most "
+            f"{MAX_JOINT_ACTIONS:,} (N <= 7 with 6 actions, N <= 6 with 8)"
+        )
+    j = torch.arange(num_actions**num_uavs, device=device)
+    return torch.stack([(j // num_actions**i) % num_actions for i in range(num_uavs)], -1)
 
 
 def joint_targets(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N, N]`` target cell of every UAV under every joint action from ``[..., N]`` cells (-1: off the
-    grid).
+    """``[..., A^N, N]`` target position of every UAV under every joint action from ``[..., N]`` positions (-1: off
+    the grid, the levels, or into a building).
 
-    ``cells`` are flat cell indices (``y * L1 + x``), ``neighbours`` the ``[L1 * L2, 4]`` table of the cell
-    each move (up, down, left, right) leads to (-1 off the grid, :func:`grid_neighbours`), ``num_uavs`` the team's
-    size N; a task action keeps the UAV in its cell.
+    ``cells`` are position indices (cells ``y * L1 + x`` without altitude levels), ``neighbours`` the ``[P, M]`` table
+    of the position each move reaches (up, down, left, right, and with levels climb, descend; -1 where none:
+    :func:`grid_neighbours`, :func:`~.positions.model_positions`), ``num_uavs`` the team's size N; a UAV has
+    ``A = M + 2`` actions (the moves, then sense and relay at 4 and 5, which keep it where it is).
     """
-    actions = decode_joint_actions(num_uavs, cells.device)  # [A, N]
-    moves = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, 4)  # [..., A, N, 4]
-    moved = torch.gather(moves, -1, actions.clamp(max=3).expand_as(moves[..., 0]).unsqueeze(-1)).squeeze(-1)
-    return torch.where(actions < 4, moved, cells.unsqueeze(-2))
+    moves = neighbours.shape[1]
+    actions = decode_joint_actions(num_uavs, cells.device, moves + 2)  # [A, N]
+    column = torch.where(actions >= NUM_ACTIONS, actions - 2, actions.clamp(max=3))  # climb 6, descend 7: columns 4, 5
+    moving = (actions < 4) | (actions >= NUM_ACTIONS)
+    options = neighbours[cells].unsqueeze(-3).expand(*cells.shape[:-1], actions.shape[0], num_uavs, moves)
+    moved = torch.gather(options, -1, column.expand_as(options[..., 0]).unsqueeze(-1)).squeeze(-1)
+    return torch.where(moving, moved, cells.unsqueeze(-2))
 
 
-def joint_next_tasks(tasks: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N, N]`` task of every UAV after every joint action from ``[..., N]`` tasks (4 senses, 5 relays)."""
-    actions = decode_joint_actions(num_uavs, tasks.device)  # [A, N]
+def joint_next_tasks(tasks: torch.Tensor, num_uavs: int, num_actions: int = NUM_ACTIONS) -> torch.Tensor:
+    """``[..., A^N, N]`` task of every UAV after every joint action of ``num_actions`` actions each from ``[..., N]``
+    tasks (4 senses, 5 relays)."""
+    actions = decode_joint_actions(num_uavs, tasks.device, num_actions)  # [A, N]
     return torch.where(actions == 4, 0, torch.where(actions == 5, 1, tasks.unsqueeze(-2)))
 
 
 def joint_action_valid(cells: torch.Tensor, neighbours: torch.Tensor, num_uavs: int) -> torch.Tensor:
-    """``[..., 6^N]`` validity of every joint action at cell configurations ``[..., N]``: on the grid, cells
-    distinct.
+    """``[..., A^N]`` validity of every joint action at position configurations ``[..., N]``: every move reaches a
+    position, targets distinct.
 
     ``cells``, ``neighbours`` and ``num_uavs`` as in :func:`joint_targets`. Two UAVs side by side on a 2x2 grid:
 

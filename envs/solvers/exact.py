@@ -39,10 +39,11 @@ import math
 
 import torch
 
-from ..config import NUM_ACTIONS, ModelConfig
+from ..config import ModelConfig
 from ..limits import EXACT_SOLVER_BUDGET, exact_solver_fits, num_configurations, required_bytes
-from ..physics.channel import cell_xyz, direct_terms, fixed_layout, link_gains, rates, relay_contributions
+from ..physics.channel import direct_terms, fixed_layout, link_gains, rates, relay_contributions
 from ..physics.grid import grid_neighbours, joint_next_tasks, joint_targets, targets_valid
+from ..physics.positions import model_positions
 
 MEMORY_BUDGET = EXACT_SOLVER_BUDGET  # bytes of the successor table and one solver sweep
 
@@ -53,8 +54,15 @@ UNREACHABLE = torch.iinfo(torch.int32).max
 
 
 def fits(cfg: ModelConfig, memory_budget: int = MEMORY_BUDGET) -> bool:
-    """Whether :class:`ConfigurationSpace` of ``cfg``'s grid and team fits ``memory_budget``."""
-    return exact_solver_fits(cfg.grid, cfg.num_uavs, memory_budget)
+    """Whether :class:`ConfigurationSpace` of ``cfg``'s positions and team fits ``memory_budget``."""
+    return exact_solver_fits(cfg.num_positions, cfg.num_uavs, memory_budget, cfg.joint_action_base)
+
+
+def model_space(cfg: ModelConfig, device="cpu", memory_budget: int = MEMORY_BUDGET) -> ConfigurationSpace:
+    """The :class:`ConfigurationSpace` of the model ``cfg``: its team on its positions (every altitude level, no
+    position inside a building)."""
+    neighbours = None if cfg.num_levels == 1 else model_positions(cfg, device).neighbours
+    return ConfigurationSpace(cfg.grid, cfg.num_uavs, device, memory_budget, neighbours)
 
 
 def fixed_layout_tables(cfg: ModelConfig, device=None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -70,16 +78,16 @@ def fixed_layout_tables(cfg: ModelConfig, device=None) -> tuple[torch.Tensor, to
         raise ValueError(
             "layout='random' has no fixed layout: take each world's tables from env.cell_contributions and env.direct"
         )
-    contributions = relay_contributions(link_gains(cell_xyz(cfg, torch.float64, device), nodes, cfg), cfg)
+    contributions = relay_contributions(link_gains(model_positions(cfg, device).xyz, nodes, cfg), cfg)
     return contributions.unsqueeze(0), direct_terms(nodes, cfg).unsqueeze(0)
 
 
 class ConfigurationSpace:
     """Every configuration of ``num_uavs`` interchangeable UAVs on ``grid`` and the valid transitions between them.
 
-    Attributes: ``cells`` ``[K, N]`` (ascending) and ``tasks`` ``[K, N]`` of every
-    configuration ``k``; ``successors`` ``[K, 6^N]`` int32, the configuration
-    after each joint action of the UAVs in cell order, ``-1`` where invalid.
+    Attributes: ``cells`` ``[K, N]`` (ascending positions: cells without altitude levels) and ``tasks`` ``[K, N]``
+    of every configuration ``k``; ``successors`` ``[K, A^N]`` int32, the configuration after each joint action of
+    the UAVs in position order, ``-1`` where invalid (``A = 6``, 8 with altitude levels).
 
     Raises ``ValueError`` (one line, with the bytes it would need) when the
     tables exceed ``memory_budget``.
@@ -89,6 +97,8 @@ class ConfigurationSpace:
         num_uavs: ``N``.
         device: the torch device of the tables.
         memory_budget: the bytes the tables may take.
+        neighbours: the positions' moves ``[P, M]`` (:func:`~uavrl.envs.physics.positions.model_positions`); None:
+            the grid's cells at one level.  :func:`model_space` gives a model's.
 
     Example:
         >>> space = ConfigurationSpace((3, 3), 2)
@@ -96,19 +106,30 @@ class ConfigurationSpace:
         (torch.Size([144, 2]), torch.Size([144, 36]))
     """
 
-    def __init__(self, grid: tuple[int, int], num_uavs: int, device="cpu", memory_budget: int = MEMORY_BUDGET):
-        need = required_bytes(grid, num_uavs)
-        N, (L1, L2), A = num_uavs, grid, NUM_ACTIONS**num_uavs
-        C = L1 * L2
+    def __init__(
+        self,
+        grid: tuple[int, int],
+        num_uavs: int,
+        device="cpu",
+        memory_budget: int = MEMORY_BUDGET,
+        neighbours: torch.Tensor | None = None,
+    ):
+        dev = torch.device(device)
+        # the positions' moves: the grid's cells without altitude levels, else model_positions(cfg).neighbours
+        self.neighbours = grid_neighbours(grid, dev) if neighbours is None else neighbours.to(dev)
+        N, (L1, L2), C = num_uavs, grid, len(self.neighbours)
+        base = self.neighbours.shape[1] + 2
+        A = base**num_uavs
+        need = required_bytes(C, num_uavs, base)
         if need > memory_budget:
+            where = f"{L1}x{L2}" if C == L1 * L2 else f"{C:,} positions of {L1}x{L2}"
             raise ValueError(
-                f"the exact solver for {N} UAVs on {L1}x{L2} needs {need:,} bytes ({need / 2**30:.3g} GiB) for "
-                f"{num_configurations(grid, N):,} configurations x {A:,} joint actions, over its budget of "
+                f"the exact solver for {N} UAVs on {where} needs {need:,} bytes ({need / 2**30:.3g} GiB) for "
+                f"{num_configurations(C, N):,} configurations x {A:,} joint actions, over its budget of "
                 f"{int(memory_budget):,} bytes: the evaluation uses lower bounds there"
             )
-        self.grid, self.num_uavs, self.num_joint_actions, self.device = tuple(grid), N, A, torch.device(device)
-        dev = self.device
-        self.neighbours = grid_neighbours(grid, dev)
+        self.grid, self.num_uavs, self.num_joint_actions, self.device = tuple(grid), N, A, dev
+        self.num_actions = base
         # binomial[n, r] = C(n, r): the rank of ascending cells c_0 < ... < c_{N-1} is sum_i C(c_i, i + 1)
         self._binomial = torch.tensor(
             [[math.comb(n, r) for r in range(N + 1)] for n in range(C + 1)], dtype=torch.long, device=dev
@@ -143,7 +164,7 @@ class ConfigurationSpace:
         invalid."""
         target = joint_targets(cells, self.neighbours, self.num_uavs)
         valid = targets_valid(target)
-        nxt = self.index(target.clamp(min=0), joint_next_tasks(tasks, self.num_uavs))
+        nxt = self.index(target.clamp(min=0), joint_next_tasks(tasks, self.num_uavs, self.num_actions))
         return torch.where(valid, nxt, -1)
 
     def utility(

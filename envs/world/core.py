@@ -8,7 +8,7 @@ import copy
 import torch
 
 from ..config import ModelConfig
-from ..limits import DEFAULT_MEMORY_BUDGET
+from ..limits import DEFAULT_MEMORY_BUDGET, VERTICAL_FEATURES
 from ..physics import streams
 from ..physics.channel import rates, relay_contributions
 from ..physics.dynamics import UAV_STATE
@@ -109,9 +109,10 @@ class World(LayoutTables, Observations, SolverQueries):
         self.reward = TeamReward(cfg, self.fading.random)
         self.energy = energy_part(cfg, dev)
         self._slots = self.dynamics.slots  # the cells a UAV's code can name: C, and one off the grid with energy
+        self.num_positions = self.dynamics.num_positions  # the (cell, level) positions: the cells without levels
         self._share(GRID_TABLES, self._build_geometry)
         # per-layout tables: one shared row for a fixed layout, one per world for random ones (zeros until a reset)
-        C, f64 = cfg.num_cells, torch.float64
+        C, f64 = self.num_positions, torch.float64
         fixed = self.layouts.fixed
         Bt = 1 if fixed is not None else B
         self._code_offset = None if Bt == 1 else torch.arange(B, device=dev).unsqueeze(-1) * (2 * self._slots)
@@ -122,6 +123,7 @@ class World(LayoutTables, Observations, SolverQueries):
         self._code_obs = torch.zeros(Bt, K, 13, dtype=torch.float32, device=dev)  # own (x, y, task), contributions
         self._code_rate = torch.zeros(Bt, K, 3, dtype=f64, device=dev)  # adds to (sum PU, sum SE, relaying count)
         self._node_obs = torch.zeros(Bt, NODE_FEATURES, dtype=torch.float32, device=dev)
+        self._code_vertical = None if cfg.num_levels == 1 else torch.zeros(Bt, K, VERTICAL_FEATURES, device=dev)
         self._direct = torch.zeros(Bt, 2, dtype=f64, device=dev)
         self._u_star = torch.zeros(Bt, dtype=f64, device=dev)  # U_STAR_REWARDS only: each layout's exact U*
         self._fading_table = None  # the fading part's table, its shape the part's: made by the first layout
@@ -227,7 +229,7 @@ class World(LayoutTables, Observations, SolverQueries):
         cfg = self.cfg
         if not self.fading.random:
             if self._pair_rates is not None:
-                return self._pair_rates.index_select(0, torch.add(code[:, 1], code[:, 0], alpha=2 * cfg.num_cells))
+                return self._pair_rates.index_select(0, torch.add(code[:, 1], code[:, 0], alpha=2 * self.num_positions))
             return self._sum_rates(code, worlds)
         s = self._s
         keys, counters = (s.keys, s.counters) if worlds is None else (s.keys[worlds], s.counters[worlds])

@@ -3,8 +3,10 @@ tables of :mod:`.tables` (:class:`Observations`, a part of :class:`~uavrl.envs.w
 reset or a step.
 
 A UAV's observation is its own (x, y, task), the contributions at its cell and the 4 next cells, then the others'
-(x, y, task) (under an energy model then the batteries and service flags); a world's state is every UAV's (x, y, task)
-and contributions at its cell, then the 4 nodes' positions (:data:`NODE_FEATURES` entries).
+(x, y, task) (under an energy model then the batteries and service flags; with altitude levels then its level, the
+contributions a climb and a descent reach and the others' levels); a world's state is every UAV's (x, y, task) and
+contributions at its cell (and battery, service flag, level), then the 4 nodes' positions (:data:`NODE_FEATURES`
+entries).
 """
 
 from __future__ import annotations
@@ -40,23 +42,23 @@ class Observations:
 
         The 4 nodes' positions are the same for every UAV of a world: they are the last
         :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
-        return observation_size(self.num_uavs, self.energy is not None)
+        return observation_size(self.num_uavs, self.energy is not None, self.cfg.num_levels > 1)
 
     @property
     def state_size(self) -> int:
         """Per UAV (x, y, task) and its contributions at its cell (under an energy model then per UAV its battery and
         service flag), then the 4 nodes' (x, y, z)."""
-        return state_size(self.num_uavs, self.energy is not None)
+        return state_size(self.num_uavs, self.energy is not None, self.cfg.num_levels > 1)
 
     def _assemble(
         self, code: torch.Tensor, energy: torch.Tensor | None = None, tables: tuple | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
         layout); under an energy model ``energy`` ``[W, N, 2]`` their features (default: the worlds' batteries now);
-        ``tables`` ``(code_obs, node_obs)`` of their own layouts (:meth:`_observation_tables`; default: the
-        worlds')."""
+        ``tables`` ``(code_obs, node_obs, code_vertical)`` of their own layouts (:meth:`_observation_tables`; default:
+        the worlds')."""
         W, N = code.shape
-        code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables
+        code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables[:2]
         own = self._code_rows(code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
@@ -74,6 +76,13 @@ class Observations:
             elif N > 2:
                 parts.append(torch.cat([energy, energy], 1).as_strided((W, N, 2 * (N - 1)), (4 * N, 2, 1), 2))
             per_uav.append(energy.reshape(W, 2 * N))
+        if self._code_level is not None:  # then its level and what a climb and a descent reach, the others' levels
+            vertical_obs = self._code_vertical if tables is None else tables[2]
+            parts.append(self._code_rows(vertical_obs, code))
+            level = self._code_level.index_select(0, code.view(-1)).view(W, N)
+            if N > 1:
+                parts.append(torch.cat([level, level], 1).as_strided((W, N, N - 1), (2 * N, 1, 1), 1))
+            per_uav.append(level)
         observation = torch.cat(parts, -1) if len(parts) > 1 else own
         state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
         return observation, state
@@ -118,13 +127,16 @@ class Observations:
         """The outputs an agent acts from, of configurations ``cell``, ``task`` ``[W, N]`` (their observation and
         state assembled)."""
         W, N = cell.shape
-        return {
+        out = {
             "observation": observation,
             "action_mask": self.dynamics.masks(cell),
             "state": state,
             "positions": self._cell_xy.index_select(0, cell.view(-1)).view(W, N, 2),
             "tasks": task,
         }
+        if self._code_level is not None:  # with altitude levels, each UAV's level (0 the lowest)
+            out["levels"] = self.dynamics.positions.level.index_select(0, cell.view(-1)).view(W, N)
+        return out
 
     def _observe(self, code: torch.Tensor, cell: torch.Tensor, task: torch.Tensor, moves, switches) -> dict:
         """The outputs of the configurations ``cell``, ``task`` ``[B, N]`` (``code`` their codes) after a step;
@@ -132,7 +144,7 @@ class Observations:
         only)."""
         B, N = self.num_worlds, self.num_uavs
         if self._pair_obs is not None:
-            pair = torch.add(code.flip(-1), code, alpha=2 * self.cfg.num_cells)  # [B, 2]: rows (a, b) and (b, a)
+            pair = torch.add(code.flip(-1), code, alpha=2 * self.num_positions)  # [B, 2]: rows (a, b) and (b, a)
             observation = self._pair_obs.index_select(0, pair.view(-1)).view(B, N, -1)
             state = self._pair_state.index_select(0, pair[:, 0])
         else:

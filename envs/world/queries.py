@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import torch
 
-from ..config import NUM_ACTIONS, RELAYING, SENSING
+from ..config import RELAYING, SENSING
 from ..physics.channel import rates
 from ..physics.grid import cells_of, decode_joint_actions, joint_action_valid, targets_valid
 from ..solvers.optimum import optimum as exact_optimum
@@ -16,24 +16,30 @@ class SolverQueries:
     """Questions about any configurations of the World's layouts (a mixin of :class:`~uavrl.envs.world.World`)."""
 
     def cells_of(self, positions: torch.Tensor) -> torch.Tensor:
-        """Cell indices ``y * L1 + x`` of ``[..., 2]`` (x, y) positions."""
-        return cells_of(positions, self.cfg.grid[0])
+        """Position indices of ``[..., 2]`` (x, y) positions (cells ``y * L1 + x``), or with altitude levels of
+        ``[..., 3]`` (x, y, level) ones (-1 inside a building)."""
+        cells = cells_of(positions, self.cfg.grid[0])
+        if self.cfg.num_levels == 1:
+            return cells
+        return self.dynamics.positions.number[cells + positions[..., 2] * self.cfg.num_cells]
 
     def utility(self, positions: torch.Tensor, tasks: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(R_PU, R_SE, U)`` of configurations of this env's worlds, deterministic channels.
 
-        ``positions`` ``[B, ..., N, 2]`` (x, y) and ``tasks`` ``[B, ..., N]``; results ``[B, ...]`` float64.
+        ``positions`` ``[B, ..., N, 2]`` (x, y), with altitude levels ``[B, ..., N, 3]`` (x, y, level), and ``tasks``
+        ``[B, ..., N]``; results ``[B, ...]`` float64.
         """
         self._require_layout()
         positions, tasks = positions.to(self.device), tasks.to(self.device)
+        D = 2 + (self.cfg.num_levels > 1)
         if (
             positions.shape[0] != self.num_worlds
-            or positions.shape[-2:] != (self.num_uavs, 2)
+            or positions.shape[-2:] != (self.num_uavs, D)
             or tasks.shape != positions.shape[:-1]
         ):
             raise ValueError(
                 f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected "
-                f"[B={self.num_worlds}, ..., N={self.num_uavs}, 2] and [B, ..., N]"
+                f"[B={self.num_worlds}, ..., N={self.num_uavs}, {D}] and [B, ..., N]"
             )
         if any(t.dtype.is_floating_point or t.dtype.is_complex or t.dtype == torch.bool for t in (positions, tasks)):
             raise TypeError(f"positions ({positions.dtype}) and tasks ({tasks.dtype}) must hold integers")
@@ -44,13 +50,20 @@ class SolverQueries:
             away = (x == self.cfg.base[0]) & (y == self.cfg.base[1])
             off_grid, tasks = off_grid & ~away, tasks.masked_fill(away, SENSING)
             positions = positions.masked_fill(away.unsqueeze(-1), 0)
+        if D == 3:
+            off_grid |= (positions[..., 2] < 0) | (positions[..., 2] >= self.cfg.num_levels)
         if off_grid.any():
             where = tuple(positions[off_grid][0].tolist())
-            raise ValueError(f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in 0..{L2 - 1}")
+            levels = f", level in 0..{self.cfg.num_levels - 1}" if D == 3 else ""
+            raise ValueError(
+                f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in 0..{L2 - 1}{levels}"
+            )
         bad_task = (tasks != SENSING) & (tasks != RELAYING)
         if bad_task.any():
             raise ValueError(f"tasks hold {tasks[bad_task][0].item()}: a task is 0 (sensing) or 1 (relaying)")
         cells = self.cells_of(positions)
+        if (cells < 0).any():
+            raise ValueError(f"positions hold {tuple(positions[cells < 0][0].tolist())}, inside a building")
         contrib = self._per_cell(self._cell_contrib, cells)
         if self.energy is not None:
             contrib = contrib.masked_fill(away.unsqueeze(-1), 0.0)
@@ -59,7 +72,8 @@ class SolverQueries:
         return r_pu, r_se, r_pu + r_se
 
     def optimum(self, method: str = "auto") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Exact ``U*`` ``[B]`` and one optimal configuration per world (positions ``[B, N, 2]``, tasks ``[B, N]``).
+        """Exact ``U*`` ``[B]`` and one optimal configuration per world (positions ``[B, N, 2]`` (x, y), with altitude
+        levels ``[B, N, 3]`` (x, y, level); tasks ``[B, N]``).
 
         Over all placements on distinct cells and all task vectors, for the
         deterministic (mean) channels.  See :func:`uavrl.envs.solvers.optimum.optimum` (``method`` as its).
@@ -71,13 +85,21 @@ class SolverQueries:
         if solved is None:
             solved = optima[method] = exact_optimum(self._cell_contrib, self._direct, self.cfg, method=method)
         u, cells, tasks = solved
-        B, L1 = self.num_worlds, self.cfg.grid[0]
+        B = self.num_worlds
         if len(u) != B:
             u, cells, tasks = u.expand(B), cells.expand(B, -1), tasks.expand(B, -1)
-        return u.clone(), torch.stack([cells % L1, cells // L1], -1), tasks.clone()
+        return u.clone(), self.position_coordinates(cells), tasks.clone()
+
+    def position_coordinates(self, cells: torch.Tensor) -> torch.Tensor:
+        """``[..., 2]`` (x, y) of position indices ``[...]``, with altitude levels ``[..., 3]`` (x, y, level)."""
+        L1, positions = self.cfg.grid[0], self.dynamics.positions
+        grid_cell = cells if self.cfg.num_levels == 1 else positions.cell[cells]
+        xy = [grid_cell % L1, grid_cell // L1]
+        return torch.stack(xy if self.cfg.num_levels == 1 else [*xy, positions.level[cells]], -1)
 
     def joint_action_mask(self, positions: torch.Tensor | None = None) -> torch.Tensor:
-        """``[B, 6^N]`` valid joint actions (all cells on the grid and distinct) at ``positions`` (default: now).
+        """``[B, A^N]`` valid joint actions (every move reaches a position, all distinct) at ``positions`` (default:
+        now; ``A`` 6, 8 with altitude levels).
 
         Under an energy model a UAV out of service (at the base) has one valid action, the no-op, and blocks no one.
         """
@@ -93,7 +115,7 @@ class SolverQueries:
             return joint_action_valid(cells, self.dynamics.neighbours, self.num_uavs)
         N = self.num_uavs
         actions = decode_joint_actions(N, self.device)  # [A, N]
-        row = cells.unsqueeze(-2) * NUM_ACTIONS + actions  # [..., A, N]: each UAV's (cell, action) row
+        row = cells.unsqueeze(-2) * self.dynamics.num_actions + actions  # [..., A, N]: each UAV's (cell, action) row
         allowed = self.dynamics.cell_mask.view(-1).index_select(0, row.view(-1)).view_as(row)
         target = self.dynamics.move_to.index_select(0, row.view(-1)).view_as(row)
         # the UAVs away all sit on one cell: give each its own, past the grid's, so they clash with no one

@@ -35,6 +35,7 @@ class SharedTables(dict):
 # what World._build_geometry computes for the grid
 GRID_TABLES = (
     "_cell_xyz",
+    "_code_level",
     "_state_base",
     "_grid_scale",
     "_node_scale",
@@ -48,6 +49,7 @@ GRID_TABLES = (
 LAYOUT_TABLES = (
     "_cell_contrib",
     "_code_obs",
+    "_code_vertical",
     "_code_rate",
     "_node_obs",
     "_direct",
@@ -90,10 +92,10 @@ class LayoutTables:
         """The static tables of the grid the observation reads: every cell's and every code's position."""
         cfg, dev, f64 = self.cfg, self.device, torch.float64
         L1, L2 = cfg.grid
-        C = cfg.num_cells
-        c = torch.arange(C, device=dev)
-        x, y = c % L1, c // L1
-        self._cell_xyz = torch.stack([x.to(f64), y.to(f64), torch.full((C,), cfg.height, dtype=f64, device=dev)], -1)
+        positions = self.dynamics.positions  # a UAV's "cell" is one of these: a cell at a level
+        C = len(positions)
+        x, y = positions.cell % L1, positions.cell // L1
+        self._cell_xyz = positions.xyz
         # digit base of the tabular state index s = sum_i d_i base^i, None when it overflows int64
         tabular = cfg.has_state_index and self.energy is None  # the tabular state has no battery
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if tabular else None
@@ -108,14 +110,17 @@ class LayoutTables:
         self._code_xyt = torch.cat(
             [self._cell_xy[self._code_cell] / self._grid_scale, self._code_task[:, None]], -1
         ).float()  # [2C, 3] as observed
+        self._code_level = None  # with altitude levels, each code's level as observed, 0 to 1 (no slot off the grid)
+        if cfg.num_levels > 1:
+            self._code_level = (positions.level[self._code_cell] / (cfg.num_levels - 1)).float()
 
     def _set_layout(self, worlds: torch.Tensor):
         """Recompute the per-cell and per-code tables of ``worlds`` (indices into the tables) from ``self._nodes``."""
-        cfg, C, k = self.cfg, self.cfg.num_cells, len(worlds)
+        cfg, C, k = self.cfg, self.num_positions, len(worlds)
         nodes = self._nodes[worlds]
         gains = link_gains(self._cell_xyz, nodes, cfg)  # [k, C, 4]: the channel model's mean gains
         contrib = relay_contributions(gains, cfg)  # the rate model's per-cell terms
-        code_obs, node_obs = self._observation_tables(contrib, nodes)
+        code_obs, node_obs, code_vertical = self._observation_tables(contrib, nodes)
         cc = self._code_cell
         relay = ((self._code_task == RELAYING) & (cc < C))[None, :]
         on_grid = torch.cat([contrib, contrib.new_zeros(k, 1, 2)], 1) if self._slots > C else contrib
@@ -136,6 +141,8 @@ class LayoutTables:
             "_node_obs": node_obs,
             "_direct": direct_terms(nodes, cfg),
         }
+        if code_vertical is not None:
+            tables["_code_vertical"] = code_vertical
         fading_table = self.fading.table(self._cell_xyz, nodes, gains)
         if fading_table is not None:
             if self._slots > C:  # zero gains at the cell of a UAV out of service: it adds nothing
@@ -153,20 +160,25 @@ class LayoutTables:
         if self._pairs:
             self._set_pair_tables()
 
-    def _observation_tables(self, contrib: torch.Tensor, nodes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(code_obs [k, 2C, 13], node_obs [k, 12])`` of ``k`` layouts: what a UAV at each code observes of its
-        layout, and the nodes as the state shows them, from the per-cell contributions ``[k, C, 2]`` and the nodes."""
-        C, k, K = self.cfg.num_cells, len(contrib), 2 * self._slots
+    def _observation_tables(self, contrib: torch.Tensor, nodes: torch.Tensor):
+        """``(code_obs [k, 2C, 13], node_obs [k, 12], code_vertical [k, 2C, 5] or None)`` of ``k`` layouts: what a UAV
+        at each code observes of its layout, the nodes as the state shows them, and with altitude levels its level
+        and the contributions a climb and a descent reach, from the per-position contributions ``[k, C, 2]`` and the
+        nodes."""
+        C, k, K = self.num_positions, len(contrib), 2 * self._slots
         # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
-        # at c and at the cells its four moves reach, -1 where a move leaves the grid
+        # at c and at the cells its moves reach, -1 where a move leaves the grid (the levels, or enters a building)
         scaled = torch.cat([contrib / contrib.amax(1, keepdim=True), contrib.new_full((k, 1, 2), -1.0)], 1)
         neighbours = self.dynamics.neighbours
         around = torch.cat([torch.arange(C, device=self.device)[:, None], neighbours.where(neighbours >= 0, C)], -1)
         if self._slots > C:  # a UAV out of service (cell C) sees -1 everywhere, adds nothing and relays for no one
-            around = torch.cat([around, around.new_full((1, 5), C)])
-        local = scaled.index_select(1, around[self._code_cell].flatten()).view(k, K, 10).float()
-        code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), local], -1)
-        return code_obs, (nodes / self._node_scale).flatten(1).float()
+            around = torch.cat([around, around.new_full((1, around.shape[1]), C)])
+        seen = scaled.index_select(1, around[self._code_cell].flatten()).view(k, K, -1).float()
+        code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), seen[..., :10]], -1)
+        vertical = None
+        if self.cfg.num_levels > 1:  # the level, then the contributions at the positions a climb and a descent reach
+            vertical = torch.cat([self._code_level[None, :, None].expand(k, -1, -1), seen[..., 10:]], -1)
+        return code_obs, (nodes / self._node_scale).flatten(1).float(), vertical
 
     def _per_cell(self, table: torch.Tensor, cells: torch.Tensor, worlds: torch.Tensor | None = None) -> torch.Tensor:
         """Rows of a per-cell table ``[Bt, C, ...]`` at ``cells`` ``[W, ...]`` of all worlds (or of ``worlds``)."""
@@ -204,7 +216,7 @@ class LayoutTables:
         UAV 0 at code ``a`` and UAV 1 at code ``b`` (UAV 1's observation is row
         ``b * 2C + a``), so a step needs one gather per output instead of ~15 ops.
         """
-        K = 2 * self.cfg.num_cells
+        K = 2 * self.num_positions
         code = torch.arange(K, device=self.device)
         pairs = torch.stack([code.repeat_interleave(K), code.repeat(K)], -1)  # [K^2, 2]
         observation, state = self._assemble(pairs)

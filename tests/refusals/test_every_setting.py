@@ -132,6 +132,7 @@ BAD_OPTIONS = {
     "cell_size": "env.cell_size=-1",
     "altitude": "env.altitude=-1",
     "altitude_m": "env.altitude_m=-1",
+    "altitudes_m": "env.altitudes_m=[100,30]",
     "channel": "env.channel=fibre",
     "alpha": "env.alpha=-1",
     "g0": "env.g0=0",
