@@ -25,6 +25,13 @@ A frame shows, for one world:
   docs/model.md, Rates), and under the rows a key to the colours, the grey
   dashed links and that column.
 
+In a city (``env.city`` other than ``none``) a frame also shows the buildings at
+true scale under the grid's lines, shaded from light (low) to dark (the
+tallest roof, given in the key); under geometric line of sight
+(``env.los=geometric``) a link from a UAV to PT or PR that a building blocks
+is dashed (NLoS), every other link solid, grey still marking a link that earns
+nothing.  Frames of ``env.city=none`` draw none of this.
+
 Under an energy model (``env.energy`` other than ``none``) a frame also shows
 the base (``env.base``, off the grid) as a pad with one slot per UAV, UAV ``i``
 ``i`` cells from the base along the grid's side (towards the grid's middle); a
@@ -62,7 +69,7 @@ import torch
 
 from .config import RELAYING, InvalidOption
 from .limits import NODE_NAMES
-from .physics.channel import PR, PT, E, S
+from .physics.channel import PR, PT, E, S, cell_xyz
 from .physics.energy import CHARGING, OUT, RETURNING, WAITING
 from .solvers.optimum import optimum as exact_optimum
 
@@ -80,17 +87,24 @@ GAUGE_WIDTH, GAUGE_TOP, GAUGE_HEIGHT = 0.8, 0.36, 0.16  # in cells, below the UA
 BASE_COLOUR = "#2f6b3a"
 # the panel's layout in figure fractions: header on top, the map on the left, the per-UAV rows on the right
 HEADER, MAP_RIGHT, MARGIN = 0.16, 0.7, 0.02
+GRID_EDGE = "#b0b0b0"
 COORDINATE_COLOUR = "#7a7a7a"
 COORDINATE_GAP = 0.55  # cells (at least) between the grid's edge and the centre of its coordinates
-# the panel's key under its rows: (a marker's colour, or None for a grey dashed link; the text)
+# in a city: the buildings' shades of matplotlib's Greys, from 0 m to the tallest roof, light enough that the links
+# and the nodes' names stay legible over the tallest
+BUILDING_SHADES = (0.12, 0.55)
+# the panel's key under its rows: (a swatch: a dot's RGB, ("line", colour, style), "shades" of the buildings, or ""
+# for none; the text)
+IDLE_SWATCH = ("line", IDLE_LINK, "--")
 PANEL_KEY = (
     (RELAY_COLOUR, "relay: PT → UAV → PR"),
     (SENSE_COLOUR, "sense: S → UAV → E"),
-    (None, "earns nothing"),
+    (IDLE_SWATCH, "earns nothing"),
     ("", "c/Σc: its path's share"),
     ("", "of its network's sum"),
 )
 ENERGY_KEY = (("", "away: status, steps left"),)
+LOS_KEY = (("line", "#404040", "-"), "LoS"), (("line", "#404040", "--"), "NLoS: blocked")
 DPI = 100
 BACKGROUNDS_KEPT = 16  # layouts whose drawn background a renderer keeps (about 0.7 MB each at 480 x 360)
 
@@ -116,6 +130,11 @@ class WorldRenderer:
         self.canvas = FigureCanvasAgg(self.figure)
         self._font = max(7.0, min(11.0, height / 36))
         self.energy = world.energy  # None for env.energy=none: nothing of the energy model is made or drawn
+        self.city = world.parts.get("city")  # None for env.city=none: no building is drawn, no link dashed for NLoS
+        # in a city of geometric line of sight the dash marks a blocked link (NLoS), and no longer a link that earns
+        # nothing (grey either way)
+        self.dash_nlos = self.city is not None and world.cfg.geometric_los
+        self._los: dict[bytes, np.ndarray] = {}  # each layout's [C, 4] line of sight from every cell centre
         self._make_map()
         self._make_header()
         self._make_panel()
@@ -126,6 +145,11 @@ class WorldRenderer:
         if self.energy is not None:
             self._make_base()
             self._dynamic[3:3] = [self._gauge_frames, self._gauges]  # over the UAVs, under their numbers
+        if self.city is not None:  # the map's names and coordinates over the buildings: a white halo keeps them legible
+            from matplotlib.patheffects import withStroke
+
+            for text in set(self.ax.texts) - set(self._uav_labels):
+                text.set_path_effects([withStroke(linewidth=2.5, foreground="white")])
         for artist in self._dynamic:  # animated: the figure's own draw (the background) leaves them out
             artist.set_animated(True)
         self._u_star: dict[bytes, float] = {}  # each layout's exact U*, keyed by its node positions
@@ -142,7 +166,9 @@ class WorldRenderer:
         N, (L1, L2), font = self.world.num_uavs, self.world.cfg.grid, self._font
         ax = self.ax = self.figure.add_axes((MARGIN, MARGIN, MAP_RIGHT - 2 * MARGIN, 1 - HEADER - 2 * MARGIN))
         ax.set_axis_off()
-        ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="#f3f3f3", edgecolor="#b0b0b0", lw=1.0, zorder=0))
+        ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="#f3f3f3", edgecolor=GRID_EDGE, lw=1.0, zorder=0))
+        if self.city is not None:
+            self._make_buildings()
         lines = [((x - 0.5, -0.5), (x - 0.5, L2 - 0.5)) for x in range(1, L1)]
         lines += [((-0.5, y - 0.5), (L1 - 0.5, y - 0.5)) for y in range(1, L2)]
         ax.add_collection(LineCollection(lines, colors="#d6d6d6", linewidths=0.6, zorder=0))
@@ -159,6 +185,23 @@ class WorldRenderer:
             ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
         ]
         self._make_coordinates()
+
+    def _make_buildings(self) -> None:
+        """The city's buildings at true scale over the grid's ground, under its lines, shaded by height: one artist,
+        static (in every layout's background)."""
+        from matplotlib import colormaps
+        from matplotlib.collections import PolyCollection
+        from matplotlib.patches import Rectangle
+
+        x0, y0, x1, y1 = self.city.footprints_cells().T
+        boxes = np.stack([np.stack(corner, -1) for corner in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))], 1)
+        heights = self.city.city.height
+        self.tallest = math.ceil(heights.max())
+        low, high = BUILDING_SHADES
+        shades = colormaps["Greys"](low + (high - low) * heights / self.tallest)
+        self.buildings = self.ax.add_collection(PolyCollection(boxes, facecolors=shades, linewidths=0, zorder=0))
+        L1, L2 = self.world.cfg.grid  # the grid's edge again, over the buildings
+        self.ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="none", edgecolor=GRID_EDGE, lw=1.0, zorder=0))
 
     def _make_coordinates(self) -> None:
         """Each column's ``x`` and each row's ``y`` beside the grid, and the axes' names; placed per layout
@@ -218,6 +261,13 @@ class WorldRenderer:
         panel = self.figure.add_axes((MAP_RIGHT, MARGIN, 1 - MAP_RIGHT - MARGIN, 1 - HEADER - 2 * MARGIN))
         panel.set_axis_off()
         key = PANEL_KEY + (ENERGY_KEY if self.energy is not None else ())
+        if self.dash_nlos:  # grey solid for a link that earns nothing: the dash is a blocked link's
+            key = tuple(
+                (("line", IDLE_LINK, "-"), text) if swatch == IDLE_SWATCH else (swatch, text) for swatch, text in key
+            )
+            key += LOS_KEY
+        if self.city is not None:
+            key += (("shades", f"buildings 0–{self.tallest} m"),)
         rows = max(N, 6)
         lines = rows + 1.5 + 0.8 * len(key)  # the head, the rows, a gap, the key's closer lines
         row_points = panel.get_position().height * self.size[0] / (lines + 1) * 72 / DPI
@@ -231,13 +281,25 @@ class WorldRenderer:
         self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
         self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
         key_font = font * 0.9
-        for k, (colour, text) in enumerate(key):
+        for k, (swatch, text) in enumerate(key):
             y = rows + 1.5 + 0.8 * k
-            if colour is None:
-                panel.plot([0.0, 0.09], [y, y], color=IDLE_LINK, ls="--", lw=1.2)
-            elif colour:
-                panel.scatter([0.05], [y], s=(key_font * 0.9) ** 2, lw=0, color=np.array(colour) / 255)
+            if swatch == "shades":  # the buildings' colour bar, lowest to tallest
+                self._shades_swatch(panel, y)
+            elif swatch and swatch[0] == "line":
+                panel.plot([0.0, 0.09], [y, y], color=swatch[1], ls=swatch[2], lw=1.2)
+            elif swatch:
+                panel.scatter([0.05], [y], s=(key_font * 0.9) ** 2, lw=0, color=np.array(swatch) / 255)
             panel.text(0.12, y, text, fontsize=key_font, va="center", color="#404040")
+
+    @staticmethod
+    def _shades_swatch(panel, y: float) -> None:
+        """A small colour bar of the buildings' shades at height ``y`` of the panel's key."""
+        from matplotlib import colormaps
+        from matplotlib.colors import ListedColormap
+
+        low, high = BUILDING_SHADES
+        shades = ListedColormap(colormaps["Greys"](np.linspace(low, high, 64)))
+        panel.imshow([np.linspace(0, 1, 64)], cmap=shades, extent=(0.0, 0.09, y + 0.25, y - 0.25), aspect="auto")
 
     # ----------------------------------------------------------- geometry
     def _fit(self, nodes: np.ndarray) -> None:
@@ -356,6 +418,17 @@ class WorldRenderer:
             self._u_star[key] = float(exact_optimum(contributions, direct, world.cfg)[0][0])
         return self._u_star[key]
 
+    def _line_of_sight(self, nodes: torch.Tensor) -> np.ndarray:
+        """``[C, 4]`` bool: the layout ``nodes``' links from every cell centre at the UAVs' height, clear of every
+        building or not; computed once per layout."""
+        key = nodes.cpu().numpy().tobytes()
+        if key not in self._los:
+            if len(self._los) >= BACKGROUNDS_KEPT:
+                del self._los[next(iter(self._los))]
+            cells = cell_xyz(self.world.cfg, nodes.dtype, nodes.device)
+            self._los[key] = self.city.line_of_sight(cells, nodes).cpu().numpy()
+        return self._los[key]
+
     def frame(self, index: int = 0, focus: int | None = None) -> np.ndarray:
         """The ``[H, W, 3]`` uint8 picture of world ``index`` now; ``focus``: the UAV to ring."""
         world, cfg = self.world, self.world.cfg
@@ -389,13 +462,19 @@ class WorldRenderer:
             paid, unpaid_note = 0 < relaying.sum() < cfg.num_uavs, "   one job for all: no rates"
         else:
             paid, unpaid_note = bool(relaying.any()) or not cfg.lease_rule, "   no relay: no lease"
+        # in a city of geometric line of sight, a blocked link (PT or PR only: S and E fly above the roofs) is dashed
+        clear = self._line_of_sight(nodes_t) if self.dash_nlos else None
         segments, link_colours, styles = [], [], []
         for i in range(len(cells)):
-            src, dst = (nodes[PT], nodes[PR]) if relaying[i] else (nodes[S], nodes[E])
+            ends = (PT, PR) if relaying[i] else (S, E)
+            src, dst = nodes[ends[0]], nodes[ends[1]]
             segments += [(src, xy[i]), (xy[i], dst)] if not away[i] else [(xy[i], xy[i])] * 2
-            colour, style = ((*colours[i], 0.45), "solid") if paid else (IDLE_LINK, "dashed")
+            colour = (*colours[i], 0.45) if paid else IDLE_LINK
             link_colours += [colour, colour]
-            styles += [style, style]
+            if clear is None:
+                styles += ["solid" if paid else "dashed"] * 2
+            else:
+                styles += ["solid" if away[i] or clear[cells[i], n] else "dashed" for n in ends]
         self._links.set_segments(segments)
         self._links.set_colors(link_colours)
         self._links.set_linestyles(styles)

@@ -69,6 +69,12 @@ class CityPart:
         cells = xyz.detach().to("cpu", torch.float64).numpy() if isinstance(xyz, torch.Tensor) else xyz
         return (cells - self._origin) * self.cell_size
 
+    def footprints_cells(self) -> np.ndarray:
+        """``[n, 4]`` float64: each building's ``(x0, y0, x1, y1)`` in the model's cells (the inverse of
+        :meth:`metres`), for pictures."""
+        corners = np.stack([self.city.x0, self.city.y0, self.city.x1, self.city.y1], -1)
+        return corners / self.cell_size + np.tile(self._origin[:2], 2)
+
     def line_of_sight(self, uav_xyz: torch.Tensor, nodes: torch.Tensor) -> torch.Tensor:
         """``[..., N, 4]`` bool: does each link from a UAV ``[..., N, 3]`` to PT, PR, S, E ``[..., 4, 3]`` (cells)
         clear every building?  The links to S and E fly at the UAVs' height, above the roofs: always."""

@@ -1,5 +1,6 @@
 """Rendering and videos: env.render() frames, TorchRL's PixelRenderTransform and VideoRecorder, the video command."""
 
+import math
 import subprocess
 import sys
 
@@ -7,6 +8,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import torch
+from matplotlib.collections import PolyCollection
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from torchrl.envs import SerialEnv, TransformedEnv, check_env_specs
 from torchrl.record import PixelRenderTransform, VideoRecorder
@@ -14,6 +16,7 @@ from torchrl.record.loggers import CSVLogger
 
 from uavrl.cli import compose_config
 from uavrl.envs import UAVSpectrumEnv, make_config
+from uavrl.envs.physics.channel import PR, PT, cell_xyz
 from uavrl.envs.physics.energy import CHARGING, WAITING
 from uavrl.envs.render import (
     GAUGE_HEIGHT,
@@ -415,3 +418,109 @@ def test_a_bad_video_setting_is_one_line(tmp_path):
     )
     assert done.returncode == 1
     assert done.stderr.strip() == "error: eval.video_starts=0 is invalid: it must be a whole number >= 1"
+
+
+# ------------------------------------------------------------------ cities
+def city_world(**overrides) -> World:
+    world = World(make_config("a2g_urban", city="urban", city_seed=0, **overrides), batch_size=1)
+    world.reset()
+    return world
+
+
+def clear_of_grid_lines(v: np.ndarray, margin: float = 0.15) -> np.ndarray:
+    """Whether each coordinate ``v`` (cells) is at least ``margin`` from the grid's lines (at ``k - 0.5``)."""
+    return np.abs((v + 0.5) - np.round(v + 0.5)) >= margin
+
+
+def test_footprints_in_cells_are_the_buildings_where_the_model_finds_them():
+    part = city_world().parts["city"]
+    footprints = part.footprints_cells()
+    x0, y0, x1, y1 = footprints.T
+    assert footprints.shape == (len(part.city.x0), 4) and (x1 > x0).all() and (y1 > y0).all()
+    halfway_up = part.city.height / 2 / part.cell_size
+    centres = torch.from_numpy(np.stack([(x0 + x1) / 2, (y0 + y1) / 2, halfway_up], -1))
+    assert part.inside(centres).all()
+    beside = centres.clone()
+    beside[:, 0] = torch.from_numpy(x1 + 0.02)  # a metre east of the east wall: in the street
+    assert not part.inside(beside).any()
+
+
+def test_a_city_frame_shows_the_buildings_shaded_by_height_and_the_streets_between():
+    """All UAVs over cell (5, 5): the links run along y = 5, so the grid's other rows show only buildings and
+    streets."""
+    world = city_world()
+    world.start_at(torch.tensor([[2 * 55 + t for t in (1, 0, 1, 0, 1, 0)]]))
+    renderer = WorldRenderer(world, width=640, height=480)
+    frame = renderer.frame(0)
+    assert renderer.buildings in renderer.ax.collections
+    x0, y0, x1, y1 = renderer.city.footprints_cells().T
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    free = (cx > 0) & (cx < 9) & (cy > 0) & (cy < 9) & (np.abs(cy - 5) > 1.5)
+    shown = np.flatnonzero(free & clear_of_grid_lines(cx) & clear_of_grid_lines(cy))
+    assert len(shown) >= 10
+    expected = np.round(renderer.buildings.get_facecolors()[shown, :3] * 255)
+    drawn = np.array([frame[renderer.pixel_of(cx[k], cy[k])] for k in shown], dtype=float)
+    assert np.abs(drawn - expected).max() <= 1
+    heights = renderer.city.city.height[shown]
+    brightness = drawn.mean(-1)
+    assert (np.diff(brightness[np.argsort(heights)]) <= 1).all()  # darker as taller
+    assert brightness[heights.argmax()] < brightness[heights.argmin()] - 20
+    # a street: no building within 0.15 cells
+    xs, ys = np.meshgrid(np.linspace(0.1, 8.9, 89), np.linspace(0.1, 8.9, 89))
+    xs, ys = xs.ravel(), ys.ravel()
+    near = (
+        (xs[:, None] > x0 - 0.15) & (xs[:, None] < x1 + 0.15) & (ys[:, None] > y0 - 0.15) & (ys[:, None] < y1 + 0.15)
+    ).any(-1)
+    street = np.flatnonzero(~near & clear_of_grid_lines(xs) & clear_of_grid_lines(ys) & (np.abs(ys - 5) > 1.5))
+    assert len(street) >= 10
+    assert all((frame[renderer.pixel_of(xs[k], ys[k])] == rgb("#f3f3f3")).all() for k in street)
+
+
+def test_in_a_city_a_blocked_link_is_dashed_and_grey_still_means_it_earns_nothing(monkeypatch):
+    world = city_world()
+    part = world.parts["city"]
+    clear = part.line_of_sight(cell_xyz(world.cfg), world.nodes[0]).numpy()  # [C, 4]
+    blocked_pt = int(np.flatnonzero(~clear[:, PT] & clear[:, PR])[0])
+    blocked_pr = int(np.flatnonzero(clear[:, PT] & ~clear[:, PR])[0])
+    calls = []
+    real = part.line_of_sight
+    monkeypatch.setattr(part, "line_of_sight", lambda *a: calls.append(1) or real(*a))
+    renderer = WorldRenderer(world)
+
+    def links(code):  # each link's (dashed, grey)
+        world.start_at(torch.tensor([code]))
+        renderer.frame(0)
+        dashed = [dashes is not None for _, dashes in renderer._links.get_linestyles()]
+        grey = [tuple(np.round(c[:3] * 255)) == tuple(rgb(IDLE_LINK)) for c in renderer._links.get_colors()]
+        return list(zip(dashed, grey, strict=True))
+
+    relay, sense = 1, 0
+    code = [2 * blocked_pt + relay, 2 * blocked_pr + relay, 2 * blocked_pt + sense, 0, 0, 0]
+    blocked = [(True, False)]  # dashed, in the relay's colour
+    assert links(code) == blocked + [(False, False)] * 2 + blocked + [(False, False)] * 8
+    assert links([2 * blocked_pt + sense] * 6) == [(False, True)] * 12  # S and E: above the roofs; no relay: no lease
+    assert len(calls) == 1  # once per layout
+    texts = [t.get_text() for t in drawn_texts(renderer)]
+    tallest = math.ceil(part.city.height.max())
+    assert {"LoS", "NLoS: blocked", f"buildings 0–{tallest} m", "earns nothing"} <= set(texts)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"city": "urban", "los": "statistical"}], ids=["no-city", "statistical"])
+def test_without_geometric_line_of_sight_links_are_as_before(overrides):
+    """Outside a city no building is drawn and the dash means what it meant; a city of statistical line of sight
+    draws its buildings but dashes no link for NLoS."""
+    world = World(make_config("a2g_urban", **overrides), batch_size=1)
+    world.reset()
+    renderer = WorldRenderer(world)
+    for code, dashed in (([1, 0, 0, 0, 0, 0], False), ([0] * 6, True)):  # one relay pays; none relaying: no lease
+        world.start_at(torch.tensor([code]))
+        renderer.frame(0)
+        assert [d is not None for _, d in renderer._links.get_linestyles()] == [dashed] * 12
+    texts = {t.get_text() for t in drawn_texts(renderer)}
+    assert "LoS" not in texts and "NLoS: blocked" not in texts
+    if not overrides:
+        assert renderer.city is None and not hasattr(renderer, "buildings")
+        assert not any(isinstance(c, PolyCollection) for c in renderer.ax.collections)
+        assert not any(t.startswith("buildings") for t in texts)
+    else:
+        assert renderer.buildings in renderer.ax.collections
