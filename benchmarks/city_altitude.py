@@ -20,7 +20,7 @@ optimal configurations use; draws one panel per environment.
 
 Usage::
 
-    python benchmarks/city_altitude.py             # writes docs/figures/city_altitude.png, prints the tables
+    python benchmarks/city_altitude.py | tee benchmarks/results/city_altitude.txt  # and docs/figures/city_altitude.png
     python benchmarks/city_altitude.py --seeds 0 1 --out /tmp/city_altitude.png
 """
 

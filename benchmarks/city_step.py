@@ -22,7 +22,7 @@ new seed (``envs/physics/buildings.py``'s ``city_part``), on the grids ``--grids
 
 Usage::
 
-    python benchmarks/city_step.py              # writes nothing; the lead keeps the output in benchmarks/results/
+    python benchmarks/city_step.py | tee benchmarks/results/city_step.txt
     python benchmarks/city_step.py --worlds 1024 --rounds 3
 """
 
