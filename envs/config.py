@@ -48,6 +48,7 @@ LOS_MODELS = ("geometric", "statistical")
 # the options only a city reads (docs/model.md, Cities of buildings)
 CITY_OPTIONS = ("city_alpha", "city_beta", "city_gamma", "city_seed", "los")
 CITY_SEED_LIMIT = 2**63  # a city's seed is an int64, as a world's is
+HELD_OUT_CITY_SEEDS = 2**62  # city seeds from here name the benchmark's held-out cities: no training run lays one out
 PRESETS = ("paper", "reference_code", "a2g_urban")
 # the options only the power laws read, and those only the physical channels read (docs/model.md, Channel models)
 POWER_LAW_OPTIONS = ("alpha", "g0", "p_pt", "p_s", "p_u", "noise")

@@ -27,6 +27,8 @@ from uavrl.cli import run_command
 from uavrl.config import RUN_OPTION_SETTINGS, model_config
 from uavrl.costs import check_run_costs
 from uavrl.envs._moved import moved_names
+from uavrl.envs.config import HELD_OUT_CITY_SEEDS
+from uavrl.envs.errors import InvalidOption
 from uavrl.experiment.checkpoints import checkpoint_files, no_checkpoint, run_directory
 from uavrl.experiment.io import quoted, read_regular_text, special_kind
 from uavrl.experiment.rundir import check_run_files, tidy
@@ -80,6 +82,9 @@ def check_settings(cfg: DictConfig, overrides=None) -> None:
     check_typed(cfg, overrides, {**RUN_SETTINGS, **AGENT_SETTINGS.get(cfg.agent.name, {})})
     check_scenario(cfg)
     model = model_config(cfg)
+    if model.city_seed >= HELD_OUT_CITY_SEEDS:
+        reason = "seeds from 2**62 name the benchmark's held-out cities, which no training run lays out"
+        raise InvalidOption("city_seed", model.city_seed, f"{reason}: give a seed below 2**62")
     check_agent_settings(cfg, model)
     check_run_costs(cfg, model, overrides)
     if cfg.resume:

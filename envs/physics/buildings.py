@@ -129,10 +129,13 @@ def city_part(cfg) -> CityPart | None:
     blocked *= cfg.num_levels == 1  # with altitude levels a position inside a building is one a UAV cannot take
     if blocked or nodes_blocked:
         name = "altitude_m" if cfg.altitude_m is not None else "altitude"
-        reason = (
-            f"{blocked} of the {cfg.num_cells} cells{' and S or E' if nodes_blocked else ''} at "
-            f"{cfg.height * cfg.cell_size:g} m are inside buildings of the {cfg.city} city (city_seed={cfg.city_seed}):"
-            f" fly above its tallest roof over the grid, {tallest:.1f} m, or choose another city"
-        )
+        where = f"{cfg.city} city (city_seed={cfg.city_seed})"
+        if blocked:
+            what = f"{blocked} of the {cfg.num_cells} cells{' and S or E' if nodes_blocked else ''}"
+            advice = f"fly above its tallest roof over the grid, {tallest:.1f} m, or choose another city"
+        else:  # with altitude levels only S and E fly at this height
+            what, advice = "S or E", "fly S and E higher or choose another city"
+        verb = "are" if blocked else "is"
+        reason = f"{what} at {cfg.height * cfg.cell_size:g} m {verb} inside buildings of the {where}: {advice}"
         raise InvalidOption(name, getattr(cfg, name), reason)
     return part

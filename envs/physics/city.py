@@ -30,6 +30,7 @@ from .radio import P1410 as P1410  # the standard environments, kept here beside
 MAX_BUILDINGS = 4_000_000  # 5 arrays of float64: 160 MB; a 10 km x 10 km suburban city has 75,000
 CHUNK_BYTES = 64 * 2**20  # the working memory of line_of_sight's link-by-building arrays
 _PAIR_BYTES = 8 * 12  # about 12 float64 temporaries live per (link, building) pair
+_ROOF_MARGIN = 1e-9  # relative and in m: a link's part this far above the tallest roof is above it after rounding
 
 
 @dataclass(frozen=True)
@@ -259,9 +260,9 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     edge, running along a wall or over a roof at roof height, is in line of sight, and one with an end inside a
     building (:func:`inside_building`) is blocked.
 
-    Each link is tested only against the buildings its ground track may cross, found by walking the lattice along
-    it (about two per building pitch of its length), in chunks of about ``CHUNK_BYTES`` of working memory; a link
-    above every roof is not tested.
+    Each link is tested only against the buildings its ground track may cross below the tallest roof, found by
+    walking the lattice along that part of it (about two per building pitch of its length), in chunks of about
+    ``CHUNK_BYTES`` of working memory; a link above every roof is not tested.
 
     Args:
         city: the city.
@@ -274,9 +275,18 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     clear = np.ones(len(a), dtype=bool)
     tallest = float(city.height.max(initial=0.0))
     links = np.flatnonzero(np.minimum(a[:, 2], b[:, 2]) < tallest)
-    first, last = _sites_along(city, a[links], b[links] - a[links])
+    # the buildings a link may pass through lie under its part below the tallest roof (and a margin): the walk looks
+    # for them along that part only, from the link's lower end; the slab test below still takes the whole segment
+    lower = np.where((a[links, 2] <= b[links, 2])[:, None], a[links], b[links])
+    upper = np.where((a[links, 2] <= b[links, 2])[:, None], b[links], a[links])
+    rise = upper[:, 2] - lower[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        below = np.where(rise > 0, (tallest * (1 + _ROOF_MARGIN) + _ROOF_MARGIN - lower[:, 2]) / rise, 1.0)
+    walk = (upper - lower) * np.clip(below, 0.0, 1.0)[:, None]
+    first, last = _sites_along(city, lower, walk)
     order = np.argsort(first - last, kind="stable")  # the links that cross the most sites first
     links, first, counts = links[order], first[order], (last - first + 1)[order]
+    lower, walk = lower[order], walk[order]
     low = (city.x0, city.y0, np.zeros_like(city.height))
     high = (city.x1, city.y1, city.height)
     begin = 0
@@ -285,7 +295,7 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
         end = begin + max(1, CHUNK_BYTES // (_PAIR_BYTES * 2 * count))
         chunk = links[begin:end]
         start, step = a[chunk], b[chunk] - a[chunk]
-        index, valid = _crossed_buildings(city, start, step, first[begin:end], count)
+        index, valid = _crossed_buildings(city, lower[begin:end], walk[begin:end], first[begin:end], count)
         enter, leave = np.zeros(index.shape), np.ones(index.shape)
         for axis in range(3):
             axis_enter, axis_leave = _slab(

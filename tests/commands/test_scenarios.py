@@ -25,6 +25,20 @@ SCENARIOS = {  # name: (grid, UAVs, preset, option values, agents)
         {"channel": "al_hourani", "environment": "urban"},
         {"dqn", "random", "oracle"},
     ),
+    "city_urban_10x10": (
+        (10, 10),
+        6,
+        "a2g_urban",
+        {"city": "urban", "environment": "urban", "altitudes_m": (30.0, 60.0, 100.0, 200.0, 300.0)},
+        {"dqn", "random", "oracle"},
+    ),
+    "city_dense_20x20": (
+        (20, 20),
+        10,
+        "a2g_urban",
+        {"city": "dense_urban", "environment": "dense_urban", "altitudes_m": (30.0, 60.0, 100.0, 200.0)},
+        {"dqn", "random", "oracle"},
+    ),
     "energy_6x6": (
         (6, 6),
         2,

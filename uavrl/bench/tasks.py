@@ -33,6 +33,7 @@ import hashlib
 import json
 
 from uavrl.envs._moved import moved_names
+from uavrl.envs.config import HELD_OUT_CITY_SEEDS
 from uavrl.envs.errors import InvalidOption, InvalidType
 from uavrl.envs.rules import at_least, shown
 
@@ -95,6 +96,25 @@ def _zero_shot(index: int, num_uavs: int, side: int, layout: str) -> Task:
     )
 
 
+def _held_out_city(index: int, environment: str, num_uavs: int) -> Task:
+    """A city no training run lays out (``city_seed`` from :data:`~uavrl.envs.config.HELD_OUT_CITY_SEEDS`, fixed by
+    the task's index) of an ITU-R P.1410 environment, on ``city_urban_10x10``'s model (N = 6) or
+    ``city_dense_20x20``'s (N = 10); S and E at 200 m where the high-rise city's roofs reach 100 m."""
+    scenario, side = ("city_urban_10x10", 10) if num_uavs == 6 else ("city_dense_20x20", 20)
+    high = {"altitude_m": 200.0} if environment == "highrise" else {}
+    return _task(
+        index,
+        f"city_{environment}_n{num_uavs}",
+        scenario,
+        f"N = {num_uavs} on {side}x{side} in a held-out {environment.replace('_', '-')} city, altitude levels",
+        city=environment,
+        environment=environment,
+        city_seed=HELD_OUT_CITY_SEEDS + index,
+        **high,
+    )
+
+
+CITY_ENVIRONMENTS = ("suburban", "urban", "dense_urban", "highrise")
 # the index fixes a task's seeds: a new task takes a new index, an old one keeps its own
 _ALL = [
     _task(0, "paper_6x6", "paper_6x6", "the paper's 6x6 grid with 2 UAVs"),
@@ -117,6 +137,8 @@ _ALL = [
     # smoke-sized: the tests and the documentation's runnable examples
     _task(17, "tiny_3x3", "paper_6x6", "2 UAVs on 3x3 (smoke-sized)", grid=(3, 3), num_uavs=2),
     _task(18, "tiny_energy", "energy_4x4", "energy_4x4 on 3x3 (smoke-sized)", grid=(3, 3)),
+    *(_held_out_city(19 + k, environment, 6) for k, environment in enumerate(CITY_ENVIRONMENTS)),
+    *(_held_out_city(23 + k, environment, 10) for k, environment in enumerate(CITY_ENVIRONMENTS)),
 ]
 TASKS = {task.name: task for task in _ALL}
 SUITES = {
@@ -124,6 +146,7 @@ SUITES = {
     "core": [TASKS[name] for name in ("n6_10x10", "large_20x20", "random_layouts", "rayleigh", "a2g_urban")],
     "energy": [TASKS[name] for name in ("energy_4x4", "energy_6x6", "persistent_10x10")],
     "zero_shot": [task for task in _ALL if task.name.startswith("zs_")],
+    "city": [task for task in _ALL if task.name.startswith("city_")],
     "tiny": [TASKS["tiny_3x3"], TASKS["tiny_energy"]],
 }
 SUITES_TEXT = ", ".join(SUITES)
