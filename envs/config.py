@@ -339,7 +339,8 @@ class ModelConfig:
             values |= {"altitude": metres / self.cell_size, "altitude_m": metres}
             problem = (radio_problem(values) if self.is_physical else None) or (None, physics_problem(values))
             if problem[1] is not None:
-                raise InvalidOption("altitudes_m", list(self.altitudes_m), f"the level {metres:g} m: {problem[1]}")
+                reason = problem[1].removesuffix(" (altitude_m sets the height in metres)")
+                raise InvalidOption("altitudes_m", list(self.altitudes_m), f"the level {metres:g} m: {reason}")
 
     @property
     def num_levels(self) -> int:
