@@ -274,7 +274,8 @@ def wrong_type(err: Exception) -> str | None:
     expected = {"Integer": "a whole number", "Boolean": "true or false", "Float": "a number", "String": "text"}
     converted = re.search(r"could not be converted to (\w+)|is not a valid (bool)", str(cause))
     name = converted and (converted.group(1) or "Boolean")
-    kind = expected.get(name, name) if converted else "of the setting's type"
+    listed = "is not a ListConfig, list or tuple" in str(cause)
+    kind = expected.get(name, name) if converted else "a list, e.g. [1, 2]" if listed else "of the setting's type"
     return f"{cause.full_key}={shown(cause.value)} is invalid: it must be {kind}"
 
 

@@ -108,8 +108,9 @@ def _option_type(hint) -> Any:
     """The type Hydra checks a model option's value against (null always allowed: the preset's value)."""
     if hint in (int, str, bool):
         return Optional[hint]
-    if typing.get_origin(hint) is tuple or tuple in map(typing.get_origin, typing.get_args(hint)):  # grid, base
-        return Optional[list[int]]
+    tuples = [arg for arg in (hint, *typing.get_args(hint)) if typing.get_origin(arg) is tuple]
+    if tuples:  # grid, base: whole numbers; altitudes_m: numbers
+        return Optional[list[float if float in typing.get_args(tuples[0]) else int]]
     return REAL
 
 

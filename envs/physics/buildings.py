@@ -65,7 +65,7 @@ class CityPart:
         self.city: City = generate_city(*parameters, width * cell_size, depth * cell_size, seed=seed)
 
     def metres(self, xyz: torch.Tensor | np.ndarray) -> np.ndarray:
-        """Positions ``[..., 3]`` in the model's cells as the city's metres (a float64 array)."""
+        """Positions ``xyz`` ``[..., 3]`` in the model's cells as the city's metres (a float64 array)."""
         cells = xyz.detach().to("cpu", torch.float64).numpy() if isinstance(xyz, torch.Tensor) else xyz
         return (cells - self._origin) * self.cell_size
 
@@ -76,23 +76,24 @@ class CityPart:
         return corners / self.cell_size + np.tile(self._origin[:2], 2)
 
     def line_of_sight(self, uav_xyz: torch.Tensor, nodes: torch.Tensor) -> torch.Tensor:
-        """``[..., N, 4]`` bool: does each link from a UAV ``[..., N, 3]`` to PT, PR, S, E ``[..., 4, 3]`` (cells)
-        clear every building?  The links to S and E fly at the UAVs' height, above the roofs: always."""
+        """``[..., N, 4]`` bool: does each link from a UAV ``uav_xyz`` ``[..., N, 3]`` to PT, PR, S, E ``nodes``
+        ``[..., 4, 3]`` (cells) clear every building?  The links to S and E fly at the UAVs' height, above the roofs:
+        always."""
         uav = self.metres(uav_xyz)[..., :, None, :]
         ground = self.metres(nodes[..., :GROUND_NODES, :])[..., None, :, :]
         clear = torch.from_numpy(line_of_sight(self.city, uav, ground)).to(uav_xyz.device)
         return torch.cat([clear, clear.new_ones(clear.shape[:-1] + (4 - GROUND_NODES,))], -1)
 
     def on_roofs(self, nodes: torch.Tensor) -> torch.Tensor:
-        """Nodes ``[..., 4, 3]`` (cells) with PT and PR on the roof of the building they stand in, if any (a rooftop
-        base station, our choice), the others as they are."""
+        """The ``nodes`` ``[..., 4, 3]`` (cells) with PT and PR on the roof of the building they stand in, if any (a
+        rooftop base station, our choice), the others as they are."""
         roofs = roof_height(self.city, self.metres(nodes[..., :GROUND_NODES, :])[..., :2]) / self.cell_size
         raised = nodes.clone()
         raised[..., :GROUND_NODES, 2] = torch.from_numpy(roofs).to(nodes)
         return raised
 
     def inside(self, xyz: torch.Tensor) -> torch.Tensor:
-        """``[...]`` bool: is each position ``[..., 3]`` (cells) inside a building?"""
+        """``[...]`` bool: is each position of ``xyz`` ``[..., 3]`` (cells) inside a building?"""
         return torch.from_numpy(inside_building(self.city, self.metres(xyz))).to(xyz.device)
 
     @functools.cached_property
