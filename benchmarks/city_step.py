@@ -2,8 +2,9 @@
 P.1410 city beside the same of the flat model, measured alternately in one process (docs/model.md, Cities of
 buildings).
 
-Models: ``a2g_urban`` (the flat model: no city, Al-Hourani urban), the same in the urban city (``env.city=urban``)
-and in the dense-urban one (``env.city=dense_urban env.environment=dense_urban``); layouts ``line`` (fixed: the
+Models: ``a2g_urban`` (the flat model: no city, Al-Hourani urban), the same in the urban city (``env.city=urban``),
+in the dense-urban one (``env.city=dense_urban env.environment=dense_urban``) and in the urban city with
+``city_urban_10x10``'s five altitude levels (``env.altitudes_m=[30,60,100,200,300]``); layouts ``line`` (fixed: the
 per-cell tables are built once, with the World) and ``random`` (each reset draws the reset worlds' layouts and
 recomputes their tables, in a city their geometric line of sight).  ``B`` worlds (``--worlds``), N = 6, 10x10 cells
 of 50 m, UAVs at 100 m, one torch thread, wall-clock milliseconds:
@@ -46,6 +47,7 @@ MODELS = {
     "flat (no city)": {},
     "urban city": {"city": "urban"},
     "dense_urban city": {"city": "dense_urban", "environment": "dense_urban"},
+    "urban city, 5 levels": {"city": "urban", "altitudes_m": [30, 60, 100, 200, 300]},  # city_urban_10x10's model
 }
 LAYOUTS = ("line", "random")
 FLAT = "flat (no city)"
