@@ -1,17 +1,19 @@
-"""The environments a trained policy may act in: those of its run's grid, number of UAVs and layout.
+"""The environments a trained policy may act in: those of its run's grid, number of UAVs, layout, altitude levels
+and city.
 
 A table or network learned on a 6x6 grid reads the positions and observations
 of a 5x5 grid without any error (same shapes), and acts on a model it never
 saw.  So the policies of a run (``uavrl.load_policy``, ``Agent.policies``)
 check what they act in, at no per-step cost beyond a shape comparison:
 
-- ``bind_env(env)`` compares the environment's grid, number of UAVs and layout
-  with the run's (the evaluation binds every policy it measures);
+- ``bind_env(env)`` compares the environment's grid, number of UAVs, layout,
+  altitude levels (``altitudes_m``) and city with the run's (the evaluation binds every policy it measures);
 - every tensordict: its number of UAVs;
 - the first tensordicts of each batch shape, until one has a UAV off the
   first column and one off the first row (at most :data:`FULL_CHECKS`): its
   positions lie on the run's grid, the observed (x, y) are those positions
-  scaled to the run's grid, the moves that leave the grid are the run's, and
+  scaled to the run's grid, the moves that leave the grid are the run's (blocked, among others, where
+  buildings stand in the way of UAVs at altitude levels), and
   for a fixed layout the nodes in ``state`` are the run's.
 
 A mismatch is a ValueError in one line.  :class:`RunEnvironment` holds plain
@@ -48,11 +50,16 @@ FULL_CHECKS = (
 )
 
 
+CITY_OPTIONS = ("city", "city_alpha", "city_beta", "city_gamma", "city_seed", "los")  # what places the buildings
+
+
 class RunEnvironment:
-    """The grid, number of UAVs and layout of a run, and the checks that an environment or tensordict has them."""
+    """The grid, number of UAVs, layout, altitude levels and city of a run, and the checks that an environment or
+    tensordict has them."""
 
     def __init__(self, cfg: ModelConfig):
         self.grid, self.num_uavs, self.layout = tuple(cfg.grid), int(cfg.fleet_size), cfg.layout  # spares act too
+        self.altitudes_m, self.city = cfg.altitudes_m, _city(cfg)
         L1, L2 = self.grid
         self.xy_scale = torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=torch.float64)
         self.layout_nodes = fixed_layout(cfg)  # [4, 3], None for layout="random"
@@ -62,19 +69,21 @@ class RunEnvironment:
         # under an energy model a UAV out of service is shown at the base, off the grid, and every observation ends
         # with the UAVs' batteries and service flags
         self.base = None if cfg.energy == "none" else torch.tensor(cfg.base)
-        self.observation_size = observation_size(self.num_uavs, self.base is not None)
+        self.observation_size = observation_size(self.num_uavs, self.base is not None, cfg.num_levels > 1)
         self._checked_shape = None  # the batch shape whose tensordicts were checked in full
         self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
 
     def __str__(self) -> str:
-        return f"a {self.grid[0]}x{self.grid[1]} grid, {self.num_uavs} UAVs, layout {self.layout!r}"
+        shown = f"a {self.grid[0]}x{self.grid[1]} grid, {self.num_uavs} UAVs, layout {self.layout!r}"
+        return shown + "".join(_extras(self.altitudes_m, self.city))
 
     def _refuse(self, what: str) -> ValueError:
         return InvalidOption("env", message=f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
 
     def check_env(self, env) -> None:
         """A one-line ValueError unless ``env`` (or every worker of a ``SerialEnv``/``ParallelEnv``) has the run's
-        grid, number of UAVs and layout; ``None`` (no environment) leaves every tensordict to its own check."""
+        grid, number of UAVs, layout, altitude levels and city; ``None`` (no environment) leaves every tensordict to its
+        own check."""
         if env is None:
             self._checked_shape = None
             return
@@ -96,6 +105,8 @@ class RunEnvironment:
             differ.append(f"layout {cfg.layout!r}")
         elif nodes is not None and tuple(cfg.grid) == self.grid and not torch.equal(nodes, self.layout_nodes):
             differ.append(f"layout {cfg.layout!r} with its nodes elsewhere (another altitude)")
+        if cfg.altitudes_m != self.altitudes_m or _city(cfg) != self.city:
+            differ.append("".join(_extras(cfg.altitudes_m, _city(cfg))).removeprefix(", ") or "one altitude, no city")
         if differ:
             raise self._refuse(f"the environment has {', '.join(differ)}")
 
@@ -138,7 +149,8 @@ class RunEnvironment:
             leaves = observation[..., 5:OWN_FEATURES:2] == -1.0  # per neighbour: -1 where the move leaves the grid
             # the moves up, down, left, right that leave the grid, from the positions (no per-cell table)
             edges = torch.stack([y == 0, y == L2 - 1, x == 0, x == L1 - 1], -1)
-            if not torch.equal(leaves[serving], edges[serving]):
+            blocked = self.city is not None and self.altitudes_m is not None  # buildings block moves too
+            if not torch.equal(edges[serving] & leaves[serving] if blocked else leaves[serving], edges[serving]):
                 raise self._refuse("the tensordict's observations mark the grid's edges elsewhere")
         state = td.get("state", None)
         if state is not None and self.nodes is not None:
@@ -146,6 +158,21 @@ class RunEnvironment:
             if not torch.allclose(nodes, self.nodes.expand_as(nodes), atol=1e-5):
                 raise self._refuse("the nodes in the tensordict's state are those of another layout")
         return bool((L1 == 1 or (x > 0).any()) and (L2 == 1 or (y > 0).any()))
+
+
+def _city(cfg: ModelConfig) -> tuple | None:
+    """The options that place a model's buildings, None without a city."""
+    return None if cfg.city == "none" else tuple(getattr(cfg, name) for name in CITY_OPTIONS)
+
+
+def _extras(altitudes_m, city) -> list[str]:
+    """How a run's altitude levels and city are named: ``, altitudes_m=[30, 100]``, ``, city 'urban' (city_seed=0,
+    los=geometric)``."""
+    shown = [f", altitudes_m=[{', '.join(f'{h:g}' for h in altitudes_m)}]"] if altitudes_m else []
+    if city is not None:
+        options = ", ".join(f"{k}={v}" for k, v in zip(CITY_OPTIONS[1:], city[1:], strict=True) if v is not None)
+        shown.append(f", city {city[0]!r} ({options})")
+    return shown
 
 
 class CheckedPolicy(TensorDictModuleBase):
@@ -157,7 +184,7 @@ class CheckedPolicy(TensorDictModuleBase):
         self.in_keys, self.out_keys = list(policy.in_keys), list(policy.out_keys)
 
     def bind_env(self, env) -> CheckedPolicy:
-        """Act in ``env``: a one-line ValueError unless it has the run's grid, number of UAVs and layout."""
+        """Act in ``env``: a one-line ValueError unless it has the run's model (:class:`RunEnvironment`)."""
         self.run_env.check_env(env)
         return self
 

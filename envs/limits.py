@@ -391,9 +391,10 @@ def exact_solver_fits(
 
 def table_bytes(cfg, num_tables: int) -> int:
     """Bytes of the tabular learner's Q tables plus the model tables it keeps beside them
-    (:mod:`uavrl.agents.tabular.tables`), in plain integers so the commands check it before torch is imported."""
+    (:mod:`uavrl.agents.tabular.tables`), in plain integers so the commands check it before torch is imported; over
+    ``num_positions`` (an upper bound in a city, where positions inside buildings are left out)."""
     A = cfg.num_joint_actions
-    positions = cfg.num_cells**cfg.num_uavs
+    positions = cfg.num_positions**cfg.num_uavs  # placements
     configs = positions * 2**cfg.num_uavs
     # per placement and joint action: next cells (int32), valid flag, moves, the valid list; per configuration:
     # both rates (float64) and the Q row
@@ -445,11 +446,11 @@ def world_bytes(cfg, batch_size: int) -> int:
     """Peak bytes of ``World(cfg, batch_size)`` built, reset and stepped (measured: 1.0 GB for 1000x1000 and one
     world, 3.1 GB for 300x300 and 64 random layouts, 1.9 GB for 10^6 worlds of 4 UAVs on 6x6).
 
-    The geometry and the per-code tables cost ~500 bytes a cell, each layout's tables ~520 (while they are built:
-    one set for a fixed layout, shared by every world); each world ~440 bytes a UAV and what a reset takes to place
-    its UAVs (:func:`placement_bytes`).
+    The geometry and the per-code tables cost ~500 bytes a position (a cell at one level), each layout's tables ~520
+    (while they are built: one set for a fixed layout, shared by every world); each world ~440 bytes a UAV and what a
+    reset takes to place its UAVs (:func:`placement_bytes`).
     """
-    C, N, B = cfg.num_cells, cfg.fleet_size, batch_size
+    C, N, B = cfg.num_positions, cfg.fleet_size, batch_size  # the tables are per position: per cell at one level
     layouts = B if cfg.layout == "random" else 1
     per_world = placement_bytes(cfg) + 440 * N + 64
     if cfg.energy != "none":  # the batteries, status and timers, and a step's ~12 [B, N] temporaries of energy
@@ -480,9 +481,10 @@ def env_bytes(cfg, batch_size: int) -> int:
 def frame_bytes(cfg) -> int:
     """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key (the spares
     are agents too)."""
-    N, energy = cfg.fleet_size, cfg.energy != "none"
-    observation = 4 * N * observation_size(N, energy)
-    per_step = observation + 4 * state_size(N, energy) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask, ...
+    N, energy, levels = cfg.fleet_size, cfg.energy != "none", cfg.num_levels > 1
+    observation = 4 * N * observation_size(N, energy, levels)
+    per_step = observation + 4 * state_size(N, energy, levels) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask
+    per_step += 8 * N if levels else 0  # the UAVs' levels
     return 2 * per_step
 
 

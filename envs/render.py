@@ -32,6 +32,10 @@ tallest roof, given in the key); under geometric line of sight
 is dashed (NLoS), every other link solid, grey still marking a link that earns
 nothing.  Frames of ``env.city=none`` draw none of this.
 
+With altitude levels (``env.altitudes_m``) each UAV's disc grows with its level (the lowest the smallest) and
+carries a tag ``l0``, ``l1``, ... (its level, 0 the lowest) at its upper right; each panel row gives its height in m
+and the key names the levels' heights.  Frames at one level draw none of this.
+
 Under an energy model (``env.energy`` other than ``none``) a frame also shows
 the base (``env.base``, off the grid) as a pad with one slot per UAV, UAV ``i``
 ``i`` cells from the base along the grid's side (towards the grid's middle); a
@@ -104,6 +108,7 @@ PANEL_KEY = (
     ("", "of its network's sum"),
 )
 ENERGY_KEY = (("", "away: status, steps left"),)
+LEVEL_DISC = 0.6  # with altitude levels: the lowest level's disc, as a fraction of the highest's (its full size)
 LOS_KEY = (("line", "#404040", "-"), "LoS"), (("line", "#404040", "--"), "NLoS: blocked")
 DPI = 100
 BACKGROUNDS_KEPT = 16  # layouts whose drawn background a renderer keeps (about 0.7 MB each at 480 x 360)
@@ -135,6 +140,7 @@ class WorldRenderer:
         # nothing (grey either way)
         self.dash_nlos = self.city is not None and world.cfg.geometric_los
         self._los: dict[bytes, np.ndarray] = {}  # each layout's [C, 4] line of sight from every cell centre
+        self.levels = world.cfg.num_levels > 1  # altitude levels: each UAV's level on the map and in its row
         self._make_map()
         self._make_header()
         self._make_panel()
@@ -142,6 +148,8 @@ class WorldRenderer:
             self._links, self._uavs, self._focus, *self._uav_labels, self._title, self._rates,
             self._row_dots, *self._rows,
         ]  # fmt: skip
+        if self.levels:
+            self._dynamic[3 + len(self._uav_labels) : 3 + len(self._uav_labels)] = self._level_tags  # over the numbers
         if self.energy is not None:
             self._make_base()
             self._dynamic[3:3] = [self._gauge_frames, self._gauges]  # over the UAVs, under their numbers
@@ -184,6 +192,14 @@ class WorldRenderer:
         self._uav_labels = [
             ax.text(0, 0, str(i), ha="center", va="center", color="white", weight="bold", zorder=5) for i in range(N)
         ]
+        if self.levels:  # each UAV's level, at its disc's upper right, dark on a white halo
+            from matplotlib.patheffects import withStroke
+
+            halo = [withStroke(linewidth=2, foreground="white")]
+            self._level_tags = [
+                ax.text(0, 0, "", ha="left", va="bottom", color="#202020", zorder=6, path_effects=halo)
+                for _ in range(N)
+            ]
         self._make_coordinates()
 
     def _make_buildings(self) -> None:
@@ -274,9 +290,12 @@ class WorldRenderer:
         font = min(self._font * 0.85, 0.7 * row_points)
         panel.set_xlim(0, 1)
         panel.set_ylim(lines, -0.5)
-        if self.energy is not None:  # a fourth column, the battery
+        if self.energy is not None or self.levels:  # a fourth column, the battery or the height
             font *= 0.85
         head = "UAV task  c/Σc" if self.energy is None else "UAV task  c/Σc batt"
+        if self.levels:  # the height (altitude levels need energy='none')
+            head += "  alt"
+            key += (("", "lN: level N, 0 lowest"),)
         panel.text(0.12, 0, head, fontsize=font, va="center", family="monospace", color="#404040")
         self._row_dots = panel.scatter(np.full(N, 0.05), np.arange(1, N + 1), s=(font * 1.05) ** 2, lw=0)
         self._rows = [panel.text(0.12, i + 1, "", fontsize=font, va="center", family="monospace") for i in range(N)]
@@ -336,6 +355,10 @@ class WorldRenderer:
         for text in self._uav_labels:
             text.set_visible(scale >= 14)  # a smaller disc has no room for a digit
             text.set_fontsize(min(self._font * 0.9, 0.45 * cell))
+        if self.levels:
+            self._disc_area = self._uavs.get_sizes()[0]  # the highest level's; lower ones are smaller
+            for text in self._level_tags:
+                text.set_fontsize(max(6.0, min(self._font * 0.8, 0.4 * cell)))
         self._fit_coordinates(cell, nodes)
         key = nodes.tobytes()
         if key not in self._backgrounds:
@@ -419,13 +442,16 @@ class WorldRenderer:
         return self._u_star[key]
 
     def _line_of_sight(self, nodes: torch.Tensor) -> np.ndarray:
-        """``[C, 4]`` bool: the layout ``nodes``' links from every cell centre at the UAVs' height, clear of every
-        building or not; computed once per layout."""
+        """``[P, 4]`` bool: the layout ``nodes``' links from every position (a cell centre at the UAVs' height, or at
+        each altitude level), clear of every building or not; computed once per layout."""
         key = nodes.cpu().numpy().tobytes()
         if key not in self._los:
             if len(self._los) >= BACKGROUNDS_KEPT:
                 del self._los[next(iter(self._los))]
-            cells = cell_xyz(self.world.cfg, nodes.dtype, nodes.device)
+            if self.levels:
+                cells = self.world.dynamics.positions.xyz.to(nodes.device, nodes.dtype)
+            else:
+                cells = cell_xyz(self.world.cfg, nodes.dtype, nodes.device)
             self._los[key] = self.city.line_of_sight(cells, nodes).cpu().numpy()
         return self._los[key]
 
@@ -438,9 +464,13 @@ class WorldRenderer:
         if nodes.tobytes() != self._fitted:
             self._fit(nodes)
             self._fitted = nodes.tobytes()
-        cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()
-        xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
-        away = cells >= cfg.num_cells  # out of service (returning, out, charging, waiting): at the base, linked to none
+        cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()  # cells: position indices
+        if self.levels:  # (x, y, level) of each position (altitude levels need energy='none': every UAV serves)
+            *xy, level = world.position_coordinates(state.cell[index]).cpu().numpy().T
+            xy = np.stack(xy, -1).astype(float)
+        else:
+            xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
+        away = cells >= world.num_positions  # out of service (returning, out, charging, waiting): at the base
         relaying = tasks == RELAYING
         colours = np.where(relaying[:, None], np.array(RELAY_COLOUR), np.array(SENSE_COLOUR)) / 255
         if self.energy is not None:
@@ -453,6 +483,12 @@ class WorldRenderer:
         self._uavs.set_facecolors(colours)
         for i, text in enumerate(self._uav_labels):
             text.set_position(xy[i])
+        if self.levels:
+            grow = LEVEL_DISC + (1 - LEVEL_DISC) * level / (cfg.num_levels - 1)  # the disc's diameter by level
+            self._uavs.set_sizes(self._disc_area * grow**2)
+            for i, tag in enumerate(self._level_tags):  # at the disc's upper right (y grows downwards)
+                tag.set_position((xy[i, 0] + 0.25 * grow[i], xy[i, 1] - 0.25 * grow[i]))
+                tag.set_text(f"l{int(level[i])}")
         self._focus.set_visible(focus is not None)
         if focus is not None:
             self._focus.set_offsets(xy[focus : focus + 1])
@@ -499,6 +535,8 @@ class WorldRenderer:
                     steps_left = f" {int(state.timer[index, i])}" if status[i] in (RETURNING, CHARGING) else ""
                     text = f"{i:>3} {STATUS_NAMES[int(status[i])] + steps_left:<10}"
                 text += f" {battery[i]:4.0%}"
+            if self.levels:
+                text += f" {cfg.altitudes_m[int(level[i])]:>4g}m"
             row.set_text(text)
         self._row_dots.set_facecolors(colours)
         self.canvas.restore_region(self._background)

@@ -65,6 +65,7 @@ GROUPS = ("scenario", "env", "agent")  # config groups: a setting of one may com
 MODEL_NAMES = ("env.grid", "env.num_uavs")  # how the grid and the team are typed: uavrl.train, uavrl.evaluate
 REPRODUCE_NAMES = ("grids", "num_uavs")  # uavrl.reproduce
 TABLE_FREE = "or use agent=dqn, which keeps no table"
+LEVELS = "env.altitudes_m"  # how the altitude levels are typed
 
 
 class Typed:
@@ -223,27 +224,33 @@ def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typ
 
 
 class _Resized:
-    """A model with its grid, team or spares made the least a setting allows: what a cost would be with them (the
-    sizes that follow are :class:`~uavrl.envs.ModelConfig`'s own properties, read over the lowered ones)."""
+    """A model with its grid, team, spares or altitude levels made the least a setting allows: what a cost would be
+    with them (the sizes that follow are :class:`~uavrl.envs.ModelConfig`'s own properties, read over the lowered
+    ones)."""
 
     def __init__(self, model, lowered: frozenset, grid: str = "env.grid", team: str = "env.num_uavs"):
         self._model = model
         self.num_uavs = 1 if team in lowered else model.num_uavs
         self.num_spares = 0 if "env.num_spares" in lowered else model.num_spares
         self.grid = (self.num_uavs + self.num_spares, 1) if grid in lowered else model.grid
+        self.altitudes_m = None if LEVELS in lowered else model.altitudes_m
 
     def __getattr__(self, name):
         return getattr(self._model, name)
 
     num_cells = ModelConfig.num_cells
+    num_levels = ModelConfig.num_levels
+    num_positions = ModelConfig.num_positions
     fleet_size = ModelConfig.fleet_size
+    num_actions = ModelConfig.num_actions
+    joint_action_base = ModelConfig.joint_action_base
     num_joint_actions = ModelConfig.num_joint_actions
     num_states = ModelConfig.num_states
 
 
 def model_factors(model, names: tuple[str, str] = ("env.grid", "env.num_uavs")) -> list[Factor]:
-    """The grid's cells and the team (and its spares) as factors of a cost, named as typed (``names``: the grid's
-    and the team's setting)."""
+    """The grid's cells, the team (and its spares) and the altitude levels as factors of a cost, named as typed
+    (``names``: the grid's and the team's setting)."""
     grid, team = names
     factors = [
         Factor(grid, model.num_cells, model.fleet_size, label=f"the cells of {grid}", multiplies=False),
@@ -251,6 +258,8 @@ def model_factors(model, names: tuple[str, str] = ("env.grid", "env.num_uavs")) 
     ]
     if model.num_spares:
         factors.append(Factor("env.num_spares", model.num_spares, 0, multiplies=False))
+    if model.num_levels > 1:  # a UAV's positions: every cell at every level (an upper bound in a city)
+        factors.append(Factor(LEVELS, model.num_levels, label=f"the levels of {LEVELS}", multiplies=False))
     return factors
 
 
@@ -563,7 +572,8 @@ def starts_worlds(model, runs: Factor, names=MODEL_NAMES) -> Cost:
 def q_tables(model, tables: Factor, names=MODEL_NAMES, hint: str = "") -> Cost:
     """The tabular learner's Q tables, one per run (``tables``), and the model tables beside them; the DQN has no
     table, and a refusal says so where one table alone is over the budget."""
-    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]} ({count(model.num_states)} states x "
+    levels = f" at {model.num_levels} altitude levels" if model.num_levels > 1 else ""
+    what = f"the team Q tables on {model.grid[0]}x{model.grid[1]}{levels} ({count(model.num_states)} states x "
     what += f"{count(model.num_joint_actions)} joint actions each, with the model's lookup tables)"
     factors = (tables, *model_factors(model, names))
 

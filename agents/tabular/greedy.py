@@ -25,16 +25,16 @@ from uavrl.agents.evaluation import (
 )
 from uavrl.envs.config import ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
-from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid
+from uavrl.envs.physics.grid import decode_joint_actions, joint_action_valid
 from uavrl.envs.world import World
 
 OUTPUTS = ("positions", "tasks", "r_pu", "r_se", "task_switches", "moves")  # what the yardstick reads per step
 
 
 def greedy_joint_actions(q_rows: torch.Tensor, valid: torch.Tensor, uniforms: torch.Tensor) -> torch.Tensor:
-    """Index of the greedy joint action of each Q row ``[W, 6^N]`` among the ``valid`` ones ``[W, 6^N]``.
+    """Index of the greedy joint action of each Q row ``[W, A^N]`` among the ``valid`` ones ``[W, A^N]``.
 
-    Ties are broken uniformly at random: the tied action with the largest of ``uniforms`` ``[W, 6^N]``.
+    Ties are broken uniformly at random: the tied action with the largest of ``uniforms`` ``[W, A^N]``.
     """
     values = q_rows.masked_fill(~valid, -math.inf)
     ties = values == values.amax(-1, keepdim=True)
@@ -54,7 +54,7 @@ def evaluate_tables(
     policy_seed: int = 0,
     memory_budget: int = DEFAULT_MEMORY_BUDGET,
 ) -> list[dict[str, float]]:
-    """:func:`uavrl.agents.evaluation.evaluate` of the greedy policy of each table ``[R, S, 6^N]``: one dict per table.
+    """:func:`uavrl.agents.evaluation.evaluate` of the greedy policy of each table ``[R, S, A^N]``: one dict per table.
 
     The same as evaluating ``TabularPolicy(tables[r], cfg, seed=policy_seed)``
     for every ``r`` (same starts, same tie-breaking numbers), with the ``R``
@@ -66,15 +66,18 @@ def evaluate_tables(
         cfg, num_starts, horizon, seed, device, gamma, memory_budget
     )
     q = tables.to(world.device)
-    R, B, N, A, C = len(q), num_starts, cfg.num_uavs, cfg.num_joint_actions, cfg.num_cells
-    neighbours = grid_neighbours(cfg.grid, world.device)
+    R, B, N, A = len(q), num_starts, cfg.num_uavs, cfg.num_joint_actions
+    neighbours = world.dynamics.neighbours  # the moves between positions: cells without altitude levels
+    C = len(neighbours)
     play = World(world.cfg, R * B, world.device, seed, memory_budget=memory_budget)
     out = play.start_at(world.code.repeat(R, 1))
     table_of = torch.arange(R, device=world.device).repeat_interleave(B)
-    joint_actions, place = decode_joint_actions(N, world.device), C ** torch.arange(N, device=world.device)
+    joint_actions = decode_joint_actions(N, world.device, cfg.joint_action_base)
+    place = C ** torch.arange(N, device=world.device)
     # the valid joint actions of every placement p = sum_i c_i C^i, as in the learner's model tables
     valid = joint_action_valid(torch.arange(C**N, device=world.device)[:, None] // place % C, neighbours, N)
     generator = torch.Generator(device=world.device).manual_seed(policy_seed)
+    outputs = OUTPUTS if cfg.num_levels == 1 else (*OUTPUTS, "levels")
     steps = []
     for _ in range(horizon):
         # every table's policy draws the same numbers as TabularPolicy does from its own generator
@@ -82,8 +85,8 @@ def evaluate_tables(
         placement = ((play.code >> 1) * place).sum(-1)
         pick = greedy_joint_actions(q[table_of, out["state_index"]], valid[placement], uniforms)
         out = play.step(joint_actions[pick])[0]
-        steps.append({key: out[key] for key in OUTPUTS})
-    per_table = {key: torch.stack([s[key] for s in steps], 1).unflatten(0, (R, B)) for key in OUTPUTS}
+        steps.append({key: out[key] for key in outputs})
+    per_table = {key: torch.stack([s[key] for s in steps], 1).unflatten(0, (R, B)) for key in outputs}
     return [
         greedy_metrics(world, start, {key: v[r] for key, v in per_table.items()}, u_star, references, gamma)
         for r in range(R)

@@ -16,7 +16,7 @@ from uavrl.envs.rules import refuse, rule_of
 from uavrl.envs.world import World
 
 from .kernels import _choose_batched, _episode_per_run, _episode_shared, use_workqueue_threads
-from .tables import TabularModel
+from .tables import TabularModel, table_place
 
 _LEARNER_STREAM = 1 << 20  # the purpose of the learner's draws in the random streams (the world's are small numbers)
 
@@ -62,13 +62,13 @@ class TeamQLearner:
         num_tables = 1 if shared_table else int(runs)
         if not cfg.has_state_index:
             raise ValueError(
-                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} has {cfg.num_states:.3g} "
+                f"the team Q table of {cfg.num_uavs} UAVs on {table_place(cfg)} has {cfg.num_states:.3g} "
                 "states: no int64 state index exists; use agent=dqn, which scales further"
             )
         need = table_bytes(cfg, num_tables)
         if need > memory_budget:
             raise ValueError(
-                f"the team Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need {need:,} bytes "
+                f"the team Q table of {cfg.num_uavs} UAVs on {table_place(cfg)} would need {need:,} bytes "
                 f"({need / 2**30:.3g} GiB) with the model tables, over the memory budget of {int(memory_budget):,} "
                 "bytes; raise agent.memory_budget or use agent=dqn, which scales further"
             )
@@ -93,9 +93,8 @@ class TeamQLearner:
             worlds = START_BLOCK * self.runs
             first_world = (self.seed + block * worlds) % SEED_LIMIT  # world seeds are int64
             start = World(self.cfg, worlds, self.device, first_world, memory_budget=self.memory_budget).reset()
-            self._block_starts = self.model.configuration_ids(start["positions"], start["tasks"]).view(
-                START_BLOCK, self.runs
-            )
+            ids = self.model.configuration_ids(start["positions"], start["tasks"], start.get("levels"))
+            self._block_starts = ids.view(START_BLOCK, self.runs)
             self._start_block = block
         return self._block_starts[offset]
 

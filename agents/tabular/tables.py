@@ -17,8 +17,9 @@ from uavrl.envs.config import ModelConfig
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, row_itemsize, valid_list_itemsize
 from uavrl.envs.physics.channel import rates
 from uavrl.envs.physics.fading import fading_part
-from uavrl.envs.physics.grid import decode_joint_actions, grid_neighbours, joint_action_valid, joint_targets
-from uavrl.envs.solvers.exact import ConfigurationSpace, fixed_layout_tables, optimal_values
+from uavrl.envs.physics.grid import cells_of, decode_joint_actions, joint_action_valid, joint_targets
+from uavrl.envs.physics.positions import model_positions
+from uavrl.envs.solvers.exact import fixed_layout_tables, model_space, optimal_values
 from uavrl.envs.solvers.optimum import optimum
 
 _TABLE_CHUNK = 1 << 22  # configurations x joint actions built per torch call
@@ -37,6 +38,26 @@ def _row_dtype(cfg: ModelConfig) -> torch.dtype:
     return _TORCH_INTEGERS[row_itemsize(cfg)]
 
 
+def position_indices(
+    cfg: ModelConfig, number: torch.Tensor, xy: torch.Tensor, levels: torch.Tensor | None
+) -> torch.Tensor:
+    """The position indices ``[..., N]`` of ``[..., N, 2]`` (x, y) and, with altitude levels, ``[..., N]`` levels (the
+    World's outputs ``positions`` and ``levels``); ``number``: the model's
+    :attr:`~uavrl.envs.physics.positions.Positions.number`."""
+    cells = cells_of(xy, cfg.grid[0])
+    if cfg.num_levels == 1:
+        return cells
+    if levels is None:
+        raise ValueError(f"altitudes_m={list(cfg.altitudes_m)} needs each UAV's level beside its (x, y): none given")
+    return number[levels * cfg.num_cells + cells]
+
+
+def table_place(cfg: ModelConfig) -> str:
+    """Where a table's team flies, for its refusals: ``3x3``, with altitude levels ``3x3 at 3 altitude levels``."""
+    where = f"{cfg.grid[0]}x{cfg.grid[1]}"
+    return where if cfg.num_levels == 1 else f"{where} at {cfg.num_levels} altitude levels"
+
+
 class TabularModel:
     """The model of ``cfg`` as lookup tables, computed by the model's own functions (no TorchRL).
 
@@ -45,8 +66,9 @@ class TabularModel:
     rates from :func:`uavrl.envs.physics.channel.rates` and ``U*`` from
     :func:`uavrl.envs.solvers.optimum.optimum`: the functions the environment steps with.
 
-    Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i C^i``
-    the cells and ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
+    Configurations are numbered ``k = p * 2^N + t`` with ``p = sum_i c_i P^i``
+    the positions (:func:`~uavrl.envs.physics.positions.model_positions`: the cells without altitude levels) and
+    ``t = sum_i task_i 2^i`` the tasks.  Tables (torch, on ``device``):
     ``rates[k]`` = (R_PU, R_SE) (also as ``r_pu[k]``, ``r_se[k]``), ``row[k]`` (the Q row: the env's
     ``state_index``), ``valid[p, j]`` (and the same as lists: ``valid_actions[p, :num_valid[p]]``),
     ``next_cells[p, j]``, ``moves[p, j]``, ``next_tasks[t, j]``, ``switches[t, j]``.  The tables a learning step
@@ -77,17 +99,18 @@ class TabularModel:
                 f"max_steps <= {cfg.steps_before_reserve} (no battery reaches its reserve)"
             )
         self.cfg, self.device = cfg, torch.device(device)
-        N, C, A = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions
+        N, A = cfg.num_uavs, cfg.num_joint_actions
         dev = self.device
-        neighbours = grid_neighbours(cfg.grid, dev)
+        self.positions = model_positions(cfg, dev)  # a UAV's "cell" is one of these: a cell at a level
+        C, neighbours = len(self.positions), self.positions.neighbours
         contributions, direct = fixed_layout_tables(cfg, dev)  # [1, C, 2], [1, 2]
-        self.num_positions, self.num_task_codes = C**N, 2**N
+        self.num_placements, self.num_task_codes = C**N, 2**N
         place = torch.tensor([C**i for i in range(N)], device=dev)
         bits = torch.tensor([2**i for i in range(N)], device=dev)
         task_codes = torch.arange(2**N, device=dev)
         tasks = (task_codes[:, None] // bits) % 2  # [2^N, N]
         # tasks after every joint action, and how many UAVs switched
-        actions = decode_joint_actions(N, dev)  # [A, N]
+        actions = decode_joint_actions(N, dev, cfg.joint_action_base)  # [A, N]
         new_tasks = torch.where(actions == 4, 0, torch.where(actions == 5, 1, tasks[:, None, :]))  # [2^N, A, N]
         self.next_tasks = (new_tasks * bits).sum(-1).int()
         self.switches = (new_tasks != tasks[:, None, :]).sum(-1).to(torch.int8)
@@ -129,18 +152,21 @@ class TabularModel:
         tables = (self.rates, self.row, self.valid_actions, self.num_valid, self.next_cells, self.next_tasks)
         return tuple(t.numpy() for t in (*tables, self.moves, self.switches))
 
-    def configuration_ids(self, positions: torch.Tensor, tasks: torch.Tensor) -> torch.Tensor:
-        """``k`` of ``[..., N, 2]`` positions and ``[..., N]`` tasks."""
-        N, C, L1 = self.cfg.num_uavs, self.cfg.num_cells, self.cfg.grid[0]
-        cells = positions[..., 1] * L1 + positions[..., 0]
+    def configuration_ids(
+        self, positions: torch.Tensor, tasks: torch.Tensor, levels: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """``k`` of ``[..., N, 2]`` positions (x, y), ``[..., N]`` tasks and, with altitude levels, ``[..., N]``
+        levels (the World's outputs ``positions``, ``tasks`` and ``levels``)."""
+        N, C = self.cfg.num_uavs, len(self.positions)
+        cells = position_indices(self.cfg, self.positions.number, positions, levels)
         place = torch.tensor([C**i for i in range(N)], device=positions.device)
         bits = torch.tensor([2**i for i in range(N)], device=positions.device)
         return (cells * place).sum(-1) * 2**N + (tasks * bits).sum(-1)
 
 
 def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DEFAULT_MEMORY_BUDGET) -> torch.Tensor:
-    """The paper's "offline" table: exact ``Q*`` ``[S, 6^N]`` of the delta reward for the tabular state
-    (docs/model.md, "What the agents see and learn").
+    """The paper's "offline" table: exact ``Q*`` ``[S, A^N]`` (``A`` 6, 8 with altitude levels) of the delta reward
+    for the tabular state (docs/model.md, "What the agents see and learn").
 
     Solved on the configuration graph (:mod:`uavrl.envs.solvers.exact`, the environment's
     own dynamics and rates), infinite horizon, discount ``gamma``.  With
@@ -161,7 +187,7 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
         memory_budget: the bytes the solve may take; a larger model is refused with one line.
 
     Returns:
-        ``Q*`` ``[S, 6^N]`` float64 on ``device``.
+        ``Q*`` ``[S, A^N]`` float64 on ``device``.
     """
     if cfg.reward != "delta":
         raise ValueError(
@@ -176,12 +202,13 @@ def exact_q_table(cfg: ModelConfig, gamma: float, device="cpu", memory_budget=DE
     need = cfg.num_states * cfg.num_joint_actions * 8
     if not cfg.has_state_index or need > memory_budget:
         raise ValueError(
-            f"the exact Q table of {cfg.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} would need "
+            f"the exact Q table of {cfg.num_uavs} UAVs on {table_place(cfg)} would need "
             f"{cfg.num_states * cfg.num_joint_actions * 8:,} bytes, over the memory budget of {int(memory_budget):,} "
             "bytes; raise agent.memory_budget or use agent=dqn"
         )
-    N, C, A, dev = cfg.num_uavs, cfg.num_cells, cfg.num_joint_actions, torch.device(device)
-    space = ConfigurationSpace(cfg.grid, N, dev)
+    N, A, dev = cfg.num_uavs, cfg.num_joint_actions, torch.device(device)
+    space = model_space(cfg, dev)
+    C = len(space.neighbours)  # the positions: the cells without altitude levels
     potential = space.utility(cfg, *fixed_layout_tables(cfg, dev), beta=(cfg.beta1, cfg.beta2))
     values = optimal_values(space, potential, gamma)
     task_vectors = (torch.arange(2**N, device=dev)[:, None] >> torch.arange(N, device=dev)) & 1  # [2^N, N]

@@ -3,7 +3,7 @@
 Both wrap the batched physics, a :class:`~uavrl.envs.world.World`, as :class:`~uavrl.envs.env.UAVSpectrumEnv`
 does, with no TorchRL on the way: the same observations, action masks, rewards and seeds.
 
-- :class:`UAVSpectrumGymEnv`: one world; the team acts with one action per UAV, ``MultiDiscrete([6] * N)``.
+- :class:`UAVSpectrumGymEnv`: one world; the team acts with one action per UAV, ``MultiDiscrete([A] * N)``.
 - :class:`UAVSpectrumVectorEnv`: ``num_envs`` worlds stepped together as one ``World`` of that batch (a step
   costs a few tensor operations whatever the batch, no loop over worlds); next-step autoreset, as
   Gymnasium's own vector envs.
@@ -23,7 +23,7 @@ The observation is, per UAV, its observation followed by the four nodes' positio
 float32, whose bounds hold every layout the config allows.  The reward is the team reward (float32, as
 ``UAVSpectrumEnv``'s); an episode is truncated after ``max_steps``, and terminated only under an energy model, when
 no UAV serves any more (docs/model.md, Energy and lifetime).  The info holds ``action_mask`` ``[N, A]`` int8
-(A = 6, 7 with recharging; 1 where the move stays on the grid) and the step's ``r_pu``, ``r_se``,
+(A = 6, 7 with recharging, 8 with altitude levels; 1 where the move is possible) and the step's ``r_pu``, ``r_se``,
 ``utility``, ``moves``, ``task_switches``; :meth:`UAVSpectrumGymEnv.action_masks` is the mask flat, as
 MaskablePPO asks for it.
 
@@ -62,7 +62,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from ..config import ModelConfig, action_names, check_config_alone, make_config
 from ..errors import InvalidOption, InvalidType
-from ..limits import DEFAULT_MEMORY_BUDGET
+from ..limits import DEFAULT_MEMORY_BUDGET, VERTICAL_FEATURES
 from ..physics.channel import fixed_layout
 from ..render import RENDER_MODES as DRAWN_MODES
 from ..render import render as render_world
@@ -141,10 +141,23 @@ def _position_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     return np.minimum(base, 0), np.maximum(base, 1)
 
 
+def _vertical_bounds(cfg: ModelConfig) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Bounds of the observation's altitude part (none at one level): the own level scaled to [0, 1], the
+    contributions at the positions a climb and a descent reach (``VERTICAL_FEATURES - 1``, -1 where the move is
+    impossible), the others' levels in [0, 1]."""
+    if cfg.num_levels == 1:
+        return [], []
+    contributions, others = VERTICAL_FEATURES - 1, cfg.fleet_size - 1
+    low = [np.zeros(1), np.full(contributions, -1.0), np.zeros(others)]
+    return low, [np.ones(1), np.ones(contributions), np.ones(others)]
+
+
 def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[N, F + 12]`` bounds of the team observation: positions and tasks in [0, 1], the contributions at the own
     and the 4 next cells in [0, 1] (scaled by the best cell's), -1 where a move leaves the grid (or for a UAV out of
-    service), the batteries and service flags of an energy model in [0, 1], then the nodes.
+    service), the batteries and service flags of an energy model in [0, 1]; with altitude levels the own level in
+    [0, 1], the contributions a climb and a descent reach (as the next cells') and the others' levels in [0, 1]; then
+    the nodes.
 
     Args:
         cfg: the model.
@@ -155,8 +168,9 @@ def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     N, (position_low, position_high) = cfg.fleet_size, _position_bounds(cfg)
     energy = 0 if cfg.energy == "none" else 2 * N
     node_low, node_high = _node_bounds(cfg)
-    low = [position_low, np.full(10, -1.0), np.tile(position_low, N - 1), np.zeros(energy), node_low]
-    high = [position_high, np.ones(10), np.tile(position_high, N - 1), np.ones(energy), node_high]
+    vertical_low, vertical_high = _vertical_bounds(cfg)
+    low = [position_low, np.full(10, -1.0), np.tile(position_low, N - 1), np.zeros(energy), *vertical_low, node_low]
+    high = [position_high, np.ones(10), np.tile(position_high, N - 1), np.ones(energy), *vertical_high, node_high]
     low, high = np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
     return np.tile(low, (N, 1)), np.tile(high, (N, 1))
 
@@ -164,7 +178,8 @@ def observation_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
 def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
     then the nodes; under an energy model ``[7 N + 12]``: a UAV out of service at the base with contributions -1,
-    then each UAV's battery and service flag in [0, 1], then the nodes.
+    then each UAV's battery and service flag in [0, 1], then the nodes; with altitude levels each UAV's level in
+    [0, 1] before the nodes.
 
     Args:
         cfg: the model.
@@ -173,8 +188,8 @@ def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
         The lower and the upper bounds, float32.
     """
     node_low, node_high = _node_bounds(cfg)
-    if cfg.energy == "none":
-        per_uav = 5 * cfg.fleet_size
+    if cfg.energy == "none":  # altitude levels need energy='none'
+        per_uav = (5 + (cfg.num_levels > 1)) * cfg.fleet_size
         return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
             [np.ones(per_uav, np.float32), node_high]
         )

@@ -28,15 +28,19 @@ from uavrl.agents.evaluation import EVAL_SEED, evaluate  # noqa: E402
 from uavrl.envs import UAVSpectrumEnv, make_config, observation_with_nodes  # noqa: E402
 from uavrl.envs.adapters.gym_env import ENV_ID, TeamActionPolicy, UAVSpectrumGymEnv, UAVSpectrumVectorEnv  # noqa: E402
 from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv  # noqa: E402
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, observation_size  # noqa: E402
 
 # the paper's preset, a team of 3 on random layouts with fading (per-world layouts and fading draws), the
-# authors' absolute layout (its nodes lie outside the grid's span on a 6x6 grid)
+# authors' absolute layout (its nodes lie outside the grid's span on a 6x6 grid), three altitude levels over a city
+# (8 actions; buildings block some climbs, descents and moves)
+LEVELS_IN_A_CITY = {"preset": "a2g_urban", "altitudes_m": [20, 100, 300], "city": "highrise", "environment": "highrise"}
 MODELS = [
     {"grid": (6, 6), "num_uavs": 2},
     {"grid": (4, 4), "num_uavs": 3, "layout": "random", "fading": "rayleigh"},
     {"grid": (6, 6), "num_uavs": 2, "preset": "reference_code"},
+    {"grid": (3, 3), "num_uavs": 3, **LEVELS_IN_A_CITY},
 ]
-MODEL_IDS = ["paper", "random-rayleigh", "reference_code"]
+MODEL_IDS = ["paper", "random-rayleigh", "reference_code", "levels-city"]
 
 
 @pytest.fixture(autouse=True)
@@ -186,6 +190,39 @@ def test_parallel_env_passes_pettingzoos_tests():
         warnings.filterwarnings("ignore", "Observation space for each agent probably should be")
         api_test(parallel_to_aec(UAVSpectrumParallelEnv(grid=(4, 4), num_uavs=3, max_steps=20)), num_cycles=40)
     state_test(parallel_to_aec(UAVSpectrumParallelEnv(max_steps=20)), UAVSpectrumParallelEnv(max_steps=20))
+
+
+def test_parallel_env_passes_pettingzoos_tests_at_levels_in_a_city():
+    options = dict(grid=(3, 3), num_uavs=3, max_steps=20, **LEVELS_IN_A_CITY)
+    parallel_api_test(UAVSpectrumParallelEnv(**options), num_cycles=40)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Observation is not a NumPy array")
+        warnings.filterwarnings("ignore", "Observation space for each agent probably should be")
+        api_test(parallel_to_aec(UAVSpectrumParallelEnv(**options)), num_cycles=40)
+    state_test(parallel_to_aec(UAVSpectrumParallelEnv(**options)), UAVSpectrumParallelEnv(**options))
+
+
+def test_the_adapters_spaces_hold_every_observation_at_levels_in_a_city():
+    """8 actions a UAV; the observation's and the state's bounds hold what a long random walk sees (a UAV at every
+    level, climbs and descents blocked by the buildings: their contributions -1)."""
+    options = dict(grid=(3, 3), num_uavs=3, max_steps=200, **LEVELS_IN_A_CITY)
+    gym_env, zoo = UAVSpectrumGymEnv(**options), UAVSpectrumParallelEnv(**options)
+    assert gym_env.action_space == gymnasium.spaces.MultiDiscrete([8, 8, 8])
+    assert all(zoo.action_space(agent).n == 8 for agent in zoo.possible_agents)
+    observation, info = gym_env.reset(seed=1)
+    own_level = OWN_FEATURES + 3 * 2  # after the own part and the others' (x, y, task)
+    assert observation.shape == (3, observation_size(3, False, levels=True) + NODE_FEATURES) == (3, 38)
+    seen, blocked, rng = [observation], False, np.random.default_rng(0)
+    for _ in range(200):
+        observation, *_, info = gym_env.step(rng.integers(0, 8, 3))
+        seen.append(observation)
+        blocked |= bool((info["action_mask"][:, 6:] == 0).any())
+    assert all(gym_env.observation_space.contains(o) for o in seen) and blocked
+    levels = np.stack(seen)[:, :, own_level]  # 0 to 1
+    assert set(np.round(levels.ravel() * 2).astype(int)) == {0, 1, 2}
+    zoo.reset(seed=1)
+    state = zoo.state()
+    assert zoo.state_space.contains(state) and state.shape == (6 * 3 + 12,)
 
 
 def test_parallel_env_is_the_gym_env():
