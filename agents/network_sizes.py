@@ -20,83 +20,95 @@ def _linear(inputs: int, outputs: int, bias: bool = True) -> int:
     return inputs * outputs + (outputs if bias else 0)
 
 
-def _team_input(num_uavs: int, energy: bool) -> int:
+def _team_input(num_uavs: int, energy: bool, levels: bool = False) -> int:
     """Entries of a UAV's row of the team network's input: its observation and the nodes."""
-    return observation_size(num_uavs, energy) + NODE_FEATURES
+    return observation_size(num_uavs, energy, levels) + NODE_FEATURES
 
 
-def team_parameters(num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int) -> int:
+def _moves(levels: bool) -> int:
+    """The positions a UAV's moves reach (the factored head reads which another UAV holds): 4, 6 with levels."""
+    return 6 if levels else 4
+
+
+def team_parameters(
+    num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int, levels: bool = False
+) -> int:
     """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
-    of ``hidden`` units), then the joint head (``6^N`` values) or the shared per-UAV head (one hidden layer)."""
-    N, h, F = num_uavs, hidden, _team_input(num_uavs, energy)
+    of ``hidden`` units), then the joint head (``A^N`` values: the joint head is refused under an energy model, so a
+    UAV's ``num_actions`` are the joint action base, 6 or 8 with altitude levels) or the shared per-UAV head (one
+    hidden layer)."""
+    N, h, F = num_uavs, hidden, _team_input(num_uavs, energy, levels)
     torso = _linear(N * F, h) + depth * _linear(h, h)
     if head == "joint":
-        return torso + _linear(h, 6**N)
-    return torso + _linear(h + F + N + 4, h) + _linear(h, num_actions)
+        return torso + _linear(h, num_actions**N)
+    return torso + _linear(h + F + N + _moves(levels), h) + _linear(h, num_actions)
 
 
-def qmix_parameters(num_uavs: int, energy: bool, embed: int) -> int:
+def qmix_parameters(num_uavs: int, energy: bool, embed: int, levels: bool = False) -> int:
     """Parameters of ``QMix`` (TorchRL ``QMixer``'s layers): the hypernetworks from the state to the mixing weights
     and biases."""
-    S = state_size(num_uavs, energy)
+    S = state_size(num_uavs, energy, levels)
     return _linear(S, embed * num_uavs) + 3 * _linear(S, embed) + _linear(embed, 1)
 
 
-def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, depth: int) -> int:
+def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, depth: int, levels: bool = False) -> int:
     """Parameters of ``SetQCore``: the encoder, ``depth`` attention and feed-forward layers, the head; no size in
     any shape."""
     h = hidden
     attention = 4 * _linear(h, h) + _linear(PAIR_FEATURES, h // 2) + _linear(h // 2, heads)
     attention += _linear(PAIR_FEATURES, h, bias=False)
     layer = attention + 2 * _linear(h, h)
-    encoder, head = _linear(set_input_size(energy), h) + _linear(h, h), _linear(2 * h, h) + _linear(h, num_actions)
+    encoder = _linear(set_input_size(energy, levels), h) + _linear(h, h)
+    head = _linear(2 * h, h) + _linear(h, num_actions)
     return encoder + depth * layer + head
 
 
-def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False) -> int:
     """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it."""
-    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
     if a.get("network", "team") == "set":
         pairs = N * N * (PAIR_FEATURES * h // 2 + h // 2 * int(a.heads) + PAIR_FEATURES * h + 2 * h)
         layer = N * 6 * h * h + pairs
-        return N * (set_input_size(energy) * h + h * h) + depth * layer + N * (2 * h * h + h * num_actions)
+        return N * (set_input_size(energy, levels) * h + h * h) + depth * layer + N * (2 * h * h + h * num_actions)
     torso = N * F * h + depth * h * h
     if a.head == "joint":
-        return torso + h * 6**N
-    macs = torso + h * h + N * ((F + N + 4) * h + h * num_actions)
+        return torso + h * num_actions**N
+    macs = torso + h * h + N * ((F + N + _moves(levels)) * h + h * num_actions)
     if a.mixer == "qmix":
         embed = int(a.mixing_embed_dim)
-        macs += state_size(N, energy) * embed * (N + 3) + embed * (N + 1)
+        macs += state_size(N, energy, levels) * embed * (N + 3) + embed * (N + 1)
     return macs
 
 
-def team_row_values(num_uavs: int, num_actions: int, energy: bool, a) -> int:
+def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False) -> int:
     """Float32 values one world's rows hold at the peak of a gradient step: each layer's inputs and outputs, twice
     for the team network (its torso's and head's temporaries), once for the size-free one (measured by the peak
     resident memory of gradient steps of 8 and of 4096 rows, N = 6 on 10x10 with QMIX: 28 KB a row against this
     count's 37 KB; of 8 and of 256 rows for the size-free network, N = 30 on 40x40: 3.2 MB a row, as counted)."""
-    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy)
+    N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
     if a.get("network", "team") == "set":
         pairs = N * N * (PAIR_FEATURES + 2 * (h // 2) + 3 * int(a.heads) + 2 * h)
-        return N * (set_input_size(energy) + 2 * h) + depth * (N * 12 * h + pairs) + N * (4 * h + num_actions)
+        own = set_input_size(energy, levels)
+        return N * (own + 2 * h) + depth * (N * 12 * h + pairs) + N * (4 * h + num_actions)
     values = N * F + 2 * (depth + 1) * h
     if a.head == "joint":
-        return 2 * (values + 3 * 6**N)
-    values += N * (h + F + N + 4 + 2 * h + num_actions)
+        return 2 * (values + 3 * num_actions**N)
+    values += N * (h + F + N + _moves(levels) + 2 * h + num_actions)
     if a.mixer == "qmix":
-        values += state_size(N, energy) + 2 * int(a.mixing_embed_dim) * (N + 3)
+        values += state_size(N, energy, levels) + 2 * int(a.mixing_embed_dim) * (N + 3)
     return 2 * values
 
 
 def greedy_cells(model) -> int:
-    """The cells of the greedy valid action's occupancy table (``ValidGreedy``): the grid's and two more where that
-    is fewer than N^2 A comparisons of targets with claims, else none (its cost then follows the team, not the grid)."""
-    cells = model.num_cells + 2
+    """The positions of the greedy valid action's occupancy table (``ValidGreedy``): the model's (its cells, at every
+    altitude level) and two more where that is fewer than N^2 A comparisons of targets with claims, else none (its
+    cost then follows the team, not the grid)."""
+    cells = model.num_positions + 2
     return cells if cells <= model.fleet_size**2 * model.num_actions else 0
 
 
 def policy_row_bytes(model, a) -> int:
     """Bytes of one world's row when the Q-network of settings ``a`` values it and picks its greedy valid action:
     the network's float32 values (:func:`team_row_values`) and the occupancy table (:func:`greedy_cells`)."""
-    values = team_row_values(model.fleet_size, model.num_actions, model.energy != "none", a)
+    values = team_row_values(model.fleet_size, model.num_actions, model.energy != "none", a, model.num_levels > 1)
     return FLOAT * values + greedy_cells(model)

@@ -80,13 +80,33 @@ def team_sizes(env_cfg: ModelConfig, a) -> list[tuple[int, tuple[int, int]]]:
 
 def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
     """The models one run trains on: every team of :func:`team_sizes` in every layout of ``agent.layouts`` (or
-    ``env.layout``), the run's model otherwise."""
+    ``env.layout``) and every city of ``agent.cities`` (or ``env.city_seed``), the run's model otherwise."""
     layouts = list(a.get("layouts") or []) or [env_cfg.layout]
+    cities = list(a.get("cities") or []) or [env_cfg.city_seed]
     return [
-        env_cfg.replace(num_uavs=n, grid=grid, layout=layout)
+        env_cfg.replace(num_uavs=n, grid=grid, layout=layout, city_seed=city)
         for n, grid in team_sizes(env_cfg, a)
         for layout in layouts
+        for city in cities
     ]
+
+
+MAX_CITIES = 16  # agent.cities: the groups, and with them the memory and the time, multiply by the cities
+HELD_OUT_CITIES = 2**62  # city seeds from here on are the benchmark's held-out cities (uavrl/bench/tasks.py SEED_BASE)
+
+
+def cities_rule() -> Rule:
+    """``agent.cities``: null, or 1 to :data:`MAX_CITIES` distinct city seeds below :data:`HELD_OUT_CITIES`."""
+
+    def accepts(v):
+        seeds = isinstance(v, list) and all(whole(0).accepts(s) and s < HELD_OUT_CITIES for s in v)
+        return v is None or (seeds and 1 <= len(v) <= MAX_CITIES and len(set(v)) == len(v))
+
+    return Rule(
+        accepts,
+        f"give null (env.city_seed's city) or a list of 1 to {MAX_CITIES} distinct city seeds, whole numbers in "
+        "[0, 2^62) (seeds from 2^62 are the benchmark's held-out cities)",
+    )
 
 
 @dataclass
@@ -145,6 +165,12 @@ class DQNSchema:
         rule=Rule(lambda v: isinstance(v, list) and set(v) <= set(LAYOUTS), f"give a list among {', '.join(LAYOUTS)}"),
         doc="agent.network=set: the layouts each team trains on ([]: env.layout)",
         factory=list,
+    )
+    cities: Optional[list[int]] = setting(
+        None,
+        cities_rule(),
+        "agent.network=set with env.city: the city seeds each team and layout trains in, one group of agent.worlds "
+        "worlds each (null: env.city_seed)",
     )
     heads: int = setting(
         4, whole(1), "agent.network=set: attention heads (they divide agent.hidden)", read=read_if("network", "set")
@@ -262,12 +288,23 @@ def _plain(value):
 def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for DQN settings that cannot go together (after the schema's rules), before torch is
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
-    each a model of its own (``agent.sizes`` x ``agent.layouts``)."""
+    each a model of its own (``agent.sizes`` x ``agent.layouts`` x ``agent.cities``)."""
     network = a.get("network", "team")  # run configs saved before: no setting
     if int(a.get("n_step", 1)) > env_cfg.max_steps:  # MultiStep's memory and time grow with it, its returns do not
         raise ValueError(
             f"agent.n_step={a.n_step} is invalid with env.max_steps={env_cfg.max_steps}: a target sums at most the "
             f"rewards of its episode; give a whole number in [1, {env_cfg.max_steps}]"
+        )
+    if a.get("cities") and env_cfg.city == "none":
+        raise ValueError(
+            f"agent.cities={shown(_plain(a.cities), label=True)} is invalid with env.city='none': the seeds lay out a "
+            "city's buildings; give env.city (e.g. env.city=urban) or agent.cities=null"
+        )
+    if a.get("demonstrations", "none") != "none" and env_cfg.num_levels > 1:
+        raise ValueError(
+            f"agent.demonstrations={a.demonstrations!r} is invalid with env.altitudes_m="
+            f"{shown(list(env_cfg.altitudes_m), label=True)}: the oracle's demonstrations move in the plane only; use "
+            "agent.demonstrations=none"
         )
     if network == "team":
         if a.mixer == "mean":
@@ -279,7 +316,7 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
                 raise ValueError(
                     f"agent.{lever}={a[lever]!r} is invalid with agent.network='team': use agent.network=set"
                 )
-        for name in ("sizes", "layouts"):
+        for name in ("sizes", "layouts", "cities"):
             if a.get(name):
                 value = shown(_plain(a.get(name)), label=True)
                 raise ValueError(
@@ -287,10 +324,11 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
                     "trains on it alone: use agent.network=set"
                 )
         if a.head == "joint" and env_cfg.num_uavs > MAX_JOINT_UAVS:
+            N, A = env_cfg.num_uavs, env_cfg.joint_action_base
             raise ValueError(
-                f"agent.head='joint' is invalid with env.num_uavs={env_cfg.num_uavs}: it needs 6^{env_cfg.num_uavs} "
-                f"outputs, and it is for teams of at most {MAX_JOINT_UAVS} UAVs (6^{MAX_JOINT_UAVS} = "
-                f"{6**MAX_JOINT_UAVS:,}); use agent.head=factored"
+                f"agent.head='joint' is invalid with env.num_uavs={N}: it needs {A}^{N} outputs, and it is for teams "
+                f"of at most {MAX_JOINT_UAVS} UAVs ({A}^{MAX_JOINT_UAVS} = {A**MAX_JOINT_UAVS:,}); use "
+                "agent.head=factored"
             )
         if a.head == "joint" and env_cfg.energy != "none":
             raise ValueError(
@@ -453,11 +491,19 @@ def agent_rules(name: str) -> dict[str, Rule]:
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
     """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
     when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
-    number of UAVs and layout of the same model otherwise."""
+    number of UAVs, layout and city (``env.city_seed``) of the same model otherwise; neither with altitude levels
+    where it was trained without, or the reverse."""
+    levels, trained = env_cfg.num_levels > 1, run_cfg.num_levels > 1
+    if levels != trained:
+        return (
+            f"its policy was trained {'with altitude levels' if trained else 'at one altitude'} (env.altitudes_m="
+            f"{shown(run_cfg.altitudes_m and list(run_cfg.altitudes_m), label=True)}), and a UAV's observations and "
+            f"actions {'at one altitude' if trained else 'with altitude levels'} differ"
+        )
     size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
     same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
-    if size_free and env_cfg.replace(**same) != run_cfg:
-        return "only env.grid, env.num_uavs and env.layout may differ from the saved run's"
+    if size_free and env_cfg.replace(**same, city_seed=run_cfg.city_seed) != run_cfg:
+        return "only env.grid, env.num_uavs, env.layout and env.city_seed may differ from the saved run's"
     if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"

@@ -436,10 +436,11 @@ def state_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
 PAIR_FEATURES = 3  # the size-free network's view of another UAV: (dx, dy) by the grid's span, exp(-its distance)
 
 
-def set_input_size(energy: bool) -> int:
+def set_input_size(energy: bool, levels: bool = False) -> int:
     """Entries of a UAV's own input to the size-free network (``SetQCore``): its observation's own part, the nodes,
-    which of its 4 next cells another UAV holds, and under an energy model its battery and service flag."""
-    return OWN_FEATURES + NODE_FEATURES + 4 + (2 if energy else 0)
+    which of its 4 next cells another UAV holds (6 positions with altitude levels: ``levels``), under an energy model
+    its battery and service flag, with altitude levels its observation's :data:`VERTICAL_FEATURES`."""
+    return OWN_FEATURES + NODE_FEATURES + 4 + (2 if energy else 0) + (2 + VERTICAL_FEATURES if levels else 0)
 
 
 def world_bytes(cfg, batch_size: int) -> int:

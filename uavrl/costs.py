@@ -352,8 +352,8 @@ class _Agent(dict):
 def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost], list[Cost]]:
     """The DQN's memory (the worlds, a batch of transitions, the replay buffers, the networks with their target,
     gradients and Adam's moments, a gradient step), its team steps and its CPU time.  A size-free run trains every
-    team of ``agent.sizes`` in every layout of ``agent.layouts``: each group has its own worlds, buffer and share of
-    the batch (agents/dqn/multisize.py)."""
+    team of ``agent.sizes`` in every layout of ``agent.layouts`` and city of ``agent.cities``: each group has its own
+    worlds, buffer and share of the batch (agents/dqn/multisize.py)."""
     a = cfg.agent
     settings = _Agent.of(a)
     size_free = settings["network"] == "set"
@@ -370,7 +370,11 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     n_step = Factor("agent.n_step", int(a.get("n_step", 1)), multiplies=False)
     demos = Factor("agent.demo_transitions", int(a.get("demo_transitions", 1)))
     per_iteration = [dataclasses.replace(f, multiplies=False) for f in (updates, batch, worlds, T)]
-    each = [Factor("groups (agent.sizes x agent.layouts)", len(groups), fixed=True)] if len(groups) > 1 else []
+    each = (
+        [Factor("groups (agent.sizes x agent.layouts x agent.cities)", len(groups), fixed=True)]
+        if len(groups) > 1
+        else []
+    )
     shape = model_factors(largest, (grid_name, team_name))
     if sized:  # agent.sizes names the grid and the team at once
         del shape[1]
@@ -401,11 +405,13 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         s = agent(low)
         if size_free:
             hidden, heads, depth = int(s.hidden), int(s.heads), int(s.depth)
-            return TRAINING_COPIES * FLOAT * set_parameters(model.num_actions, _e(model), hidden, heads, depth)
+            return (
+                TRAINING_COPIES * FLOAT * set_parameters(model.num_actions, _e(model), hidden, heads, depth, _l(model))
+            )
         m = models(low)[0]
-        params = team_parameters(m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth))
+        params = team_parameters(m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth), _l(m))
         if s.head == "factored" and s.mixer == "qmix":
-            params += qmix_parameters(m.fleet_size, _e(m), int(s.mixing_embed_dim))
+            params += qmix_parameters(m.fleet_size, _e(m), int(s.mixing_embed_dim), _l(m))
         return TRAINING_COPIES * FLOAT * params
 
     def step_bytes(low) -> int:
@@ -433,7 +439,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     def cpu_seconds(low) -> int:
         s, total_seconds, rows = agent(low), 0.0, group_batch(low)
         for m in models(low):
-            macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s)
+            macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s, _l(m))
             per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
             per_step += worlds.at(low) * (2 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
             per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size
@@ -469,6 +475,10 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
 
 def _e(model) -> bool:
     return model.energy != "none"
+
+
+def _l(model) -> bool:
+    return model.num_levels > 1
 
 
 def policy_pass(model, a, starts: Factor) -> Cost:

@@ -20,7 +20,6 @@ from uavrl.envs import InvalidOption, ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET, SEED_LIMIT
 from uavrl.envs.physics.channel import rates
 from uavrl.envs.physics.fading import fading_part
-from uavrl.envs.physics.grid import cells_or_away
 from uavrl.envs.physics.rewards import log_gap_reward
 from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 from uavrl.envs.world import World
@@ -29,6 +28,7 @@ from .builders import TeamNetwork, build_collector, build_policies, build_replay
 from .curriculum import Curriculum, uniform_sample
 from .demonstrations import Demonstrations
 from .migration import load_replay_buffer
+from .networks import LEVELS, PositionIndex, position_numbers
 from .transitions import CompactTransitions, n_step_returns, transition_keys
 
 _ITERATION_STRIDE = 2**24  # world seeds of iteration k: seed * 2^44 + (k + 1) * 2^24 + world, clear of the eval seeds
@@ -168,7 +168,8 @@ class DQNAgent(Agent):
         u_star = group.optimum()
         # kept (the properties return copies): the collector's closing reset draws new random layouts before the batch
         # is read; a second clone would copy every world's [C, 2] rows of a shared layout
-        utility = partial(mean_utility, group.cfg, (group.env.cell_contributions, group.env.direct))
+        layout = (group.env.cell_contributions, group.env.direct)
+        utility = partial(mean_utility, group.cfg, layout, numbers=position_numbers(group.env.world))
         batch = next(group.batches)  # [worlds, steps]
         nxt = batch.get("next")
         if self.settings.objective == "log_gap":
@@ -208,7 +209,7 @@ class DQNAgent(Agent):
             else:  # DQfD: the demonstrations' share of the batch gets the TD loss and the margin loss
                 demos = self.demonstrations.sample(g, self.demonstrations.demo_size(size))
                 batch = torch.cat([uniform_sample(group.buffer, max(1, size - len(demos))), demos])
-                margins.append(self.demonstrations.loss(group.values.module, demos))
+                margins.append(self.demonstrations.loss(group.values, demos))
             losses.append(self.network.td_loss(batch, group))
             if a.get("replay", "uniform") == "prioritized":
                 group.buffer.update_priority(batch.get("index"), batch.get("td_error"))
@@ -273,11 +274,15 @@ class DQNAgent(Agent):
         return reset_layouts(group.cfg, group.env.num_worlds, self.device, self._group_seed(iteration, g))
 
 
-def mean_utility(cfg: ModelConfig, layout: tuple[torch.Tensor, torch.Tensor], td: TensorDictBase) -> torch.Tensor:
+def mean_utility(
+    cfg: ModelConfig, layout: tuple[torch.Tensor, torch.Tensor], td: TensorDictBase, numbers: torch.Tensor | None = None
+) -> torch.Tensor:
     """``[W, T]`` mean-channel utility of the configurations of ``td`` (``[W, T]``) in the worlds' ``layout``
-    (``(cell_contributions, direct)`` of the env of ``cfg``, the layouts they were played in)."""
-    C = cfg.num_cells
-    cells = cells_or_away(td.get("positions"), cfg.grid)  # C: out of service, adds nothing
+    (``(cell_contributions, direct)`` of the env of ``cfg``, the layouts they were played in; with altitude levels
+    ``numbers`` ``[L, C]`` turns a UAV's cell and level into the position the contributions are of,
+    :func:`~.networks.position_numbers`)."""
+    C = layout[0].shape[-2]  # the positions: the cells with one level
+    cells = PositionIndex(cfg.grid, numbers)(td.get("positions"), td.get(LEVELS, None))  # C: out of service
     on_grid = layout[0][torch.arange(len(cells), device=cells.device)[:, None, None], cells.clamp(max=C - 1)]
     contributions = on_grid.masked_fill((cells == C).unsqueeze(-1), 0.0)
     r_pu, r_se = rates(contributions, td.get("tasks"), layout[1][:, None], cfg)

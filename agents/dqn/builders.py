@@ -25,7 +25,7 @@ from uavrl.envs.compat import make_collector
 
 from .curriculum import Curriculum
 from .loss import DoubleQMixerLoss, QMix, VDNMix
-from .networks import Q_INPUTS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy
+from .networks import LEVELS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy, position_numbers, q_inputs
 from .priorities import ProportionalSampler
 from .transitions import CompactTransitions
 
@@ -55,7 +55,12 @@ def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
         a: the agent's settings ``cfg.agent`` (``head``, ``hidden``, ``depth``).
     """
     net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
-    return TensorDictModule(net, in_keys=list(Q_INPUTS), out_keys=[_values_key(a)])
+    return TensorDictModule(net, in_keys=q_inputs(env.cfg), out_keys=[_values_key(a)])
+
+
+def _levels(env: UAVSpectrumEnv) -> list:
+    """The levels entry the greedy rules read after the positions, with altitude levels."""
+    return [LEVELS] if env.cfg.num_levels > 1 else []
 
 
 def _values_key(a):
@@ -137,8 +142,8 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
         device=env.device,
     )
     greedy_action = TensorDictModule(
-        ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions),
-        in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks"],
+        ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions, position_numbers(env.world)),
+        in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks", *_levels(env)],
         out_keys=[("agents", "action")],
     )
     greedy = TensorDictSequential(q, greedy_action)
@@ -151,8 +156,8 @@ def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Poli
     N, values = env.num_uavs, "joint_action_value"
     spec = Categorical(env.cfg.num_joint_actions, device=env.device)
     mask = TensorDictModule(
-        JointActionMask(env.neighbours, env.cfg.grid[0], N),
-        in_keys=["positions"],
+        JointActionMask(env.neighbours, env.cfg.grid[0], N, position_numbers(env.world)),
+        in_keys=["positions", *_levels(env)],
         out_keys=["joint_action_mask"],
     )
     argmax = QValueModule(
@@ -162,7 +167,9 @@ def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Poli
         out_keys=["joint_action", values, "joint_chosen_action_value"],
     )
     decode = TensorDictModule(
-        DecodeJointAction(N, env.device), in_keys=["joint_action"], out_keys=[("agents", "action")]
+        DecodeJointAction(N, env.device, env.cfg.joint_action_base),
+        in_keys=["joint_action"],
+        out_keys=[("agents", "action")],
     )
     exploration = EpsilonGreedy(spec, action_key="joint_action", action_mask_key="joint_action_mask", **eps)
     greedy = TensorDictSequential(mask, q, argmax, decode)

@@ -28,7 +28,7 @@ import math
 
 import torch
 from tensordict import TensorDictBase
-from torch import nn
+from tensordict.nn import TensorDictModule
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.utils import step_mdp
 
@@ -40,7 +40,6 @@ from uavrl.envs.solvers.optimum import MAX_EXCHANGE_UAVS
 
 from .builders import ZeroedStorage
 from .curriculum import uniform_sample
-from .networks import Q_INPUTS
 from .setnet import team_value
 from .transitions import n_step_returns
 
@@ -111,9 +110,9 @@ class Demonstrations:
         """``size`` of team ``g``'s demonstrations, uniformly (full transitions)."""
         return uniform_sample(self.buffers[g], size)
 
-    def loss(self, net: nn.Module, demos: TensorDictBase) -> torch.Tensor:
-        """The margin loss of the values of ``net`` (the network acting in the team's grid, a
+    def loss(self, net: TensorDictModule, demos: TensorDictBase) -> torch.Tensor:
+        """The margin loss of the values of ``net`` (the module acting in the team's worlds, around a
         :class:`~.setnet.SetQNet`) on ``demos``."""
-        values = net(*(demos.get(k) for k in Q_INPUTS))
+        values = net.module(*(demos.get(k) for k in net.in_keys))
         expert, allowed = demos.get(("agents", "action")), demos.get(("agents", "action_mask"))
         return margin_loss(values, expert, allowed, self.margin, self.mixer)

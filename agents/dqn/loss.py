@@ -11,7 +11,6 @@ from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.objectives import LossModule
 
-from .networks import Q_INPUTS
 from .transitions import STEPS
 
 
@@ -97,16 +96,17 @@ class DoubleQMixerLoss(LossModule):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         # Parameters are read, never swapped into the modules: the online ones are the modules' own (the optimizer
         # steps them in place), the target ones are handed to the network and the mixer as arguments.
-        net, greedy = (m.module for m in self.local_value_network.module)
+        q, choose = self.local_value_network.module
+        net, greedy, inputs = q.module, choose.module, q.in_keys  # in_keys: Q_INPUTS, and the levels with levels
         mixer, nxt = self.mixer_network.module, td.get("next")
         # the successors' online pass stays apart from the states': one pass over both costs ~10% more a gradient
         # step on CPU, its backward running over the successors' rows too (BENCHMARKS.md, DQN iteration)
-        chosen = net(*(td.get(key) for key in Q_INPUTS)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
+        chosen = net(*(td.get(key) for key in inputs)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
         value = mixer(chosen, td.get("state"))
         with torch.no_grad():
-            after = net(*(nxt.get(key) for key in Q_INPUTS))
-            next_action = greedy(after, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
-            target_values = net(*(nxt.get(key) for key in Q_INPUTS), params=self._target_net)
+            after = net(*(nxt.get(key) for key in inputs))
+            next_action = greedy(after, *(nxt.get(key) for key in choose.in_keys[1:]))  # mask, positions, tasks...
+            target_values = net(*(nxt.get(key) for key in inputs), params=self._target_net)
             chosen = target_values.gather(-1, next_action.unsqueeze(-1))  # the online greedy action, target-valued
             next_value = mixer(chosen, nxt.get("state"), self.target_mixer_network_params.get("module"))
             target = nxt.get("reward") + discount(td, self.gamma) * (~nxt.get("terminated")) * next_value

@@ -1,8 +1,9 @@
 """The DQN with a size-free network (``agent.network=set``), trained over several team sizes and grids at once.
 
 ``agent.sizes`` lists the teams ``[N, L1, L2]`` one run trains on (``[]``: the run's ``env.num_uavs`` and
-``env.grid`` only), each in every layout of ``agent.layouts`` (``[]``: ``env.layout``); every other model option is
-the run's (channel, energy model, ...).  Each team and layout is a group
+``env.grid`` only), each in every layout of ``agent.layouts`` (``[]``: ``env.layout``) and in a city, every city of
+``agent.cities`` (null: ``env.city_seed``); every other model option is the run's (channel, energy model, altitude
+levels, ...).  Each team, layout and city is a group
 with its own ``agent.worlds`` worlds, collector, exploration and replay buffer; one core
 (:class:`~.setnet.SetQCore`) acts in all of them.  One iteration: an episode in every world of every group, then
 ``agent.updates`` gradient steps, each the sum of one batch's loss per group (``agent.batch_size`` split evenly).
@@ -30,11 +31,11 @@ from torch import nn
 from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.schema import AGENTS, network_refusal, training_models  # noqa: F401 (uavrl.load_policy's)
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
+from uavrl.envs.rules import shown
 
 from .agent import DQNAgent, _Group
 from .builders import QNetwork, build_policies, exploration_schedule
 from .curriculum import Curriculum
-from .networks import Q_INPUTS
 from .setnet import SetDoubleQLoss, SetQCore, SetQNet
 
 
@@ -50,13 +51,14 @@ class SetNetwork(QNetwork):
     def __init__(self, agent: DQNAgent, env: UAVSpectrumEnv):
         super().__init__(agent, env)
         a, env_cfg = self.settings, agent.env_cfg
-        energy = env_cfg.energy != "none"
-        self.core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth)).to(agent.device)
+        energy, levels = env_cfg.energy != "none", env_cfg.num_levels > 1
+        core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth), levels)
+        self.core = core.to(agent.device)
 
     def values(self, env: UAVSpectrumEnv) -> TensorDictModule:
-        return TensorDictModule(
-            SetQNet(self.core, env.cfg.grid), in_keys=list(Q_INPUTS), out_keys=[("agents", "action_value")]
-        )
+        positions = env.world.dynamics.positions if env.cfg.num_levels > 1 else None  # its moves, its buildings
+        net = SetQNet(self.core, env.cfg.grid, positions)
+        return TensorDictModule(net, in_keys=net.in_keys, out_keys=[("agents", "action_value")])
 
     def build_loss(self, policies) -> SetDoubleQLoss:
         a = self.settings
@@ -67,15 +69,20 @@ class SetNetwork(QNetwork):
         return list(self.core.parameters())
 
     def td_loss(self, batch: TensorDictBase, group: _Group) -> torch.Tensor:
-        return self.loss(batch, group.grid)["loss"]
+        return self.loss(batch, group.values.module)["loss"]
 
     def update_target(self) -> None:
         self.loss.update_target(float(self.settings.tau))
 
     def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
-        """The greedy policy in environments of ``env_cfg``: any grid and number of UAVs of the run's model (a
+        """The greedy policy in environments of ``env_cfg``: any grid, number of UAVs and city of the run's model (a
         one-line ValueError for another model: other observations, or actions)."""
         agent = self.agent
+        if (env_cfg.num_levels > 1) != self.core.levels:
+            raise ValueError(
+                f"env.altitudes_m={shown(env_cfg.altitudes_m)} is invalid for this network, trained with "
+                f"env.altitudes_m={shown(agent.env_cfg.altitudes_m)}: its inputs and actions differ"
+            )
         if (env_cfg.energy != "none") != self.core.energy or env_cfg.num_actions != agent.env_cfg.num_actions:
             raise ValueError(
                 f"env.energy={env_cfg.energy!r} is invalid for this network, trained with "

@@ -22,31 +22,70 @@ from uavrl.envs import (
     joint_action_valid,
     observation_with_nodes,
 )
-from uavrl.envs.config import RELAYING, SENSING
+from uavrl.envs.config import CLIMB, RELAYING, SENSING
 from uavrl.envs.physics.grid import cells_or_away
 
 Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
+LEVELS = "levels"  # with altitude levels, each UAV's level: the networks and the greedy rules read it after the rest
 
 
-def _cells(positions: torch.Tensor, width: int) -> torch.Tensor:
-    return positions[..., 1] * width + positions[..., 0]
+def q_inputs(cfg) -> list:
+    """The entries a Q network reads in environments of the model ``cfg``: :data:`Q_INPUTS`, then with altitude
+    levels each UAV's level."""
+    return [*Q_INPUTS, LEVELS] if cfg.num_levels > 1 else list(Q_INPUTS)
+
+
+def position_numbers(world) -> torch.Tensor | None:
+    """``[L, C]`` the position of each cell at each altitude level of ``world``'s model (-1 inside a building): what
+    turns a UAV's ``(x, y)`` and level into its position (:class:`PositionIndex`); None with one level."""
+    cfg = world.cfg
+    if cfg.num_levels == 1:
+        return None
+    return world.dynamics.positions.number.view(cfg.num_levels, cfg.num_cells)
+
+
+class PositionIndex(nn.Module):
+    """Position indices ``[*, N]`` of UAVs at ``(x, y)`` ``[*, N, 2]`` (and with altitude levels at levels ``[*, N]``):
+    cells ``y L1 + x`` (``L1 L2`` for a UAV off the grid, out of service) with one level, the model's positions
+    (:func:`~uavrl.envs.physics.positions.model_positions`) with several.
+
+    Args:
+        grid: ``(L1, L2)``.
+        numbers: ``[L, C]`` of :func:`position_numbers`; None: one level.
+    """
+
+    def __init__(self, grid: tuple[int, int], numbers: torch.Tensor | None = None):
+        super().__init__()
+        self.grid = tuple(grid)
+        self.register_buffer("numbers", None if numbers is None else numbers.clone(), persistent=False)
+
+    def forward(self, positions: torch.Tensor, levels: torch.Tensor | None = None) -> torch.Tensor:
+        cells = cells_or_away(positions, self.grid)
+        return cells if self.numbers is None else self.numbers[levels, cells]
+
+
+def _grid(neighbours: torch.Tensor, width: int, numbers: torch.Tensor | None) -> tuple[int, int]:
+    """The grid of a move table ``[P, M]`` of positions (cells with one level) and ``numbers`` ``[L, C]``."""
+    cells = len(neighbours) if numbers is None else numbers.shape[-1]
+    return width, cells // width
 
 
 class TeamQNet(nn.Module):
-    """Action values from the joint observation ``[*, N, F]``, the positions ``[*, N, 2]`` and the state.
+    """Action values from the joint observation ``[*, N, F]``, the positions ``[*, N, 2]`` and the state (and with
+    altitude levels the levels ``[*, N]``: :func:`q_inputs`).
 
     Each UAV's input is its observation followed by the node positions (the
     last 12 entries of ``state``, :func:`~uavrl.envs.world.observation_with_nodes`).
     The torso (a centralised ``MultiAgentMLP``) embeds all N inputs at once.
     ``factored``: a shared per-UAV head (a ``MultiAgentMLP`` with one hidden
     layer) reads that embedding, the UAV's own observation, its one-hot id and
-    which of its 4 neighbouring cells another UAV holds, and returns
-    ``[*, N, A]`` (A = 6, 7 with recharging).  The embedding is the same for every UAV of a world, so the
-    head's first layer is applied in two parts: to the embedding once per
+    which of the M positions its moves reach another UAV holds (4, 6 with altitude levels), and returns
+    ``[*, N, A]`` (A = 6, 7 with recharging, 8 with altitude levels).  The embedding is the same for every UAV of a
+    world, so the head's first layer is applied in two parts: to the embedding once per
     world, to the rest once per UAV: the same function and parameters as the
     layer on the whole input, and with 6 UAVs 43% fewer multiplications for
     the whole network.
-    ``joint``: a linear head returns ``[*, 6^N]``.
+    ``joint``: a linear head returns ``[*, A^N]`` (``cfg.num_joint_actions``: 6^N, 8^N with altitude levels).
 
     Example:
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
@@ -60,7 +99,8 @@ class TeamQNet(nn.Module):
     def __init__(self, env: UAVSpectrumEnv, head: str, hidden: int, depth: int):
         super().__init__()
         N, F, dev = env.num_uavs, env.observation_size + NODE_FEATURES, env.device
-        self.joint, self.width = head == "joint", env.cfg.grid[0]
+        self.joint = head == "joint"
+        moves = env.neighbours.shape[1]  # the positions a UAV's moves reach: 4, 6 with altitude levels
         self.torso = MultiAgentMLP(
             F,
             hidden,
@@ -74,11 +114,11 @@ class TeamQNet(nn.Module):
             device=dev,
         )
         if self.joint:
-            self.head = nn.Linear(hidden, NUM_ACTIONS**N, device=dev)
+            self.head = nn.Linear(hidden, env.cfg.num_joint_actions, device=dev)
         else:
             self.head = MultiAgentMLP(
-                hidden + F + N + 4,
-                env.num_actions,  # 6, and "return" with recharging
+                hidden + F + N + moves,
+                env.num_actions,  # 6, "return" with recharging, climb and descend with altitude levels
                 N,
                 centralized=False,
                 share_params=True,
@@ -89,17 +129,24 @@ class TeamQNet(nn.Module):
             )
         self.register_buffer("ids", torch.eye(N, device=dev))
         self.register_buffer("neighbours", env.neighbours.clone())
+        self.position = PositionIndex(env.cfg.grid, position_numbers(env.world))
         self._torso_layers = sorted(self.torso.params.keys(), key=int)  # "0", "2", ...: the Linear layers
 
     def forward(
-        self, observation: torch.Tensor, positions: torch.Tensor, state: torch.Tensor, params: TensorDictBase = None
+        self,
+        observation: torch.Tensor,
+        positions: torch.Tensor,
+        state: torch.Tensor,
+        levels: torch.Tensor | None = None,
+        params: TensorDictBase = None,
     ) -> torch.Tensor:
-        """The values: ``[*, N, A]`` per UAV (factored head), or ``[*, 6^N]`` per joint action (joint head).
+        """The values: ``[*, N, A]`` per UAV (factored head), or ``[*, A^N]`` per joint action (joint head).
 
         Args:
             observation: the UAVs' observations ``[*, N, F]``.
-            positions: their cells ``[*, N, 2]`` (the greedy rule's neighbours and the masked moves read them).
+            positions: their cells ``[*, N, 2]`` (which of the positions their moves reach another UAV holds).
             state: the worlds' state ``[*, S]``; its last 12 entries, the node positions, join each observation.
+            levels: with altitude levels, their levels ``[*, N]``; None with one level.
             params: the structure of ``TensorDict.from_module(self)`` (the target network's copy in the loss),
                 replacing the module's own parameters, which keeps the factored head free of any parameter swap;
                 None: the module's own.
@@ -117,8 +164,8 @@ class TeamQNet(nn.Module):
         for layer in self._torso_layers:
             embedding = torch.relu(nn.functional.linear(embedding, torso[layer, "weight"], torso[layer, "bias"]))
         C = len(self.neighbours)
-        cells = cells_or_away(positions, (self.width, C // self.width))
-        # [*, N, 4]: which of its neighbouring cells another UAV holds (none, for a UAV out of service)
+        cells = self.position(positions, levels)
+        # [*, N, M]: which of the positions its moves reach another UAV holds (none, for a UAV out of service)
         held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
         held &= (cells < C).unsqueeze(-1)
         own = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1), held.to(observation.dtype)], -1)
@@ -144,11 +191,15 @@ class ValidGreedy(nn.Module):
     two relays of N = 2 both turning to sensing) can land in a worse
     configuration than either alone, and flip back and forth forever.
 
+    With altitude levels the moves are also climb and descend (actions 6, 7), and the targets are positions.
+
     Args:
-        neighbours: the grid's neighbour table ``[C, 4]`` (``UAVSpectrumEnv.neighbours``): the cell each move
-            reaches, -1 off the grid.
+        neighbours: the model's move table ``[P, M]`` (``UAVSpectrumEnv.neighbours``): the position each move
+            reaches (up, down, left, right, and climb, descend with altitude levels), -1 where none.
         width: the grid's ``L1``, to turn positions ``(x, y)`` into cells ``x + L1 y``.
-        num_actions: the actions of a UAV (6; 7 with a ``return`` action).
+        num_actions: the actions of a UAV (6; 7 with a ``return`` action, 8 with altitude levels).
+        numbers: with altitude levels, the position of each cell at each level ``[L, C]``
+            (:func:`position_numbers`); None with one level.
 
     Example:
         >>> greedy = ValidGreedy(UAVSpectrumEnv(grid=(3, 1), num_uavs=2).neighbours, width=3)
@@ -164,28 +215,48 @@ class ValidGreedy(nn.Module):
         tensor([[4, 5]])
     """
 
-    def __init__(self, neighbours: torch.Tensor, width: int, num_actions: int = NUM_ACTIONS):
+    def __init__(
+        self,
+        neighbours: torch.Tensor,
+        width: int,
+        num_actions: int = NUM_ACTIONS,
+        numbers: torch.Tensor | None = None,
+    ):
         super().__init__()
-        self.width, self.num_actions = width, num_actions
+        self.num_actions = num_actions
+        self.vertical = neighbours.shape[1] > 4  # climb and descend: actions 6, 7, the move table's columns 4, 5
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5
+        self.position = PositionIndex(_grid(neighbours, width, numbers), numbers)
 
     def _targets(self, cells: torch.Tensor) -> torch.Tensor:
-        """``[*, N, A]`` the cell each action leads to from ``cells`` ``[*, N]``: off-grid moves lead to the extra cell
-        C (masked out), where a UAV out of service stays.  "return" keeps the cell for the step, as the environment's
-        dynamics do (its flight home is the energy part's).  Read from the UAVs' own rows of ``neighbours``: no
-        per-cell table, so the cost does not grow with the grid."""
-        C = len(self.neighbours)
+        """``[*, N, A]`` the position each action leads to from ``cells`` ``[*, N]``: impossible moves lead to the
+        extra position P (masked out), where a UAV out of service stays.  "return" keeps the cell for the step, as the
+        environment's dynamics do (its flight home is the energy part's).  Read from the UAVs' own rows of
+        ``neighbours``: no per-position table, so the cost does not grow with the grid."""
+        C, M = self.neighbours.shape
         serving = cells < C
-        moves = self.neighbours.index_select(0, cells.where(serving, 0).reshape(-1)).view(*cells.shape, 4)
+        moves = self.neighbours.index_select(0, cells.where(serving, 0).reshape(-1)).view(*cells.shape, M)
         moves = torch.where((moves < 0) | ~serving.unsqueeze(-1), C, moves)
-        return torch.cat([moves, cells.unsqueeze(-1).expand(*cells.shape, self.num_actions - 4)], -1)
+        stays = cells.unsqueeze(-1).expand(*cells.shape, self.num_actions - M)  # sense, relay (and "return")
+        if self.vertical:
+            return torch.cat([moves[..., :4], stays, moves[..., 4:]], -1)
+        return torch.cat([moves, stays], -1)
+
+    def _moves(self, x: torch.Tensor) -> torch.Tensor:
+        """The entries ``[*, A]`` of the moves (0-3, and climb, descend with altitude levels) of per-action ``x``."""
+        return torch.cat([x[..., :4], x[..., CLIMB:]], -1) if self.vertical else x[..., :4]
 
     def forward(
-        self, action_value: torch.Tensor, action_mask: torch.Tensor, positions: torch.Tensor, tasks: torch.Tensor
+        self,
+        action_value: torch.Tensor,
+        action_mask: torch.Tensor,
+        positions: torch.Tensor,
+        tasks: torch.Tensor,
+        levels: torch.Tensor | None = None,
     ) -> torch.Tensor:
         C = len(self.neighbours)
-        cells = cells_or_away(positions, (self.width, C // self.width))
+        cells = self.position(positions, levels)
         # per-UAV rows, UAV first ([N, *, ...], contiguous): one row per step of the sequential choice
         targets = self._targets(cells).movedim(-2, 0).contiguous()
         values, allowed = action_value.movedim(-2, 0).contiguous(), action_mask.movedim(-2, 0).contiguous()
@@ -231,43 +302,51 @@ class ValidGreedy(nn.Module):
         # now if the holder has left it (UAVs following one another move together)
         for i in range(N):
             release(i)
-            blocked = taken(i, targets[i][..., :4]) | ~allowed[i][..., :4]
-            value, move = values[i][..., :4].masked_fill(blocked, -math.inf).max(-1, keepdim=True)
-            better = (actions[i] >= 4) & (value > values[i].gather(-1, actions[i]))
+            blocked = taken(i, self._moves(targets[i])) | ~self._moves(allowed[i])
+            value, move = self._moves(values[i]).masked_fill(blocked, -math.inf).max(-1, keepdim=True)
+            kept = (actions[i] >= 4) & (actions[i] < CLIMB) if self.vertical else actions[i] >= 4
+            if self.vertical:  # the moves' entries 4, 5 are climb, descend
+                move = torch.where(move >= 4, move + CLIMB - 4, move)
+            better = kept & (value > values[i].gather(-1, actions[i]))
             actions[i] = torch.where(better, move, actions[i])
             claim(i, torch.where(better, targets[i].gather(-1, move), claimed[..., i : i + 1]))
         return torch.cat(actions, -1)
 
 
 class JointActionMask(nn.Module):
-    """``[*, 6^N]`` valid joint actions at positions ``[*, N, 2]`` (the environment's rule).
+    """``[*, A^N]`` valid joint actions at positions ``[*, N, 2]`` (and levels ``[*, N]`` with altitude levels: ``A``
+    8, else 6), the environment's rule.
 
     Args:
-        neighbours: the grid's neighbour table ``[C, 4]`` (``UAVSpectrumEnv.neighbours``).
+        neighbours: the model's move table ``[P, M]`` (``UAVSpectrumEnv.neighbours``).
         width: the grid's ``L1``, to turn positions ``(x, y)`` into cells ``x + L1 y``.
         num_uavs: ``N``.
+        numbers: with altitude levels, the position of each cell at each level ``[L, C]``
+            (:func:`position_numbers`); None with one level.
     """
 
-    def __init__(self, neighbours: torch.Tensor, width: int, num_uavs: int):
+    def __init__(self, neighbours: torch.Tensor, width: int, num_uavs: int, numbers: torch.Tensor | None = None):
         super().__init__()
-        self.width, self.num_uavs = width, num_uavs
+        self.num_uavs = num_uavs
         self.register_buffer("neighbours", neighbours.clone())
+        self.position = PositionIndex(_grid(neighbours, width, numbers), numbers)
 
-    def forward(self, positions: torch.Tensor) -> torch.Tensor:
-        return joint_action_valid(_cells(positions, self.width), self.neighbours, self.num_uavs)
+    def forward(self, positions: torch.Tensor, levels: torch.Tensor | None = None) -> torch.Tensor:
+        return joint_action_valid(self.position(positions, levels), self.neighbours, self.num_uavs)
 
 
 class DecodeJointAction(nn.Module):
-    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i 6^i``.
+    """Per-UAV actions ``[*, N]`` of joint actions ``[*]``, ``j = sum_i a_i A^i``.
 
     Args:
         num_uavs: ``N``.
-        device: the torch device of its decoding table ``[6^N, N]``.
+        device: the torch device of its decoding table ``[A^N, N]``.
+        num_actions: ``A``, the joint action base (``cfg.joint_action_base``: 6, 8 with altitude levels).
     """
 
-    def __init__(self, num_uavs: int, device):
+    def __init__(self, num_uavs: int, device, num_actions: int = NUM_ACTIONS):
         super().__init__()
-        self.register_buffer("table", decode_joint_actions(num_uavs, device))
+        self.register_buffer("table", decode_joint_actions(num_uavs, device, num_actions))
 
     def forward(self, joint_action: torch.Tensor) -> torch.Tensor:
         return self.table[joint_action]

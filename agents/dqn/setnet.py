@@ -2,9 +2,11 @@
 
 Each UAV reads only what does not depend on N or the grid: its own cell and task (normalised by the grid), the relay
 contributions at its cell and the cells its moves reach, which of those cells another UAV holds, the 4 nodes relative
-to it, and under an energy model its battery and service flag.  One attention layer per ``agent.depth`` lets every
-UAV read the others: the keys and values are the others' embeddings and their positions relative to it (by the
-grid's span, and ``exp(-distance in cells)``), so the per-UAV values permute with the UAVs.  A shared head turns each
+to it, under an energy model its battery and service flag, and with altitude levels its level, the contributions a
+climb and a descent reach (its observation's vertical features) and which of the 6 positions its moves reach another
+UAV holds.  One attention layer per ``agent.depth`` lets every UAV read the others: the keys and values are the
+others' embeddings and their positions relative to it (by the grid's span, and ``exp(-distance in cells)``, in 3-D
+with altitude levels), so the per-UAV values permute with the UAVs.  A shared head turns each
 UAV's result into its action values; the team value is their sum (VDN) or mean (``agent.mixer``), so nothing grows
 with N.
 
@@ -29,11 +31,12 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
-from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, PAIR_FEATURES, set_input_size
-from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, PAIR_FEATURES, VERTICAL_FEATURES, set_input_size
+from uavrl.envs.physics.grid import grid_neighbours
+from uavrl.envs.physics.positions import Positions
 
 from .loss import discount
-from .networks import Q_INPUTS, ValidGreedy
+from .networks import LEVELS, Q_INPUTS, PositionIndex, ValidGreedy
 
 MIXERS = ("vdn", "mean")  # the size-free team values: the sum or the mean of the UAVs' chosen values
 
@@ -76,10 +79,10 @@ class SetQCore(nn.Module):
     """The size-free parameters: an encoder of each UAV's own features, ``depth`` attention layers over the others,
     a head of ``num_actions`` values per UAV (inputs: :meth:`SetQNet.features`)."""
 
-    def __init__(self, num_actions: int, energy: bool, hidden: int, heads: int, depth: int):
+    def __init__(self, num_actions: int, energy: bool, hidden: int, heads: int, depth: int, levels: bool = False):
         super().__init__()
-        self.energy = energy
-        self.encode = _mlp(set_input_size(energy), hidden, hidden)
+        self.energy, self.levels = energy, levels
+        self.encode = _mlp(set_input_size(energy, levels), hidden, hidden)
         self.attention = nn.ModuleList(RelativeAttention(hidden, heads) for _ in range(depth))
         self.feed = nn.ModuleList(_mlp(hidden, hidden, hidden) for _ in range(depth))
         self.head = _mlp(2 * hidden, hidden, num_actions)  # the UAV's result and the team's mean
@@ -94,27 +97,44 @@ class SetQCore(nn.Module):
 
 
 class SetQNet(nn.Module):
-    """:class:`SetQCore` acting in a ``grid``: reads ``Q_INPUTS`` (observation, positions, state) of any number of
-    UAVs, returns ``[*, N, A]``.  Holds no parameters of its own: views of one core in several grids share them."""
+    """:class:`SetQCore` acting in a ``grid``: reads ``Q_INPUTS`` (observation, positions, state; then the levels
+    with altitude levels) of any number of UAVs, returns ``[*, N, A]``.  Holds no parameters of its own: views of one
+    core in several grids (and cities) share them.
 
-    def __init__(self, core: SetQCore, grid: tuple[int, int]):
+    Args:
+        core: the parameters.
+        grid: ``(L1, L2)``.
+        positions: with altitude levels, the model's positions (``World.dynamics.positions``: its moves, its
+            buildings); None with one level.
+    """
+
+    def __init__(self, core: SetQCore, grid: tuple[int, int], positions: Positions | None = None):
         super().__init__()
-        self.core, self.grid = core, tuple(grid)
+        self.core, self.grid, self.positions = core, tuple(grid), positions
         L1, L2 = self.grid
         device = next(core.parameters()).device
-        self.register_buffer("neighbours", grid_neighbours(self.grid, device), persistent=False)
+        if (positions is not None) != core.levels:
+            raise ValueError("SetQNet: give the model's positions exactly for a core of altitude levels")
+        if positions is None:
+            self.register_buffer("neighbours", grid_neighbours(self.grid, device), persistent=False)
+            self.position = PositionIndex(self.grid)
+        else:
+            self.register_buffer("neighbours", positions.neighbours.to(device), persistent=False)
+            self.position = PositionIndex(self.grid, positions.number.to(device).view(-1, L1 * L2))
+            # each position's height in cells: the vertical part of the distance between two UAVs
+            self.register_buffer("heights", positions.xyz[:, 2].to(device, torch.float32), persistent=False)
         self.register_buffer(
             "span", torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1)], dtype=torch.float32, device=device), False
         )
         self.register_buffer("size", torch.tensor([L1, L2], dtype=torch.float32, device=device), False)
 
-    def features(self, observation, positions, state) -> tuple[torch.Tensor, torch.Tensor]:
+    def features(self, observation, positions, state, levels=None) -> tuple[torch.Tensor, torch.Tensor]:
         """``(own [*, N, F], pairs [*, N, N, 3])``: what the core reads, none of it sized by N or the grid."""
         N = positions.shape[-2]
         xy = positions.to(self.span.dtype)
         C = len(self.neighbours)
-        cells = cells_or_away(positions, self.grid)
-        # which of its neighbouring cells another UAV holds (none, for a UAV out of service)
+        cells = self.position(positions, levels)
+        # which of the positions its moves reach another UAV holds (none, for a UAV out of service)
         held = (self.neighbours[cells.clamp(max=C - 1)].unsqueeze(-1) == cells[..., None, None, :]).any(-1)
         held &= (cells < C).unsqueeze(-1)
         nodes = state[..., -NODE_FEATURES:].unflatten(-1, (4, 3))  # (x / L1, y / L2, z / h) of PT, PR, S, E
@@ -127,11 +147,27 @@ class SetQNet(nn.Module):
             start = OWN_FEATURES + 3 * (N - 1)
             parts.append(observation[..., start : start + 2])
         offsets = xy[..., None, :, :] - xy[..., :, None, :]  # [*, N, N, 2]: row i, UAV j relative to UAV i
-        proximity = torch.exp(-offsets.norm(dim=-1, keepdim=True))
+        if self.positions is None:
+            proximity = torch.exp(-offsets.norm(dim=-1, keepdim=True))
+        else:  # its own level and what a climb and a descent reach: the observation's vertical features
+            start = observation.shape[-1] - (VERTICAL_FEATURES + N - 1)  # the others' levels follow them
+            parts.append(observation[..., start : start + VERTICAL_FEATURES])
+            height = self.heights[cells]
+            rise = (height[..., None, :] - height[..., :, None]).unsqueeze(-1)
+            proximity = torch.exp(-torch.cat([offsets, rise], -1).norm(dim=-1, keepdim=True))
         return torch.cat(parts, -1), torch.cat([offsets / self.span, proximity], -1)
 
-    def forward(self, observation, positions, state) -> torch.Tensor:
-        return self.core(*self.features(observation, positions, state))
+    def forward(self, observation, positions, state, levels=None) -> torch.Tensor:
+        return self.core(*self.features(observation, positions, state, levels))
+
+    def acting(self, core: SetQCore) -> SetQNet:
+        """A view of ``core`` (the target's) in this one's grid and positions."""
+        return SetQNet(core, self.grid, self.positions)
+
+    @property
+    def in_keys(self) -> list:
+        """What it reads, in order: :data:`Q_INPUTS`, then the levels with altitude levels."""
+        return [*Q_INPUTS, LEVELS] if self.positions is not None else list(Q_INPUTS)
 
 
 def team_value(chosen: torch.Tensor, mixer: str) -> torch.Tensor:
@@ -144,37 +180,32 @@ class SetDoubleQLoss(nn.Module):
 
     ``y = r + gamma^n (1 - terminated) Mix(Q_target(s', a'))`` (``n``: the steps an n-step reward sums) where the
     online core's :class:`ValidGreedy` picks the valid joint action ``a'``; the loss is the Huber distance to
-    ``Mix(Q(s, a))``.  ``Mix`` is the sum or mean of :func:`team_value`, so one loss module serves every team size
-    and grid (``grid``: the batch's).
+    ``Mix(Q(s, a))``.  ``Mix`` is the sum or mean of :func:`team_value`, so one loss module serves every team size,
+    grid and city (``online``: the core's view in the batch's, :meth:`SetNetwork.values`).
     """
 
     def __init__(self, core: SetQCore, mixer: str, gamma: float, num_actions: int):
         super().__init__()
         self.core, self.mixer, self.gamma, self.num_actions = core, mixer, gamma, num_actions
         self.target = copy.deepcopy(core).requires_grad_(False)
-        self._grids: dict = {}
+        self._views: dict = {}
 
-    def _views(self, grid) -> tuple[SetQNet, SetQNet, ValidGreedy]:
-        if grid not in self._grids:
-            online = SetQNet(self.core, grid)
-            self._grids[grid] = (
-                online,
-                SetQNet(self.target, grid),
-                ValidGreedy(online.neighbours, grid[0], self.num_actions),
-            )
-        return self._grids[grid]
+    def _target_and_greedy(self, online: SetQNet) -> tuple[SetQNet, ValidGreedy]:
+        if online not in self._views:
+            greedy = ValidGreedy(online.neighbours, online.grid[0], self.num_actions, online.position.numbers)
+            self._views[online] = (online.acting(self.target), greedy)
+        return self._views[online]
 
-    def forward(self, td: TensorDictBase, grid: tuple[int, int]) -> TensorDictBase:
-        online, target, greedy = self._views(tuple(grid))
-        nxt = td.get("next")
-        chosen = online(*(td.get(k) for k in Q_INPUTS)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
+    def forward(self, td: TensorDictBase, online: SetQNet) -> TensorDictBase:
+        target, greedy = self._target_and_greedy(online)
+        nxt, inputs = td.get("next"), online.in_keys
+        chosen = online(*(td.get(k) for k in inputs)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
         value = team_value(chosen, self.mixer)
         with torch.no_grad():
-            next_values = online(*(nxt.get(k) for k in Q_INPUTS))
-            action = greedy(next_values, nxt.get(("agents", "action_mask")), nxt.get("positions"), nxt.get("tasks"))
-            next_value = team_value(
-                target(*(nxt.get(k) for k in Q_INPUTS)).gather(-1, action.unsqueeze(-1)), self.mixer
-            )
+            next_values = online(*(nxt.get(k) for k in inputs))
+            where = (nxt.get(k) for k in ["positions", "tasks", *inputs[len(Q_INPUTS) :]])  # and the levels
+            action = greedy(next_values, nxt.get(("agents", "action_mask")), *where)
+            next_value = team_value(target(*(nxt.get(k) for k in inputs)).gather(-1, action.unsqueeze(-1)), self.mixer)
             y = nxt.get("reward") + discount(td, self.gamma) * (~nxt.get("terminated")) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, y)})
 

@@ -9,7 +9,8 @@ UAVs' battery and service flags, and with random layouts the layout's nodes.
 keeps only those (with the actions, the reward and the done flags) when the
 buffer is extended, and rebuilds the full transitions with the World's own
 :meth:`~uavrl.envs.world.World.configurations` when it is sampled or read:
-the same tensors, bit for bit, at a tenth of the memory or less (BENCHMARKS.md).
+the same tensors, bit for bit, at a tenth of the memory or less (BENCHMARKS.md).  With altitude levels a code's
+cell is the UAV's position (its cell at its level).
 
 Example:
     >>> import torch
@@ -32,8 +33,9 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data.postprocs import MultiStep
 from torchrl.envs import Transform
 
-from uavrl.envs.physics.grid import cells_or_away
 from uavrl.envs.world import World
+
+from .networks import LEVELS, PositionIndex, position_numbers
 
 _OBSERVED = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
 _OUTCOME = ["reward", "done", "terminated"]  # of "next", stored as they are
@@ -41,11 +43,17 @@ STEPS = "steps_to_next_obs"  # n-step returns: the steps a reward sums (TorchRL'
 
 
 def transition_keys(world: World, action_keys: list, n_step: int = 1) -> list:
-    """The entries of a full transition (what the loss reads), ``"nodes"`` with random layouts and
-    ``"steps_to_next_obs"`` with n-step returns (``n_step > 1``)."""
+    """The entries of a full transition (what the loss reads), ``"levels"`` with altitude levels, ``"nodes"`` with
+    random layouts and ``"steps_to_next_obs"`` with n-step returns (``n_step > 1``)."""
+    observed = _observed(world)
     layout = ["nodes"] if world.layouts.fixed is None else []
     steps = [STEPS] if n_step > 1 else []
-    return _OBSERVED + layout + steps + action_keys + [("next", k) for k in _OBSERVED + _OUTCOME]
+    return observed + layout + steps + action_keys + [("next", k) for k in observed + _OUTCOME]
+
+
+def _observed(world: World) -> list:
+    """What a step observes: :data:`_OBSERVED`, and each UAV's level with altitude levels."""
+    return _OBSERVED + ([LEVELS] if world.cfg.num_levels > 1 else [])
 
 
 def n_step_returns(episodes: TensorDictBase, n_step: int, gamma: float) -> TensorDictBase:
@@ -98,13 +106,14 @@ class CompactTransitions(Transform):
     def __init__(self, world: World, action_keys: list, n_step: int = 1):
         super().__init__(in_keys=[], out_keys=[])
         self.world = world
+        self.position = PositionIndex(world.cfg.grid, position_numbers(world))  # a code's cell: its position
         self.joint = "joint_action" in action_keys
         self.code_dtype = torch.int16 if 2 * world.dynamics.slots <= torch.iinfo(torch.int16).max else torch.int32
         longest = min(n_step, world.cfg.max_steps)
         self.steps_dtype = next(d for d in (torch.int8, torch.int16, torch.int32) if longest <= torch.iinfo(d).max)
 
     def _inv_call(self, td: TensorDictBase) -> TensorDictBase:
-        world, grid = self.world, self.world.cfg.grid
+        world = self.world
         stored = {"action": td.get(("agents", "action")).to(torch.int8)}
         if self.joint:
             stored["joint_action"] = td.get("joint_action").to(torch.int16)
@@ -114,7 +123,7 @@ class CompactTransitions(Transform):
             stored[STEPS] = td.get(STEPS).to(self.steps_dtype)
         nxt = {key: td.get(("next", key)) for key in _OUTCOME}
         for holder, step in ((stored, td), (nxt, td.get("next"))):
-            code = 2 * cells_or_away(step.get("positions"), grid) + step.get("tasks")
+            code = 2 * self.position(step.get("positions"), step.get(LEVELS, None)) + step.get("tasks")
             holder["code"] = code.to(self.code_dtype)
             if world.energy is not None:
                 holder["energy"] = world.energy_features(step.get("state")).contiguous()
