@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
-from uavrl.envs.config import LAYOUTS, NUM_ACTIONS, InvalidOption
+from uavrl.envs.config import HELD_OUT_CITY_SEEDS, LAYOUTS, NUM_ACTIONS, InvalidOption
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rules import (
     REAL,
@@ -92,14 +92,14 @@ def training_models(env_cfg: ModelConfig, a) -> list[ModelConfig]:
 
 
 MAX_CITIES = 16  # agent.cities: the groups, and with them the memory and the time, multiply by the cities
-HELD_OUT_CITIES = 2**62  # city seeds from here on are the benchmark's held-out cities (uavrl/bench/tasks.py SEED_BASE)
 
 
 def cities_rule() -> Rule:
-    """``agent.cities``: null, or 1 to :data:`MAX_CITIES` distinct city seeds below :data:`HELD_OUT_CITIES`."""
+    """``agent.cities``: null, or 1 to :data:`MAX_CITIES` distinct city seeds below the benchmark's held-out ones
+    (:data:`~uavrl.envs.config.HELD_OUT_CITY_SEEDS`)."""
 
     def accepts(v):
-        seeds = isinstance(v, list) and all(whole(0).accepts(s) and s < HELD_OUT_CITIES for s in v)
+        seeds = isinstance(v, list) and all(whole(0).accepts(s) and s < HELD_OUT_CITY_SEEDS for s in v)
         return v is None or (seeds and 1 <= len(v) <= MAX_CITIES and len(set(v)) == len(v))
 
     return Rule(
@@ -299,12 +299,6 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
         raise ValueError(
             f"agent.cities={shown(_plain(a.cities), label=True)} is invalid with env.city='none': the seeds lay out a "
             "city's buildings; give env.city (e.g. env.city=urban) or agent.cities=null"
-        )
-    if a.get("demonstrations", "none") != "none" and env_cfg.num_levels > 1:
-        raise ValueError(
-            f"agent.demonstrations={a.demonstrations!r} is invalid with env.altitudes_m="
-            f"{shown(list(env_cfg.altitudes_m), label=True)}: the oracle's demonstrations move in the plane only; use "
-            "agent.demonstrations=none"
         )
     if network == "team":
         if a.mixer == "mean":

@@ -75,10 +75,17 @@ def oracle_transitions(
         td = step_mdp(frames[-1], keep_other=True, exclude_action=False)
     batch = torch.stack(frames, 1)  # [worlds, steps]
     if objective == "log_gap":
-        now, after = (env.world.utility(step["positions"], step["tasks"])[2] for step in (batch, batch["next"]))
+        now, after = (env.world.utility(_placed(step), step["tasks"])[2] for step in (batch, batch["next"]))
         change = log_gap_reward(after, now, u_star.unsqueeze(-1), gap_floor)
         batch.set(("next", "reward"), change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype))
     return n_step_returns(batch, n_step, gamma).reshape(-1)
+
+
+def _placed(step: TensorDictBase) -> torch.Tensor:
+    """The UAVs' ``(x, y)`` ``[..., N, 2]`` of ``step``, with altitude levels ``(x, y, level)`` ``[..., N, 3]``."""
+    levels = step.get("levels", None)
+    positions = step.get("positions")
+    return positions if levels is None else torch.cat([positions, levels.unsqueeze(-1)], -1)
 
 
 class Demonstrations:
