@@ -10,6 +10,7 @@ Example:
 
 from __future__ import annotations
 
+from uavrl.envs.config import NUM_ACTIONS
 from uavrl.envs.limits import NODE_FEATURES, PAIR_FEATURES, observation_size, set_input_size, state_size
 
 TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
@@ -30,17 +31,22 @@ def _moves(levels: bool) -> int:
     return 6 if levels else 4
 
 
+def _joint_actions(num_uavs: int, levels: bool) -> int:
+    """The joint head's outputs: ``A^N``, ``A`` the 6 actions and with levels climb and descend (as
+    ``ModelConfig.joint_action_base``; "return" is never in a joint action)."""
+    return (NUM_ACTIONS + 2 * levels) ** num_uavs
+
+
 def team_parameters(
     num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int, levels: bool = False
 ) -> int:
     """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
-    of ``hidden`` units), then the joint head (``A^N`` values: the joint head is refused under an energy model, so a
-    UAV's ``num_actions`` are the joint action base, 6 or 8 with altitude levels) or the shared per-UAV head (one
-    hidden layer)."""
+    of ``hidden`` units), then the joint head (``A^N`` values, ``A`` 6 or 8 with altitude levels) or the shared
+    per-UAV head (one hidden layer)."""
     N, h, F = num_uavs, hidden, _team_input(num_uavs, energy, levels)
     torso = _linear(N * F, h) + depth * _linear(h, h)
     if head == "joint":
-        return torso + _linear(h, num_actions**N)
+        return torso + _linear(h, _joint_actions(N, levels))
     return torso + _linear(h + F + N + _moves(levels), h) + _linear(h, num_actions)
 
 
@@ -72,7 +78,7 @@ def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool
         return N * (set_input_size(energy, levels) * h + h * h) + depth * layer + N * (2 * h * h + h * num_actions)
     torso = N * F * h + depth * h * h
     if a.head == "joint":
-        return torso + h * num_actions**N
+        return torso + h * _joint_actions(N, levels)
     macs = torso + h * h + N * ((F + N + _moves(levels)) * h + h * num_actions)
     if a.mixer == "qmix":
         embed = int(a.mixing_embed_dim)
@@ -92,7 +98,7 @@ def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bo
         return N * (own + 2 * h) + depth * (N * 12 * h + pairs) + N * (4 * h + num_actions)
     values = N * F + 2 * (depth + 1) * h
     if a.head == "joint":
-        return 2 * (values + 3 * num_actions**N)
+        return 2 * (values + 3 * _joint_actions(N, levels))
     values += N * (h + F + N + _moves(levels) + 2 * h + num_actions)
     if a.mixer == "qmix":
         values += state_size(N, energy, levels) + 2 * int(a.mixing_embed_dim) * (N + 3)

@@ -85,7 +85,7 @@ class TeamQNet(nn.Module):
     world, to the rest once per UAV: the same function and parameters as the
     layer on the whole input, and with 6 UAVs 43% fewer multiplications for
     the whole network.
-    ``joint``: a linear head returns ``[*, A^N]`` (``cfg.num_joint_actions``: 6^N, 8^N with altitude levels).
+    ``joint``: a linear head returns ``[*, A^N]`` (``A = cfg.joint_action_base``: 6, 8 with altitude levels).
 
     Example:
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2)
@@ -114,7 +114,7 @@ class TeamQNet(nn.Module):
             device=dev,
         )
         if self.joint:
-            self.head = nn.Linear(hidden, env.cfg.num_joint_actions, device=dev)
+            self.head = nn.Linear(hidden, env.cfg.joint_action_base**N, device=dev)
         else:
             self.head = MultiAgentMLP(
                 hidden + F + N + moves,
@@ -223,7 +223,7 @@ class ValidGreedy(nn.Module):
         numbers: torch.Tensor | None = None,
     ):
         super().__init__()
-        self.num_actions = num_actions
+        self.width, self.num_actions = width, num_actions
         self.vertical = neighbours.shape[1] > 4  # climb and descend: actions 6, 7, the move table's columns 4, 5
         self.register_buffer("neighbours", neighbours.clone())
         self.register_buffer("task_ids", torch.tensor([SENSING, RELAYING], device=neighbours.device))  # actions 4, 5

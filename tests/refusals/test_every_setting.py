@@ -63,6 +63,7 @@ BAD = {
     ("agent=dqn", "agent.network"): "agent.network=tree",
     ("agent=dqn", "agent.sizes"): "agent.network=set agent.sizes=[[0,3,3]]",
     ("agent=dqn", "agent.layouts"): "agent.network=set agent.layouts=[spiral]",
+    ("agent=dqn", "agent.cities"): "agent.network=set env=a2g_urban env.city=urban agent.cities=[0,0]",
     ("agent=dqn", "agent.heads"): "agent.network=set agent.heads=0",
     ("agent=dqn", "agent.worlds"): "agent.worlds=0",
     ("agent=dqn", "agent.hidden"): "agent.hidden=0",
