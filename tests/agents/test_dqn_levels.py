@@ -17,6 +17,7 @@ from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.config import CLIMB, DESCEND
 from uavrl.envs.limits import set_input_size
 from uavrl.experiment.evaluating import evaluate_checkpoint
+from uavrl.experiment.runs import size_free_teams
 from uavrl.train import train
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -169,6 +170,9 @@ def test_a_size_free_run_trains_over_cities_and_acts_in_a_held_out_one(tmp_path,
     held_out = "env.city_seed=4611686018427387905"  # the benchmark's held-out cities are size-free's to act in
     metrics = evaluate_checkpoint(compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=4", held_out), [held_out])
     assert 0.0 <= metrics["eval/optimality"] <= 1.0
+    assert json.loads((run_dir / "eval-2uav-4x4-city4611686018427387905.json").read_text()) == metrics
+    assert not (run_dir / "eval.json").exists()  # the run's own city's evaluation is another file
+    assert size_free_teams(cfg, model_config(cfg)).endswith("in 2 urban cities (env.city_seed 0, 1)")
 
 
 @pytest.mark.parametrize(

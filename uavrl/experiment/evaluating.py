@@ -5,7 +5,8 @@ evaluation, written beside its checkpoint.
 (``eval.*`` settings may be overridden), writes the metrics as JSON to ``eval.json`` beside the checkpoint (an
 earlier evaluation there with other settings or of another checkpoint stays: this one then goes to ``eval-2.json``,
 ...; the settings of each are recorded in ``.uavrl-evaluations.json``); :func:`print_evaluation` prints the summary
-in words.  A size-free network is evaluated zero-shot on another team size or grid (``eval-<N>uav-<L1>x<L2>.json``).
+in words.  A size-free network is evaluated zero-shot on another team size or grid (``eval-<N>uav-<L1>x<L2>.json``),
+or city (``...-city<seed>.json``).
 The settings are checked first, without torch, then the checkpoint read with torch alone
 (:func:`uavrl.experiment.saved.check_evaluation`).
 """
@@ -42,12 +43,19 @@ from uavrl.experiment.saved import check_evaluation, evaluated_config, load_agen
 
 
 def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
-    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>].json`` for another."""
+    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>][-city<seed>].json`` for another (a
+    size-free network acts in other cities too)."""
     run, other = model_config(saved), model_config(evaluated)
-    if (other.num_uavs, other.grid, other.layout) == (run.num_uavs, run.grid, run.layout):
+    if (other.num_uavs, other.grid, other.layout, other.city_seed) == (
+        run.num_uavs,
+        run.grid,
+        run.layout,
+        run.city_seed,
+    ):
         return "eval.json"
     layout = "" if other.layout == run.layout else f"-{other.layout}"
-    return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}.json"
+    city = "" if other.city_seed == run.city_seed else f"-city{other.city_seed}"
+    return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}{city}.json"
 
 
 EVALUATIONS = ".uavrl-evaluations.json"  # in the run directory: each evaluation file's settings

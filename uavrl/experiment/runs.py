@@ -153,7 +153,8 @@ def model_words(env_cfg) -> str:
 
 
 def size_free_teams(cfg: DictConfig, env_cfg) -> str:
-    """The teams and layouts a size-free run trained on (``agent.sizes``, ``agent.layouts``; empty: the run's own).
+    """The teams, layouts and cities a size-free run trained on (``agent.sizes``, ``agent.layouts``, ``agent.cities``;
+    empty: the run's own).
 
     Example:
         >>> from uavrl.envs import make_config
@@ -167,7 +168,9 @@ def size_free_teams(cfg: DictConfig, env_cfg) -> str:
     teams = ", ".join(team_words(n, (l1, l2)) for n, l1, l2 in sizes)
     count = f"{len(sizes)} teams" if len(sizes) > 1 else "1 team"
     in_layouts = ", ".join(repr(layout) for layout in layouts)
-    return f"{count} ({teams}) in layout{'s' if len(layouts) > 1 else ''} {in_layouts}"
+    cities = list(OmegaConf.select(cfg, "agent.cities", default=None) or [])  # agent.cities: each its own group
+    in_cities = f", in {len(cities)} {env_cfg.city} cities (env.city_seed {', '.join(map(str, cities))})"
+    return f"{count} ({teams}) in layout{'s' if len(layouts) > 1 else ''} {in_layouts}{in_cities if cities else ''}"
 
 
 def policy_words(agent_name: str, result: dict) -> str:
