@@ -11,6 +11,7 @@ from uavrl.agents import agent_class, network_sizes
 from uavrl.agents.dqn import TeamQNet, ValidGreedy
 from uavrl.agents.dqn.networks import JointActionMask, position_numbers, q_inputs
 from uavrl.agents.dqn.setnet import SetQCore, SetQNet
+from uavrl.agents.dqn.transitions import CompactTransitions, transition_keys
 from uavrl.agents.schema import training_models
 from uavrl.config import model_config
 from uavrl.envs import UAVSpectrumEnv, make_config
@@ -108,6 +109,19 @@ def test_the_greedy_rules_never_pick_an_invalid_action(city):
     assert (climbs[top] != CLIMB).all() and (climbs[~top] == CLIMB).any()
     joint = JointActionMask(env.neighbours, 5, 3, numbers)
     assert torch.equal(joint(td["positions"], td["levels"]), env.world.joint_action_mask())
+
+
+def test_the_replay_keeps_positions_and_rebuilds_the_transitions_bit_for_bit():
+    """With levels a stored code's cell is the UAV's position: the rebuilt transitions, levels included, are the
+    collected ones."""
+    env = UAVSpectrumEnv(batch_size=4, config=make_config("a2g_urban", **CITY, max_steps=5), seed=2)
+    full = env.rollout(5).reshape(-1)
+    compact = CompactTransitions(env.world, [("agents", "action")])
+    keys = transition_keys(env.world, [("agents", "action")])
+    assert "levels" in keys and ("next", "levels") in keys
+    stored = compact.inv(full.select(*keys))
+    assert (stored["code"] >> 1).max() >= env.cfg.num_cells  # positions above the lowest level
+    assert (compact(stored) == full.select(*keys)).all()
 
 
 def test_a_uav_below_another_climbs_after_it():
