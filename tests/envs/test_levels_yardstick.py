@@ -253,3 +253,22 @@ def test_the_oracle_flies_around_a_building():
         td = TensorDict({key: out[key] for key in ("positions", "tasks", "levels")}, batch_size=[1])
         out = world.step(oracle(td)["agents", "action"])[0]
     assert world.cells_of(placements(out)).tolist() == [[goal, other]]
+
+
+def test_the_lookahead_refuses_altitude_levels_in_one_line():
+    from omegaconf import OmegaConf
+
+    from uavrl.agents.lookahead import LookaheadPolicy
+    from uavrl.agents.lookahead_rules import lookahead_settings
+
+    expected = (
+        "eval.lookahead=1 is invalid: the lookahead searches the cells of one altitude level, not "
+        "env.altitudes_m=[20.0, 60.0, 200.0]: give eval.lookahead=0"
+    )
+    with pytest.raises(ValueError) as refused:
+        LookaheadPolicy(None, "vdn", tiny("levels"), depth=1, width=4, gamma=0.9)
+    assert str(refused.value) == expected
+    cfg = OmegaConf.create({"eval": {"lookahead": 1}, "env": {"altitudes_m": [20.0, 60.0, 200.0]}})
+    with pytest.raises(ValueError, match="^eval.lookahead=1 is invalid: the lookahead searches"):
+        lookahead_settings(cfg)
+    assert lookahead_settings(OmegaConf.create({"eval": {"lookahead": 0}, "env": {"altitudes_m": [20, 60]}})) == {}
