@@ -6,8 +6,6 @@ optimum where its search stopped early.  :mod:`uavrl.agents.evaluation` measures
 
 from __future__ import annotations
 
-import functools
-
 import torch
 
 from uavrl.envs.config import ModelConfig
@@ -23,9 +21,18 @@ from uavrl.envs.world import World
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
-@functools.lru_cache(maxsize=4)
+_SPACES: dict = {}  # the last few configuration spaces (up to 1 GiB each), by what they depend on
+
+
 def _space(cfg: ModelConfig, device: str) -> exact.ConfigurationSpace:
-    return exact.model_space(cfg, device)
+    """:func:`~uavrl.envs.solvers.exact.model_space` of ``cfg``, kept for the last few grids, teams and moves: models
+    that differ in their channels only share one."""
+    key = (cfg.grid, cfg.num_uavs, device, model_positions(cfg).neighbours.numpy().tobytes())
+    if key not in _SPACES:
+        if len(_SPACES) >= 4:
+            _SPACES.pop(next(iter(_SPACES)))
+        _SPACES[key] = exact.model_space(cfg, device)
+    return _SPACES[key]
 
 
 def placements(outputs) -> torch.Tensor:
@@ -118,14 +125,15 @@ def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, g
             for level in range(len(LEVELS))
         ]
         return {"best_return": best_return, "min_steps": torch.stack(fewest, -1), "exact": True}
-    fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon)
+    positions = world.dynamics.positions
+    fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon, positions)
     optimal = [
         optimal_configurations(contributions[w], direct[w], cfg, float(u_star[w]))
         for w in range(1 if cfg.layout != "random" else B)
     ]
     optimal = optimal * B if len(optimal) == 1 else optimal
     assignment = assignment_min_steps(
-        cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], model_positions(cfg)
+        cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], positions
     )
     fewest[:, -1] = torch.maximum(fewest[:, -1], assignment.to(fewest.device))
     return {"best_return": None, "min_steps": fewest, "exact": False}

@@ -91,12 +91,9 @@ def reachable_best(
         if offsets is None:  # every position
             near, inside = None, None
             distance = sum((here[..., axis, None] - where[:, axis]).abs() for axis in range(3))  # [w, N, P]
-        else:  # the positions within K moves: [w, N, R], off the grid, the levels or inside a building masked
-            x, y, level = (here[..., axis, None] + offsets[:, axis] for axis in range(3))
-            inside = (x >= 0) & (x < L1) & (y >= 0) & (y < L2) & (level >= 0) & (level < L)
-            near = positions.number.to(cells.device)[((level * L2 + y) * L1 + x).where(inside, 0)]
-            inside &= near >= 0
-            near, distance = near.where(inside, 0), offsets.abs().sum(-1).expand_as(x)
+        else:  # the positions within K moves: [w, N, R]
+            near, inside = _positions_near(here, offsets, positions.number.to(cells.device), (L1, L2, L))
+            distance = offsets.abs().sum(-1).expand_as(near)
         for task, column in ((RELAYING, 0), (SENSING, 1)):
             cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp(max=K + 1)  # beyond K: one bucket
             value = contributions[worlds, :, column]
@@ -108,6 +105,17 @@ def reachable_best(
             at_cost.scatter_reduce_(-1, cost, value, "amax")
             best[task].append(at_cost[..., : K + 1].cummax(-1).values.transpose(1, 2))  # [w, K + 1, N]
     return torch.cat(best[RELAYING]), torch.cat(best[SENSING])
+
+
+def _positions_near(here, offsets, number, shape) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(positions [w, N, R], inside [w, N, R])`` at ``offsets`` ``[R, 3]`` from ``here`` ``[w, N, 3]`` (x, y,
+    level), ``inside`` false (and the position 0) off the grid, off the levels or inside a building (``number`` -1)."""
+    L1, L2, L = shape
+    x, y, level = (here[..., axis, None] + offsets[:, axis] for axis in range(3))
+    inside = (x >= 0) & (x < L1) & (y >= 0) & (y < L2) & (level >= 0) & (level < L)
+    near = number[((level * L2 + y) * L1 + x).where(inside, 0)]
+    inside &= near >= 0
+    return near.where(inside, 0), inside
 
 
 def grid_coordinates(positions: Positions) -> torch.Tensor:
@@ -137,7 +145,9 @@ def reach_offsets(max_steps: int, device=None, num_levels: int = 1) -> torch.Ten
     return box[box.abs().sum(-1) <= max_steps]
 
 
-def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
+def relaxed_best_utility(
+    cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int, positions: Positions | None = None
+) -> torch.Tensor:
     """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps.
 
     Args:
@@ -147,9 +157,10 @@ def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, 
         direct: the direct-link terms ``[W, 2]`` (or ``[1, 2]``).
         cfg: the model (its positions, ``num_uavs`` and rate model).
         max_steps: ``K``.
+        positions: ``cfg``'s positions (e.g. a World's ``dynamics.positions``); None: :func:`model_positions`.
     """
     N = cfg.num_uavs
-    positions = model_positions(cfg, cells.device)
+    positions = model_positions(cfg, cells.device) if positions is None else positions
     best_a, best_b = reachable_best(cells, tasks, contributions, positions, cfg.grid, max_steps)
     W, K1 = best_a.shape[:2]
     if N > MAX_SPLIT_UAVS:
@@ -187,7 +198,9 @@ def _split_relaxed_best(best_a, best_b, direct, cfg: ModelConfig) -> torch.Tenso
     return bound.masked_fill((no_a & no_b).any(-1), -math.inf)
 
 
-def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int) -> torch.Tensor:
+def relaxed_min_steps(
+    cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int, positions: Positions | None = None
+) -> torch.Tensor:
     """``[W, L]`` lower bound on the steps from ``[W, N]`` positions/tasks to utility ``>= levels`` ``[W, L]``.
 
     ``max_steps + 1`` where even the relaxation does not reach a level within ``max_steps``.
@@ -200,10 +213,10 @@ def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, lev
         cfg: the model (its positions, ``num_uavs`` and rate model).
         levels: the utilities to reach ``[W, L]`` (bit/s/Hz).
         max_steps: the most steps looked at.
+        positions: ``cfg``'s positions; None: :func:`model_positions`.
     """
-    reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(
-        1
-    )  # [W, K + 1, L]
+    best = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps, positions)
+    reach = best.unsqueeze(-1) >= levels.unsqueeze(1)  # [W, K + 1, L]
     return torch.where(reach.any(1), reach.double().argmax(1), max_steps + 1).long()
 
 
