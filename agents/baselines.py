@@ -258,7 +258,7 @@ class OraclePolicy(TensorDictModuleBase):
             left = lengths(here, there)
             moves = [
                 (abs(where[there][AXIS[move]] - where[here][AXIS[move]]), move)
-                for move, reached in zip(MOVES, self.neighbours[here])  # noqa: B905 (4 moves without levels)
+                for move, reached in zip(MOVES, self.neighbours[here], strict=False)  # 4 moves without levels
                 if reached >= 0 and lengths(reached, there) < left
             ]
             change = [SENSE + task] if task != tasks[i] else []

@@ -61,7 +61,7 @@ def reachable_best(
     """``[W, K + 1, N]`` largest relay and sensing contribution UAV ``i`` can hold after ``k = 0..K`` steps.
 
     ``-inf`` where no position of that task is within reach (a task change alone takes a step).  Per UAV, the best
-    value at each cost (:func:`distance` + task change) is bucketed, then the running maximum over the costs gives
+    value at each cost (:func:`moves_apart` + task change) is bucketed, then the running maximum over the costs gives
     every ``k``: a few ``[w, N, R]`` tensors for a chunk of worlds at a time, ``R`` the positions within ``K`` moves
     of a position (:func:`reach_offsets`) or, where the model has fewer, every position: the cost follows the
     horizon, not the grid.
@@ -118,17 +118,20 @@ def _positions_near(here, offsets, number, shape) -> tuple[torch.Tensor, torch.T
     return near.where(inside, 0), inside
 
 
-def grid_coordinates(positions: Positions) -> torch.Tensor:
-    """``[P, 3]`` long (x, y, level) of every position."""
-    return torch.cat([positions.xyz[:, :2].long(), positions.level[:, None]], -1)
+def grid_coordinates(positions: Positions, index: torch.Tensor | None = None) -> torch.Tensor:
+    """``[..., 3]`` long (x, y, level) of the position indices ``index`` ``[...]``; None: ``[P, 3]``, every position's.
+    On the positions' device."""
+    index = slice(None) if index is None else index.to(positions.level.device)
+    return torch.cat([positions.xyz[index, :2].long(), positions.level[index].unsqueeze(-1)], -1)
 
 
 def moves_apart(positions: Positions, here: torch.Tensor, there: torch.Tensor) -> torch.Tensor:
-    """``|dx| + |dy| + |dlevel|`` between position indices ``here`` and ``there`` (broadcast): the fewest moves
-    between them with no building in the way, so never more than the fewest with buildings (the Manhattan distance
-    of their cells without altitude levels)."""
-    where = grid_coordinates(positions).to(here.device)
-    return (where[here] - where[there]).abs().sum(-1)
+    """``|dx| + |dy| + |dlevel|`` between position indices ``here`` and ``there`` (broadcast, on ``here``'s device):
+    the fewest moves between them with no building in the way, so never more than the fewest with buildings (the
+    Manhattan distance of their cells without altitude levels).  Computed from the positions given, never as a
+    ``[P, P]`` table."""
+    apart = (grid_coordinates(positions, here) - grid_coordinates(positions, there)).abs().sum(-1)
+    return apart.to(here.device)
 
 
 def reach_size(max_steps: int, num_levels: int = 1) -> int:

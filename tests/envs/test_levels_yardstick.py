@@ -220,14 +220,14 @@ def test_one_level_bounds_are_the_manhattan_ones():
     cells = torch.stack([torch.randperm(35, generator=generator)[:3] for _ in range(4)])
     tasks = torch.randint(0, 2, (4, 3), generator=generator)
     contributions = torch.rand(1, 35, 2, generator=generator, dtype=torch.float64)
-    K = 6
-    best = bounds.reachable_best(cells, tasks, contributions, positions, cfg.grid, K)
     distance = manhattan(cells.unsqueeze(-1), torch.arange(35), 7)  # [W, N, C]
-    for task, column in ((1, 0), (0, 1)):
-        cost = distance + (tasks != task).long().unsqueeze(-1)
-        for k in range(K + 1):
-            value = contributions[0, :, column].expand_as(cost).masked_fill(cost > k, -math.inf).amax(-1)
-            assert best[column][:, k].equal(value)
+    for K in (2, 6):  # the positions within reach (13 < 35), then every position
+        best = bounds.reachable_best(cells, tasks, contributions, positions, cfg.grid, K)
+        for task, column in ((1, 0), (0, 1)):
+            cost = distance + (tasks != task).long().unsqueeze(-1)
+            for k in range(K + 1):
+                value = contributions[0, :, column].expand_as(cost).masked_fill(cost > k, -math.inf).amax(-1)
+                assert best[column][:, k].equal(value)
     targets = torch.stack([torch.randperm(35, generator=generator)[:3] for _ in range(5)])
     target_tasks = torch.randint(0, 2, (5, 3), generator=generator)
     costs = bounds.assignment_costs(cells[0], tasks[0], targets, target_tasks, positions)
