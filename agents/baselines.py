@@ -8,14 +8,16 @@ reports treat them alike).
 
 The **oracle** knows the model.  Each step it lists every optimal
 configuration of each world (:func:`uavrl.envs.solvers.bounds.optimal_configurations`),
-assigns the UAVs to the (cell, task) pairs of one of them by the bottleneck
+assigns the UAVs to the (position, task) pairs of one of them by the bottleneck
 assignment (:func:`uavrl.envs.solvers.bounds.best_assignment`: the fewest steps for
 the slowest UAV, then the fewest UAVs on long paths) and moves every UAV one
 step along it: the UAV with the most steps left chooses first, a task change
-comes first, then a move that shortens its path along the longer axis, then
-the other axis, else it stays.  A move is taken only into a cell that no UAV
-still to choose holds and no UAV that chose targets, so every joint action is
-valid (no cancelled move, no collision).
+comes first, then a move that shortens its path along the axis (x, y, or the
+altitude level) with the most left, then the others, else it stays.  Steps are
+counted along the model's positions (:class:`PathLengths`: around buildings in a
+city).  A move is taken only into a position that no UAV still to choose holds
+and no UAV that chose targets, so every joint action is valid (no cancelled
+move, no collision).
 
 Example:
     >>> from uavrl.envs import UAVSpectrumEnv
@@ -28,6 +30,7 @@ Example:
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
@@ -37,13 +40,77 @@ from uavrl.agents.env_check import CheckedPolicy, RunEnvironment
 from uavrl.agents.generators import PolicyGenerator
 from uavrl.agents.schema import AGENTS
 from uavrl.envs import ModelConfig
-from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, relay_contributions
-from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
-from uavrl.envs.solvers.bounds import assignment_costs, best_assignment, optimal_configurations
+from uavrl.envs.config import CLIMB, DESCEND
+from uavrl.envs.physics.channel import direct_terms, link_gains, relay_contributions
+from uavrl.envs.physics.grid import cells_or_away
+from uavrl.envs.physics.positions import Positions, model_positions
+from uavrl.envs.solvers.bounds import (
+    assignment_costs,
+    best_assignment,
+    grid_coordinates,
+    moves_apart,
+    optimal_configurations,
+)
 from uavrl.envs.solvers.exact import fixed_layout_tables
 from uavrl.envs.solvers.optimum import optimum
 
 UP, DOWN, LEFT, RIGHT, SENSE = range(5)
+MOVES = (UP, DOWN, LEFT, RIGHT, CLIMB, DESCEND)  # the action of each column of Positions.neighbours
+AXIS = {UP: 1, DOWN: 1, LEFT: 0, RIGHT: 0, CLIMB: 2, DESCEND: 2}  # the coordinate (x, y, level) each move changes
+
+
+class PathLengths:
+    """The fewest moves between a model's positions: called on position indices ``here`` and ``there`` (broadcast),
+    or :meth:`between` two of them.
+
+    Where no position is inside a building the positions form a box and the fewest moves are
+    :func:`~uavrl.envs.solvers.bounds.moves_apart` (``|dx| + |dy| + |dlevel|``); in a city with blocked positions, a
+    breadth-first search over the positions' moves to each ``there`` (kept: the graph is the model's), and
+    ``len(positions)`` (more than any path) where no path leads.
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> lengths = PathLengths(model_positions(make_config("paper", grid=(3, 3), num_uavs=2)))
+        >>> lengths(torch.tensor([0, 4]), torch.tensor(8)).tolist(), lengths.between(2, 6)
+        ([4, 2], 4)
+    """
+
+    def __init__(self, positions: Positions):
+        self.positions = positions
+        self.coordinates = grid_coordinates(positions).tolist()
+        self.graph = None
+        if len(positions) < len(positions.number):  # some positions blocked: paths go around them
+            from scipy.sparse import csr_matrix  # scipy (~0.7 s to import) only in a city
+
+            rows, columns = (positions.neighbours >= 0).nonzero(as_tuple=True)
+            moves = (np.ones(len(rows)), (rows.cpu().numpy(), positions.neighbours[rows, columns].cpu().numpy()))
+            self.graph = csr_matrix(moves, shape=(len(positions), len(positions)))
+        self._to: dict[int, np.ndarray] = {}  # there -> [P] the fewest moves from every position to it
+
+    def __call__(self, here: torch.Tensor, there: torch.Tensor) -> torch.Tensor:
+        if self.graph is None:
+            return moves_apart(self.positions, here, there)
+        here, there = torch.broadcast_tensors(here, there)
+        out = torch.empty_like(here)
+        for t in there.unique().tolist():
+            at = there == t
+            out[at] = torch.from_numpy(self._lengths_to(t))[here[at]]
+        return out
+
+    def between(self, here: int, there: int) -> int:
+        """The fewest moves from position ``here`` to position ``there``."""
+        if self.graph is None:
+            return sum(abs(a - b) for a, b in zip(self.coordinates[here], self.coordinates[there], strict=True))
+        return int(self._lengths_to(there)[here])
+
+    def _lengths_to(self, there: int) -> np.ndarray:
+        if there not in self._to:
+            from scipy.sparse.csgraph import shortest_path
+
+            # every move has its reverse (a building blocks both ways): the lengths to ``there`` are those from it
+            lengths = shortest_path(self.graph, unweighted=True, indices=there)
+            self._to[there] = np.where(np.isinf(lengths), len(self.positions), lengths).astype(np.int64)
+        return self._to[there]
 
 
 class RandomPolicy(TensorDictModuleBase):
@@ -96,9 +163,12 @@ class OraclePolicy(TensorDictModuleBase):
     def __init__(self, cfg: ModelConfig, env=None):
         super().__init__()
         self.cfg, self.run_env = cfg, RunEnvironment(cfg)
-        self.in_keys = ["positions", "tasks"] + (["nodes"] if cfg.layout == "random" else [])
+        self.in_keys = ["positions", "tasks"] + (["levels"] if cfg.num_levels > 1 else [])
+        self.in_keys += ["nodes"] if cfg.layout == "random" else []
         self.bind_env(env)
-        self.neighbours = grid_neighbours(cfg.grid).tolist()
+        self.positions = model_positions(cfg)
+        self.neighbours = self.positions.neighbours.tolist()
+        self.path_lengths = PathLengths(self.positions)
         self._targets: dict[int, tuple] = {}  # world -> (its nodes, contributions, direct, optimal cells, tasks)
         self._fixed = None if cfg.layout == "random" else fixed_layout_tables(cfg)
 
@@ -121,7 +191,7 @@ class OraclePolicy(TensorDictModuleBase):
         return nodes.reshape(-1, 4, 3)
 
     def _world_tables(self, world: int, nodes) -> tuple[torch.Tensor, ...]:
-        """One world's ``(contributions [C, 2], direct [2], optimal cells, optimal tasks)``, kept per layout."""
+        """One world's ``(contributions [P, 2], direct [2], optimal positions, optimal tasks)``, kept per layout."""
         if nodes is None:
             cached = self._targets.get(0)
             if cached is None:
@@ -133,7 +203,7 @@ class OraclePolicy(TensorDictModuleBase):
         cached = self._targets.get(world)
         if cached is None or not torch.equal(cached[0], at):
             # the World's own functions on the same float64 nodes (World._set_layout): the same tables, bit for bit
-            xyz = cell_xyz(self.cfg, torch.float64, at.device)
+            xyz = self.positions.xyz.to(at.device)
             contributions = relay_contributions(link_gains(xyz, at[None], self.cfg), self.cfg)[0]
             direct = direct_terms(at[None], self.cfg)[0]
             optimal = self._optimal_configurations(contributions, direct)
@@ -144,7 +214,7 @@ class OraclePolicy(TensorDictModuleBase):
         return self._world_tables(world, nodes)[2:]
 
     def _optimal_configurations(self, contributions: torch.Tensor, direct: torch.Tensor):
-        """Every optimal configuration ``(cells, tasks)`` of one world's tables ``[C, 2]``, ``[2]``."""
+        """Every optimal configuration ``(positions, tasks)`` of one world's tables ``[P, 2]``, ``[2]``."""
         u_star = float(optimum(contributions[None], direct[None], self.cfg)[0][0])
         return optimal_configurations(contributions, direct, self.cfg, u_star)
 
@@ -154,6 +224,8 @@ class OraclePolicy(TensorDictModuleBase):
         fleet = self.cfg.fleet_size
         cells = cells_or_away(positions.cpu(), self.cfg.grid).reshape(-1, fleet)  # L1 L2: out of service
         serving, tasks_of = cells < self.cfg.num_cells, tasks.cpu().reshape(-1, fleet)
+        if self.cfg.num_levels > 1:  # the position of (cell, level); no energy model: every UAV serves
+            cells = self.positions.number[cells + self.cfg.num_cells * td.get("levels").cpu().reshape(-1, fleet)]
         nodes = self._nodes(td)
         # a UAV out of service has only the no-op; the oracle plans for those in service and never sends one home
         actions = torch.full(cells.shape, SENSE, dtype=torch.long)
@@ -170,42 +242,47 @@ class OraclePolicy(TensorDictModuleBase):
         """One valid joint action ``[n]`` of the ``n <= N`` UAVs of one world in service (an assignment of them to
         pairs of an optimal configuration)."""
         target_cells, target_tasks = self._optimal_sets(world, nodes)
-        costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.cfg.grid)
+        costs = assignment_costs(cells, tasks, target_cells, target_tasks, self.positions, self.path_lengths)
         _, s, pair = best_assignment(costs)
-        width = self.cfg.grid[0]
         goal = list(zip(target_cells[s][pair].tolist(), target_tasks[s][pair].tolist(), strict=True))
         cells, tasks = cells.tolist(), tasks.tolist()
+        lengths, where = self.path_lengths.between, self.path_lengths.coordinates
 
         def steps_to(i: int, cell_task: tuple[int, int]) -> int:
-            (y, x), (gy, gx) = divmod(cells[i], width), divmod(cell_task[0], width)
-            return abs(gx - x) + abs(gy - y) + (cell_task[1] != tasks[i])
+            return lengths(cells[i], cell_task[0]) + (cell_task[1] != tasks[i])
 
         def preferences(i: int) -> list[int]:
-            """A task change first, then moves that shorten the path (longer axis first), then staying."""
-            (y, x), (gy, gx) = divmod(cells[i], width), divmod(goal[i][0], width)
-            moves = sorted(
-                [(abs(gx - x), RIGHT if gx > x else LEFT), (abs(gy - y), DOWN if gy > y else UP)], reverse=True
-            )
-            change = [SENSE + goal[i][1]] if goal[i][1] != tasks[i] else []
-            return change + [move for distance, move in moves if distance > 0] + [SENSE + tasks[i]]
+            """A task change first, then moves that shorten the path (along the axis with the most left first), then
+            staying."""
+            here, (there, task) = cells[i], goal[i]
+            left = lengths(here, there)
+            moves = [
+                (abs(where[there][AXIS[move]] - where[here][AXIS[move]]), move)
+                for move, reached in zip(MOVES, self.neighbours[here], strict=False)  # 4 moves without levels
+                if reached >= 0 and lengths(reached, there) < left
+            ]
+            change = [SENSE + task] if task != tasks[i] else []
+            return change + [move for _, move in sorted(moves, reverse=True)] + [SENSE + tasks[i]]
 
         def target(i: int, action: int) -> int:
-            return cells[i] if action >= SENSE else self.neighbours[cells[i]][action]
+            return self.neighbours[cells[i]][MOVES.index(action)] if action in MOVES else cells[i]
 
         holder = {cell: i for i, cell in enumerate(cells)}
         waiting, claimed, actions = set(cells), set(), [0] * len(cells)
         for i in sorted(range(len(cells)), key=lambda i: -steps_to(i, goal[i])):
             waiting.discard(cells[i])
             options = preferences(i)
-            if all(target(i, a) in waiting for a in options[:-1] if a < SENSE) and any(a < SENSE for a in options):
+            if all(target(i, a) in waiting for a in options[:-1] if a in MOVES) and any(a in MOVES for a in options):
                 # every shortening move runs into a UAV still to choose: hand it this UAV's goal and take its
                 # place (it lies on this UAV's path), when that makes neither of the two slower
-                j = holder[target(i, next(a for a in options if a < SENSE))]
+                j = holder[target(i, next(a for a in options if a in MOVES))]
                 if max(steps_to(i, goal[j]), steps_to(j, goal[i])) <= max(steps_to(i, goal[i]), steps_to(j, goal[j])):
                     goal[i], goal[j] = goal[j], goal[i]
                     options = preferences(i)
             actions[i] = next(
-                a for a in options if a >= SENSE and target(i, a) == cells[i] or target(i, a) not in waiting | claimed
+                a
+                for a in options
+                if a not in MOVES and target(i, a) == cells[i] or target(i, a) not in waiting | claimed
             )
             claimed.add(target(i, actions[i]))
         return torch.tensor(actions)

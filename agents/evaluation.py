@@ -52,6 +52,7 @@ from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, check_width
 from uavrl.agents.references import (
     LEVELS,
     cached_references,
+    placements,
     u_star_gap,
 )
 from uavrl.agents.schema import EvalSchema
@@ -254,9 +255,9 @@ def evaluate(
 def greedy_rollout(env, policy, start, horizon: int) -> tuple[dict, list | None]:
     """``horizon`` steps of ``policy`` from ``start``, each world once: ``(steps, batteries)``, ``steps`` the
     ``[B, H]`` outputs :func:`greedy_metrics` reads (``r_pu``, ``r_se``, ``task_switches``, ``moves``, and
-    ``positions``, ``tasks``), ``legal`` and ``unmasked`` ``[B, H, N]`` (each action one its mask allowed; a mask
-    that allowed every action), ``batteries`` the worlds' batteries before and after under an energy model (else
-    None)."""
+    ``positions``, ``tasks``, with altitude levels ``levels``), ``legal`` and ``unmasked`` ``[B, H, N]`` (each action
+    one its mask allowed; a mask that allowed every action), ``batteries`` the worlds' batteries before and after
+    under an energy model (else None)."""
     if hasattr(policy, "bind_env"):
         policy.bind_env(env)
     if env.cfg.energy == "none":
@@ -268,6 +269,8 @@ def greedy_rollout(env, policy, start, horizon: int) -> tuple[dict, list | None]
         batteries.append(env.world.battery)
     steps = {key: rollout["next", key].squeeze(-1) for key in ("r_pu", "r_se", "task_switches", "moves")}  # [B, H]
     steps.update(positions=rollout["next", "positions"], tasks=rollout["next", "tasks"])
+    if ("next", "levels") in rollout.keys(True):  # altitude levels
+        steps["levels"] = rollout["next", "levels"]
     mask, played = rollout["agents", "action_mask"], rollout["agents", "action"].long().unsqueeze(-1)
     steps.update(legal=mask.gather(-1, played).squeeze(-1), unmasked=mask.all(-1))  # [B, H, N]
     return steps, batteries
@@ -341,7 +344,7 @@ def greedy_metrics(
         gamma: the yardstick's discount.
         batteries: the UAVs' batteries ``[B, N]`` at the start and at the end (an energy model), or None.
     """
-    positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
+    positions = torch.cat([placements(start).unsqueeze(1), placements(steps)], 1)  # with levels (x, y, level)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
     utility = world.utility(positions, tasks)[2]  # [B, H + 1], mean channels
     per_episode = episode_metrics(

@@ -42,7 +42,7 @@ from torch import nn
 from uavrl.agents.dqn.networks import ValidGreedy
 from uavrl.agents.dqn.setnet import SetQNet
 from uavrl.agents.env_check import CheckedPolicy
-from uavrl.agents.lookahead_rules import MAX_ENUMERATED, check_lookahead
+from uavrl.agents.lookahead_rules import MAX_ENUMERATED, check_lookahead, check_lookahead_levels
 from uavrl.envs import ModelConfig
 from uavrl.envs._moved import moved_names
 from uavrl.envs.physics.channel import cell_xyz, direct_terms, link_gains, rates, relay_contributions
@@ -89,6 +89,7 @@ class LookaheadPolicy(TensorDictModuleBase):
         super().__init__()
         if cfg.energy != "none":
             raise ValueError(f"eval.lookahead is invalid with env.energy={cfg.energy!r}: its model has no batteries")
+        check_lookahead_levels(depth, cfg.altitudes_m)
         if objective not in _OBJECTIVES:
             raise ValueError(f"eval.lookahead scores the objectives {', '.join(_OBJECTIVES)}, not {objective!r}")
         self.values, self.mixer, self.cfg = values, mixer, cfg

@@ -49,6 +49,18 @@ def check_lookahead(a, depth: int, agent_name: str) -> None:
         )
 
 
+def check_lookahead_levels(depth: int, altitudes_m) -> None:
+    """A one-line error for ``eval.lookahead=depth`` with altitude levels (``env.altitudes_m``, two or more): its
+    search decodes the UAVs' positions as cells of one level."""
+    if depth and altitudes_m is not None and len(altitudes_m) > 1:
+        raise InvalidOption(
+            "eval.lookahead",
+            depth,
+            f"the lookahead searches the cells of one altitude level, not env.altitudes_m={list(altitudes_m)}: "
+            "give eval.lookahead=0",
+        )
+
+
 def lookahead_settings(cfg, agent_settings=None) -> dict:
     """``evaluate_agent``'s lookahead keywords from ``cfg.eval`` (none where ``eval.lookahead`` is 0 or absent); the
     agent is checked at once: ``agent_settings`` (an evaluated checkpoint's saved ``agent``), else ``cfg.agent`` (a
@@ -57,4 +69,5 @@ def lookahead_settings(cfg, agent_settings=None) -> dict:
     a = agent_settings if agent_settings is not None else cfg.get("agent")
     if depth and a is not None:
         check_lookahead(a, depth, f"agent={a.name}")
+    check_lookahead_levels(depth, (cfg.get("env") or {}).get("altitudes_m"))
     return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", WIDTH))} if depth else {}

@@ -124,7 +124,7 @@ class PlannerPolicy(OraclePolicy):
         """The actions of the UAVs ``uavs`` in service of one world (rules 1 and 2)."""
         here, now = cells[uavs], tasks[uavs]
         target_cells, target_tasks = self._optimal_sets(world, nodes)
-        steps = best_assignment(assignment_costs(here, now, target_cells, target_tasks, self.cfg.grid))[0]
+        steps = best_assignment(assignment_costs(here, now, target_cells, target_tasks, self.positions))[0]
         partners, cycle = self._partners(world, nodes, here, now) if steps == 0 else (here, False)
         if steps == 0 and cycle:  # at A: every UAV moves to its cell of B (free cells, so no move is cancelled)
             moves = zip(here.tolist(), partners.tolist(), strict=True)

@@ -6,12 +6,11 @@ optimum where its search stopped early.  :mod:`uavrl.agents.evaluation` measures
 
 from __future__ import annotations
 
-import functools
-
 import torch
 
+from uavrl.envs.config import ModelConfig
 from uavrl.envs.limits import EXACT_SOLVER_BUDGET
-from uavrl.envs.physics.grid import cells_of
+from uavrl.envs.physics.positions import model_positions
 from uavrl.envs.solvers import exact, mission_exact
 from uavrl.envs.solvers.bounds import OPTIMUM_RTOL, assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.solvers.mission import delivered_bound, optimum_by_count, service_steps_bound
@@ -22,9 +21,26 @@ from uavrl.envs.world import World
 LEVELS = {"99": 0.99, "999": 0.999, "optimum": 1 - OPTIMUM_RTOL}
 
 
-@functools.lru_cache(maxsize=4)
-def _space(grid: tuple[int, int], num_uavs: int, device: str) -> exact.ConfigurationSpace:
-    return exact.ConfigurationSpace(grid, num_uavs, device)
+_SPACES: dict = {}  # the last few configuration spaces (up to 1 GiB each), by what they depend on
+
+
+def _space(cfg: ModelConfig, device: str) -> exact.ConfigurationSpace:
+    """:func:`~uavrl.envs.solvers.exact.model_space` of ``cfg``, kept for the last few grids, teams and moves: models
+    that differ in their channels only share one."""
+    key = (cfg.grid, cfg.num_uavs, device, model_positions(cfg).neighbours.numpy().tobytes())
+    if key not in _SPACES:
+        if len(_SPACES) >= 4:
+            _SPACES.pop(next(iter(_SPACES)))
+        _SPACES[key] = exact.model_space(cfg, device)
+    return _SPACES[key]
+
+
+def placements(outputs) -> torch.Tensor:
+    """``[..., N, 2]`` the UAVs' (x, y) in a World's or env's outputs, with altitude levels ``[..., N, 3]`` (x, y,
+    level): what :meth:`~uavrl.envs.World.utility` and :meth:`~uavrl.envs.World.cells_of` read."""
+    if "levels" not in outputs:
+        return outputs["positions"]
+    return torch.cat([outputs["positions"], outputs["levels"].unsqueeze(-1)], -1)
 
 
 def start_references(world: World, start, u_star: torch.Tensor, horizon: int, gamma: float) -> dict:
@@ -38,7 +54,8 @@ def start_references(world: World, start, u_star: torch.Tensor, horizon: int, ga
 
     Args:
         world: the worlds of the starts, just reset.
-        start: the worlds' outputs at the start (:meth:`~uavrl.envs.World.reset`: ``positions``, ``tasks``).
+        start: the worlds' outputs at the start (:meth:`~uavrl.envs.World.reset`: ``positions``, ``tasks``, with
+            altitude levels ``levels``).
         u_star: each world's best utility U* ``[B]``.
         horizon: the evaluation's steps per rollout ``H``.
         gamma: the discount of the best return.
@@ -90,13 +107,13 @@ def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, g
     """:func:`start_references`' fewest steps to each level, and the exact best return where ``returns``."""
     cfg, B, N = world.cfg, world.num_worlds, world.cfg.num_uavs
     # the N serving UAVs: spares (env.num_spares) are the last agents and wait at the base at a start
-    cells, tasks = cells_of(start["positions"][..., :N, :], cfg.grid[0]), start["tasks"][..., :N]
+    cells, tasks = world.cells_of(placements(start)[..., :N, :]), start["tasks"][..., :N]
     contributions, direct = world.cell_contributions, world.direct
     thresholds = torch.stack([q * u_star for q in LEVELS.values()], -1)  # [B, L]
     if exact.fits(cfg):
         per_world = cfg.layout == "random"  # one layout for all worlds otherwise
         tables = slice(None) if per_world else slice(0, 1)
-        space = _space(cfg.grid, cfg.num_uavs, str(world.device))
+        space = _space(cfg, str(world.device))
         potential = space.utility(cfg, contributions[tables], direct[tables])
         which = (
             torch.arange(B, device=world.device) if per_world else torch.zeros(B, dtype=torch.long, device=world.device)
@@ -108,14 +125,15 @@ def _level_references(world: World, start, u_star: torch.Tensor, horizon: int, g
             for level in range(len(LEVELS))
         ]
         return {"best_return": best_return, "min_steps": torch.stack(fewest, -1), "exact": True}
-    fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon)
+    positions = world.dynamics.positions
+    fewest = relaxed_min_steps(cells, tasks, contributions, direct, cfg, thresholds, horizon, positions)
     optimal = [
         optimal_configurations(contributions[w], direct[w], cfg, float(u_star[w]))
         for w in range(1 if cfg.layout != "random" else B)
     ]
     optimal = optimal * B if len(optimal) == 1 else optimal
     assignment = assignment_min_steps(
-        cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], cfg.grid
+        cells.cpu(), tasks.cpu(), [c.cpu() for c, _ in optimal], [t.cpu() for _, t in optimal], positions
     )
     fewest[:, -1] = torch.maximum(fewest[:, -1], assignment.to(fewest.device))
     return {"best_return": None, "min_steps": fewest, "exact": False}
@@ -150,6 +168,7 @@ def cached_references(world, start, u_star, horizon, gamma) -> dict:
         str(world.device),
         start["positions"].cpu().numpy().tobytes(),
         start["tasks"].cpu().numpy().tobytes(),
+        None if "levels" not in start else start["levels"].cpu().numpy().tobytes(),
         None if world.battery is None else world.battery.cpu().numpy().tobytes(),
     )
     if key not in _REFERENCE_CACHE:

@@ -505,9 +505,11 @@ def bounds_bytes(cfg, num_starts: int, horizon: int) -> int:
     """Peak bytes of the evaluation's lower bounds (:mod:`uavrl.envs.solvers.bounds`) where the exact solver does not
     fit: each world's best reachable terms ``[K + 1, N]``, then the relaxation (chunks of (world, step) rows over every
     split of up to ``MAX_SPLIT_UAVS`` UAVs, or a few ``[rows, N]`` tensors beyond), and the optimal sets (at most
-    ``MAX_CANDIDATES`` candidates, or ``[N, C]`` moves per listed set where they are searched)."""
-    N, C, rows = cfg.num_uavs, cfg.num_cells, num_starts * (horizon + 1)
-    reach = min(C, 2 * horizon * (horizon + 1) + 1)  # the cells scanned per UAV: those within the horizon
+    ``MAX_CANDIDATES`` candidates, or ``[N, P]`` moves per listed set where they are searched)."""
+    N, C, rows = cfg.num_uavs, cfg.num_positions, num_starts * (horizon + 1)
+    # the positions scanned per UAV: those within the horizon (uavrl.envs.solvers.bounds.reach_size), at every level
+    levels = range(1 - cfg.num_levels, cfg.num_levels)
+    reach = min(C, sum(2 * k * (k + 1) + 1 for k in (horizon - abs(d) for d in levels) if k >= 0))
     chunk = 1 << 22  # uavrl.envs.solvers.bounds._CHUNK_ELEMENTS
     reachable = 2 * rows * N * 8 + min(num_starts * N * reach, max(chunk, N * reach)) * 48
     if N <= 10:  # uavrl.envs.solvers.bounds.MAX_SPLIT_UAVS

@@ -3,9 +3,10 @@
 Two bounds, both provably never above the true fewest steps:
 
 - :func:`relaxed_min_steps` (any level, e.g. 0.99 U*): after ``k`` steps UAV
-  ``i`` can only hold a (cell, task) with ``Manhattan distance + [task changed]
-  <= k`` (a step either moves or sets the task).  Forgetting that cells must
-  differ, the best utility within reach is the best, over which UAVs relay,
+  ``i`` can only hold a (position, task) with ``distance + [task changed]
+  <= k`` (a step either moves or sets the task; the distance ``|dx| + |dy| + |dlevel|`` between positions, a move
+  being one cell in the plane or one altitude level, and buildings only lengthening paths).  Forgetting that
+  positions must differ, the best utility within reach is the best, over which UAVs relay,
   of every relay taking the largest relay contribution it can reach and every
   sensor the largest sensing contribution (the rates grow with each sum).  No
   real ``k``-step trajectory does better, so the first ``k`` whose relaxed best
@@ -14,10 +15,12 @@ Two bounds, both provably never above the true fewest steps:
   (:func:`uavrl.envs.solvers.optimum.split_relaxation`: one UAV may share its contribution between the tasks), a bound
   no smaller (by 0.02% at most in the layouts measured), computed in ``O(N log N)`` per world and step.
 - :func:`assignment_min_steps` (the optimum itself): to end in an optimal set
-  of (cell, task) pairs, some UAV must make the largest ``distance + [task
+  of (position, task) pairs, some UAV must make the largest ``distance + [task
   changed]`` of the best assignment of UAVs to that set's pairs (a bottleneck
   assignment); the bound is the least of these over *every* optimal set
   (:func:`optimal_configurations` finds them all).
+
+Positions are a model's (:func:`~uavrl.envs.physics.positions.model_positions`): cells without altitude levels.
 
 Example:
     >>> from uavrl.envs.config import make_config
@@ -41,7 +44,7 @@ import torch
 
 from ..config import RELAYING, SENSING, ModelConfig
 from ..physics.channel import rates, rates_from_sums
-from ..physics.grid import manhattan
+from ..physics.positions import Positions, model_positions
 from .optimum import SplitSearch, ratio_order, split_relaxation, staffed_scale
 
 OPTIMUM_RTOL = 1e-9  # a configuration "is optimal" when U >= (1 - OPTIMUM_RTOL) U*
@@ -52,18 +55,22 @@ MAX_SPLIT_UAVS = 10  # relaxed_best_utility tries every split of up to this many
 _CHUNK_ELEMENTS = 1 << 22  # elements of the largest temporary per torch call: the tables grow with C and 2^N
 
 
-def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[torch.Tensor, torch.Tensor]:
+def reachable_best(
+    cells, tasks, contributions, positions: Positions, grid, max_steps: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``[W, K + 1, N]`` largest relay and sensing contribution UAV ``i`` can hold after ``k = 0..K`` steps.
 
-    ``-inf`` where no cell of that task is within reach (a task change alone takes a step).  Per UAV, the best
-    value at each cost (moves + task change) is bucketed, then the running maximum over the costs gives every ``k``:
-    a few ``[w, N, R]`` tensors for a chunk of worlds at a time, ``R`` the cells within ``K`` moves of a cell
-    (:func:`reach_offsets`) or, where the grid has fewer, every cell: the cost follows the horizon, not the grid.
+    ``-inf`` where no position of that task is within reach (a task change alone takes a step).  Per UAV, the best
+    value at each cost (:func:`moves_apart` + task change) is bucketed, then the running maximum over the costs gives
+    every ``k``: a few ``[w, N, R]`` tensors for a chunk of worlds at a time, ``R`` the positions within ``K`` moves
+    of a position (:func:`reach_offsets`) or, where the model has fewer, every position: the cost follows the
+    horizon, not the grid.
 
     Args:
-        cells: the UAVs' cells ``[W, N]`` at the start.
+        cells: the UAVs' positions ``[W, N]`` at the start (cells without altitude levels).
         tasks: their tasks ``[W, N]``.
-        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        contributions: each position's relay and sensing contributions ``[W, P, 2]`` (or ``[1, P, 2]``, one layout).
+        positions: the model's positions (:func:`~uavrl.envs.physics.positions.model_positions`).
         grid: ``(L1, L2)`` cells.
         max_steps: ``K``.
 
@@ -71,21 +78,22 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
         The relay and the sensing bests, ``[W, K + 1, N]`` each.
     """
     W, N = cells.shape
-    C, K = contributions.shape[-2], max_steps
+    P, K = contributions.shape[-2], max_steps
+    L1, L2 = grid
+    L = len(positions.number) // (L1 * L2)
     contributions = contributions.expand(W, -1, -1)  # one shared layout, or one per world
-    offsets = reach_offsets(K, cells.device) if reach_size(K) < C else None
-    chunk = max(1, _CHUNK_ELEMENTS // (N * (C if offsets is None else len(offsets))))
+    offsets = reach_offsets(K, cells.device, L) if reach_size(K, L) < P else None
+    chunk = max(1, _CHUNK_ELEMENTS // (N * (P if offsets is None else len(offsets))))
+    where = grid_coordinates(positions).to(cells.device)  # [P, 3] (x, y, level)
     best = {RELAYING: [], SENSING: []}
     for start in range(0, W, chunk):
-        here, worlds = cells[start : start + chunk], slice(start, start + chunk)
-        if offsets is None:  # every cell
+        here, worlds = where[cells[start : start + chunk]], slice(start, start + chunk)  # [w, N, 3]
+        if offsets is None:  # every position
             near, inside = None, None
-            distance = manhattan(here.unsqueeze(-1), torch.arange(C, device=cells.device), grid[0])
-        else:  # the cells within K moves: [w, N, R], off the grid masked
-            x = here.unsqueeze(-1) % grid[0] + offsets[:, 0]
-            y = here.unsqueeze(-1) // grid[0] + offsets[:, 1]
-            inside = (x >= 0) & (x < grid[0]) & (y >= 0) & (y < grid[1])
-            near, distance = (y * grid[0] + x).where(inside, 0), offsets.abs().sum(-1).expand_as(x)
+            distance = sum((here[..., axis, None] - where[:, axis]).abs() for axis in range(3))  # [w, N, P]
+        else:  # the positions within K moves: [w, N, R]
+            near, inside = _positions_near(here, offsets, positions.number.to(cells.device), (L1, L2, L))
+            distance = offsets.abs().sum(-1).expand_as(near)
         for task, column in ((RELAYING, 0), (SENSING, 1)):
             cost = (distance + (tasks[worlds] != task).long().unsqueeze(-1)).clamp(max=K + 1)  # beyond K: one bucket
             value = contributions[worlds, :, column]
@@ -99,31 +107,64 @@ def reachable_best(cells, tasks, contributions, grid, max_steps: int) -> tuple[t
     return torch.cat(best[RELAYING]), torch.cat(best[SENSING])
 
 
-def reach_size(max_steps: int) -> int:
-    """The cells within ``max_steps`` moves of a cell on an unbounded grid: ``2 K (K + 1) + 1``."""
-    return 2 * max_steps * (max_steps + 1) + 1
+def _positions_near(here, offsets, number, shape) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(positions [w, N, R], inside [w, N, R])`` at ``offsets`` ``[R, 3]`` from ``here`` ``[w, N, 3]`` (x, y,
+    level), ``inside`` false (and the position 0) off the grid, off the levels or inside a building (``number`` -1)."""
+    L1, L2, L = shape
+    x, y, level = (here[..., axis, None] + offsets[:, axis] for axis in range(3))
+    inside = (x >= 0) & (x < L1) & (y >= 0) & (y < L2) & (level >= 0) & (level < L)
+    near = number[((level * L2 + y) * L1 + x).where(inside, 0)]
+    inside &= near >= 0
+    return near.where(inside, 0), inside
 
 
-def reach_offsets(max_steps: int, device=None) -> torch.Tensor:
-    """``[reach_size(K), 2]`` every (dx, dy) with ``|dx| + |dy| <= K``."""
+def grid_coordinates(positions: Positions, index: torch.Tensor | None = None) -> torch.Tensor:
+    """``[..., 3]`` long (x, y, level) of the position indices ``index`` ``[...]``; None: ``[P, 3]``, every position's.
+    On the positions' device."""
+    index = slice(None) if index is None else index.to(positions.level.device)
+    return torch.cat([positions.xyz[index, :2].long(), positions.level[index].unsqueeze(-1)], -1)
+
+
+def moves_apart(positions: Positions, here: torch.Tensor, there: torch.Tensor) -> torch.Tensor:
+    """``|dx| + |dy| + |dlevel|`` between position indices ``here`` and ``there`` (broadcast, on ``here``'s device):
+    the fewest moves between them with no building in the way, so never more than the fewest with buildings (the
+    Manhattan distance of their cells without altitude levels).  Computed from the positions given, never as a
+    ``[P, P]`` table."""
+    apart = (grid_coordinates(positions, here) - grid_coordinates(positions, there)).abs().sum(-1)
+    return apart.to(here.device)
+
+
+def reach_size(max_steps: int, num_levels: int = 1) -> int:
+    """The positions within ``max_steps`` moves of a position on an unbounded grid of ``num_levels`` levels:
+    ``2 K (K + 1) + 1`` at one level, that many at ``K - |dlevel|`` moves for every other level within reach."""
+    return sum(2 * k * (k + 1) + 1 for k in (max_steps - abs(d) for d in range(1 - num_levels, num_levels)) if k >= 0)
+
+
+def reach_offsets(max_steps: int, device=None, num_levels: int = 1) -> torch.Tensor:
+    """``[reach_size(K, L), 3]`` every (dx, dy, dlevel) with ``|dx| + |dy| + |dlevel| <= K`` and ``|dlevel| < L``."""
     span = torch.arange(-max_steps, max_steps + 1, device=device)
-    grid = torch.cartesian_prod(span, span)
-    return grid[grid.abs().sum(-1) <= max_steps]
+    climb = torch.arange(1 - num_levels, num_levels, device=device)
+    box = torch.cartesian_prod(span, span, climb)
+    return box[box.abs().sum(-1) <= max_steps]
 
 
-def relaxed_best_utility(cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int) -> torch.Tensor:
+def relaxed_best_utility(
+    cells, tasks, contributions, direct, cfg: ModelConfig, max_steps: int, positions: Positions | None = None
+) -> torch.Tensor:
     """``[W, K + 1]`` an upper bound on the utility any valid trajectory reaches after ``k = 0..K`` steps.
 
     Args:
-        cells: the UAVs' cells ``[W, N]`` at the start.
+        cells: the UAVs' positions ``[W, N]`` at the start (cells without altitude levels).
         tasks: their tasks ``[W, N]``.
-        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        contributions: each position's relay and sensing contributions ``[W, P, 2]`` (or ``[1, P, 2]``, one layout).
         direct: the direct-link terms ``[W, 2]`` (or ``[1, 2]``).
-        cfg: the model (its grid, ``num_uavs`` and rate model).
+        cfg: the model (its positions, ``num_uavs`` and rate model).
         max_steps: ``K``.
+        positions: ``cfg``'s positions (e.g. a World's ``dynamics.positions``); None: :func:`model_positions`.
     """
     N = cfg.num_uavs
-    best_a, best_b = reachable_best(cells, tasks, contributions, cfg.grid, max_steps)
+    positions = model_positions(cfg, cells.device) if positions is None else positions
+    best_a, best_b = reachable_best(cells, tasks, contributions, positions, cfg.grid, max_steps)
     W, K1 = best_a.shape[:2]
     if N > MAX_SPLIT_UAVS:
         return _split_relaxed_best(best_a, best_b, direct.expand(W, 2), cfg)
@@ -160,39 +201,42 @@ def _split_relaxed_best(best_a, best_b, direct, cfg: ModelConfig) -> torch.Tenso
     return bound.masked_fill((no_a & no_b).any(-1), -math.inf)
 
 
-def relaxed_min_steps(cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int) -> torch.Tensor:
-    """``[W, L]`` lower bound on the steps from ``[W, N]`` cells/tasks to utility ``>= levels`` ``[W, L]``.
+def relaxed_min_steps(
+    cells, tasks, contributions, direct, cfg: ModelConfig, levels, max_steps: int, positions: Positions | None = None
+) -> torch.Tensor:
+    """``[W, L]`` lower bound on the steps from ``[W, N]`` positions/tasks to utility ``>= levels`` ``[W, L]``.
 
     ``max_steps + 1`` where even the relaxation does not reach a level within ``max_steps``.
 
     Args:
-        cells: the UAVs' cells ``[W, N]`` at the start.
+        cells: the UAVs' positions ``[W, N]`` at the start (cells without altitude levels).
         tasks: their tasks ``[W, N]``.
-        contributions: each cell's relay and sensing contributions ``[W, C, 2]`` (or ``[1, C, 2]``, one layout).
+        contributions: each position's relay and sensing contributions ``[W, P, 2]`` (or ``[1, P, 2]``, one layout).
         direct: the direct-link terms ``[W, 2]`` (or ``[1, 2]``).
-        cfg: the model (its grid, ``num_uavs`` and rate model).
+        cfg: the model (its positions, ``num_uavs`` and rate model).
         levels: the utilities to reach ``[W, L]`` (bit/s/Hz).
         max_steps: the most steps looked at.
+        positions: ``cfg``'s positions; None: :func:`model_positions`.
     """
-    reach = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps).unsqueeze(-1) >= levels.unsqueeze(
-        1
-    )  # [W, K + 1, L]
+    best = relaxed_best_utility(cells, tasks, contributions, direct, cfg, max_steps, positions)
+    reach = best.unsqueeze(-1) >= levels.unsqueeze(1)  # [W, K + 1, L]
     return torch.where(reach.any(1), reach.double().argmax(1), max_steps + 1).long()
 
 
 def optimal_configurations(contributions, direct, cfg: ModelConfig, u_star: float, rtol: float = OPTIMUM_RTOL):
-    """Every set of (cell, task) pairs of one world with ``U >= (1 - rtol) U*``: ``(cells [S, N], tasks [S, N])``.
+    """Every set of (position, task) pairs of one world with ``U >= (1 - rtol) U*``: ``(positions [S, N], tasks [S,
+    N])`` (cells without altitude levels).
 
-    ``contributions`` ``[C, 2]``, ``direct`` ``[2]``.  Why the search is complete:
-    a relay on cell ``r`` whose relay contribution lies more than ``delta`` below
-    the N-th largest could move to an unused cell with a larger one (at most N - 1
+    ``contributions`` ``[P, 2]`` over the model's positions, ``direct`` ``[2]``.  Why the search is complete:
+    a relay on position ``r`` whose relay contribution lies more than ``delta`` below
+    the N-th largest could move to an unused position with a larger one (at most N - 1
     of the N best cells are used), raising ``U`` by more than ``rtol U*`` when
     ``delta = (1 + direct + sum of the N largest) (2^(2 rtol U*) - 1)``; so
     relays lie within ``delta`` of the top N relay cells, sensors likewise,
     and the candidates are every split of those cells.
 
     Args:
-        contributions: the world's cell contributions ``[C, 2]``.
+        contributions: the world's position contributions ``[P, 2]``.
         direct: its direct-link terms ``[2]``.
         cfg: the model (its ``num_uavs`` and rate model).
         u_star: the world's ``U*``.
@@ -282,17 +326,21 @@ def _searched_configurations(contributions, direct, cfg: ModelConfig, threshold:
     return cells[optimal], tasks[optimal]
 
 
-def assignment_costs(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
-    """``[S, N, N]`` steps UAV ``i`` (cells/tasks ``[N]``) needs to hold pair ``j`` of target set ``s`` (``[S, N]``).
+def assignment_costs(cells, tasks, target_cells, target_tasks, positions: Positions, path_lengths=None) -> torch.Tensor:
+    """``[S, N, N]`` steps UAV ``i`` (positions/tasks ``[N]``) needs to hold pair ``j`` of target set ``s``
+    (``[S, N]``): the moves plus a task change.
 
     Args:
-        cells: the UAVs' cells ``[N]``.
+        cells: the UAVs' positions ``[N]`` (cells without altitude levels).
         tasks: their tasks ``[N]``.
-        target_cells: the target sets' cells ``[S, N]``.
+        target_cells: the target sets' positions ``[S, N]``.
         target_tasks: their tasks ``[S, N]``.
-        grid: ``(L1, L2)`` cells (Manhattan distances on it).
+        positions: the model's positions (:func:`~uavrl.envs.physics.positions.model_positions`).
+        path_lengths: ``(here, there) ->`` the fewest moves between position indices (broadcast); None:
+            :func:`moves_apart`, never more (no building in the way).
     """
-    distance = manhattan(cells[:, None, None], target_cells[None], grid[0])  # [N, S, N]
+    moves = path_lengths or (lambda here, there: moves_apart(positions, here, there))
+    distance = moves(cells[:, None, None], target_cells[None])  # [N, S, N]
     return (distance + (tasks[:, None, None] != target_tasks[None])).permute(1, 0, 2)
 
 
@@ -339,31 +387,33 @@ def _bottleneck(cost: np.ndarray, linear_sum_assignment) -> int:
 MAX_PERMUTED_UAVS = 6  # assignment_min_steps tries every assignment of up to this many UAVs (720), in one tensor
 
 
-def assignment_min_steps(cells, tasks, target_cells, target_tasks, grid) -> torch.Tensor:
+def assignment_min_steps(cells, tasks, target_cells, target_tasks, positions: Positions) -> torch.Tensor:
     """``[W]`` lower bound on the steps from ``[W, N]`` cells/tasks to any of the sets ``[S, N]`` (per world: lists).
 
     The least, over the sets and the assignments of UAVs to their pairs, of the largest steps a UAV needs: up to
     ``MAX_PERMUTED_UAVS`` UAVs over every assignment at once, beyond by :func:`best_assignment`.
 
     Args:
-        cells: the UAVs' cells ``[W, N]``.
+        cells: the UAVs' positions ``[W, N]`` (cells without altitude levels).
         tasks: their tasks ``[W, N]``.
-        target_cells: per world, the target sets' cells ``[S, N]`` (a list of ``W``).
+        target_cells: per world, the target sets' positions ``[S, N]`` (a list of ``W``).
         target_tasks: per world, their tasks ``[S, N]``.
-        grid: ``(L1, L2)`` cells.
+        positions: the model's positions (:func:`~uavrl.envs.physics.positions.model_positions`).
     """
     N = cells.shape[-1]
     if N <= MAX_PERMUTED_UAVS:
         orders = torch.tensor(list(itertools.permutations(range(N))), dtype=torch.long)  # [P, N]: UAV i takes pair p_i
         return torch.stack(
             [
-                assignment_costs(c, t, tc, tt, grid)[:, torch.arange(N), orders].amax(-1).min()  # [S, P, N] -> bound
+                assignment_costs(c, t, tc, tt, positions)[:, torch.arange(N), orders]
+                .amax(-1)
+                .min()  # [S, P, N] -> bound
                 for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks, strict=True)
             ]
         ).long()
     return torch.tensor(
         [
-            best_assignment(assignment_costs(c, t, tc, tt, grid))[0]
+            best_assignment(assignment_costs(c, t, tc, tt, positions))[0]
             for c, t, tc, tt in zip(cells, tasks, target_cells, target_tasks, strict=True)
         ],
         dtype=torch.long,

@@ -19,6 +19,7 @@ from uavrl.agents.evaluation import check_settings as check_eval_settings
 from uavrl.agents.tabular import exact_q_table
 from uavrl.envs import UAVSpectrumEnv, make_config
 from uavrl.envs.physics.grid import cells_of
+from uavrl.envs.physics.positions import model_positions
 from uavrl.envs.solvers.bounds import assignment_min_steps, optimal_configurations, relaxed_min_steps
 from uavrl.envs.solvers.exact import ConfigurationSpace, fixed_layout_tables, min_steps, optimal_values
 
@@ -175,7 +176,9 @@ def test_bounds_never_exceed_the_exact_minimum(grid, N, options):
     optimal = [
         optimal_configurations(env.cell_contributions[w], env.direct[w], env.cfg, float(u_star[w])) for w in range(B)
     ]
-    assignment = assignment_min_steps(cells, tasks, [c for c, _ in optimal], [t for _, t in optimal], grid)
+    assignment = assignment_min_steps(
+        cells, tasks, [c for c, _ in optimal], [t for _, t in optimal], model_positions(env.cfg)
+    )
     assert (assignment <= exact).all()
     assert (torch.maximum(assignment, relaxed[:, -1]) == exact).double().mean() >= 0.9  # and nearly always tight
 

@@ -18,6 +18,7 @@ from uavrl.envs.limits import KEYED_PLACEMENT_CELLS, world_bytes
 from uavrl.envs.physics import streams
 from uavrl.envs.physics.dynamics import Dynamics
 from uavrl.envs.physics.grid import cells_or_away, grid_neighbours
+from uavrl.envs.physics.positions import model_positions
 from uavrl.envs.solvers import bounds, optimum
 from uavrl.envs.world import World, WorldsState
 from uavrl.envs.world import tables as world_tables
@@ -166,19 +167,34 @@ def test_worlds_of_one_model_share_its_tables_and_they_are_the_ones_built_alone(
 
 def test_bounds_within_reach_of_the_starts_are_those_over_every_cell(monkeypatch):
     generator = torch.Generator().manual_seed(1)
-    cases = [((30, 20), 5, 3, True), ((40, 40), 7, 2, False), ((25, 60), 11, 4, True)]
-    for (L1, L2), K, N, shared in cases:
-        C, W = L1 * L2, 9
-        cells = torch.stack([torch.randperm(C, generator=generator)[:N] for _ in range(W)])
+    cases = [
+        ((30, 20), 5, 3, True, {}),
+        ((40, 40), 7, 2, False, {}),
+        ((25, 60), 11, 4, True, {}),
+        (
+            (20, 20),
+            4,
+            3,
+            False,
+            dict(altitudes_m=[20, 60, 200], city="dense_urban", environment="dense_urban"),
+        ),  # levels, positions blocked
+    ]
+    for (L1, L2), K, N, shared, model in cases:
+        cfg = make_config("a2g_urban" if model else "paper", grid=(L1, L2), num_uavs=N, **model)
+        positions, W = model_positions(cfg), 9
+        P = len(positions)
+        assert P < L1 * L2 * cfg.num_levels if model else P == L1 * L2
+        cells = torch.stack([torch.randperm(P, generator=generator)[:N] for _ in range(W)])
         tasks = torch.randint(0, 2, (W, N), generator=generator)
-        contributions = torch.rand(1 if shared else W, C, 2, generator=generator, dtype=torch.float64)
-        assert bounds.reach_size(K) < C
-        near = bounds.reachable_best(cells, tasks, contributions, (L1, L2), K)
+        contributions = torch.rand(1 if shared else W, P, 2, generator=generator, dtype=torch.float64)
+        assert bounds.reach_size(K, cfg.num_levels) < P
+        near = bounds.reachable_best(cells, tasks, contributions, positions, (L1, L2), K)
         with monkeypatch.context() as patch:
-            patch.setattr(bounds, "reach_size", lambda k: math.inf)  # every cell
-            every = bounds.reachable_best(cells, tasks, contributions, (L1, L2), K)
+            patch.setattr(bounds, "reach_size", lambda k, levels: math.inf)  # every position
+            every = bounds.reachable_best(cells, tasks, contributions, positions, (L1, L2), K)
         assert all(a.equal(b) for a, b in zip(near, every, strict=True))
     assert len(bounds.reach_offsets(3)) == bounds.reach_size(3) == 25
+    assert len(bounds.reach_offsets(3, num_levels=3)) == bounds.reach_size(3, 3) == 25 + 2 * (13 + 5)
 
 
 @pytest.mark.parametrize("num_uavs", [11, 13])
@@ -234,9 +250,10 @@ def test_the_assignment_bound_over_every_assignment_is_the_bottleneck_one(num_ua
     tasks = torch.randint(0, 2, (W, num_uavs), generator=generator)
     targets = [torch.stack([torch.randperm(C, generator=generator)[:num_uavs] for _ in range(S)]) for _ in range(W)]
     target_tasks = [torch.randint(0, 2, (S, num_uavs), generator=generator) for _ in range(W)]
-    fast = bounds.assignment_min_steps(cells, tasks, targets, target_tasks, grid)
+    positions = model_positions(make_config("paper", grid=grid, num_uavs=num_uavs))
+    fast = bounds.assignment_min_steps(cells, tasks, targets, target_tasks, positions)
     by_assignment = [
-        bounds.best_assignment(bounds.assignment_costs(c, t, tc, tt, grid))[0]
+        bounds.best_assignment(bounds.assignment_costs(c, t, tc, tt, positions))[0]
         for c, t, tc, tt in zip(cells, tasks, targets, target_tasks, strict=True)
     ]
     assert fast.tolist() == by_assignment
