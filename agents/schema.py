@@ -482,11 +482,18 @@ def agent_rules(name: str) -> dict[str, Rule]:
     return AGENTS[name].rules()
 
 
+# what a size-free policy trained in a city may meet in another city (a city for a city, levels for levels)
+CITY_MODEL_OPTIONS = (
+    *("city", "city_alpha", "city_beta", "city_gamma", "city_seed", "los", "environment", "altitudes_m", "altitude_m"),
+)
+
+
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
     """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
     when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
-    number of UAVs, layout and city (``env.city_seed``) of the same model otherwise; neither with altitude levels
-    where it was trained without, or the reverse."""
+    number of UAVs, layout and, trained in a city, any other city (its environment, seed, channel environment and
+    altitudes) of the same model otherwise; neither with altitude levels where it was trained without, or the
+    reverse."""
     levels, trained = env_cfg.num_levels > 1, run_cfg.num_levels > 1
     if levels != trained:
         return (
@@ -496,8 +503,11 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
         )
     size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
     same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
-    if size_free and env_cfg.replace(**same, city_seed=run_cfg.city_seed) != run_cfg:
-        return "only env.grid, env.num_uavs, env.layout and env.city_seed may differ from the saved run's"
+    if env_cfg.city != "none" and run_cfg.city != "none":  # one city for another: its buildings, channel and levels
+        same |= {name: getattr(run_cfg, name) for name in CITY_MODEL_OPTIONS}
+    if size_free and env_cfg.replace(**same) != run_cfg:
+        cities = ", the city (env.city and its options, env.environment) and the levels" if "city" in same else ""
+        return f"only env.grid, env.num_uavs, env.layout{cities} may differ from the saved run's"
     if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
