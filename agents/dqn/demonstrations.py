@@ -33,6 +33,7 @@ from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.utils import step_mdp
 
 from uavrl.agents.baselines import OraclePolicy
+from uavrl.agents.references import placements
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.limits import SEED_LIMIT
 from uavrl.envs.physics.rewards import log_gap_reward
@@ -75,17 +76,10 @@ def oracle_transitions(
         td = step_mdp(frames[-1], keep_other=True, exclude_action=False)
     batch = torch.stack(frames, 1)  # [worlds, steps]
     if objective == "log_gap":
-        now, after = (env.world.utility(_placed(step), step["tasks"])[2] for step in (batch, batch["next"]))
+        now, after = (env.world.utility(placements(step), step["tasks"])[2] for step in (batch, batch["next"]))
         change = log_gap_reward(after, now, u_star.unsqueeze(-1), gap_floor)
         batch.set(("next", "reward"), change.unsqueeze(-1).to(batch.get(("next", "reward")).dtype))
     return n_step_returns(batch, n_step, gamma).reshape(-1)
-
-
-def _placed(step: TensorDictBase) -> torch.Tensor:
-    """The UAVs' ``(x, y)`` ``[..., N, 2]`` of ``step``, with altitude levels ``(x, y, level)`` ``[..., N, 3]``."""
-    levels = step.get("levels", None)
-    positions = step.get("positions")
-    return positions if levels is None else torch.cat([positions, levels.unsqueeze(-1)], -1)
 
 
 class Demonstrations:

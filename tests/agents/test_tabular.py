@@ -196,16 +196,33 @@ def test_policy_runs_in_rollout_and_collector():
     assert len(batches) == 2 and batches[0]["next", "done"].any()
 
 
-def test_greedy_actions_are_valid_joint_actions():
-    cfg = make_config("paper", grid=(2, 2), num_uavs=3, max_steps=10)
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        make_config("paper", grid=(2, 2), num_uavs=3, max_steps=10),
+        # altitude levels over the highrise city on 3x3: into a building, off the levels
+        make_config(
+            "a2g_urban",
+            grid=(3, 3),
+            num_uavs=2,
+            city="highrise",
+            environment="highrise",
+            altitudes_m=[20, 100, 300],
+            max_steps=40,
+        ),  # fmt: skip
+    ],
+    ids=["grid", "levels-in-a-city"],
+)
+def test_greedy_actions_are_valid_joint_actions(cfg):
     # values that favour invalid joint actions: the policy must still pick valid ones
     q = torch.arange(cfg.num_joint_actions, dtype=torch.float64).expand(cfg.num_states, -1).clone()
     env = UAVSpectrumEnv(batch_size=16, config=cfg)
     td = env.reset()
+    digits = cfg.joint_action_base ** torch.arange(cfg.num_uavs)
     for _ in range(10):
         mask = env.joint_action_mask()
         td = TabularPolicy(q, cfg)(td)
-        joint = (td["agents", "action"] * torch.tensor([1, 6, 36])).sum(-1)
+        joint = (td["agents", "action"] * digits).sum(-1)
         assert mask.gather(1, joint[:, None]).all()
         td = env.step_mdp(env.step(td))
 

@@ -64,21 +64,6 @@ def test_a_table_without_levels_is_refused_the_levels():
         model.configuration_ids(torch.zeros(1, 2, 2, dtype=torch.long), torch.zeros(1, 2, dtype=torch.long))
 
 
-def test_greedy_actions_are_valid_at_levels_in_a_city():
-    """Values that favour invalid joint actions (into a building, off the levels): the policy still picks valid
-    ones."""
-    cfg = city_levels(num_uavs=2)
-    q = torch.arange(cfg.num_joint_actions, dtype=torch.float64).expand(cfg.num_states, -1).clone()
-    env = UAVSpectrumEnv(batch_size=16, config=cfg)
-    td = env.reset()
-    for _ in range(10):
-        mask = env.joint_action_mask()
-        td = TabularPolicy(q, cfg)(td)
-        joint = (td["agents", "action"] * torch.tensor([1, 8])).sum(-1)
-        assert mask.gather(1, joint[:, None]).all()
-        td = env.step_mdp(env.step(td))
-
-
 @pytest.mark.parametrize("method", ["q_learning", "value_iteration"])
 def test_evaluating_the_tables_gives_the_numbers_of_the_torchrl_policies_at_levels(method):
     """The tabular agent's batched evaluation equals TorchRL rollouts of its policies at levels in a city."""

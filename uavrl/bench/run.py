@@ -24,7 +24,7 @@ import torch
 from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 from uavrl.agents.evaluation import greedy_metrics, greedy_rollout
 from uavrl.agents.planner import PlannerPolicy
-from uavrl.agents.references import LEVELS, start_references, u_star_gap
+from uavrl.agents.references import LEVELS, placements, start_references, u_star_gap
 from uavrl.bench import cache
 from uavrl.bench.results import TEXT, new_results
 from uavrl.bench.stats import aggregate
@@ -97,7 +97,7 @@ def _values(task: Task, played: dict):
     """Per start: the raw value (the discounted gain J; under an energy model the data delivered, bit/Hz) and the
     mean-channel utilities ``[B, H + 1]``."""
     world, start, steps = played["world"], played["start"], played["steps"]
-    positions = torch.cat([start["positions"].unsqueeze(1), steps["positions"]], 1)
+    positions = torch.cat([placements(start).unsqueeze(1), placements(steps)], 1)  # with levels (x, y, level)
     tasks = torch.cat([start["tasks"].unsqueeze(1), steps["tasks"]], 1)
     utility = world.utility(positions, tasks)[2]
     if world.energy is None:
@@ -124,7 +124,7 @@ def _start_references(task: Task) -> tuple[dict, dict]:
     the certified quantities: U*, its gap, the fewest steps or their bound, the mission's optimum or bound."""
     env, start, u_star = _started(task)
     refs = start_references(env.world, start, u_star, env.cfg.max_steps, task.gamma)
-    u_start = env.world.utility(start["positions"], start["tasks"])[2]
+    u_start = env.world.utility(placements(start), start["tasks"])[2]
     stored = {
         "u_star": _tensor(u_star),
         "u_start": _tensor(u_start),
