@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 pytest.importorskip("benchmarl")
 
@@ -66,6 +67,19 @@ def test_short_run_completes_masked_and_reported(tmp_path, algorithm, masked_cho
     tags = set(EventAccumulator(str(run_dir)).Reload().Tags()["scalars"])
     assert {"eval/return_ratio", "eval/optimality", "eval/reach_999"} <= tags
     assert any(path.name.startswith(f"{algorithm}_tiny_4x4") for path in run_dir.iterdir())  # BenchMARL's folder
+
+
+def test_a_short_run_in_a_city_with_altitude_levels(tmp_path, masked_choices):
+    """The same task in an urban city with three altitude levels: BenchMARL's MAPPO picks among the 8 actions its
+    mask allows (none into a building or off the levels) and the yardstick is exact."""
+    city = ["env.preset=a2g_urban", "env.channel=al_hourani", "env.cell_size=50", "env.altitude_m=100"]
+    city += ["env.city=urban", "env.environment=urban", "env.altitudes_m=[30,100,300]"]
+    run_dir = train(compose_config("benchmarl", ["algorithm=mappo", *TINY, *city, f"run_dir={tmp_path / 'run'}"]))
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["env_steps"] == 2400 and 0 < metrics["eval/optimality"] <= 1 and "eval/return_ratio" in metrics
+    assert masked_choices == [True, True]
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())["env"]
+    assert saved["altitudes_m"] == [30, 100, 300] and saved["city"] == "urban"
 
 
 def test_a_finished_run_reloads_to_act_as_it_was_evaluated_writing_nothing(tmp_path):
