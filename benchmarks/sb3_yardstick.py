@@ -11,6 +11,7 @@ Usage::
     python benchmarks/sb3_yardstick.py                                # N = 2 on 6x6, 50,000 steps, seed 0
     python benchmarks/sb3_yardstick.py --timesteps 200000 --seeds 0 1 2 --reward log_gap
     python benchmarks/sb3_yardstick.py --save runs/sb3     # also keeps each model: runs/sb3/ppo_seed<k>.zip
+    python benchmarks/sb3_yardstick.py --city urban --altitudes 30 60 100 200 300   # a city with altitude levels
 
 A kept model is scored on a benchmark suite by ``python benchmarks/score_outside.py sb3 runs/sb3/ppo_seed0.zip``.
 """
@@ -31,7 +32,20 @@ def parse_args(argv=None):
     p.add_argument("--max-steps", type=int, default=30, help="training episode length (the DQN's on 6x6)")
     p.add_argument("--reward", default="delta", help="the model's reward option PPO trains on")
     p.add_argument("--save", help="a folder to keep each trained model in, as ppo_seed<k>.zip")
+    p.add_argument(
+        "--city", help="an ITU-R P.1410 city on env=a2g_urban's channel (suburban, urban, dense_urban, highrise)"
+    )
+    p.add_argument("--altitudes", type=float, nargs="+", help="altitude levels in m (env.altitudes_m)")
     return p.parse_args(argv)
+
+
+def model_options(args) -> dict:
+    """The model's options: the paper's, or with ``--city`` and ``--altitudes`` ``a2g_urban``'s channel in a city."""
+    options = dict(grid=tuple(args.grid), num_uavs=args.uavs, max_steps=args.max_steps, reward=args.reward)
+    if args.city or args.altitudes:
+        options |= dict(preset="a2g_urban", altitudes_m=args.altitudes)
+        options |= dict(city=args.city, environment=args.city) if args.city else {}
+    return options
 
 
 def row(name: str, seed, metrics: dict, train_seconds) -> str:
@@ -57,8 +71,8 @@ def main(argv=None):
     torch.set_num_threads(1)
     print(
         f"# SB3 PPO on UAVSpectrumGymEnv: {time.strftime('%Y-%m-%d %H:%M')}, {args.uavs} UAVs on "
-        f"{args.grid[0]}x{args.grid[1]}, reward={args.reward}, {args.timesteps} steps of episodes of {args.max_steps}, "
-        f"{args.starts} held-out starts, one torch thread"
+        f"{args.grid[0]}x{args.grid[1]}, city={args.city}, altitudes={args.altitudes}, reward={args.reward}, "
+        f"{args.timesteps} steps of episodes of {args.max_steps}, {args.starts} held-out starts, one torch thread"
     )
     print(
         "| row | seed | final U/U\\* | return ratio | reach 0.999 U\\* | steps to 0.999 U\\* | fewest (exact) "
@@ -67,7 +81,7 @@ def main(argv=None):
     print("|---|---|---|---|---|---|---|---|---|")
     cfg = None
     for seed in args.seeds:
-        env = UAVSpectrumGymEnv(grid=tuple(args.grid), num_uavs=args.uavs, max_steps=args.max_steps, reward=args.reward)
+        env = UAVSpectrumGymEnv(**model_options(args))
         env.reset(seed=seed)
         started = time.perf_counter()
         model = PPO("MlpPolicy", env, seed=seed, device="cpu")
