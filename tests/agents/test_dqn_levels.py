@@ -184,7 +184,7 @@ def test_a_size_free_run_trains_over_cities_and_acts_in_a_held_out_one(tmp_path,
     held_out = "env.city_seed=4611686018427387905"  # the benchmark's held-out cities are size-free's to act in
     metrics = evaluate_checkpoint(compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=4", held_out), [held_out])
     assert 0.0 <= metrics["eval/optimality"] <= 1.0
-    assert json.loads((run_dir / "eval-2uav-4x4-city4611686018427387905.json").read_text()) == metrics
+    assert json.loads((run_dir / "eval-2uav-4x4-urban4611686018427387905.json").read_text()) == metrics
     assert not (run_dir / "eval.json").exists()  # the run's own city's evaluation is another file
     assert size_free_teams(cfg, model_config(cfg)).endswith("in 2 urban cities (env.city_seed 0, 1)")
 
@@ -225,3 +225,20 @@ def test_the_cost_check_counts_every_city(compose_cfg):
     many = compose_cfg(*base, f"agent.cities=[{','.join(map(str, range(16)))}]")
     with pytest.raises(ValueError, match=r"x groups \(agent.sizes x agent.layouts x agent.cities\) = 100,000 x 6 x 16"):
         check_run_costs(many, model_config(many))
+
+
+def test_evaluations_in_other_cities_are_files_of_their_own(compose_cfg):
+    """A size-free run evaluated in two cities of one seed, or at other levels, writes three files, none the run's
+    own ``eval.json``: nothing evaluated is silently replaced."""
+    from uavrl.experiment.evaluating import evaluation_file
+
+    saved = compose_cfg(*TINY, *SET)
+    others = [
+        ["env.city_seed=7"],
+        ["env.city_seed=7", "env.city=highrise", "env.environment=highrise"],
+        ["env.city_seed=7", "env.altitudes_m=[30,100]"],
+    ]
+    names = [evaluation_file(saved, compose_cfg(*TINY, *SET, *other)) for other in others]
+    assert len(set(names)) == 3 and "eval.json" not in names
+    assert names[0] == "eval-2uav-4x4-urban7.json" and names[1] == "eval-2uav-4x4-highrise7.json"
+    assert evaluation_file(saved, compose_cfg(*TINY, *SET)) == "eval.json"

@@ -13,6 +13,7 @@ The settings are checked first, without torch, then the checkpoint read with tor
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import sys
@@ -23,7 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.evaluation import evaluate_agent
 from uavrl.agents.lookahead_rules import lookahead_settings
-from uavrl.agents.schema import training_models
+from uavrl.agents.schema import CITY_MODEL_OPTIONS, training_models
 from uavrl.config import model_config
 from uavrl.costs import check_evaluation_costs
 from uavrl.envs.world import resolve_device
@@ -43,18 +44,19 @@ from uavrl.experiment.saved import check_evaluation, evaluated_config, load_agen
 
 
 def evaluation_file(saved: DictConfig, evaluated: DictConfig) -> str:
-    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>][-city<seed>].json`` for another (a
-    size-free network acts in other cities too)."""
+    """``eval.json`` for the run's own model, ``eval-<N>uav-<L1>x<L2>[-<layout>][-<city><seed>[-<digest>]].json`` for
+    another (a size-free network acts in other cities too; ``digest``: of the city's other options and the levels
+    where they differ, so no two models share a file)."""
     run, other = model_config(saved), model_config(evaluated)
-    if (other.num_uavs, other.grid, other.layout, other.city_seed) == (
-        run.num_uavs,
-        run.grid,
-        run.layout,
-        run.city_seed,
-    ):
+    named = ("city", "city_seed", "environment")  # in the name (al_hourani's environment is the city's)
+    options = [getattr(other, name) for name in CITY_MODEL_OPTIONS if name not in named]
+    same_options = options == [getattr(run, name) for name in CITY_MODEL_OPTIONS if name not in named]
+    digest = "" if same_options else "-" + hashlib.sha256(repr(options).encode()).hexdigest()[:8]
+    same_city = [getattr(other, name) for name in named] == [getattr(run, name) for name in named] and same_options
+    if (other.num_uavs, other.grid, other.layout) == (run.num_uavs, run.grid, run.layout) and same_city:
         return "eval.json"
     layout = "" if other.layout == run.layout else f"-{other.layout}"
-    city = "" if other.city_seed == run.city_seed else f"-city{other.city_seed}"
+    city = "" if same_city else f"-{other.city}{other.city_seed}{digest}"
     return f"eval-{other.num_uavs}uav-{other.grid[0]}x{other.grid[1]}{layout}{city}.json"
 
 
