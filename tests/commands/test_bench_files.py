@@ -163,7 +163,7 @@ def _set(results: dict, where: str, value) -> dict:
 
 MALFORMED = [
     ("suite", ..., "suite is missing"),
-    ("suite", "nope", "suite=\"nope\" is invalid: allowed suites are 'paper', 'core', 'energy', 'zero_shot', 'tiny'"),
+    ("suite", "nope", f'suite="nope" is invalid: allowed suites are {", ".join(map(repr, SUITES))}'),
     ("suite", "paper", 'tasks[0].task="tiny_3x3" is invalid: suite paper has paper_6x6, reference_code'),
     ("tasks.1.task", "tiny_3x3", 'tasks[1].task="tiny_3x3" is invalid: the task is given twice'),
     ("tasks.0.mean_score", "0.5", 'tasks[0].mean_score="0.5" is invalid: it must be a finite number'),
