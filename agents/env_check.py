@@ -36,6 +36,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from uavrl.envs import config
 from uavrl.envs.config import InvalidOption, ModelConfig
 from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, observation_size
 from uavrl.envs.physics.channel import fixed_layout
@@ -50,7 +51,7 @@ FULL_CHECKS = (
 )
 
 
-CITY_OPTIONS = ("city", "city_alpha", "city_beta", "city_gamma", "city_seed", "los")  # what places the buildings
+CITY_OPTIONS = ("city", *config.CITY_OPTIONS)  # what places the buildings and decides line of sight
 
 
 class RunEnvironment:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
-from uavrl.envs.config import HELD_OUT_CITY_SEEDS, LAYOUTS, NUM_ACTIONS, InvalidOption
+from uavrl.envs.config import CITY_OPTIONS, HELD_OUT_CITY_SEEDS, LAYOUTS, NUM_ACTIONS, InvalidOption
 from uavrl.envs.limits import DEFAULT_MEMORY_BUDGET
 from uavrl.envs.rules import (
     REAL,
@@ -483,9 +483,7 @@ def agent_rules(name: str) -> dict[str, Rule]:
 
 
 # what a size-free policy trained in a city may meet in another city (a city for a city, levels for levels)
-CITY_MODEL_OPTIONS = (
-    *("city", "city_alpha", "city_beta", "city_gamma", "city_seed", "los", "environment", "altitudes_m", "altitude_m"),
-)
+CITY_MODEL_OPTIONS = ("city", *CITY_OPTIONS, "environment", "altitudes_m", "altitude_m")
 
 
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
