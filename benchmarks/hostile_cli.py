@@ -1,6 +1,6 @@
 """Hostile command lines against every command, each run as a whole process, and what each one got.
 
-    python benchmarks/hostile_cli.py [--group old|new|all] [--timeout 60] [--jobs 2] [--only WORD] [--out results.json]
+    python benchmarks/hostile_cli.py [--group old|new|cities|all] [--timeout 60] [--jobs 2] [--only WORD] [--out X.json]
 
 Every case is a mistake a user could type (sizes that cannot fit, settings that cannot go together, values of the
 wrong kind, paths that are no run, options a part does not read), on ``uavrl.train``, ``uavrl.evaluate``,
@@ -8,7 +8,8 @@ wrong kind, paths that are no run, options a part does not read), on ``uavrl.tra
 group); the ``new`` group holds the benchmark (``uavrl.bench``: its suites and settings, results files, the
 references' cache, ``compare``, ``leaderboard``, ``list``), the DQN's and the evaluation's newer options (n-step
 returns, prioritized replay, the curriculum, demonstrations, the lookahead), large grids and run directories holding
-another run's checkpoint.  The script first makes its own fixtures in a temporary directory (a tabular run and a
+another run's checkpoint; the ``cities`` group the cities of buildings, the altitude levels, ``agent.cities`` and
+the ``city`` suite.  The script first makes its own fixtures in a temporary directory (a tabular run and a
 size-free DQN run, trained for a few seconds; a text file, a FIFO, a directory with no run; a sentinel ``notes.txt``
 in each; for the new group also a team DQN run, copies of it holding the tabular run's checkpoint, a results file of
 ours and malformed ones, caches with damaged or re-signed entries, links to ``/dev/zero``, 20 GB sparse files, a
@@ -496,7 +497,59 @@ NEW_CASES = [
     ("evaluate", "checkpoint={set} eval.num_starts=100000000 env.grid=[100,100] env.num_uavs=20"),
 ]
 
-GROUPS = {"old": CASES, "new": NEW_CASES}
+C = "agent=random eval.num_starts=2 env=a2g_urban"  # a physical channel: the cities' and the levels' options are read
+LEVELS = "env.altitudes_m=[30,100,300]"
+MANY_LEVELS = "env.altitudes_m=[" + ",".join(str(30 + k) for k in range(65)) + "]"
+CITY_CASES = [
+    # ---------------------------------------------------------------- cities of buildings and altitude levels
+    ("train", "agent=random eval.num_starts=2 env.city=urban"),
+    ("train", f"{C} env.city=atlantis"),
+    ("train", f"{C} env.city=Urban"),
+    ("train", f"{C} env.city=dense_urban"),
+    ("train", f"{C} env.city=urban env.environment=suburban"),
+    ("train", f"{C} env.city=urban env.city_alpha=1"),
+    ("train", f"{C} env.city=urban env.city_alpha=-0.3"),
+    ("train", f"{C} env.city=urban env.city_beta=1e12"),
+    ("train", f"{C} env.city=urban env.city_gamma=inf"),
+    ("train", f"{C} env.city=urban env.city_gamma=abc"),
+    ("train", f"{C} env.city=urban env.city_seed=-1"),
+    ("train", f"{C} env.city=urban env.city_seed=1.5"),
+    ("train", f"{C} env.city=urban env.city_seed=9223372036854775808"),
+    ("train", f"{C} env.city=urban env.city_seed=4611686018427387904"),
+    ("train", f"{C} env.city_seed=3"),
+    ("train", f"{C} env.los=statistical"),
+    ("train", f"{C} env.city=urban env.los=ray_traced"),
+    ("train", f"{C} env.city=highrise env.environment=highrise"),
+    ("train", f"{C} env.city=highrise env.environment=highrise {LEVELS} env.altitude_m=30 env.city_seed=1"),
+    ("train", f"{C} env.altitudes_m=300"),
+    ("train", f"{C} env.altitudes_m=[300,30]"),
+    ("train", f"{C} env.altitudes_m=[30,30]"),
+    ("train", f"{C} env.altitudes_m=[]"),
+    ("train", f"{C} env.altitudes_m=[0,100]"),
+    ("train", f"{C} env.altitudes_m=[30,1e30]"),
+    ("train", f"{C} env.altitudes_m=[30,nan]"),
+    ("train", f"{C} env.altitudes_m=[a,b]"),
+    ("train", f"{C} {MANY_LEVELS}"),
+    ("train", f"{C} {LEVELS} {E}"),
+    ("train", f"{C} env.channel=tr36777_uma env.altitudes_m=[10,100]"),
+    ("train", f"{C} env.city=urban {LEVELS} env.grid=[3000,3000] env.num_uavs=2"),
+    ("train", f"agent=tabular env=a2g_urban {MANY_LEVELS.replace(',94]', ']')} env.grid=[4,4]"),
+    ("train", f"agent=tabular env=a2g_urban {LEVELS} env.grid=[10,10] env.num_uavs=3"),
+    ("train", f"{S} env=a2g_urban env.grid=[4,4] agent.cities=[0,1]"),
+    ("train", f"{S} env=a2g_urban env.city=urban env.grid=[4,4] agent.cities=[{','.join(map(str, range(17)))}]"),
+    ("train", f"{S} env=a2g_urban env.city=urban env.grid=[4,4] agent.cities=[4611686018427387904]"),
+    ("train", f"{S} env=a2g_urban env.city=urban env.grid=[4,4] agent.cities=[1,1]"),
+    ("train", f"{T} env=a2g_urban env.city=urban env.grid=[4,4] agent.cities=[0,1]"),
+    ("train", f"{T} env=a2g_urban {LEVELS} env.grid=[4,4] eval.lookahead=1"),
+    ("evaluate", f"checkpoint={{set}} eval.num_starts=2 {LEVELS}"),
+    ("evaluate", "checkpoint={set} eval.num_starts=2 env.city=urban"),
+    ("evaluate", f"checkpoint={{tab}} eval.num_starts=2 {LEVELS}"),
+    ("bench", "city agent=random tasks=[city_nowhere_n6]"),
+    ("bench", "city agent=random tasks=[tiny_3x3]"),
+    ("bench", "cities agent=random"),
+]
+
+GROUPS = {"old": CASES, "new": NEW_CASES, "cities": CITY_CASES}
 CACHE_RECOMPUTED = r"warning: the references' cache entry .* is damaged \(.*\): recomputed and rewritten"
 # cases whose documented answer is to go on and say so: the pattern its output must hold (else it is "accepted")
 HONOURED = {
@@ -852,7 +905,9 @@ def summary(results: list[tuple], options) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--group", choices=("old", "new", "all"), default="all", help="which cases (module doc)")
+    parser.add_argument(
+        "--group", choices=("old", "new", "cities", "all"), default="all", help="which cases (module doc)"
+    )
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds before a case counts as a hang")
     parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
     parser.add_argument("--memory-gib", type=float, default=6, help="address space of each new case's process")
@@ -880,7 +935,7 @@ def main() -> None:
             def one(case):
                 group, command, text = case
                 args = shlex.split(text.format(**places))
-                result = run_case(command, args, root, options.timeout, memory if group == "new" else None)
+                result = run_case(command, args, root, options.timeout, memory if group != "old" else None)
                 with lock:  # the fixtures' own files only (a case that runs may write runs of its own beside them)
                     now = snapshot(root)
                     changed = [name for name, digest in before.items() if now.get(name) != digest]

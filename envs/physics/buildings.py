@@ -125,7 +125,13 @@ def city_part(cfg) -> CityPart | None:
     (:mod:`.positions`)."""
     if cfg.city == "none":
         return None
-    part = _city_part(cfg.city, cfg.city_parameters, cfg.city_seed, cfg.grid, cfg.cell_size, cfg.height, cfg.layout)
+    try:
+        part = _city_part(cfg.city, cfg.city_parameters, cfg.city_seed, cfg.grid, cfg.cell_size, cfg.height, cfg.layout)
+    except InvalidOption as refused:  # too many buildings: the density given, or the area (the grid) of the city's
+        if refused.option != "beta":
+            raise
+        name = "city_beta" if cfg.city_beta is not None else "grid"
+        raise InvalidOption(name, getattr(cfg, name), str(refused).split(" is invalid: ", 1)[1]) from None
     blocked, nodes_blocked, tallest = part.blocked
     blocked *= cfg.num_levels == 1  # with altitude levels a position inside a building is one a UAV cannot take
     if blocked or nodes_blocked:

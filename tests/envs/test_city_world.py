@@ -176,3 +176,10 @@ def test_uavs_inside_buildings_are_refused_naming_the_height():
     cfg = make_config("paper", grid=(10, 10), num_uavs=2, **{**CITY, "altitude_m": 30.0})
     with pytest.raises(InvalidOption, match=r"altitude_m=30.0 is invalid: \d+ of the 100 cells at 30 m are inside"):
         World(cfg)
+
+
+def test_a_city_of_too_many_buildings_is_refused_naming_the_density_typed():
+    cfg = make_config("paper", grid=(6, 6), num_uavs=2, **{**CITY, "city_beta": 1e12})
+    with pytest.raises(InvalidOption, match=r"city_beta=1000000000000.0 is invalid: .* at most 4,000,000") as refused:
+        World(cfg)
+    assert refused.value.option == "city_beta"
