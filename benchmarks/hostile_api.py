@@ -1,6 +1,6 @@
 """Hostile input to the Python API, the adapters and the commands' file handling, each case measured in a process.
 
-    python benchmarks/hostile_api.py [--group old|new|all] [--jobs 2] [--timeout S] [--only SURFACE] [--json PATH]
+    python benchmarks/hostile_api.py [--group old|new|cities|all] [--jobs 2] [--timeout S] [--only SURFACE] [--json P]
 
 About a hundred cases on ``load_policy``, ``UAVSpectrumEnv`` (construction, ``reset``, ``step``, ``to``,
 ``rollout``), the Gymnasium and PettingZoo adapters, ``uavrl.agents.evaluation.evaluate`` and the files that
@@ -9,8 +9,9 @@ About a hundred cases on ``load_policy``, ``UAVSpectrumEnv`` (construction, ``re
 benchmark in Python (``uavrl.bench.run.score_suite``, its cache, ``uavrl.bench.results.read``, ``save`` and
 ``markdown``), the leaderboard's page (every string of a results file escaped), ``load_experiment`` (where the
 ``[benchmarl]`` extra is missing, BenchMARL's names are stand-ins that raise ``BenchmarlStandIn``: the cases still
-show how the run directory is read before BenchMARL is reached) and rollouts with no end.  Each runs in its own
-process, forked from one that imported torch and
+show how the run directory is read before BenchMARL is reached) and rollouts with no end; the ``cities`` group the
+cities of buildings and the altitude levels (the options, the World's queries, the city functions, the adapters).
+Each runs in its own process, forked from one that imported torch and
 uavrl once (address space capped at ``--memory-gib``, killed after ``--timeout`` seconds, by default 16 GiB and
 300 s for the old group, 6 GiB and 60 s for the new; the commands' cases start
 ``python -m uavrl.<command>`` from there), and is classified as:
@@ -623,9 +624,50 @@ NEW_CASES = [
      "env().rollout(10**12, break_when_any_done=False)"),
     ("reset/step/to", "rollout(5, policy='random')", "policy", "env().rollout(5, policy='random')"),
 ]  # fmt: skip
-GROUPS = {"old": CASES, "new": NEW_CASES}
-TIMEOUTS = {"old": 300, "new": 60}  # seconds before a case counts as a hang, unless --timeout
-MEMORY_GIB = {"old": 16, "new": 6}  # each case's address space, unless --memory-gib
+A2G = "preset='a2g_urban', grid=(4, 4), num_uavs=2"  # a physical channel: the cities' and levels' options are read
+CITY_CASES = [
+    # ------------------------------------------------------------------ cities of buildings and altitude levels
+    ("cities", "city='urban' under the paper's channel", "city", "make_config('paper', city='urban')"),
+    ("cities", "city=['urban']", "city", f"UAVSpectrumEnv({A2G}, city=['urban'])"),
+    ("cities", "city_seed=-1", "city_seed", f"UAVSpectrumEnv({A2G}, city='urban', city_seed=-1)"),
+    ("cities", "city_seed=2**63", "city_seed", f"UAVSpectrumEnv({A2G}, city='urban', city_seed=2**63)"),
+    ("cities", "city_seed=np.int64(3) without a city", "city_seed", f"UAVSpectrumEnv({A2G}, city_seed=np.int64(3))"),
+    ("cities", "city_alpha=nan", "city_alpha", f"UAVSpectrumEnv({A2G}, city='urban', city_alpha=float('nan'))"),
+    ("cities", "city_beta=1e12", "city_beta", f"UAVSpectrumEnv({A2G}, city='urban', city_beta=1e12)"),
+    ("cities", "los=True", "los", f"UAVSpectrumEnv({A2G}, city='urban', los=True)"),
+    ("cities", "UAVs inside the high-rise city's buildings", "altitude_m",
+     "UAVSpectrumEnv(preset='a2g_urban', city='highrise', environment='highrise')"),
+    ("cities", "altitudes_m='300'", "altitudes_m", f"UAVSpectrumEnv({A2G}, altitudes_m='300')"),
+    ("cities", "altitudes_m=[30, nan]", "altitudes_m", f"UAVSpectrumEnv({A2G}, altitudes_m=[30, float('nan')])"),
+    ("cities", "altitudes_m=torch.tensor([30., 100.])", "altitudes_m",
+     f"UAVSpectrumEnv({A2G}, altitudes_m=torch.tensor([30.0, 100.0]))"),
+    ("cities", "altitudes_m={30, 100} (a set)", "altitudes_m", f"UAVSpectrumEnv({A2G}, altitudes_m={{30, 100}})"),
+    ("cities", "altitudes_m with energy", "altitudes_m",
+     "UAVSpectrumEnv(grid=(4, 4), altitudes_m=[30, 100], energy='follow_up', base=(-1, 0))"),
+    ("cities", "action 8 at levels", "action",
+     f"e = UAVSpectrumEnv({A2G}, altitudes_m=[30, 100]); td = e.reset(); "
+     "td['agents', 'action'] = torch.full((1, 2), 8); e.step(td)"),
+    ("cities", "utility of (x, y) at levels", "positions",
+     f"e = UAVSpectrumEnv({A2G}, altitudes_m=[30, 100]); e.reset(); "
+     "e.world.utility(torch.zeros(1, 2, 2, dtype=torch.long), torch.zeros(1, 2, dtype=torch.long))"),
+    ("cities", "utility at level 5 of 2", "positions",
+     f"e = UAVSpectrumEnv({A2G}, altitudes_m=[30, 100]); e.reset(); "
+     "e.world.utility(torch.tensor([[[0, 0, 5], [1, 0, 0]]]), torch.zeros(1, 2, dtype=torch.long))"),
+    ("cities", "a policy of one altitude in an env of levels", "env",
+     "p = load_policy(RUN)[0]; p.bind_env(UAVSpectrumEnv(preset='a2g_urban', grid=(3, 3), num_uavs=2, "
+     "altitudes_m=[30, 100]))"),
+    ("cities", "generate_city over 1e9 m", "beta",
+     "from uavrl.envs.physics.city import generate_city; generate_city(0.3, 500, 15, 1e9, 1e9)"),
+    ("cities", "line_of_sight of a NaN point", "a",
+     "from uavrl.envs.physics.city import generate_city, line_of_sight; "
+     "line_of_sight(generate_city(0.3, 500, 15, 500, 500), [[float('nan'), 0, 0]], [[0, 0, 0]])"),
+    ("cities", "gym env: action 9 at levels", "action",
+     "import uavrl.envs.gym_env as g; e = g.UAVSpectrumGymEnv(preset='a2g_urban', grid=(4, 4), num_uavs=2, "
+     "altitudes_m=[30, 100]); e.reset(seed=0); e.step(np.array([9, 0]))"),
+]  # fmt: skip
+GROUPS = {"old": CASES, "new": NEW_CASES, "cities": CITY_CASES}
+TIMEOUTS = {"old": 300, "new": 60, "cities": 60}  # seconds before a case counts as a hang, unless --timeout
+MEMORY_GIB = {"old": 16, "new": 6, "cities": 6}  # each case's address space, unless --memory-gib
 
 
 def classify(report: dict | None, names: str, timed_out: bool, returncode: int) -> tuple[str, str]:
@@ -759,7 +801,9 @@ def table(results: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--group", choices=("old", "new", "all"), default="all", help="which cases (module doc)")
+    parser.add_argument(
+        "--group", choices=("old", "new", "cities", "all"), default="all", help="which cases (module doc)"
+    )
     parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
     parser.add_argument("--timeout", type=float, help="seconds before a case counts as a hang (default per group)")
     parser.add_argument("--memory-gib", type=float, help="address space of each case's process (default per group)")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import torch
 
 from ..config import RELAYING, SENSING
+from ..errors import InvalidOption, InvalidType
 from ..physics.channel import rates
 from ..physics.grid import cells_of, decode_joint_actions, joint_action_valid, targets_valid
 from ..solvers.optimum import optimum as exact_optimum
@@ -37,12 +38,15 @@ class SolverQueries:
             or positions.shape[-2:] != (self.num_uavs, D)
             or tasks.shape != positions.shape[:-1]
         ):
-            raise ValueError(
-                f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected "
-                f"[B={self.num_worlds}, ..., N={self.num_uavs}, {D}] and [B, ..., N]"
+            raise InvalidOption(
+                "positions",
+                message=f"positions {tuple(positions.shape)} / tasks {tuple(tasks.shape)} do not fit: expected "
+                f"[B={self.num_worlds}, ..., N={self.num_uavs}, {D}] and [B, ..., N]",
             )
         if any(t.dtype.is_floating_point or t.dtype.is_complex or t.dtype == torch.bool for t in (positions, tasks)):
-            raise TypeError(f"positions ({positions.dtype}) and tasks ({tasks.dtype}) must hold integers")
+            raise InvalidType(
+                "positions", message=f"positions ({positions.dtype}) and tasks ({tasks.dtype}) must hold integers"
+            )
         L1, L2 = self.cfg.grid
         x, y = positions[..., 0], positions[..., 1]
         off_grid = (x < 0) | (x >= L1) | (y < 0) | (y >= L2)
@@ -55,15 +59,19 @@ class SolverQueries:
         if off_grid.any():
             where = tuple(positions[off_grid][0].tolist())
             levels = f", level in 0..{self.cfg.num_levels - 1}" if D == 3 else ""
-            raise ValueError(
-                f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in 0..{L2 - 1}{levels}"
+            raise InvalidOption(
+                "positions",
+                message=f"positions hold {where}, off the {L1}x{L2} grid: x lies in 0..{L1 - 1}, y in "
+                f"0..{L2 - 1}{levels}",
             )
         bad_task = (tasks != SENSING) & (tasks != RELAYING)
         if bad_task.any():
-            raise ValueError(f"tasks hold {tasks[bad_task][0].item()}: a task is 0 (sensing) or 1 (relaying)")
+            bad = tasks[bad_task][0].item()
+            raise InvalidOption("tasks", message=f"tasks hold {bad}: a task is 0 (sensing) or 1 (relaying)")
         cells = self.cells_of(positions)
         if (cells < 0).any():
-            raise ValueError(f"positions hold {tuple(positions[cells < 0][0].tolist())}, inside a building")
+            inside = tuple(positions[cells < 0][0].tolist())
+            raise InvalidOption("positions", message=f"positions hold {inside}, inside a building")
         contrib = self._per_cell(self._cell_contrib, cells)
         if self.energy is not None:
             contrib = contrib.masked_fill(away.unsqueeze(-1), 0.0)
