@@ -114,6 +114,15 @@ DPI = 100
 BACKGROUNDS_KEPT = 16  # layouts whose drawn background a renderer keeps (about 0.7 MB each at 480 x 360)
 
 
+def building_shades(fractions: np.ndarray) -> np.ndarray:
+    """``[..., 4]`` RGBA of buildings ``fractions`` (0 to 1) of the tallest roof high: greys within
+    :data:`BUILDING_SHADES`, darker as taller (the map's buildings and the key's colour bar)."""
+    from matplotlib import colormaps
+
+    low, high = BUILDING_SHADES
+    return colormaps["Greys"](low + (high - low) * fractions)
+
+
 class WorldRenderer:
     """Frames of the worlds of ``world``, ``width x height`` pixels each, drawn on one reused Agg figure.
 
@@ -205,7 +214,6 @@ class WorldRenderer:
     def _make_buildings(self) -> None:
         """The city's buildings at true scale over the grid's ground, under its lines, shaded by height: one artist,
         static (in every layout's background)."""
-        from matplotlib import colormaps
         from matplotlib.collections import PolyCollection
         from matplotlib.patches import Rectangle
 
@@ -213,8 +221,7 @@ class WorldRenderer:
         boxes = np.stack([np.stack(corner, -1) for corner in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))], 1)
         heights = self.city.city.height
         self.tallest = math.ceil(heights.max())
-        low, high = BUILDING_SHADES
-        shades = colormaps["Greys"](low + (high - low) * heights / self.tallest)
+        shades = building_shades(heights / self.tallest)
         self.buildings = self.ax.add_collection(PolyCollection(boxes, facecolors=shades, linewidths=0, zorder=0))
         L1, L2 = self.world.cfg.grid  # the grid's edge again, over the buildings
         self.ax.add_patch(Rectangle((-0.5, -0.5), L1, L2, facecolor="none", edgecolor=GRID_EDGE, lw=1.0, zorder=0))
@@ -313,11 +320,9 @@ class WorldRenderer:
     @staticmethod
     def _shades_swatch(panel, y: float) -> None:
         """A small colour bar of the buildings' shades at height ``y`` of the panel's key."""
-        from matplotlib import colormaps
         from matplotlib.colors import ListedColormap
 
-        low, high = BUILDING_SHADES
-        shades = ListedColormap(colormaps["Greys"](np.linspace(low, high, 64)))
+        shades = ListedColormap(building_shades(np.linspace(0, 1, 64)))
         panel.imshow([np.linspace(0, 1, 64)], cmap=shades, extent=(0.0, 0.09, y + 0.25, y - 0.25), aspect="auto")
 
     # ----------------------------------------------------------- geometry
