@@ -368,14 +368,22 @@ def test_smoke_overrides_shorten_the_commands():
     ]
 
 
+def a_page(tmp_path: Path, monkeypatch, text: str) -> Path:
+    """A page of ``text`` in ``tmp_path``, which the harness takes for the repository's root."""
+    page = tmp_path / "page.md"
+    page.write_text(text)
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    return page
+
+
 def test_harness_reads_blocks_and_skips(tmp_path: Path, monkeypatch):
     """The parser finds the language, the line and the skip reason; a failing line fails the test."""
-    page = tmp_path / "page.md"
-    page.write_text(
+    page = a_page(
+        tmp_path,
+        monkeypatch,
         "text\n\n<!-- doc-test: skip pip install -->\n```bash\npip install x\n```\n\n"
-        "```python\nvalue = 1\n```\n\n```bash\necho a \\\n  b  # comment\n# only a comment\nfalse\n```\n"
+        "```python\nvalue = 1\n```\n\n```bash\necho a \\\n  b  # comment\n# only a comment\nfalse\n```\n",
     )
-    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     found = blocks_of(page)
     assert [(b.language, b.line, b.skip_reason) for b in found] == [
         ("bash", 4, "pip install"),
@@ -397,12 +405,12 @@ def test_harness_reads_blocks_and_skips(tmp_path: Path, monkeypatch):
 
 def test_a_block_prints_what_its_page_says(tmp_path: Path, monkeypatch):
     """``<!-- doc-test: prints TEXT -->`` below a block: its output must hold TEXT, or the page's test fails."""
-    page = tmp_path / "page.md"
-    page.write_text(
+    page = a_page(
+        tmp_path,
+        monkeypatch,
         "```python\nprint(6 * 7)\n```\n<!-- doc-test: prints 42 -->\n\n"
-        "```bash\necho one && echo two >&2\n```\n<!-- doc-test: prints two -->\n"
+        "```bash\necho one && echo two >&2\n```\n<!-- doc-test: prints two -->\n",
     )
-    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     assert [block.prints for block in blocks_of(page)] == ["42", "two"]
     test_blocks_run(page, tmp_path, monkeypatch)
     page.write_text(page.read_text().replace("prints 42", "prints 43"))
