@@ -453,7 +453,7 @@ class ModelConfig:
         if self.energy == "none":
             return
         if self.energy == "rotary_wing":
-            self._check_step_energies()
+            power.check_step_energies(self, _DEFAULTS["slot_s"])
         if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
             reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
             raise InvalidOption("recharge_steps", self.recharge_steps, reason)
@@ -479,46 +479,19 @@ class ModelConfig:
         if self.reset_positions == "keep":
             reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
             raise InvalidOption("energy", self.energy, reason)
-        self._check_step_energies()
-        lowest, need, farthest = self._lowest_start_and_largest_reserve()
+        power.check_step_energies(self, _DEFAULTS["slot_s"])
+        lowest, need, farthest = power.lowest_start_and_largest_reserve(self)
         if lowest <= need:
-            name = self._battery_blamed()
+            preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)}  # a base next to the grid
+            name = power.battery_blamed(self, preset)
             unit = "Wh" if self.energy == "rotary_wing" else "units"
             scale = 3600.0 if self.energy == "rotary_wing" else 1.0
             reason = (
                 f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
                 f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
-                f"{need / scale:.4g} {unit}: {_BATTERY_ADVICE[name]}"
+                f"{need / scale:.4g} {unit}: {power.BATTERY_ADVICE[name]}"
             )
             raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)
-
-    def _lowest_start_and_largest_reserve(self, **changes) -> tuple[float, float, int]:
-        """The lowest battery a UAV may start with, the largest reserve of a cell (the farthest from the base's), and
-        that cell's steps from the base, under an energy model (with the options ``changes`` in place of these)."""
-        v = {name: changes.get(name, getattr(self, name)) for name in _BATTERY_ADVICE}
-        (L1, L2), (bx, by) = v["grid"], v["base"]
-        farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
-        energies = power.step_energies(
-            self.energy, v["cell_size"], v["slot_s"], self.powers_w[2], v["circuit_power_w"], v["battery_wh"]
-        )
-        lowest = energies.capacity * (power.UNIFORM_LOW if v["battery_init"] == "uniform" else 1.0)
-        return lowest, energies.reserve(farthest), farthest
-
-    def _battery_blamed(self) -> str:
-        """The option to name when a battery cannot reach the base: the first one set away from its preset's value
-        whose preset value (a base next to the grid) would let it, else the battery (the base under follow_up)."""
-        preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)}
-        for name in _BATTERY_ADVICE:
-            value = getattr(self, name)
-            if value == preset[name] or (name == "base" and abs(value[0]) + abs(value[1]) <= 1):
-                continue
-            try:
-                lowest, need, _ = self._lowest_start_and_largest_reserve(**{name: preset[name]})
-            except (OverflowError, ValueError):
-                continue
-            if lowest > need:
-                return name
-        return "battery_wh" if self.energy == "rotary_wing" else "base"
 
     @property
     def steps_before_reserve(self) -> int | None:
@@ -531,31 +504,7 @@ class ModelConfig:
             >>> make_config("paper", grid=(3, 3), energy="follow_up", base=(-1, 0)).steps_before_reserve
             3325
         """
-        if self.energy == "none":
-            return None
-        lowest, need, _ = self._lowest_start_and_largest_reserve()
-        energies = self.step_energies
-        return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
-
-    def _check_step_energies(self):
-        """rotary_wing's step energies are finite numbers: a slot so short that a move flies faster than a float's
-        range (its propulsion power overflows) is refused naming ``slot_s``, and a battery beyond a float's range in
-        joules naming ``battery_wh``."""
-        try:
-            energies = self.step_energies
-            moving = (energies.move, energies.stay, energies.fly)
-        except OverflowError:
-            moving = (math.inf,)
-        if not all(math.isfinite(value) for value in moving):
-            speed = self.cell_size / self.slot_s
-            reason = (
-                f"a move of one cell (cell_size={self.cell_size!r} m) in it flies at {speed:.3g} m/s, whose "
-                "propulsion power overflows: give a slot of a realistic length (the default is "
-                f"{_DEFAULTS['slot_s']!r} s)"
-            )
-            raise InvalidOption("slot_s", self.slot_s, reason)
-        if not math.isfinite(energies.capacity):
-            raise InvalidOption("battery_wh", self.battery_wh, "in joules it overflows a float: give a smaller battery")
+        return None if self.energy == "none" else power.steps_before_reserve(self)
 
     @property
     def step_energies(self) -> power.StepEnergies:
@@ -652,16 +601,6 @@ _PRESETS = {
     ),
 }
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
-# the options a battery's reach depends on, in the order a refusal blames them, and how each would let it reach
-_BATTERY_ADVICE = {
-    "circuit_power_w": "give a smaller circuit power, a larger battery or a nearer base",
-    "slot_s": "give a shorter slot, a larger battery or a nearer base",
-    "cell_size": "give smaller cells, a larger battery or a nearer base",
-    "base": "give a nearer base or a larger battery",
-    "grid": "give a smaller grid, a nearer base or a larger battery",
-    "battery_wh": "give a larger battery or a nearer base",
-    "battery_init": "start full, or give a larger battery or a nearer base",
-}
 # what uavrl.envs.limits reads
 _PHYSICS_OPTIONS = (
     *("grid", "num_uavs", "layout", "fading", "direct_links", "rate_model", "reward", "channel", "environment"),

@@ -1,8 +1,8 @@
 """The energy models' constants, their sources and the energy of one step (docs/model.md, Energy and lifetime).
 
-Standard library only, like :mod:`.radio`: :class:`~uavrl.envs.config.ModelConfig` checks a battery against the
-reserve it needs before torch is imported, and :mod:`.energy` (the World's part) builds its tables from the same
-numbers.
+Standard library only, like :mod:`.radio`: the rules of a battery's reach (:func:`lowest_start_and_largest_reserve`,
+:func:`battery_blamed`, :func:`check_step_energies`), which :class:`~uavrl.envs.config.ModelConfig` applies before
+torch is imported, and :mod:`.energy` (the World's part) builds its tables from the same numbers.
 
 - ``rotary_wing``: Zeng, Xu, Zhang, "Energy Minimization for Wireless Communication with Rotary-Wing UAV", IEEE
   TWC 18(4):2329-2345, 2019, eq. (12) with their Table I; joules.
@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from ..errors import InvalidOption
 
 ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.physics.energy: one part each, none for "none"
 BATTERY_INITS = ("full", "uniform")
@@ -142,3 +144,72 @@ def step_energies(
         capacity=battery_wh * 3600.0,
         moves_by_action=False,
     )
+
+
+# the options a battery's reach depends on, in the order a refusal blames them, and how each would let it reach
+BATTERY_ADVICE = {
+    "circuit_power_w": "give a smaller circuit power, a larger battery or a nearer base",
+    "slot_s": "give a shorter slot, a larger battery or a nearer base",
+    "cell_size": "give smaller cells, a larger battery or a nearer base",
+    "base": "give a nearer base or a larger battery",
+    "grid": "give a smaller grid, a nearer base or a larger battery",
+    "battery_wh": "give a larger battery or a nearer base",
+    "battery_init": "start full, or give a larger battery or a nearer base",
+}
+
+
+def lowest_start_and_largest_reserve(cfg, **changes) -> tuple[float, float, int]:
+    """The lowest battery a UAV of the model ``cfg`` may start with, the largest reserve of a cell (the farthest from
+    the base's), and that cell's steps from the base, under an energy model (with the options ``changes`` in place
+    of these)."""
+    v = {name: changes.get(name, getattr(cfg, name)) for name in BATTERY_ADVICE}
+    (L1, L2), (bx, by) = v["grid"], v["base"]
+    farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
+    energies = step_energies(cfg.energy, v["cell_size"], v["slot_s"], cfg.powers_w[2], v["circuit_power_w"],
+                             v["battery_wh"])  # fmt: skip
+    lowest = energies.capacity * (UNIFORM_LOW if v["battery_init"] == "uniform" else 1.0)
+    return lowest, energies.reserve(farthest), farthest
+
+
+def battery_blamed(cfg, preset: dict) -> str:
+    """The option to name when a battery of the model ``cfg`` cannot reach the base: the first one set away from its
+    ``preset`` value whose preset value would let it, else the battery (the base under follow_up)."""
+    for name in BATTERY_ADVICE:
+        value = getattr(cfg, name)
+        if value == preset[name] or (name == "base" and abs(value[0]) + abs(value[1]) <= 1):
+            continue
+        try:
+            lowest, need, _ = lowest_start_and_largest_reserve(cfg, **{name: preset[name]})
+        except (OverflowError, ValueError):
+            continue
+        if lowest > need:
+            return name
+    return "battery_wh" if cfg.energy == "rotary_wing" else "base"
+
+
+def steps_before_reserve(cfg) -> int:
+    """The most steps after which no battery of the model ``cfg`` (an energy model) can have reached its cell's
+    reserve, however the UAVs act: every step at the dearer of a move and a stay from the lowest start."""
+    lowest, need, _ = lowest_start_and_largest_reserve(cfg)
+    energies = cfg.step_energies
+    return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
+
+
+def check_step_energies(cfg, default_slot_s: float) -> None:
+    """rotary_wing's step energies are finite numbers: a slot so short that a move flies faster than a float's
+    range (its propulsion power overflows) is refused naming ``slot_s``, and a battery beyond a float's range in
+    joules naming ``battery_wh``."""
+    try:
+        energies = cfg.step_energies
+        moving = (energies.move, energies.stay, energies.fly)
+    except OverflowError:
+        moving = (math.inf,)
+    if not all(math.isfinite(value) for value in moving):
+        speed = cfg.cell_size / cfg.slot_s
+        reason = (
+            f"a move of one cell (cell_size={cfg.cell_size!r} m) in it flies at {speed:.3g} m/s, whose propulsion "
+            f"power overflows: give a slot of a realistic length (the default is {default_slot_s!r} s)"
+        )
+        raise InvalidOption("slot_s", cfg.slot_s, reason)
+    if not math.isfinite(energies.capacity):
+        raise InvalidOption("battery_wh", cfg.battery_wh, "in joules it overflows a float: give a smaller battery")
