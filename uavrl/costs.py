@@ -370,11 +370,8 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     n_step = Factor("agent.n_step", int(a.get("n_step", 1)), multiplies=False)
     demos = Factor("agent.demo_transitions", int(a.get("demo_transitions", 1)))
     per_iteration = [dataclasses.replace(f, multiplies=False) for f in (updates, batch, worlds, T)]
-    each = (
-        [Factor("groups (agent.sizes x agent.layouts x agent.cities)", len(groups), fixed=True)]
-        if len(groups) > 1
-        else []
-    )
+    grouped = Factor("groups (agent.sizes x agent.layouts x agent.cities)", len(groups), fixed=True)
+    each = [grouped] if len(groups) > 1 else []
     shape = model_factors(largest, (grid_name, team_name))
     if sized:  # agent.sizes names the grid and the team at once
         del shape[1]
@@ -405,9 +402,8 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         s = agent(low)
         if size_free:
             hidden, heads, depth = int(s.hidden), int(s.heads), int(s.depth)
-            return (
-                TRAINING_COPIES * FLOAT * set_parameters(model.num_actions, _e(model), hidden, heads, depth, _l(model))
-            )
+            params = set_parameters(model.num_actions, _e(model), hidden, heads, depth, _l(model))
+            return TRAINING_COPIES * FLOAT * params
         m = models(low)[0]
         params = team_parameters(m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth), _l(m))
         if s.head == "factored" and s.mixer == "qmix":
