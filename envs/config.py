@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from .errors import InvalidOption
 from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_problem
-from .physics import power, radio
+from .physics import power, radio, sensing
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
 NUM_ACTIONS = len(ACTION_NAMES)  # the paper's actions; altitude levels add CLIMB, DESCEND, recharging RETURN
@@ -158,6 +158,10 @@ class ModelConfig:
         num_spares: UAVs beyond ``num_uavs`` waiting charged at the base (needs ``recharge_steps``).
         slot_s: a step's duration in s.
         circuit_power_w: a serving UAV's radio circuit power in W.
+        observation: what a UAV observes: ``"central"`` (every UAV and node) or ``"local"`` (its own state and what
+            lies within ``comm_radius``: :mod:`uavrl.envs.physics.sensing`).
+        comm_radius: how far a UAV hears (cells, or m under a physical channel); None: every UAV and node.
+        message_size: the numbers each UAV sends a step, read by those within range at the next step (0: none).
         preset: the preset the options came from (:func:`make_config` sets it; one-line errors name its values);
             not compared between configurations.
 
@@ -220,6 +224,9 @@ class ModelConfig:
     num_spares: int = 0  # UAVs beyond num_uavs waiting charged at the base (recharge_steps needed)
     slot_s: float = power.SLOT_S
     circuit_power_w: float = power.CIRCUIT_POWER_W
+    observation: str = "central"
+    comm_radius: float | None = None
+    message_size: int = 0
     preset: str = field(default="paper", compare=False)
 
     def __post_init__(self):
@@ -275,6 +282,7 @@ class ModelConfig:
         self._check_physics()
         self._check_energy()
         self._check_levels()
+        sensing.check_observation(self.observation, self.comm_radius, self.message_size, self.is_physical)
 
     def _resolve_channel(self):
         """``g0`` and ``alpha`` of ``None`` become the power law's own; a channel refuses the options it does not read
@@ -579,6 +587,18 @@ class ModelConfig:
     @property
     def has_state_index(self) -> bool:
         return self.num_states <= 2**63 - 1
+
+    @property
+    def local(self) -> bool:
+        """Whether each UAV observes only what lies within ``comm_radius`` (``observation="local"``)."""
+        return self.observation == "local"
+
+    @property
+    def comm_radius_cells(self) -> float:
+        """How far a UAV hears, in cells (``comm_radius`` in m under a physical channel; ``inf``: every UAV)."""
+        if self.comm_radius is None:
+            return math.inf
+        return self.comm_radius / self.cell_size if self.is_physical else float(self.comm_radius)
 
     def replace(self, **changes) -> "ModelConfig":
         return dataclasses.replace(self, **changes)

@@ -12,7 +12,7 @@ import numbers
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Binary, Categorical, Composite, Unbounded
+from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
 from torchrl.data.utils import ACTION_SPACE_MAP
 from torchrl.envs import EnvBase
 
@@ -25,6 +25,7 @@ from .config import (
 )
 from .errors import InvalidOption, InvalidType
 from .limits import DEFAULT_MEMORY_BUDGET, env_bytes, frame_bytes, gib
+from .physics.sensing import MESSAGE_BOUND
 from .render import render as draw_world
 from .world import DIAGNOSTICS, SEED_LIMIT, World, check_batch_size, check_memory, check_seed, resolve_device
 
@@ -75,6 +76,7 @@ def _mask_patterns(n: int, device: torch.device) -> tuple[torch.Tensor, torch.Te
 
 _DONE_KEYS = ("done", "terminated", "truncated")
 ACTION_KEY = "('agents', 'action')"  # how the one-line errors name the action
+MESSAGE_KEY = "('agents', 'message')"
 # the keywords TorchRL's own code passes to reset (EnvBase.reset, rollouts, collectors), besides seed
 TORCHRL_RESET_KEYWORDS = ("seed", "set_state", "select_reset_only")
 
@@ -249,13 +251,12 @@ class UAVSpectrumEnv(EnvBase):
             obs["nodes"] = Unbounded((4, 3), dtype=torch.float64, device=self.device)
 
         self.full_observation_spec_unbatched = obs
+        actions = {"action": MaskedCategorical(A, (N,), dtype=torch.long, device=self.device)}
+        if self.cfg.message_size:  # what each UAV sends those within range (docs/model.md, Local observations)
+            shape = (N, self.cfg.message_size)
+            actions["message"] = Bounded(-MESSAGE_BOUND, MESSAGE_BOUND, shape, dtype=torch.float32, device=self.device)
         self.full_action_spec_unbatched = Composite(
-            agents=Composite(
-                action=MaskedCategorical(A, (N,), dtype=torch.long, device=self.device),
-                shape=(N,),
-                device=self.device,
-            ),
-            device=self.device,
+            agents=Composite(actions, shape=(N,), device=self.device), device=self.device
         )
         if self.agent_rewards:  # one reward key, as on VMAS (env.reward_key is ("agents", "reward"))
             reward = Composite(
@@ -379,6 +380,30 @@ class UAVSpectrumEnv(EnvBase):
                     "not serve: return is valid only for a UAV in service (its action_mask)",
                 )
 
+    def _messages(self, tensordict: TensorDictBase) -> torch.Tensor | None:
+        """The UAVs' messages ``("agents", "message")`` ``[B, N, message_size]`` (None: no message this step, zeros),
+        checked: finite numbers; the World clips them to [-1, 1]."""
+        if not self.cfg.message_size:
+            return None
+        message = tensordict.get(("agents", "message"), None)
+        if message is None:
+            return None
+        shape = (self.num_worlds, self.num_uavs, self.cfg.message_size)
+        if (
+            not isinstance(message, torch.Tensor)
+            or tuple(message.shape) != shape
+            or not message.dtype.is_floating_point
+        ):
+            got = f"shape {tuple(message.shape)}, dtype {message.dtype}" if isinstance(message, torch.Tensor) else ""
+            raise InvalidOption(
+                MESSAGE_KEY,
+                message=f"{MESSAGE_KEY} is {got or type(message).__name__}: expected {list(shape)} floats (worlds, "
+                "UAVs, env.message_size)",
+            )
+        if not torch.isfinite(message).all():
+            raise InvalidOption(MESSAGE_KEY, message=f"{MESSAGE_KEY} holds NaN or infinity: send finite numbers")
+        return message.to(self.device)
+
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         """TorchRL's hook of ``step``: the action, checked once here (one-line errors of
         :class:`~uavrl.envs.InvalidOption` for a missing action, or one of the wrong type, shape, dtype, device or
@@ -397,7 +422,7 @@ class UAVSpectrumEnv(EnvBase):
                 "no UAV positions yet)"
             )
         self._check_action_values(action)
-        out, reward, truncated = self.world.step(action)
+        out, reward, truncated = self.world.step(action, self._messages(tensordict))
         terminated, truncated = self.world.terminated.unsqueeze(-1), truncated.unsqueeze(-1)
         out["reward"] = reward.float().unsqueeze(-1)
         out["done"] = terminated | truncated

@@ -30,6 +30,7 @@ import numbers
 import sys
 
 from .physics import radio
+from .physics.sensing import LOCAL_NODE_FEATURES, local_slot_features
 
 NODE_NAMES = ("PT", "PR", "S", "E")
 OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours
@@ -412,19 +413,32 @@ def row_itemsize(cfg) -> int:
     return 4 if cfg.num_states < 2**31 else 8
 
 
-def observation_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
+def observation_size(
+    num_uavs: int, energy: bool, levels: bool = False, local: bool = False, message_size: int = 0
+) -> int:
     """Per-UAV observation entries of a World of ``num_uavs`` UAVs (spares included): its own (x, y, task) and
     contributions at its own and 4 next cells, the others' (x, y, task); under an energy model (``energy``) then its
     battery and service flag, and the others'; with altitude levels (``levels``) then its level and the contributions
-    at the positions a climb and a descent reach (:data:`VERTICAL_FEATURES`), and the others' levels.  The World's,
-    the networks' and the costs' one formula.
+    at the positions a climb and a descent reach (:data:`VERTICAL_FEATURES`), and the others' levels.  A ``local``
+    observation holds its own part, then a slot per node and per other UAV (:mod:`uavrl.envs.physics.sensing`,
+    ``message_size`` numbers of each other UAV's message).  The World's, the networks' and the costs' one formula.
 
     Example:
         >>> observation_size(2, energy=False), observation_size(2, energy=True), observation_size(2, False, True)
         (16, 20, 22)
+        >>> observation_size(3, energy=False, local=True), observation_size(3, False, local=True, message_size=2)
+        (37, 41)
     """
+    if local:
+        own = OWN_FEATURES + (2 if energy else 0) + (VERTICAL_FEATURES if levels else 0)
+        return own + LOCAL_NODE_FEATURES + (num_uavs - 1) * local_slot_features(energy, levels, message_size)
     vertical = VERTICAL_FEATURES + num_uavs - 1 if levels else 0
     return OWN_FEATURES + 3 * (num_uavs - 1) + (2 * num_uavs if energy else 0) + vertical
+
+
+def model_observation_size(cfg) -> int:
+    """:func:`observation_size` of the model ``cfg`` (a :class:`~uavrl.envs.config.ModelConfig`)."""
+    return observation_size(cfg.fleet_size, cfg.energy != "none", cfg.num_levels > 1, cfg.local, cfg.message_size)
 
 
 def state_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
@@ -483,7 +497,7 @@ def frame_bytes(cfg) -> int:
     """Bytes of one transition (a step's TensorDict and its ``"next"``) of ``UAVSpectrumEnv``, every key (the spares
     are agents too)."""
     N, energy, levels = cfg.fleet_size, cfg.energy != "none", cfg.num_levels > 1
-    observation = 4 * N * observation_size(N, energy, levels)
+    observation = 4 * N * model_observation_size(cfg)
     per_step = observation + 4 * state_size(N, energy, levels) + 6 * N + 16 * N + 8 * N + 8 * N + 64  # state, mask
     per_step += 8 * N if levels else 0  # the UAVs' levels
     return 2 * per_step

@@ -32,7 +32,8 @@ class WorldsState:
     ``R_PU + R_SE`` (the reward part's memory for ``best_so_far``); ``steps`` the episode clock; ``terminated``
     whether the last step ended the episode (``None``: no world's); ``started`` whether a world has been reset;
     ``keys`` and ``counters`` the per-world random streams; ``was_reset`` whether every world has been reset at least
-    once (then every UAV has a cell).
+    once (then every UAV has a cell); ``messages`` ``[B, N, message_size]`` what each UAV sent at the last step (zeros
+    after a reset; ``None`` without messages).
     """
 
     __slots__ = (
@@ -46,6 +47,7 @@ class WorldsState:
         "counters",
         "keys",
         "was_reset",
+        "messages",
     )
 
     def __init__(self, **tensors):
@@ -129,7 +131,9 @@ class World(LayoutTables, Observations, SolverQueries):
         self._fading_table = None  # the fading part's table, its shape the part's: made by the first layout
         self._world = torch.arange(B, device=dev).unsqueeze(-1)
         # two UAVs on a fixed layout: whole-pair tables (at most 2^16 rows: grids up to 128 cells)
-        self._pairs = self.num_uavs == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16 and self.energy is None
+        self._pairs = (
+            self.num_uavs == 2 and Bt == 1 and (2 * C) ** 2 <= 1 << 16 and self.energy is None and not cfg.local
+        )
         self._pair_obs = self._pair_state = self._pair_rates = None
         N, long = self.num_uavs, torch.long
         energy_state = dict.fromkeys(ENERGY_STATE)  # None without an energy model
@@ -150,6 +154,7 @@ class World(LayoutTables, Observations, SolverQueries):
             counters=torch.zeros(B, dtype=long, device=dev),
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
+            messages=torch.zeros(B, N, cfg.message_size, device=dev) if cfg.message_size else None,
         )
         if fixed is not None:
             self._share(LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
@@ -259,6 +264,8 @@ class World(LayoutTables, Observations, SolverQueries):
         s.started[worlds] = True
         s.steps[worlds] = 0
         s.best[worlds] = 0.0
+        if s.messages is not None:
+            s.messages[worlds] = 0.0
         if s.terminated is not None:  # a new tensor: the one a step published stays as it was
             s.terminated = s.terminated.index_fill(0, worlds, False)
         code = self.code
@@ -282,6 +289,8 @@ class World(LayoutTables, Observations, SolverQueries):
         s.started.fill_(True)
         s.steps.zero_()
         s.best.zero_()
+        if s.messages is not None:
+            s.messages = torch.zeros_like(s.messages)
         s.terminated = None
         s.r = self._rates(s.cell, s.task, code)
         s.was_reset = True
@@ -291,9 +300,12 @@ class World(LayoutTables, Observations, SolverQueries):
         """``[B]`` zero moves or switches (a reset)."""
         return torch.zeros(self.num_worlds, dtype=torch.long, device=self.device)
 
-    def step(self, action: torch.Tensor) -> tuple[dict, torch.Tensor, torch.Tensor]:
+    def step(
+        self, action: torch.Tensor, messages: torch.Tensor | None = None
+    ) -> tuple[dict, torch.Tensor, torch.Tensor]:
         """Every world takes the UAVs' ``action`` ``[B, N]`` (0..5, 6 to return under recharging; checked by the
-        caller).
+        caller); with ``message_size`` the UAVs send ``messages`` ``[B, N, message_size]`` (clipped to [-1, 1]; None:
+        zeros), which those within range read in the observation this step returns.
 
         Returns the outputs (as :meth:`reset`'s), the team reward ``[B]``
         (float64) and whether the episode is over ``[B]`` (truncation after
@@ -309,6 +321,8 @@ class World(LayoutTables, Observations, SolverQueries):
             s.r, prev, s.best, self._u_star, lambda: (self._sum_rates(code), self._sum_rates(cell * 2 + task))
         )
         s.steps += 1
+        if s.messages is not None:
+            s.messages = torch.zeros_like(s.messages) if messages is None else messages.float().clamp(-1.0, 1.0)
         s.terminated = self.dynamics.terminated(s) if self.energy is None else self.energy.terminated(s)
         new_cell, new_task = s.cell, s.task
         out = self._observe(

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import torch
 
-from ..limits import NODE_FEATURES, observation_size, state_size
+from ..limits import NODE_FEATURES, model_observation_size, state_size
 from ..physics.channel import link_gains, relay_contributions
 
 # outputs that describe a step rather than the configuration an agent acts from (World(diagnostics=False) skips them)
@@ -42,7 +42,7 @@ class Observations:
 
         The 4 nodes' positions are the same for every UAV of a world: they are the last
         :data:`NODE_FEATURES` entries of the world's ``state`` (:func:`observation_with_nodes`)."""
-        return observation_size(self.num_uavs, self.energy is not None, self.cfg.num_levels > 1)
+        return model_observation_size(self.cfg)
 
     @property
     def state_size(self) -> int:
@@ -51,41 +51,94 @@ class Observations:
         return state_size(self.num_uavs, self.energy is not None, self.cfg.num_levels > 1)
 
     def _assemble(
-        self, code: torch.Tensor, energy: torch.Tensor | None = None, tables: tuple | None = None
+        self,
+        code: torch.Tensor,
+        energy: torch.Tensor | None = None,
+        tables: tuple | None = None,
+        nodes: torch.Tensor | None = None,
+        messages: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
         layout); under an energy model ``energy`` ``[W, N, 2]`` their features (default: the worlds' batteries now);
         ``tables`` ``(code_obs, node_obs, code_vertical)`` of their own layouts (:meth:`_observation_tables`; default:
-        the worlds')."""
+        the worlds'); a local observation reads their ``nodes`` ``[W, 4, 3]`` and ``messages`` (default: the
+        worlds')."""
         W, N = code.shape
         code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables[:2]
         own = self._code_rows(code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
+        per_uav = [own[..., :5].reshape(W, 5 * N)]
+        if self.energy is not None:
+            energy = self.energy.features(self._s) if energy is None else energy  # [W, N, 2]
+            per_uav.append(energy.reshape(W, 2 * N))
+        vertical = level = None
+        if self._code_level is not None:
+            vertical = self._code_rows(self._code_vertical if tables is None else tables[2], code)
+            level = self._code_level.index_select(0, code.view(-1)).view(W, N)
+            per_uav.append(level)
+        state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
+        if self.cfg.local:
+            nodes = self._nodes if nodes is None else nodes
+            messages = self._s.messages if messages is None else messages
+            return self._local(code, own, energy, vertical, level, nodes, messages), state
+        return self._central(code, own, energy, vertical, level), state
+
+    def _central(self, code, own, energy, vertical, level) -> torch.Tensor:
+        """``[W, N, F]`` the central observations: each UAV's own part, the others' (x, y, task), under an energy model
+        its and the others' battery and service flag, with altitude levels its vertical part and the others' levels;
+        the others in the order ``i+1, ..., i+N-1`` (mod N), a window over the rows twice."""
+        W, N = code.shape
         parts = [own]
         if N == 2:  # the other UAV's (x, y, task)
             parts.append(self._code_xyt.index_select(0, code.flip(-1).view(-1)).view(W, N, 3))
         elif N > 2:
-            # the others' (x, y, task), for UAV i in the order i+1, ..., i+N-1 (mod N): a window over the codes twice
             xyt = self._code_xyt.index_select(0, torch.cat([code, code], 1).view(-1))  # [2 W N, 3]
             parts.append(xyt.as_strided((W, N, 3 * (N - 1)), (6 * N, 3, 1), 3))
-        per_uav = [own[..., :5].reshape(W, 5 * N)]
-        if self.energy is not None:  # then each UAV's battery and service flag: its own, the others' in that order
-            energy = self.energy.features(self._s) if energy is None else energy  # [W, N, 2]
+        if energy is not None:
             parts.append(energy)
             if N == 2:
                 parts.append(energy.flip(1))
             elif N > 2:
                 parts.append(torch.cat([energy, energy], 1).as_strided((W, N, 2 * (N - 1)), (4 * N, 2, 1), 2))
-            per_uav.append(energy.reshape(W, 2 * N))
-        if self._code_level is not None:  # then its level and what a climb and a descent reach, the others' levels
-            vertical_obs = self._code_vertical if tables is None else tables[2]
-            parts.append(self._code_rows(vertical_obs, code))
-            level = self._code_level.index_select(0, code.view(-1)).view(W, N)
+        if vertical is not None:
+            parts.append(vertical)
             if N > 1:
                 parts.append(torch.cat([level, level], 1).as_strided((W, N, N - 1), (2 * N, 1, 1), 1))
-            per_uav.append(level)
-        observation = torch.cat(parts, -1) if len(parts) > 1 else own
-        state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
-        return observation, state
+        return torch.cat(parts, -1) if len(parts) > 1 else own
+
+    def _local(self, code, own, energy, vertical, level, nodes, messages) -> torch.Tensor:
+        """``[W, N, F]`` the local observations (:mod:`uavrl.envs.physics.sensing`): each UAV's own part, then a slot
+        per node and per other UAV (in the order ``i+1, ..., i+N-1``), zeros where it lies beyond ``comm_radius``;
+        distances between points in cells (float64), a UAV out of service hearing and heard by no one."""
+        W, N = code.shape
+        cell = code >> 1
+        xyz = self._slot_xyz.index_select(0, cell.view(-1)).view(W, N, 3)
+        serving = cell < self.num_positions  # [W, N]
+        reach = self.cfg.comm_radius_cells**2
+        # the nodes: (dx / L1, dy / L2, dz / h, 1) from the UAV, within range
+        to_node = nodes.unsqueeze(1) - xyz.unsqueeze(2)  # [W, N, 4, 3]
+        heard = ((to_node.square().sum(-1) <= reach) & serving.unsqueeze(-1)).unsqueeze(-1)
+        node_slots = torch.cat([to_node / self._node_scale, torch.ones_like(to_node[..., :1])], -1)
+        parts = [own, *([] if energy is None else [energy]), *([] if vertical is None else [vertical])]
+        parts.append(node_slots.where(heard, 0.0).flatten(-2).float())
+        if N == 1:
+            return torch.cat(parts, -1)
+        others = self._others(N)  # [N, N - 1]
+        to_uav = xyz[:, others] - xyz.unsqueeze(2)  # [W, N, N - 1, 3]
+        heard = (to_uav.square().sum(-1) <= reach) & serving.unsqueeze(-1) & serving[:, others]
+        slot = [(to_uav[..., :2] / self._grid_scale).float(), (code & 1)[:, others, None].float()]
+        slot.append(torch.ones_like(slot[1]))
+        if energy is not None:
+            slot.append(energy[:, others])
+        if level is not None:
+            slot.append((level[:, others] - level.unsqueeze(-1)).unsqueeze(-1))
+        if messages is not None:
+            slot.append(messages[:, others])
+        parts.append(torch.cat(slot, -1).where(heard.unsqueeze(-1), 0.0).flatten(-2))
+        return torch.cat(parts, -1)
+
+    def _others(self, N: int) -> torch.Tensor:
+        """``[N, N - 1]`` the other UAVs of each, in the order ``i+1, ..., i+N-1`` (mod N)."""
+        return (torch.arange(N, device=self.device)[:, None] + torch.arange(1, N, device=self.device)) % N
 
     def energy_features(self, state: torch.Tensor) -> torch.Tensor | None:
         """``[..., N, 2]`` each UAV's battery and service flag as the ``state`` ``[..., S]`` shows them (what
@@ -94,11 +147,16 @@ class Observations:
         return None if self.energy is None else state[..., 5 * N : 7 * N].unflatten(-1, (N, 2))
 
     def configurations(
-        self, code: torch.Tensor, energy: torch.Tensor | None = None, nodes: torch.Tensor | None = None
+        self,
+        code: torch.Tensor,
+        energy: torch.Tensor | None = None,
+        nodes: torch.Tensor | None = None,
+        messages: torch.Tensor | None = None,
     ) -> dict:
         """What an agent acts and learns from (``observation``, ``action_mask``, ``state``, ``positions``, ``tasks``)
         of ``W`` configurations given by their codes ``[W, N]`` (``2 cell + task``), under an energy model their
-        features ``[W, N, 2]`` (:meth:`energy_features`), with ``layout=random`` their layouts' nodes ``[W, 4, 3]``:
+        features ``[W, N, 2]`` (:meth:`energy_features`), with ``layout=random`` their layouts' nodes ``[W, 4, 3]``,
+        with ``message_size`` the messages ``[W, N, message_size]`` their UAVs received:
         what :meth:`reset` and :meth:`step` returned for them, bit for bit.  For a replay buffer that keeps
         configurations rather than observations.
 
@@ -110,17 +168,21 @@ class Observations:
             >>> all(torch.equal(out[key], again[key]) for key in again)
             True
         """
-        if (self.energy is None) != (energy is None) or (self.layouts.fixed is None) == (nodes is None):
+        if (
+            (self.energy is None) != (energy is None)
+            or (self.layouts.fixed is None) == (nodes is None)
+            or (self._s.messages is None) != (messages is None)
+        ):
             raise ValueError(
                 "World.configurations takes energy features exactly under an energy model (env.energy other than "
-                "none) and nodes exactly with env.layout=random"
+                "none), nodes exactly with env.layout=random and messages exactly with env.message_size above 0"
             )
         tables = None
         if nodes is not None:
             tables = self._observation_tables(
                 relay_contributions(link_gains(self._cell_xyz, nodes, self.cfg), self.cfg), nodes
             )
-        observation, state = self._assemble(code, energy, tables)
+        observation, state = self._assemble(code, energy, tables, nodes, messages)
         return self._outputs(observation, state, code >> 1, code & 1)
 
     def _outputs(self, observation, state, cell: torch.Tensor, task: torch.Tensor) -> dict:

@@ -43,6 +43,7 @@ GRID_TABLES = (
     "_code_cell",
     "_code_task",
     "_code_xyt",
+    "_slot_xyz",
 )
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
@@ -96,6 +97,8 @@ class LayoutTables:
         C = len(positions)
         x, y = positions.cell % L1, positions.cell // L1
         self._cell_xyz = positions.xyz
+        # a UAV's point in cells by its code's cell, a UAV out of service (cell C) at the origin: it hears no one
+        self._slot_xyz = torch.cat([positions.xyz, positions.xyz.new_zeros(self._slots - C, 3)])
         # digit base of the tabular state index s = sum_i d_i base^i, None when it overflows int64
         tabular = cfg.has_state_index and self.energy is None  # the tabular state has no battery
         self._state_base = (2 * C if cfg.state_includes_tasks else C) if tabular else None
