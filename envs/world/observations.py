@@ -55,14 +55,12 @@ class Observations:
         code: torch.Tensor,
         energy: torch.Tensor | None = None,
         tables: tuple | None = None,
-        nodes: torch.Tensor | None = None,
         messages: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(observation [W, N, F], state [W, S])`` of ``W`` configurations (one per world, or any ``W`` for a fixed
         layout); under an energy model ``energy`` ``[W, N, 2]`` their features (default: the worlds' batteries now);
         ``tables`` ``(code_obs, node_obs, code_vertical)`` of their own layouts (:meth:`_observation_tables`; default:
-        the worlds'); a local observation reads their ``nodes`` ``[W, 4, 3]`` and ``messages`` (default: the
-        worlds')."""
+        the worlds'); a local observation reads their ``messages`` (default: the worlds')."""
         W, N = code.shape
         code_obs, node_obs = (self._code_obs, self._node_obs) if tables is None else tables[:2]
         own = self._code_rows(code_obs, code)  # [W, N, 13]: x, y, task, 10 contributions
@@ -77,9 +75,8 @@ class Observations:
             per_uav.append(level)
         state = torch.cat([*per_uav, node_obs.expand(W, NODE_FEATURES)], -1)
         if self.cfg.local:
-            nodes = self._nodes if nodes is None else nodes
             messages = self._s.messages if messages is None else messages
-            return self._local(code, own, energy, vertical, level, nodes, messages), state
+            return self._local(code, own, energy, vertical, level, messages), state
         return self._central(code, own, energy, vertical, level), state
 
     def _central(self, code, own, energy, vertical, level) -> torch.Tensor:
@@ -105,36 +102,51 @@ class Observations:
                 parts.append(torch.cat([level, level], 1).as_strided((W, N, N - 1), (2 * N, 1, 1), 1))
         return torch.cat(parts, -1) if len(parts) > 1 else own
 
-    def _local(self, code, own, energy, vertical, level, nodes, messages) -> torch.Tensor:
-        """``[W, N, F]`` the local observations (:mod:`uavrl.envs.physics.sensing`): each UAV's own part, then a slot
-        per node and per other UAV (in the order ``i+1, ..., i+N-1``), zeros where it lies beyond ``comm_radius``;
-        distances between points in cells (float64), a UAV out of service hearing and heard by no one."""
+    def _local(self, code, own, energy, vertical, level, messages) -> torch.Tensor:
+        """``[W, N, F]`` the local observations (:mod:`uavrl.envs.physics.sensing`): each UAV's own part and the nodes
+        it hears (``own``, the per-code table's), under an energy model its battery and service flag, with altitude
+        levels its vertical part, then a slot per other UAV in the order ``i+1, ..., i+N-1`` (mod N), zeros for one
+        beyond ``comm_radius``."""
         W, N = code.shape
-        cell = code >> 1
-        xyz = self._slot_xyz.index_select(0, cell.view(-1)).view(W, N, 3)
-        serving = cell < self.num_positions  # [W, N]
-        reach = self.cfg.comm_radius_cells**2
-        # the nodes: (dx / L1, dy / L2, dz / h, 1) from the UAV, within range
-        to_node = nodes.unsqueeze(1) - xyz.unsqueeze(2)  # [W, N, 4, 3]
-        heard = ((to_node.square().sum(-1) <= reach) & serving.unsqueeze(-1)).unsqueeze(-1)
-        node_slots = torch.cat([to_node / self._node_scale, torch.ones_like(to_node[..., :1])], -1)
         parts = [own, *([] if energy is None else [energy]), *([] if vertical is None else [vertical])]
-        parts.append(node_slots.where(heard, 0.0).flatten(-2).float())
         if N == 1:
             return torch.cat(parts, -1)
         others = self._others(N)  # [N, N - 1]
-        to_uav = xyz[:, others] - xyz.unsqueeze(2)  # [W, N, N - 1, 3]
-        heard = (to_uav.square().sum(-1) <= reach) & serving.unsqueeze(-1) & serving[:, others]
-        slot = [(to_uav[..., :2] / self._grid_scale).float(), (code & 1)[:, others, None].float()]
-        slot.append(torch.ones_like(slot[1]))
-        if energy is not None:
-            slot.append(energy[:, others])
+        code_j = torch.cat([code, code], 1).as_strided((W, N, N - 1), (2 * N, 1, 1), 1)  # code[:, others]
+        if self._pair_slot is None:
+            slot = self._uav_slots((code >> 1).unsqueeze(-1).expand(W, N, N - 1), code_j)
+        else:
+            rows = torch.add(code_j, (code >> 1).unsqueeze(-1), alpha=2 * self._slots).view(-1)
+            slot = self._pair_slot.view(-1, 4).index_select(0, rows).view(W, N, N - 1, 4)
+        extra = [*([] if energy is None else [energy[:, others]])]
         if level is not None:
-            slot.append((level[:, others] - level.unsqueeze(-1)).unsqueeze(-1))
+            extra.append((level[:, others] - level.unsqueeze(-1)).unsqueeze(-1))
         if messages is not None:
-            slot.append(messages[:, others])
-        parts.append(torch.cat(slot, -1).where(heard.unsqueeze(-1), 0.0).flatten(-2))
+            extra.append(messages[:, others])
+        if extra:  # heard: the slot's fourth entry
+            slot = torch.cat([slot, torch.cat(extra, -1).where(slot[..., 3:] > 0, 0.0)], -1)
+        parts.append(slot.flatten(-2))
         return torch.cat(parts, -1)
+
+    def _uav_slots(self, cell: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
+        """``[*, 4]`` what a UAV at position ``cell`` hears of another at ``code`` (``[*]`` each):
+        ``(dx / (L1 - 1), dy / (L2 - 1), task, 1)`` within ``comm_radius`` of each other (their points in cells, in
+        float64), zeros otherwise or when either is out of service."""
+        other = code >> 1
+        mine, theirs = self._slot_xyz[cell], self._slot_xyz[other]
+        apart = theirs - mine
+        heard = (apart.square().sum(-1) <= self.cfg.comm_radius_cells**2) & (cell < self.num_positions)
+        heard &= other < self.num_positions
+        slot = torch.cat([apart[..., :2] / self._grid_scale, (code & 1).unsqueeze(-1), torch.ones_like(apart[..., :1])], -1)
+        return slot.where(heard.unsqueeze(-1), 0.0).float()
+
+    def _node_slots(self, xyz: torch.Tensor, nodes: torch.Tensor) -> torch.Tensor:
+        """``[*, 16]`` what UAVs at points ``xyz`` ``[*, 3]`` (cells, float64) hear of the nodes ``[*, 4, 3]``
+        (broadcast): per node ``(dx / L1, dy / L2, dz / h, 1)`` within ``comm_radius``, zeros otherwise."""
+        apart = nodes - xyz.unsqueeze(-2)  # [*, 4, 3]
+        heard = apart.square().sum(-1) <= self.cfg.comm_radius_cells**2
+        slot = torch.cat([apart / self._node_scale, torch.ones_like(apart[..., :1])], -1)
+        return slot.where(heard.unsqueeze(-1), 0.0).flatten(-2).float()
 
     def _others(self, N: int) -> torch.Tensor:
         """``[N, N - 1]`` the other UAVs of each, in the order ``i+1, ..., i+N-1`` (mod N)."""
@@ -182,7 +194,7 @@ class Observations:
             tables = self._observation_tables(
                 relay_contributions(link_gains(self._cell_xyz, nodes, self.cfg), self.cfg), nodes
             )
-        observation, state = self._assemble(code, energy, tables, nodes, messages)
+        observation, state = self._assemble(code, energy, tables, messages)
         return self._outputs(observation, state, code >> 1, code & 1)
 
     def _outputs(self, observation, state, cell: torch.Tensor, task: torch.Tensor) -> dict:

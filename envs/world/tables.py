@@ -44,7 +44,10 @@ GRID_TABLES = (
     "_code_task",
     "_code_xyt",
     "_slot_xyz",
+    "_pair_slot",
 )
+
+PAIR_SLOT_ROWS = 1 << 22  # local observations read another UAV's slot from a table of at most this many rows (64 MB)
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
 LAYOUT_TABLES = (
@@ -113,6 +116,11 @@ class LayoutTables:
         self._code_xyt = torch.cat(
             [self._cell_xy[self._code_cell] / self._grid_scale, self._code_task[:, None]], -1
         ).float()  # [2C, 3] as observed
+        self._pair_slot = None  # local observations on small grids: each other UAV's slot by (position, code)
+        if cfg.local and self._slots * 2 * self._slots <= PAIR_SLOT_ROWS:
+            cell = torch.arange(self._slots, device=dev)
+            code = torch.arange(2 * self._slots, device=dev)
+            self._pair_slot = self._uav_slots(cell[:, None].expand(-1, len(code)), code.expand(len(cell), -1))
         self._code_level = None  # with altitude levels, each code's level as observed, 0 to 1 (no slot off the grid)
         if cfg.num_levels > 1:
             self._code_level = (positions.level[self._code_cell] / (cfg.num_levels - 1)).float()
@@ -165,7 +173,7 @@ class LayoutTables:
 
     def _observation_tables(self, contrib: torch.Tensor, nodes: torch.Tensor):
         """``(code_obs [k, 2C, 13], node_obs [k, 12], code_vertical [k, 2C, 5] or None)`` of ``k`` layouts: what a UAV
-        at each code observes of its layout, the nodes as the state shows them, and with altitude levels its level
+        at each code observes of its layout (and of the nodes within range: ``[k, 2C, 29]`` with local observations), the nodes as the state shows them, and with altitude levels its level
         and the contributions a climb and a descent reach, from the per-position contributions ``[k, C, 2]`` and the
         nodes."""
         C, k, K = self.num_positions, len(contrib), 2 * self._slots
@@ -178,6 +186,11 @@ class LayoutTables:
             around = torch.cat([around, around.new_full((1, around.shape[1]), C)])
         seen = scaled.index_select(1, around[self._code_cell].flatten()).view(k, K, -1).float()
         code_obs = torch.cat([self._code_xyt.expand(k, -1, -1), seen[..., :10]], -1)
+        if self.cfg.local:  # then the nodes as a UAV at the code's position hears them
+            heard = self._node_slots(self._cell_xyz.unsqueeze(0), nodes.unsqueeze(1))  # [k, C, 16]
+            if self._slots > C:  # a UAV out of service hears no node
+                heard = torch.cat([heard, heard.new_zeros(k, 1, heard.shape[-1])], 1)
+            code_obs = torch.cat([code_obs, heard.index_select(1, self._code_cell)], -1)
         vertical = None
         if self.cfg.num_levels > 1:  # the level, then the contributions at the positions a climb and a descent reach
             vertical = torch.cat([self._code_level[None, :, None].expand(k, -1, -1), seen[..., 10:]], -1)

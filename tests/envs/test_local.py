@@ -37,13 +37,6 @@ def expected_observation(world: World, out: dict, messages: torch.Tensor | None,
         for i in range(N):
             own_size = OWN_FEATURES
             row = list(central[b, i, :own_size])
-            if energy:  # the central observation's own battery and service flag follow the others' (x, y, task)
-                start = OWN_FEATURES + 3 * (N - 1)
-                row += list(central[b, i, start : start + 2])
-            if levels:
-                start = OWN_FEATURES + 3 * (N - 1) + (2 * N if energy else 0)
-                row += list(central[b, i, start : start + VERTICAL_FEATURES])
-
             points = [
                 (*(float(v) for v in out["positions"][b, j]), heights[int(out["levels"][b, j]) if levels else 0])
                 for j in range(N)
@@ -56,6 +49,13 @@ def expected_observation(world: World, out: dict, messages: torch.Tensor | None,
                     row += [d[0] / L1, d[1] / L2, d[2] / cfg.height, 1.0]
                 else:
                     row += [0.0] * 4
+            if energy:  # the central observation's own battery and service flag follow the others' (x, y, task)
+                start = OWN_FEATURES + 3 * (N - 1)
+                row += list(central[b, i, start : start + 2])
+            if levels:
+                start = OWN_FEATURES + 3 * (N - 1) + (2 * N if energy else 0)
+                row += list(central[b, i, start : start + VERTICAL_FEATURES])
+
             for k in range(1, N):
                 j = (i + k) % N
                 other = points[j]
