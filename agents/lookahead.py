@@ -89,7 +89,7 @@ class LookaheadPolicy(TensorDictModuleBase):
         super().__init__()
         if cfg.energy != "none":
             raise ValueError(f"eval.lookahead is invalid with env.energy={cfg.energy!r}: its model has no batteries")
-        check_lookahead_levels(depth, cfg.altitudes_m)
+        check_lookahead_levels(depth, cfg.altitudes_m, cfg.observation)
         if objective not in _OBJECTIVES:
             raise ValueError(f"eval.lookahead scores the objectives {', '.join(_OBJECTIVES)}, not {objective!r}")
         self.values, self.mixer, self.cfg = values, mixer, cfg

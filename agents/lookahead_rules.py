@@ -49,9 +49,13 @@ def check_lookahead(a, depth: int, agent_name: str) -> None:
         )
 
 
-def check_lookahead_levels(depth: int, altitudes_m) -> None:
+def check_lookahead_levels(depth: int, altitudes_m, observation: str = "central") -> None:
     """A one-line error for ``eval.lookahead=depth`` with altitude levels (``env.altitudes_m``, two or more): its
-    search decodes the UAVs' positions as cells of one level."""
+    search decodes the UAVs' positions as cells of one level; or with local observations (``env.observation``): it
+    searches the team's joint actions from the central state."""
+    if depth and observation == "local":
+        reason = "the lookahead searches the team's joint actions from the central state, not what each UAV hears"
+        raise InvalidOption("eval.lookahead", depth, f"{reason} (env.observation='local'): give eval.lookahead=0")
     if depth and altitudes_m is not None and len(altitudes_m) > 1:
         raise InvalidOption(
             "eval.lookahead",
@@ -69,5 +73,6 @@ def lookahead_settings(cfg, agent_settings=None) -> dict:
     a = agent_settings if agent_settings is not None else cfg.get("agent")
     if depth and a is not None:
         check_lookahead(a, depth, f"agent={a.name}")
-    check_lookahead_levels(depth, (cfg.get("env") or {}).get("altitudes_m"))
+    env = cfg.get("env") or {}
+    check_lookahead_levels(depth, env.get("altitudes_m"), env.get("observation", "central"))
     return {"lookahead": depth, "lookahead_width": int(cfg.eval.get("lookahead_width", WIDTH))} if depth else {}

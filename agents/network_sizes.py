@@ -11,7 +11,14 @@ Example:
 from __future__ import annotations
 
 from uavrl.envs.config import NUM_ACTIONS
-from uavrl.envs.limits import NODE_FEATURES, PAIR_FEATURES, observation_size, set_input_size, state_size
+from uavrl.envs.limits import (
+    NODE_FEATURES,
+    PAIR_FEATURES,
+    model_observation_size,
+    observation_size,
+    set_input_size,
+    state_size,
+)
 
 TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
 FLOAT = 4  # bytes of a float32
@@ -37,12 +44,27 @@ def _joint_actions(num_uavs: int, levels: bool) -> int:
     return (NUM_ACTIONS + 2 * levels) ** num_uavs
 
 
+def local_inputs(model) -> int:
+    """Entries of a UAV's input to ``LocalQNet`` (its local observation and one-hot id) with local observations; 0
+    with the central one (``TeamQNet``)."""
+    return model_observation_size(model) + model.fleet_size if model.local else 0
+
+
 def team_parameters(
-    num_uavs: int, num_actions: int, energy: bool, head: str, hidden: int, depth: int, levels: bool = False
+    num_uavs: int,
+    num_actions: int,
+    energy: bool,
+    head: str,
+    hidden: int,
+    depth: int,
+    levels: bool = False,
+    local: int = 0,
 ) -> int:
     """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
     of ``hidden`` units), then the joint head (``A^N`` values, ``A`` 6 or 8 with altitude levels) or the shared
-    per-UAV head (one hidden layer)."""
+    per-UAV head (one hidden layer); with ``local`` inputs (:func:`local_inputs`) ``LocalQNet``'s MLP."""
+    if local:
+        return _linear(local, hidden) + depth * _linear(hidden, hidden) + _linear(hidden, num_actions)
     N, h, F = num_uavs, hidden, _team_input(num_uavs, energy, levels)
     torso = _linear(N * F, h) + depth * _linear(h, h)
     if head == "joint":
@@ -69,9 +91,14 @@ def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, dept
     return encoder + depth * layer + head
 
 
-def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False) -> int:
-    """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it."""
+def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False, local: int = 0) -> int:
+    """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it (``LocalQNet``
+    with ``local`` inputs)."""
     N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
+    embed = int(a.mixing_embed_dim)
+    mixer = state_size(N, energy, levels) * embed * (N + 3) + embed * (N + 1) if a.mixer == "qmix" else 0
+    if local:
+        return N * (local * h + depth * h * h + h * num_actions) + mixer
     if a.get("network", "team") == "set":
         pairs = N * N * (PAIR_FEATURES * h // 2 + h // 2 * int(a.heads) + PAIR_FEATURES * h + 2 * h)
         layer = N * 6 * h * h + pairs
@@ -79,19 +106,17 @@ def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool
     torso = N * F * h + depth * h * h
     if a.head == "joint":
         return torso + h * _joint_actions(N, levels)
-    macs = torso + h * h + N * ((F + N + _moves(levels)) * h + h * num_actions)
-    if a.mixer == "qmix":
-        embed = int(a.mixing_embed_dim)
-        macs += state_size(N, energy, levels) * embed * (N + 3) + embed * (N + 1)
-    return macs
+    return torso + h * h + N * ((F + N + _moves(levels)) * h + h * num_actions) + mixer
 
 
-def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False) -> int:
+def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False, local: int = 0) -> int:
     """Float32 values one world's rows hold at the peak of a gradient step: each layer's inputs and outputs, twice
     for the team network (its torso's and head's temporaries), once for the size-free one (measured by the peak
     resident memory of gradient steps of 8 and of 4096 rows, N = 6 on 10x10 with QMIX: 28 KB a row against this
     count's 37 KB; of 8 and of 256 rows for the size-free network, N = 30 on 40x40: 3.2 MB a row, as counted)."""
     N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
+    if local:  # each layer's inputs and outputs for every UAV, twice (forward and backward), and the mixer's
+        return 2 * (N * (local + 2 * (depth + 1) * h + num_actions) + _mixer_values(N, energy, a, levels))
     if a.get("network", "team") == "set":
         pairs = N * N * (PAIR_FEATURES + 2 * (h // 2) + 3 * int(a.heads) + 2 * h)
         own = set_input_size(energy, levels)
@@ -100,9 +125,14 @@ def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bo
     if a.head == "joint":
         return 2 * (values + 3 * _joint_actions(N, levels))
     values += N * (h + F + N + _moves(levels) + 2 * h + num_actions)
-    if a.mixer == "qmix":
-        values += state_size(N, energy, levels) + 2 * int(a.mixing_embed_dim) * (N + 3)
-    return 2 * values
+    return 2 * (values + _mixer_values(N, energy, a, levels))
+
+
+def _mixer_values(num_uavs: int, energy: bool, a, levels: bool) -> int:
+    """Float32 values of QMIX's pass over one world (its state and hidden layers); none for VDN."""
+    if a.mixer != "qmix":
+        return 0
+    return state_size(num_uavs, energy, levels) + 2 * int(a.mixing_embed_dim) * (num_uavs + 3)
 
 
 def greedy_cells(model) -> int:
@@ -110,11 +140,12 @@ def greedy_cells(model) -> int:
     altitude level) and two more where that is fewer than N^2 A comparisons of targets with claims, else none (its
     cost then follows the team, not the grid)."""
     cells = model.num_positions + 2
-    return cells if cells <= model.fleet_size**2 * model.num_actions else 0
+    return cells if cells <= model.fleet_size**2 * model.num_actions and not model.local else 0
 
 
 def policy_row_bytes(model, a) -> int:
     """Bytes of one world's row when the Q-network of settings ``a`` values it and picks its greedy valid action:
     the network's float32 values (:func:`team_row_values`) and the occupancy table (:func:`greedy_cells`)."""
-    values = team_row_values(model.fleet_size, model.num_actions, model.energy != "none", a, model.num_levels > 1)
+    energy, levels = model.energy != "none", model.num_levels > 1
+    values = team_row_values(model.fleet_size, model.num_actions, energy, a, levels, local_inputs(model))
     return FLOAT * values + greedy_cells(model)

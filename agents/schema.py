@@ -285,6 +285,37 @@ def _plain(value):
     return [_plain(v) for v in value] if not isinstance(value, (str, int, float)) else value
 
 
+def check_local_dqn(env_cfg: ModelConfig, a, network: str) -> None:
+    """One-line errors for DQN settings that need the central observation (``env.observation=local`` is set): the
+    joint head (one value per joint action) and, not yet built for local observations, the size-free network and
+    learned messages."""
+    if a.head == "joint":
+        raise ValueError(
+            "agent.head='joint' is invalid with env.observation='local': one value per joint action is a central "
+            "controller's; use agent.head=factored (each UAV from its own observation)"
+        )
+    if network == "set":
+        raise ValueError(
+            "agent.network='set' is invalid with env.observation='local': the size-free network reads every UAV; "
+            "use agent.network=team"
+        )
+    if env_cfg.message_size:
+        raise ValueError(
+            f"env.message_size={env_cfg.message_size} is invalid for agent=dqn: its networks do not learn messages; "
+            "give env.message_size=0"
+        )
+
+
+def check_tabular_settings(env_cfg: ModelConfig, a) -> None:
+    """A one-line error for the tabular agent with local observations: its Q table is indexed by the team's
+    state."""
+    if env_cfg.local:
+        raise ValueError(
+            "env.observation='local' is invalid for agent=tabular: its Q table is indexed by every UAV's cell, which "
+            "no UAV observes alone; use agent=dqn"
+        )
+
+
 def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
     """One-line errors for DQN settings that cannot go together (after the schema's rules), before torch is
     imported: what the network (``team`` or ``set``) and its head and mixer allow, and the teams of a size-free run,
@@ -300,6 +331,8 @@ def check_dqn_settings(env_cfg: ModelConfig, a) -> None:
             f"agent.cities={shown(_plain(a.cities), label=True)} is invalid with env.city='none': the seeds lay out a "
             "city's buildings; give env.city (e.g. env.city=urban) or agent.cities=null"
         )
+    if env_cfg.local:
+        check_local_dqn(env_cfg, a, network)
     if network == "team":
         if a.mixer == "mean":
             raise ValueError(
@@ -462,7 +495,7 @@ def _once(key: tuple, rules: Callable[[], None]) -> None:
 
 # The agents by name: ``agent=<name>`` (``configs/agent/<name>.yaml``) runs ``AGENTS[name]``.
 AGENTS: dict[str, AgentConfig] = {
-    "tabular": AgentConfig(TabularSchema, "tabular:TabularAgent"),
+    "tabular": AgentConfig(TabularSchema, "tabular:TabularAgent", together=check_tabular_settings),
     "dqn": AgentConfig(
         DQNSchema,
         "dqn:DQNAgent",

@@ -27,6 +27,7 @@ from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
     greedy_cells,
+    local_inputs,
     policy_row_bytes,
     qmix_parameters,
     set_parameters,
@@ -405,7 +406,9 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
             params = set_parameters(model.num_actions, _e(model), hidden, heads, depth, _l(model))
             return TRAINING_COPIES * FLOAT * params
         m = models(low)[0]
-        params = team_parameters(m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth), _l(m))
+        params = team_parameters(
+            m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth), _l(m), local_inputs(m)
+        )
         if s.head == "factored" and s.mixer == "qmix":
             params += qmix_parameters(m.fleet_size, _e(m), int(s.mixing_embed_dim), _l(m))
         return TRAINING_COPIES * FLOAT * params
@@ -435,7 +438,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     def cpu_seconds(low) -> int:
         s, total_seconds, rows = agent(low), 0.0, group_batch(low)
         for m in models(low):
-            macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s, _l(m))
+            macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s, _l(m), local_inputs(m))
             per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
             per_step += worlds.at(low) * (2 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
             per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size

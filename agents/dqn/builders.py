@@ -25,7 +25,17 @@ from uavrl.envs.compat import make_collector
 
 from .curriculum import Curriculum
 from .loss import DoubleQMixerLoss, QMix, VDNMix
-from .networks import LEVELS, DecodeJointAction, JointActionMask, TeamQNet, ValidGreedy, position_numbers, q_inputs
+from .networks import (
+    LEVELS,
+    DecodeJointAction,
+    JointActionMask,
+    LocalGreedy,
+    LocalQNet,
+    TeamQNet,
+    ValidGreedy,
+    position_numbers,
+    q_inputs,
+)
 from .priorities import ProportionalSampler
 from .transitions import CompactTransitions
 
@@ -54,6 +64,9 @@ def build_q_network(env: UAVSpectrumEnv, a) -> TensorDictModule:
         env: the training environment (its observation keys and sizes).
         a: the agent's settings ``cfg.agent`` (``head``, ``hidden``, ``depth``).
     """
+    if env.cfg.local:  # each UAV from its own observation (the factored head's values)
+        net = LocalQNet(env, int(a.hidden), int(a.depth))
+        return TensorDictModule(net, in_keys=[("agents", "observation")], out_keys=[_values_key(a)])
     net = TeamQNet(env, a.head, int(a.hidden), int(a.depth))
     return TensorDictModule(net, in_keys=q_inputs(env.cfg), out_keys=[_values_key(a)])
 
@@ -141,11 +154,18 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
         ),
         device=env.device,
     )
-    greedy_action = TensorDictModule(
-        ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions, position_numbers(env.world)),
-        in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks", *_levels(env)],
-        out_keys=[("agents", "action")],
-    )
+    if env.cfg.local:  # each UAV by its own values and mask
+        greedy_action = TensorDictModule(
+            LocalGreedy(),
+            in_keys=[("agents", "action_value"), ("agents", "action_mask")],
+            out_keys=[("agents", "action")],
+        )
+    else:
+        greedy_action = TensorDictModule(
+            ValidGreedy(env.neighbours, env.cfg.grid[0], env.num_actions, position_numbers(env.world)),
+            in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks", *_levels(env)],
+            out_keys=[("agents", "action")],
+        )
     greedy = TensorDictSequential(q, greedy_action)
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
     explore = TensorDictSequential(greedy, exploration)

@@ -2,7 +2,9 @@
 
 - :class:`TeamQNet`: action values, per UAV (``factored``) or per joint action (``joint``);
 - :class:`ValidGreedy`: the factored head's greedy valid joint action, UAV by UAV;
-- :class:`JointActionMask`, :class:`DecodeJointAction`: the joint head's mask and its per-UAV actions.
+- :class:`JointActionMask`, :class:`DecodeJointAction`: the joint head's mask and its per-UAV actions;
+- :class:`LocalQNet`, :class:`LocalGreedy`: with local observations (``env.observation=local``) each UAV's values
+  from its own observation alone, and its best allowed action.
 """
 
 from __future__ import annotations
@@ -174,6 +176,47 @@ class TeamQNet(nn.Module):
         hidden = nn.functional.linear(embedding, first["weight"][:, :split], first["bias"])
         hidden = torch.relu(hidden + nn.functional.linear(own, first["weight"][:, split:]))
         return nn.functional.linear(hidden, last["weight"], last["bias"])
+
+
+class LocalQNet(nn.Module):
+    """Each UAV's action values ``[*, N, A]`` from its own observation ``[*, N, F]`` alone (``env.observation=local``):
+    one MLP shared by the UAVs (``depth`` hidden layers of ``hidden`` units, ReLU) reading the observation and the
+    UAV's one-hot id, so a UAV's values change only with what it observes (it acts on what lies within its
+    ``comm_radius``); trained centrally through the mixer, which may read the world's state.
+
+    Example:
+        >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2, observation="local", comm_radius=1.0)
+        >>> LocalQNet(env, hidden=16, depth=1)(env.reset()["agents", "observation"]).shape
+        torch.Size([3, 2, 6])
+    """
+
+    def __init__(self, env: UAVSpectrumEnv, hidden: int, depth: int):
+        super().__init__()
+        N, dev = env.num_uavs, env.device
+        sizes = [env.observation_size + N, *[hidden] * (depth + 1), env.num_actions]
+        self.layers = nn.ModuleList(nn.Linear(a, b, device=dev) for a, b in zip(sizes, sizes[1:], strict=False))
+        self.register_buffer("ids", torch.eye(N, device=dev))
+
+    def forward(self, observation: torch.Tensor, params: TensorDictBase = None) -> torch.Tensor:
+        """The values ``[*, N, A]``; ``params``: the structure of ``TensorDict.from_module(self)`` (the target copy in
+        the loss) in place of the module's own parameters."""
+        x = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1)], -1)
+        last = len(self.layers) - 1
+        for i, layer in enumerate(self.layers):
+            own = params is None
+            weight = layer.weight if own else params["layers", str(i), "weight"]
+            bias = layer.bias if own else params["layers", str(i), "bias"]
+            x = nn.functional.linear(x, weight, bias)
+            x = torch.relu(x) if i < last else x
+        return x
+
+
+class LocalGreedy(nn.Module):
+    """Each UAV's best allowed action ``[*, N]`` from its own values and mask ``[*, N, A]``: no UAV reads another's
+    (a move into a cell another UAV takes is cancelled by the environment, docs/model.md)."""
+
+    def forward(self, values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        return values.masked_fill(~mask, -math.inf).argmax(-1)
 
 
 class ValidGreedy(nn.Module):

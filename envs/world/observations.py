@@ -137,7 +137,9 @@ class Observations:
         apart = theirs - mine
         heard = (apart.square().sum(-1) <= self.cfg.comm_radius_cells**2) & (cell < self.num_positions)
         heard &= other < self.num_positions
-        slot = torch.cat([apart[..., :2] / self._grid_scale, (code & 1).unsqueeze(-1), torch.ones_like(apart[..., :1])], -1)
+        slot = torch.cat(
+            [apart[..., :2] / self._grid_scale, (code & 1).unsqueeze(-1), torch.ones_like(apart[..., :1])], -1
+        )
         return slot.where(heard.unsqueeze(-1), 0.0).float()
 
     def _node_slots(self, xyz: torch.Tensor, nodes: torch.Tensor) -> torch.Tensor:

@@ -18,6 +18,7 @@ from ..config import RELAYING, ModelConfig
 from ..physics.channel import direct_terms, link_gains, rates_from_sums, relay_contributions
 from ..physics.dynamics import Dynamics
 from ..physics.rewards import U_STAR_REWARDS
+from ..physics.sensing import PAIR_SLOT_ROWS
 from ..solvers.optimum import optimum as exact_optimum
 
 
@@ -46,8 +47,6 @@ GRID_TABLES = (
     "_slot_xyz",
     "_pair_slot",
 )
-
-PAIR_SLOT_ROWS = 1 << 22  # local observations read another UAV's slot from a table of at most this many rows (64 MB)
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
 LAYOUT_TABLES = (
@@ -173,9 +172,9 @@ class LayoutTables:
 
     def _observation_tables(self, contrib: torch.Tensor, nodes: torch.Tensor):
         """``(code_obs [k, 2C, 13], node_obs [k, 12], code_vertical [k, 2C, 5] or None)`` of ``k`` layouts: what a UAV
-        at each code observes of its layout (and of the nodes within range: ``[k, 2C, 29]`` with local observations), the nodes as the state shows them, and with altitude levels its level
-        and the contributions a climb and a descent reach, from the per-position contributions ``[k, C, 2]`` and the
-        nodes."""
+        at each code observes of its layout (with local observations then the nodes it hears: ``[k, 2C, 29]``), the
+        nodes as the state shows them, and with altitude levels its level and the contributions a climb and a descent
+        reach, from the per-position contributions ``[k, C, 2]`` and the nodes."""
         C, k, K = self.num_positions, len(contrib), 2 * self._slots
         # observation of a UAV in cell c: its (x, y, task), then the contributions (scaled by the best cell's)
         # at c and at the cells its moves reach, -1 where a move leaves the grid (the levels, or enters a building)

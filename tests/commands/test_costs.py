@@ -34,7 +34,7 @@ def test_the_parameter_counts_are_the_networks_built(options):
     and the size-free core, at two sizes each."""
     from torchrl.modules import QMixer
 
-    from uavrl.agents.dqn.networks import TeamQNet
+    from uavrl.agents.dqn.networks import LocalQNet, TeamQNet
     from uavrl.agents.dqn.setnet import SetQCore
 
     env = UAVSpectrumEnv(batch_size=1, **options)
@@ -49,6 +49,11 @@ def test_the_parameter_counts_are_the_networks_built(options):
         )
         built = parameters(SetQCore(A, energy, hidden, heads, depth))
         assert built == network_sizes.set_parameters(A, energy, hidden, heads, depth)
+        local = UAVSpectrumEnv(batch_size=1, observation="local", comm_radius=1.0, **options)
+        inputs = network_sizes.local_inputs(local.cfg)
+        assert inputs == local.observation_size + N
+        built = parameters(LocalQNet(local, hidden, depth))
+        assert built == network_sizes.team_parameters(N, A, energy, "factored", hidden, depth, local=inputs)
 
 
 def refusal(*overrides: str) -> str | None:
