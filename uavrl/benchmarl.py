@@ -52,7 +52,13 @@ def algorithm_name(cfg: DictConfig) -> str:
 def check_ours(cfg: DictConfig, overrides=None) -> None:
     """Our settings (not BenchMARL's own) refused in one line, the costs of our part of the run included."""
     check(cfg, BENCHMARL_SETTINGS)
-    check_benchmarl_costs(cfg, model_config(cfg), overrides)
+    model = model_config(cfg)
+    if model.message_size:  # a second action key in the group, which BenchMARL's discrete policies do not emit
+        raise ValueError(
+            f"env.message_size={model.message_size} is invalid for python -m uavrl.benchmarl: BenchMARL's policies "
+            "choose the UAVs' discrete actions only; give env.message_size=0"
+        )
+    check_benchmarl_costs(cfg, model, overrides)
     if cfg.run_dir:
         check_directory(cfg.run_dir, "run_dir")
         if finished(Path(cfg.run_dir)):

@@ -7,11 +7,12 @@ the same sizes.
 
 With ``observation="local"`` UAV ``i`` observes, in this order:
 
-- its own part, as under ``"central"``: its (x, y, task), the contributions at its cell and at the cells its 4 moves
-  reach; under an energy model its battery and service flag; with altitude levels its level and the contributions a
-  climb and a descent reach;
+- its own (x, y, task) and the contributions at its cell and at the cells its 4 moves reach, as under ``"central"``
+  (what its radio measures of the nodes' signals);
 - each of PT, PR, S, E: ``(dx / L1, dy / L2, dz / h, 1)`` from the UAV to the node when the node lies within
   ``comm_radius``, four zeros otherwise (:data:`NODE_SLOT`);
+- under an energy model its battery and service flag; with altitude levels its level and the contributions a climb
+  and a descent reach;
 - each other UAV ``j``, in the order ``i+1, ..., i+N-1`` (mod N): ``(dx / (L1 - 1), dy / (L2 - 1), task, 1)``, under an
   energy model its battery and service flag, with altitude levels its level minus ``i``'s, then the
   ``message_size`` numbers ``j`` sent at the last step, when ``j`` lies within ``comm_radius``; zeros otherwise.

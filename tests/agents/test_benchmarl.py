@@ -82,6 +82,37 @@ def test_a_short_run_in_a_city_with_altitude_levels(tmp_path, masked_choices):
     assert saved["altitudes_m"] == [30, 100, 300] and saved["city"] == "urban"
 
 
+@pytest.mark.parametrize("algorithm", ["ippo", "mappo"])
+def test_a_short_run_on_local_observations_acts_on_what_each_uav_hears(tmp_path, algorithm, masked_choices):
+    """IPPO and MAPPO on local observations (radius 1 cell): the run completes, and the trained policy's action for
+    UAV 0 is the same when every UAV beyond its range moves elsewhere beyond it and switches task (the deterministic
+    policy, as evaluated)."""
+    import torch
+    from tensordict import TensorDict
+
+    from tests.envs.test_local import perturbed_out_of_range
+    from uavrl.envs import World
+
+    local = ["env.observation=local", "env.comm_radius=1.0"]
+    run_dir = train(compose_config("benchmarl", [f"algorithm={algorithm}", *TINY, *local, f"run_dir={tmp_path / 'r'}"]))
+    assert masked_choices == [True, True]
+    experiment = load_experiment(run_dir)
+    cfg = experiment.task.model_config
+    assert cfg.local and cfg.comm_radius == 1.0
+    world, gen = World(cfg, batch_size=1), torch.Generator().manual_seed(0)
+    N, (L1, L2) = cfg.num_uavs, cfg.grid
+    acted = []
+    for _ in range(100):
+        code = 2 * torch.randperm(L1 * L2, generator=gen)[:N] + torch.randint(0, 2, (N,), generator=gen)
+        moved, _ = perturbed_out_of_range(code, torch.zeros(N, 0), (L1, L2), 1.0, gen)
+        for c in (code, moved):
+            out = world.configurations(c[None])
+            group = TensorDict({"observation": out["observation"], "action_mask": out["action_mask"]}, [1, N])
+            with set_exploration_type(ExplorationType.DETERMINISTIC):
+                acted.append(experiment.policy(TensorDict({"agents": group}, [1]))["agents", "action"][0, 0])
+    assert all(torch.equal(a, b) for a, b in zip(acted[::2], acted[1::2], strict=True))
+
+
 def test_a_finished_run_reloads_to_act_as_it_was_evaluated_writing_nothing(tmp_path):
     run_dir = train(compose_config("benchmarl", ["algorithm=iql", *TINY, f"run_dir={tmp_path / 'run'}"]))
     before = {path: path.stat().st_mtime_ns for path in run_dir.rglob("*")}
@@ -128,10 +159,12 @@ def test_same_seed_same_result(tmp_path):
         ("eval.num_starts=0", "eval.num_starts=0 is invalid"),
         ("eval.horizon=100000000000", "eval.horizon=100000000000 is invalid: the evaluation .* over memory_budget="),
         ("experiment.off_policy_n_envs_per_worker=100000000", "experiment.off_policy_n_envs_per_worker=100000000 is"),
+        ("env.message_size=2", "env.message_size=2 is invalid for python -m uavrl.benchmarl: BenchMARL's policies"),
     ],
 )
 def test_bad_settings_are_refused_in_one_line(override, message):
     overrides = ["algorithm=iql", override] if not override.startswith("algorithm") else [override]
+    overrides = ["env.observation=local", *overrides] if override.startswith("env.message") else overrides
     with pytest.raises(ValueError, match=message):
         check_settings(compose_config("benchmarl", overrides), overrides)
 
