@@ -1,5 +1,5 @@
-"""The environments a trained policy may act in: those of its run's grid, number of UAVs, layout, altitude levels
-and city.
+"""The environments a trained policy may act in: those of its run's grid, number of UAVs, layout, altitude levels,
+city and observations (central, or local with its messages; any communication radius).
 
 A table or network learned on a 6x6 grid reads the positions and observations
 of a 5x5 grid without any error (same shapes), and acts on a model it never
@@ -7,7 +7,8 @@ saw.  So the policies of a run (``uavrl.load_policy``, ``Agent.policies``)
 check what they act in, at no per-step cost beyond a shape comparison:
 
 - ``bind_env(env)`` compares the environment's grid, number of UAVs, layout,
-  altitude levels (``altitudes_m``) and city with the run's (the evaluation binds every policy it measures);
+  altitude levels (``altitudes_m``), city and observations (``observation``, ``message_size``) with the run's (the
+  evaluation binds every policy it measures);
 - every tensordict: its number of UAVs;
 - the first tensordicts of each batch shape, until one has a UAV off the
   first column and one off the first row (at most :data:`FULL_CHECKS`): its
@@ -38,7 +39,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from uavrl.envs import config
 from uavrl.envs.config import InvalidOption, ModelConfig
-from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, observation_size
+from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, model_observation_size
 from uavrl.envs.physics.channel import fixed_layout
 from uavrl.envs.physics.grid import on_grid
 
@@ -70,13 +71,15 @@ class RunEnvironment:
         # under an energy model a UAV out of service is shown at the base, off the grid, and every observation ends
         # with the UAVs' batteries and service flags
         self.base = None if cfg.energy == "none" else torch.tensor(cfg.base)
-        self.observation_size = observation_size(self.num_uavs, self.base is not None, cfg.num_levels > 1)
+        self.observation_size = model_observation_size(cfg)
+        # what a UAV observes: central, or local with messages of that size (any radius: the same features)
+        self.observation = (cfg.observation, cfg.message_size)
         self._checked_shape = None  # the batch shape whose tensordicts were checked in full
         self._pending = (None, 0)  # a batch shape being checked in full, and how many of its tensordicts were
 
     def __str__(self) -> str:
         shown = f"a {self.grid[0]}x{self.grid[1]} grid, {self.num_uavs} UAVs, layout {self.layout!r}"
-        return shown + "".join(_extras(self.altitudes_m, self.city))
+        return shown + "".join(_extras(self.altitudes_m, self.city)) + _observed(*self.observation)
 
     def _refuse(self, what: str) -> ValueError:
         return InvalidOption("env", message=f"this policy acts in its run's environment ({self}); {what}: {ADVICE}")
@@ -108,6 +111,8 @@ class RunEnvironment:
             differ.append(f"layout {cfg.layout!r} with its nodes elsewhere (another altitude)")
         if cfg.altitudes_m != self.altitudes_m or _city(cfg) != self.city:
             differ.append("".join(_extras(cfg.altitudes_m, _city(cfg))).removeprefix(", ") or "one altitude, no city")
+        if (cfg.observation, cfg.message_size) != self.observation:
+            differ.append(_observed(cfg.observation, cfg.message_size).removeprefix(", ") or "central observations")
         if differ:
             raise self._refuse(f"the environment has {', '.join(differ)}")
 
@@ -164,6 +169,13 @@ class RunEnvironment:
 def _city(cfg: ModelConfig) -> tuple | None:
     """The options that place a model's buildings, None without a city."""
     return None if cfg.city == "none" else tuple(getattr(cfg, name) for name in CITY_OPTIONS)
+
+
+def _observed(observation: str, message_size: int) -> str:
+    """How a run's observations are named where they are not central: ``, local observations (messages of 2)``."""
+    if observation == "central":
+        return ""
+    return ", local observations" + (f" (messages of {message_size})" if message_size else "")
 
 
 def _extras(altitudes_m, city) -> list[str]:

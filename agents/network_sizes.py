@@ -45,9 +45,11 @@ def _joint_actions(num_uavs: int, levels: bool) -> int:
 
 
 def local_inputs(model) -> int:
-    """Entries of a UAV's input to ``LocalQNet`` (its local observation and one-hot id) with local observations; 0
-    with the central one (``TeamQNet``)."""
-    return model_observation_size(model) + model.fleet_size if model.local else 0
+    """Entries of a UAV's input to ``LocalQNet`` (its local observation, one-hot id and the positions its moves reach
+    that it hears held) with local observations; 0 with the central one (``TeamQNet``)."""
+    if not model.local:
+        return 0
+    return model_observation_size(model) + model.fleet_size + _moves(model.num_levels > 1)
 
 
 def team_parameters(
@@ -59,12 +61,15 @@ def team_parameters(
     depth: int,
     levels: bool = False,
     local: int = 0,
+    message_size: int = 0,
 ) -> int:
     """Parameters of ``TeamQNet``: the torso over the joint observation (``depth`` hidden layers and an output layer
     of ``hidden`` units), then the joint head (``A^N`` values, ``A`` 6 or 8 with altitude levels) or the shared
-    per-UAV head (one hidden layer); with ``local`` inputs (:func:`local_inputs`) ``LocalQNet``'s MLP."""
+    per-UAV head (one hidden layer); with ``local`` inputs (:func:`local_inputs`) ``LocalQNet``'s MLP and its layer
+    that sends ``message_size`` numbers."""
     if local:
-        return _linear(local, hidden) + depth * _linear(hidden, hidden) + _linear(hidden, num_actions)
+        speaker = _linear(hidden, message_size) if message_size else 0
+        return _linear(local, hidden) + depth * _linear(hidden, hidden) + _linear(hidden, num_actions) + speaker
     N, h, F = num_uavs, hidden, _team_input(num_uavs, energy, levels)
     torso = _linear(N * F, h) + depth * _linear(h, h)
     if head == "joint":

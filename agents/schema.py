@@ -287,8 +287,8 @@ def _plain(value):
 
 def check_local_dqn(env_cfg: ModelConfig, a, network: str) -> None:
     """One-line errors for DQN settings that need the central observation (``env.observation=local`` is set): the
-    joint head (one value per joint action) and, not yet built for local observations, the size-free network and
-    learned messages."""
+    joint head (one value per joint action), the size-free network (not yet built for local observations) and n-step
+    returns with messages."""
     if a.head == "joint":
         raise ValueError(
             "agent.head='joint' is invalid with env.observation='local': one value per joint action is a central "
@@ -299,10 +299,10 @@ def check_local_dqn(env_cfg: ModelConfig, a, network: str) -> None:
             "agent.network='set' is invalid with env.observation='local': the size-free network reads every UAV; "
             "use agent.network=team"
         )
-    if env_cfg.message_size:
+    if env_cfg.message_size and int(a.get("n_step", 1)) > 1:
         raise ValueError(
-            f"env.message_size={env_cfg.message_size} is invalid for agent=dqn: its networks do not learn messages; "
-            "give env.message_size=0"
+            f"agent.n_step={a.n_step} is invalid with env.message_size={env_cfg.message_size}: the messages are "
+            "learned through one step of communication; give agent.n_step=1"
         )
 
 

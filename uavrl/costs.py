@@ -407,7 +407,15 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
             return TRAINING_COPIES * FLOAT * params
         m = models(low)[0]
         params = team_parameters(
-            m.fleet_size, m.num_actions, _e(m), s.head, int(s.hidden), int(s.depth), _l(m), local_inputs(m)
+            m.fleet_size,
+            m.num_actions,
+            _e(m),
+            s.head,
+            int(s.hidden),
+            int(s.depth),
+            _l(m),
+            local_inputs(m),
+            m.message_size,
         )
         if s.head == "factored" and s.mixer == "qmix":
             params += qmix_parameters(m.fleet_size, _e(m), int(s.mixing_embed_dim), _l(m))
@@ -439,6 +447,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
         s, total_seconds, rows = agent(low), 0.0, group_batch(low)
         for m in models(low):
             macs = team_row_macs(m.fleet_size, m.num_actions, _e(m), s, _l(m), local_inputs(m))
+            macs *= 2 if m.message_size else 1  # the loss sends the messages heard again: a second pass
             per_step = STEP_SECONDS + UAV_SECONDS * m.fleet_size
             per_step += worlds.at(low) * (2 * macs / MACS_PER_SECOND + greedy_cells(m) / CELLS_PER_SECOND)
             per_update = UPDATE_SECONDS + UAV_SECONDS * m.fleet_size

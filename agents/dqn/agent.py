@@ -174,6 +174,7 @@ class DQNAgent(Agent):
         nxt = batch.get("next")
         if self.settings.objective == "log_gap":
             batch.set(("next", "reward"), self._log_gap_reward(batch, u_star, utility))
+        batch = group.transitions.with_previous(batch)  # with messages: what they are sent again from
         stored = n_step_returns(batch, int(self.settings.get("n_step", 1)), float(self.settings.gamma))
         group.buffer.extend(stored.reshape(-1).select(*group.keys))
         group.exploration.step(batch.numel())

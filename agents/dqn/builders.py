@@ -154,10 +154,10 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
         ),
         device=env.device,
     )
-    if env.cfg.local:  # each UAV by its own values and mask
+    if env.cfg.local:  # each UAV by its own values, mask and observation
         greedy_action = TensorDictModule(
-            LocalGreedy(),
-            in_keys=[("agents", "action_value"), ("agents", "action_mask")],
+            LocalGreedy(env),
+            in_keys=[("agents", "action_value"), ("agents", "action_mask"), ("agents", "observation")],
             out_keys=[("agents", "action")],
         )
     else:
@@ -167,6 +167,11 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
             out_keys=[("agents", "action")],
         )
     greedy = TensorDictSequential(q, greedy_action)
+    if env.cfg.message_size:  # then what each UAV sends, from its own observation
+        speak = TensorDictModule(
+            q.module.message, in_keys=[("agents", "observation")], out_keys=[("agents", "message")]
+        )
+        greedy = TensorDictSequential(q, greedy_action, speak)
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
     explore = TensorDictSequential(greedy, exploration)
     return Policies(greedy, explore, exploration, greedy, spec, [("agents", "action")])

@@ -96,8 +96,9 @@ class DoubleQMixerLoss(LossModule):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         # Parameters are read, never swapped into the modules: the online ones are the modules' own (the optimizer
         # steps them in place), the target ones are handed to the network and the mixer as arguments.
-        q, choose = self.local_value_network.module
-        net, greedy, inputs = q.module, choose.module, q.in_keys  # in_keys: Q_INPUTS, and the levels with levels
+        q, choose = self.local_value_network.module[:2]  # then, with messages, what the UAVs send
+        net, greedy = q.module, choose.module
+        inputs = getattr(net, "loss_keys", q.in_keys)  # Q_INPUTS (and the levels); LocalQNet's: with the messages
         mixer, nxt = self.mixer_network.module, td.get("next")
         # the successors' online pass stays apart from the states': one pass over both costs ~10% more a gradient
         # step on CPU, its backward running over the successors' rows too (BENCHMARKS.md, DQN iteration)

@@ -25,7 +25,8 @@ from uavrl.envs import (
     observation_with_nodes,
 )
 from uavrl.envs.config import CLIMB, RELAYING, SENSING
-from uavrl.envs.physics.grid import cells_or_away
+from uavrl.envs.physics.grid import MOVES, cells_or_away
+from uavrl.envs.physics.sensing import local_slot_features
 
 Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
 LEVELS = "levels"  # with altitude levels, each UAV's level: the networks and the greedy rules read it after the rest
@@ -178,11 +179,46 @@ class TeamQNet(nn.Module):
         return nn.functional.linear(hidden, last["weight"], last["bias"])
 
 
+class HeardMoves(nn.Module):
+    """``[*, N, M]`` which of the positions its moves reach (up, down, left, right; climb and descend with altitude
+    levels) each UAV hears another UAV hold, from its local observation ``[*, N, F]`` alone: the slots' relative
+    positions (docs/model.md, Local observations and messages).
+
+    Args:
+        env: an environment of the model (``env.observation=local``).
+    """
+
+    def __init__(self, env: UAVSpectrumEnv):
+        super().__init__()
+        cfg, N = env.cfg, env.num_uavs
+        self.num_uavs, self.levels = N, cfg.num_levels > 1
+        self.slot = local_slot_features(cfg.energy != "none", self.levels, cfg.message_size)
+        self.own = env.observation_size - (N - 1) * self.slot
+        self.level_entry = 4 + 2 * (cfg.energy != "none")  # a slot's relative level, with altitude levels
+        L1, L2 = cfg.grid
+        self.register_buffer("scale", torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1), max(cfg.num_levels - 1, 1)]))
+        moves = [(dx, dy, 0) for dx, dy in MOVES] + ([(0, 0, 1), (0, 0, -1)] if self.levels else [])
+        self.register_buffer("moves", torch.tensor(moves, dtype=torch.float32))  # [M, 3]
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        slots = observation[..., self.own :].unflatten(-1, (self.num_uavs - 1, self.slot))
+        level = slots[..., self.level_entry : self.level_entry + 1] if self.levels else torch.zeros_like(slots[..., :1])
+        offset = (torch.cat([slots[..., :2], level], -1) * self.scale).round()  # [*, N, N - 1, 3] in cells, levels
+        at = (offset.unsqueeze(-2) == self.moves).all(-1) & (slots[..., 3:4] > 0)  # [*, N, N - 1, M]
+        return at.any(-2)
+
+
 class LocalQNet(nn.Module):
     """Each UAV's action values ``[*, N, A]`` from its own observation ``[*, N, F]`` alone (``env.observation=local``):
-    one MLP shared by the UAVs (``depth`` hidden layers of ``hidden`` units, ReLU) reading the observation and the
-    UAV's one-hot id, so a UAV's values change only with what it observes (it acts on what lies within its
+    one MLP shared by the UAVs (``depth`` hidden layers of ``hidden`` units, ReLU) reading the observation, the UAV's
+    one-hot id and which positions its moves reach it hears another UAV hold (:class:`HeardMoves`), so a UAV's
+    values change only with what it observes (it acts on what lies within its
     ``comm_radius``); trained centrally through the mixer, which may read the world's state.
+
+    With ``env.message_size=d`` a linear layer on the last hidden layer and a tanh give the ``d`` numbers the UAV sends
+    (:meth:`message`), learned end to end: in the loss, the messages a UAV heard are those the network sends now from
+    the senders' previous observations (:meth:`forward`'s ``previous``), so the receiver's TD error reaches the
+    sender's weights through one step of communication (DIAL, Foerster et al., NeurIPS 2016, truncated to one step).
 
     Example:
         >>> env = UAVSpectrumEnv(batch_size=3, grid=(4, 4), num_uavs=2, observation="local", comm_radius=1.0)
@@ -192,31 +228,91 @@ class LocalQNet(nn.Module):
 
     def __init__(self, env: UAVSpectrumEnv, hidden: int, depth: int):
         super().__init__()
-        N, dev = env.num_uavs, env.device
-        sizes = [env.observation_size + N, *[hidden] * (depth + 1), env.num_actions]
+        cfg, N, dev = env.cfg, env.num_uavs, env.device
+        self.held = HeardMoves(env)
+        sizes = [env.observation_size + N + len(self.held.moves), *[hidden] * (depth + 1), env.num_actions]
         self.layers = nn.ModuleList(nn.Linear(a, b, device=dev) for a, b in zip(sizes, sizes[1:], strict=False))
         self.register_buffer("ids", torch.eye(N, device=dev))
+        self.message_size = d = cfg.message_size
+        self.speaker = nn.Linear(hidden, d, device=dev) if d else None
+        # a local observation: its own part, then N - 1 slots ending with the sender's message (physics.sensing)
+        self.slot = local_slot_features(cfg.energy != "none", cfg.num_levels > 1, d)
+        self.own = env.observation_size - (N - 1) * self.slot
+        self.register_buffer("others", (torch.arange(N, device=dev)[:, None] + torch.arange(1, N, device=dev)) % N)
+        self.loss_keys = [("agents", "observation"), *([("agents", "previous"), "has_previous"] if d else [])]
+        """What the loss reads: the observation, and with messages the previous observations they were sent from."""
 
-    def forward(self, observation: torch.Tensor, params: TensorDictBase = None) -> torch.Tensor:
-        """The values ``[*, N, A]``; ``params``: the structure of ``TensorDict.from_module(self)`` (the target copy in
-        the loss) in place of the module's own parameters."""
-        x = torch.cat([observation, self.ids.expand(*observation.shape[:-1], -1)], -1)
-        last = len(self.layers) - 1
-        for i, layer in enumerate(self.layers):
-            own = params is None
-            weight = layer.weight if own else params["layers", str(i), "weight"]
-            bias = layer.bias if own else params["layers", str(i), "bias"]
-            x = nn.functional.linear(x, weight, bias)
-            x = torch.relu(x) if i < last else x
+    def forward(
+        self,
+        observation: torch.Tensor,
+        previous: torch.Tensor | None = None,
+        has_previous: torch.Tensor | None = None,
+        params: TensorDictBase = None,
+    ) -> torch.Tensor:
+        """The values ``[*, N, A]``.
+
+        Args:
+            observation: the UAVs' observations ``[*, N, F]``.
+            previous: with messages, the UAVs' observations a step before ``[*, N, F]``: the messages heard are
+                sent again from them by this network (the loss); None: the messages as observed (acting).
+            has_previous: ``[*]`` whether there was a step before (after a reset the messages heard are zeros).
+            params: the structure of ``TensorDict.from_module(self)`` (the target copy in the loss) in place of the
+                module's own parameters.
+        """
+        if previous is not None:
+            observation = self._heard(observation, previous, has_previous, params)
+        weight, bias = self._layer(len(self.layers) - 1, params)
+        return nn.functional.linear(self._hidden(observation, params), weight, bias)
+
+    def message(self, observation: torch.Tensor, params: TensorDictBase = None) -> torch.Tensor:
+        """``[*, N, d]`` what each UAV sends, in (-1, 1), from its observation ``[*, N, F]``."""
+        hidden = self._hidden(observation, params)
+        own = params is None
+        weight = self.speaker.weight if own else params["speaker", "weight"]
+        bias = self.speaker.bias if own else params["speaker", "bias"]
+        return torch.tanh(nn.functional.linear(hidden, weight, bias))
+
+    def _hidden(self, observation: torch.Tensor, params) -> torch.Tensor:
+        ids = self.ids.expand(*observation.shape[:-1], -1)
+        x = torch.cat([observation, ids, self.held(observation).to(observation.dtype)], -1)
+        for i in range(len(self.layers) - 1):
+            x = torch.relu(nn.functional.linear(x, *self._layer(i, params)))
         return x
+
+    def _layer(self, i: int, params) -> tuple[torch.Tensor, torch.Tensor]:
+        if params is None:
+            return self.layers[i].weight, self.layers[i].bias
+        return params["layers", str(i), "weight"], params["layers", str(i), "bias"]
+
+    def _heard(self, observation, previous, has_previous, params) -> torch.Tensor:
+        """``observation`` with each slot's message (where the sender is heard, after a first step) replaced by what
+        this network sends from the sender's ``previous`` observation."""
+        d, N = self.message_size, len(self.ids)
+        sent = self.message(previous, params)[..., self.others, :]  # [*, N, N - 1, d]: each UAV's senders, in order
+        slots = observation[..., self.own :].unflatten(-1, (N - 1, self.slot))
+        heard = (slots[..., 3:4] > 0) & has_previous.view(*has_previous.shape, 1, 1, 1)
+        slots = torch.cat([slots[..., : self.slot - d], torch.where(heard, sent, slots[..., self.slot - d :])], -1)
+        return torch.cat([observation[..., : self.own], slots.flatten(-2)], -1)
 
 
 class LocalGreedy(nn.Module):
-    """Each UAV's best allowed action ``[*, N]`` from its own values and mask ``[*, N, A]``: no UAV reads another's
-    (a move into a cell another UAV takes is cancelled by the environment, docs/model.md)."""
+    """Each UAV's best allowed action ``[*, N]`` from its own values, mask and observation ``[*, N, ...]``: no move
+    into a position it hears another UAV hold (:class:`HeardMoves`; such a move would be cancelled, docs/model.md,
+    and a UAV that keeps trying it never moves again), and no UAV reads another's values.
 
-    def forward(self, values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        return values.masked_fill(~mask, -math.inf).argmax(-1)
+    Args:
+        env: an environment of the model (``env.observation=local``).
+    """
+
+    def __init__(self, env: UAVSpectrumEnv):
+        super().__init__()
+        self.held = HeardMoves(env)
+        moves = [0, 1, 2, 3] + ([CLIMB, CLIMB + 1] if env.cfg.num_levels > 1 else [])
+        self.register_buffer("move_actions", torch.tensor(moves))
+
+    def forward(self, values: torch.Tensor, mask: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        blocked = torch.zeros_like(mask).index_copy(-1, self.move_actions, self.held(observation))
+        return values.masked_fill(blocked | ~mask, -math.inf).argmax(-1)
 
 
 class ValidGreedy(nn.Module):

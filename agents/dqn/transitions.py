@@ -39,16 +39,20 @@ from .networks import LEVELS, PositionIndex, position_numbers
 
 _OBSERVED = [("agents", "observation"), ("agents", "action_mask"), "positions", "tasks", "state"]
 _OUTCOME = ["reward", "done", "terminated"]  # of "next", stored as they are
+_PREVIOUS = ["heard_messages", "previous_code", "previous_heard", "has_previous"]  # CompactTransitions.with_previous
 STEPS = "steps_to_next_obs"  # n-step returns: the steps a reward sums (TorchRL's key, its losses read it)
 
 
 def transition_keys(world: World, action_keys: list, n_step: int = 1) -> list:
     """The entries of a full transition (what the loss reads), ``"levels"`` with altitude levels, ``"nodes"`` with
-    random layouts and ``"steps_to_next_obs"`` with n-step returns (``n_step > 1``)."""
+    random layouts, ``"steps_to_next_obs"`` with n-step returns (``n_step > 1``), and with messages what
+    :meth:`CompactTransitions.with_previous` adds."""
     observed = _observed(world)
     layout = ["nodes"] if world.layouts.fixed is None else []
     steps = [STEPS] if n_step > 1 else []
-    return observed + layout + steps + action_keys + [("next", k) for k in observed + _OUTCOME]
+    heard = [("agents", "message"), *_PREVIOUS] if world.cfg.message_size else []
+    energy = ["previous_energy"] if heard and world.energy is not None else []
+    return observed + layout + steps + action_keys + heard + energy + [("next", k) for k in observed + _OUTCOME]
 
 
 def _observed(world: World) -> list:
@@ -112,9 +116,38 @@ class CompactTransitions(Transform):
         longest = min(n_step, world.cfg.max_steps)
         self.steps_dtype = next(d for d in (torch.int8, torch.int16, torch.int32) if longest <= torch.iinfo(d).max)
 
+    def with_previous(self, episodes: TensorDictBase) -> TensorDictBase:
+        """``[W, T]`` episodes (each from a reset), with messages (``env.message_size``) given what their transitions'
+        messages are rebuilt from: ``heard_messages`` (those sent a step before, which each observation shows),
+        ``previous_code``, ``previous_heard`` and under an energy model ``previous_energy`` (the step before's
+        configuration and the messages it showed: the senders' previous observations, from which the loss sends the
+        messages again) and ``has_previous`` (False at an episode's first step); without messages, as they are."""
+        if not self.world.cfg.message_size:
+            return episodes
+
+        def before(x: torch.Tensor) -> torch.Tensor:  # each step's value at the step before (zeros at the first)
+            return torch.cat([torch.zeros_like(x[:, :1]), x[:, :-1]], 1)
+
+        heard = before(episodes.get(("agents", "message")))
+        code = 2 * self.position(episodes.get("positions"), episodes.get(LEVELS, None)) + episodes.get("tasks")
+        W, T = episodes.batch_size
+        episodes.set("heard_messages", heard)
+        episodes.set("previous_heard", before(heard))
+        episodes.set("previous_code", before(code))
+        episodes.set("has_previous", (torch.arange(T, device=code.device) > 0).expand(W, T))
+        if self.world.energy is not None:
+            episodes.set("previous_energy", before(self.world.energy_features(episodes.get("state"))))
+        return episodes
+
     def _inv_call(self, td: TensorDictBase) -> TensorDictBase:
         world = self.world
         stored = {"action": td.get(("agents", "action")).to(torch.int8)}
+        if world.cfg.message_size:  # the messages each observation shows, and the step before's configuration
+            stored.update(messages=td.get("heard_messages"), has_previous=td.get("has_previous"))
+            stored.update(previous_code=td.get("previous_code").to(self.code_dtype))
+            stored.update(previous_messages=td.get("previous_heard"))
+            if world.energy is not None:
+                stored["previous_energy"] = td.get("previous_energy")
         if self.joint:
             stored["joint_action"] = td.get("joint_action").to(torch.int16)
         if world.layouts.fixed is None:
@@ -122,6 +155,8 @@ class CompactTransitions(Transform):
         if STEPS in td.keys():
             stored[STEPS] = td.get(STEPS).to(self.steps_dtype)
         nxt = {key: td.get(("next", key)) for key in _OUTCOME}
+        if world.cfg.message_size:  # what the next observation shows: the messages sent at this step
+            nxt["messages"] = td.get(("agents", "message"))
         for holder, step in ((stored, td), (nxt, td.get("next"))):
             code = 2 * self.position(step.get("positions"), step.get(LEVELS, None)) + step.get("tasks")
             holder["code"] = code.to(self.code_dtype)
@@ -137,10 +172,13 @@ class CompactTransitions(Transform):
         def both(key):  # now and next, rebuilt in one call
             return torch.cat([td.get(key), nxt.get(key)])
 
-        energy = both("energy") if self.world.energy is not None else None
-        nodes = td.get("nodes") if self.world.layouts.fixed is None else None
-        out = self.world.configurations(both("code").long(), energy, None if nodes is None else nodes.repeat(2, 1, 1))
+        world, messages = self.world, self.world.cfg.message_size
+        energy = both("energy") if world.energy is not None else None
+        nodes = td.get("nodes") if world.layouts.fixed is None else None
+        nodes_twice = None if nodes is None else nodes.repeat(2, 1, 1)
+        out = world.configurations(both("code").long(), energy, nodes_twice, both("messages") if messages else None)
         now, after = ({key: value[i * B : (i + 1) * B] for key, value in out.items()} for i in (0, 1))
+        observed = now["observation"]
         full = self._step(now, B, td.device)
         full.get("agents").set("action", td.get("action").long())
         if self.joint:
@@ -152,6 +190,13 @@ class CompactTransitions(Transform):
         following = self._step(after, B, td.device)
         for key in _OUTCOME:
             following.set(key, nxt.get(key))
+        if messages:  # the observations the messages heard were sent from: the step before's, and this one
+            energy = td.get("previous_energy") if world.energy is not None else None
+            previous = world.configurations(td.get("previous_code").long(), energy, nodes, td.get("previous_messages"))
+            full.get("agents").set("previous", previous["observation"])
+            full.set("has_previous", td.get("has_previous"))
+            following.get("agents").set("previous", observed)
+            following.set("has_previous", torch.ones_like(td.get("has_previous")))
         full.set("next", following)
         return full
 

@@ -49,11 +49,14 @@ def test_the_parameter_counts_are_the_networks_built(options):
         )
         built = parameters(SetQCore(A, energy, hidden, heads, depth))
         assert built == network_sizes.set_parameters(A, energy, hidden, heads, depth)
-        local = UAVSpectrumEnv(batch_size=1, observation="local", comm_radius=1.0, **options)
+        local = UAVSpectrumEnv(batch_size=1, observation="local", comm_radius=1.0, message_size=heads, **options)
         inputs = network_sizes.local_inputs(local.cfg)
-        assert inputs == local.observation_size + N
+        assert inputs == local.observation_size + N + 4
         built = parameters(LocalQNet(local, hidden, depth))
-        assert built == network_sizes.team_parameters(N, A, energy, "factored", hidden, depth, local=inputs)
+        counted = network_sizes.team_parameters(
+            N, A, energy, "factored", hidden, depth, local=inputs, message_size=heads
+        )
+        assert built == counted
 
 
 def refusal(*overrides: str) -> str | None:

@@ -114,6 +114,22 @@ def _held_out_city(index: int, environment: str, num_uavs: int) -> Task:
     )
 
 
+def _decentralised(index: int, num_uavs: int, side: int, radius: float | None) -> Task:
+    """``n6_10x10`` (N = 6) or ``large_20x20`` (N = 10) with local observations within ``radius`` cells (None: every
+    UAV and node heard)."""
+    shown = "full" if radius is None else f"r{radius:g}"
+    heard = "every UAV and node" if radius is None else f"within {radius:g} cell{'' if radius == 1 else 's'}"
+    return _task(
+        index,
+        f"dec_n{num_uavs}_{side}x{side}_{shown}",
+        "n6_10x10" if num_uavs == 6 else "large_20x20",
+        f"N = {num_uavs} on {side}x{side}, each UAV observing {heard}",
+        observation="local",
+        comm_radius=radius,
+    )
+
+
+COMM_RADII = (0.0, 1.0, 2.0, 4.0, None)  # the decentralised suite's radii in cells (None: full)
 CITY_ENVIRONMENTS = ("suburban", "urban", "dense_urban", "highrise")
 # the index fixes a task's seeds: a new task takes a new index, an old one keeps its own
 _ALL = [
@@ -139,6 +155,8 @@ _ALL = [
     _task(18, "tiny_energy", "energy_4x4", "energy_4x4 on 3x3 (smoke-sized)", grid=(3, 3)),
     *(_held_out_city(19 + k, environment, 6) for k, environment in enumerate(CITY_ENVIRONMENTS)),
     *(_held_out_city(23 + k, environment, 10) for k, environment in enumerate(CITY_ENVIRONMENTS)),
+    *(_decentralised(27 + k, 6, 10, radius) for k, radius in enumerate(COMM_RADII)),
+    *(_decentralised(32 + k, 10, 20, radius) for k, radius in enumerate(COMM_RADII)),
 ]
 TASKS = {task.name: task for task in _ALL}
 SUITES = {
@@ -147,6 +165,7 @@ SUITES = {
     "energy": [TASKS[name] for name in ("energy_4x4", "energy_6x6", "persistent_10x10")],
     "zero_shot": [task for task in _ALL if task.name.startswith("zs_")],
     "city": [task for task in _ALL if task.name.startswith("city_")],
+    "decentralised": [task for task in _ALL if task.name.startswith("dec_")],
     "tiny": [TASKS["tiny_3x3"], TASKS["tiny_energy"]],
 }
 SUITES_TEXT = ", ".join(SUITES)
