@@ -30,8 +30,9 @@ LOCAL = [
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
-def greedy_actions(agent: DQNAgent, code: torch.Tensor, messages=None) -> torch.Tensor:
-    """``[W, N]`` the agent's greedy actions at the configurations ``code`` ``[W, N]`` of its training world."""
+def greedy_actions(agent: DQNAgent, code: torch.Tensor, messages=None) -> tuple:
+    """The agent's greedy actions ``[W, N]`` (and with messages what the UAVs send ``[W, N, d]``) at the
+    configurations ``code`` ``[W, N]`` of its training world, the messages heard ``[W, N, d]``."""
     world = agent.groups[0].env.world
     out = world.configurations(code) if messages is None else world.configurations(code, messages=messages)
     td = TensorDict(
@@ -43,34 +44,39 @@ def greedy_actions(agent: DQNAgent, code: torch.Tensor, messages=None) -> torch.
         },
         [len(code)],
     )
-    return agent.groups[0].greedy(td)["agents", "action"]
+    out = agent.groups[0].greedy(td)["agents"]
+    return (out["action"], out["message"]) if messages is not None else (out["action"],)
 
 
-@pytest.mark.parametrize("mixer", ["vdn", "qmix"])
-def test_a_local_uav_acts_alike_whatever_lies_beyond_its_range(compose_cfg, mixer):
-    """UAV 0's greedy action under the trained local DQN (VDN, or QMIX whose mixer alone reads the state) is the same
-    when every UAV beyond its range moves elsewhere beyond it and switches task; the central DQN's changes (this test
-    can fail)."""
+@pytest.mark.parametrize("mixer, message_size", [("vdn", 0), ("qmix", 0), ("vdn", 2)])
+def test_a_local_uav_acts_alike_whatever_lies_beyond_its_range(compose_cfg, mixer, message_size):
+    """UAV 0's greedy action (and message) under the trained local DQN (VDN, or QMIX whose mixer alone reads the
+    state; with learned messages) is the same when every UAV beyond its range moves elsewhere beyond it, switches task
+    and sent another message; the central DQN's changes (this test can fail)."""
     gen = torch.Generator().manual_seed(3)
     agents = {}
     for observation in ("local", "central"):
-        overrides = [*LOCAL, f"agent.mixer={mixer}"]
+        overrides = [*LOCAL, f"agent.mixer={mixer}", f"env.message_size={message_size}"]
         if observation == "central":
-            overrides = [o for o in overrides if not o.startswith(("env.observation", "env.comm_radius"))]
+            overrides = [o for o in overrides if not o.startswith(("env.observation", "env.comm_radius", "env.mess"))]
         cfg = compose_cfg("agent=dqn", *overrides)
         agents[observation] = agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
         for _ in range(5):
             agent.train_iteration()
-    codes, moved = [], []
+    codes, moved, sent, heard = [], [], [], []
     for _ in range(300):
         code = 2 * torch.randperm(36, generator=gen)[:4] + torch.randint(0, 2, (4,), generator=gen)
-        far, _ = perturbed_out_of_range(code, torch.zeros(4, 0), (6, 6), 2.0, gen)
+        messages = 2 * torch.rand(4, message_size, generator=gen) - 1
+        far, far_messages = perturbed_out_of_range(code, messages, (6, 6), 2.0, gen)
         codes.append(code)
         moved.append(far)
+        sent.append(messages)
+        heard.append(far_messages)
     codes, moved = torch.stack(codes), torch.stack(moved)
-    local = [greedy_actions(agents["local"], c)[:, 0] for c in (codes, moved)]
-    assert torch.equal(*local)
-    central = [greedy_actions(agents["central"], c)[:, 0] for c in (codes, moved)]
+    sent, heard = (torch.stack(m) if message_size else None for m in (sent, heard))
+    local = [greedy_actions(agents["local"], c, m) for c, m in ((codes, sent), (moved, heard))]
+    assert all(torch.equal(a[:, 0], b[:, 0]) for a, b in zip(*local, strict=True))
+    central = [greedy_actions(agents["central"], c)[0][:, 0] for c in (codes, moved)]
     assert (central[0] != central[1]).sum() > 0
 
 
@@ -88,3 +94,37 @@ def test_the_local_dqn_trains_saves_loads_and_evaluates(compose_cfg, tmp_path):
     )
     assert first == second
     assert 0.0 < first["eval/optimality"] <= 1.0 + 1e-9
+
+
+def test_messages_are_learned_through_the_receivers_loss(compose_cfg):
+    """With env.message_size=2 the loss sends the heard messages again from the senders' previous observations: the
+    sending layer gets a gradient from the receivers' TD errors, and training moves it."""
+    cfg = compose_cfg("agent=dqn", *LOCAL, "env.message_size=2")
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    speaker = agent.groups[0].values.module.speaker
+    before = speaker.weight.detach().clone()
+    while len(agent.groups[0].buffer) < int(cfg.agent.learning_starts):
+        agent.train_iteration()
+    batch = agent.groups[0].buffer.sample()
+    assert batch["has_previous"].any() and not batch["has_previous"].all()
+    agent.optimizer.zero_grad()
+    agent.network.td_loss(batch, agent.groups[0]).backward()
+    assert speaker.weight.grad.abs().sum() > 0
+    agent.train_iteration()
+    assert not torch.equal(speaker.weight.detach(), before)
+
+
+def test_kept_transitions_with_messages_rebuild_what_was_collected(compose_cfg):
+    """The replay buffer keeps configurations and the messages sent: the observations rebuilt from them are those
+    collected bit for bit, and each step's previous observation is the one a step before."""
+    cfg = compose_cfg("agent=dqn", *LOCAL, "env.message_size=2", "env.energy=follow_up", "env.base=[-1,0]")
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    group = agent.groups[0]
+    batch = group.transitions.with_previous(group.env.rollout(10, group.policies.explore))  # [W, T]
+    full = batch.reshape(-1).select(*group.keys)
+    rebuilt = group.transitions(group.transitions.inv(full))
+    for key in [("agents", "observation"), ("next", "agents", "observation"), "state"]:
+        assert torch.equal(rebuilt[key], full[key]), key
+    previous = rebuilt["agents", "previous"].view(*batch.shape, *rebuilt["agents", "previous"].shape[1:])
+    assert torch.equal(previous[:, 1:], batch["agents", "observation"][:, :-1])
+    assert torch.equal(rebuilt["next", "agents", "previous"], full["agents", "observation"])
