@@ -30,6 +30,15 @@ def observation_with_nodes(observation: torch.Tensor, state: torch.Tensor) -> to
     return torch.cat([observation, nodes.expand(*observation.shape[:-1], NODE_FEATURES)], -1)
 
 
+def _others(x: torch.Tensor) -> torch.Tensor:
+    """``[W, N, N - 1, ...]`` each UAV's others of ``x`` ``[W, N, ...]``, in the order ``i+1, ..., i+N-1`` (mod N): a
+    window over the rows twice (a view, no gather)."""
+    W, N, *rest = x.shape
+    inner = x[0, 0].numel()
+    twice = torch.cat([x, x], 1)
+    return twice.as_strided((W, N, N - 1, *rest), (2 * N * inner, inner, inner, *twice.stride()[2:]), inner)
+
+
 class Observations:
     """The World's observation assembly (a mixin of :class:`~uavrl.envs.world.World`): it reads the World's parts
     (``dynamics``, ``energy``), its per-code tables (:class:`~.tables.LayoutTables`) and its state."""
@@ -111,20 +120,19 @@ class Observations:
         parts = [own, *([] if energy is None else [energy]), *([] if vertical is None else [vertical])]
         if N == 1:
             return torch.cat(parts, -1)
-        others = self._others(N)  # [N, N - 1]
-        code_j = torch.cat([code, code], 1).as_strided((W, N, N - 1), (2 * N, 1, 1), 1)  # code[:, others]
+        code_j = _others(code)
         if self._pair_slot is None:
             slot = self._uav_slots((code >> 1).unsqueeze(-1).expand(W, N, N - 1), code_j)
         else:
             rows = torch.add(code_j, (code >> 1).unsqueeze(-1), alpha=2 * self._slots).view(-1)
             slot = self._pair_slot.view(-1, 4).index_select(0, rows).view(W, N, N - 1, 4)
-        extra = [*([] if energy is None else [energy[:, others]])]
+        extra = [*([] if energy is None else [_others(energy)])]
         if level is not None:
-            extra.append((level[:, others] - level.unsqueeze(-1)).unsqueeze(-1))
+            extra.append((_others(level) - level.unsqueeze(-1)).unsqueeze(-1))
         if messages is not None:
-            extra.append(messages[:, others])
-        if extra:  # heard: the slot's fourth entry
-            slot = torch.cat([slot, torch.cat(extra, -1).where(slot[..., 3:] > 0, 0.0)], -1)
+            extra.append(_others(messages))
+        if extra:  # zeros where not heard (the slot's fourth entry), as the slot's own
+            slot = torch.cat([slot, *extra], -1).where(slot[..., 3:] > 0, 0.0)
         parts.append(slot.flatten(-2))
         return torch.cat(parts, -1)
 
@@ -149,10 +157,6 @@ class Observations:
         heard = apart.square().sum(-1) <= self.cfg.comm_radius_cells**2
         slot = torch.cat([apart / self._node_scale, torch.ones_like(apart[..., :1])], -1)
         return slot.where(heard.unsqueeze(-1), 0.0).flatten(-2).float()
-
-    def _others(self, N: int) -> torch.Tensor:
-        """``[N, N - 1]`` the other UAVs of each, in the order ``i+1, ..., i+N-1`` (mod N)."""
-        return (torch.arange(N, device=self.device)[:, None] + torch.arange(1, N, device=self.device)) % N
 
     def energy_features(self, state: torch.Tensor) -> torch.Tensor | None:
         """``[..., N, 2]`` each UAV's battery and service flag as the ``state`` ``[..., S]`` shows them (what
