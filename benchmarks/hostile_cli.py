@@ -1,6 +1,6 @@
 """Hostile command lines against every command, each run as a whole process, and what each one got.
 
-    python benchmarks/hostile_cli.py [--group old|new|cities|all] [--timeout 60] [--jobs 2] [--only WORD] [--out X.json]
+    python benchmarks/hostile_cli.py [--group old|new|cities|local|all] [--timeout 60] [--jobs 2] [--only WORD] [--out X.json]
 
 Every case is a mistake a user could type (sizes that cannot fit, settings that cannot go together, values of the
 wrong kind, paths that are no run, options a part does not read), on ``uavrl.train``, ``uavrl.evaluate``,
@@ -9,7 +9,8 @@ group); the ``new`` group holds the benchmark (``uavrl.bench``: its suites and s
 references' cache, ``compare``, ``leaderboard``, ``list``), the DQN's and the evaluation's newer options (n-step
 returns, prioritized replay, the curriculum, demonstrations, the lookahead), large grids and run directories holding
 another run's checkpoint; the ``cities`` group the cities of buildings, the altitude levels, ``agent.cities`` and
-the ``city`` suite.  The script first makes its own fixtures in a temporary directory (a tabular run and a
+the ``city`` suite; the ``local`` group the local observations, the communication radius, messages and the
+``decentralised`` suite.  The script first makes its own fixtures in a temporary directory (a tabular run and a
 size-free DQN run, trained for a few seconds; a text file, a FIFO, a directory with no run; a sentinel ``notes.txt``
 in each; for the new group also a team DQN run, copies of it holding the tabular run's checkpoint, a results file of
 ours and malformed ones, caches with damaged or re-signed entries, links to ``/dev/zero``, 20 GB sparse files, a
@@ -549,7 +550,38 @@ CITY_CASES = [
     ("bench", "cities agent=random"),
 ]
 
-GROUPS = {"old": CASES, "new": NEW_CASES, "cities": CITY_CASES}
+L = "agent=dqn env.observation=local agent.iterations=1 agent.worlds=2 eval.num_starts=2"  # local observations
+LOCAL_CASES = [
+    # ---------------------------------------------------------------- local observations and messages
+    ("train", "agent=random eval.num_starts=2 env.observation=nearby"),
+    ("train", "agent=random eval.num_starts=2 env.observation=Local"),
+    ("train", "agent=random eval.num_starts=2 env.comm_radius=2"),
+    ("train", "agent=random eval.num_starts=2 env.message_size=4"),
+    ("train", f"{L} env.comm_radius=-1"),
+    ("train", f"{L} env.comm_radius=inf"),
+    ("train", f"{L} env.comm_radius=nan"),
+    ("train", f"{L} env.comm_radius=abc"),
+    ("train", f"{L} env.comm_radius=[1,2]"),
+    ("train", f"{L} env.message_size=-1"),
+    ("train", f"{L} env.message_size=65"),
+    ("train", f"{L} env.message_size=2.5"),
+    ("train", f"{L} env.message_size=1000000000000"),
+    ("train", f"{L} env.message_size=true"),
+    ("train", f"{L} agent.head=joint env.grid=[3,3]"),
+    ("train", f"{L} agent.network=set agent.mixer=mean"),
+    ("train", f"{L} env.message_size=2 agent.n_step=3"),
+    ("train", f"{L} eval.lookahead=1 agent.mixer=vdn"),
+    ("train", "agent=tabular env.observation=local env.grid=[3,3]"),
+    ("train", f"{L} env.grid=[3000,3000] env.num_uavs=2000"),
+    ("train", f"{L} env.num_uavs=1000 env.grid=[100,100] env.message_size=64"),
+    ("evaluate", "checkpoint={tab} eval.num_starts=2 env.observation=local"),
+    ("evaluate", "checkpoint={set} eval.num_starts=2 env.comm_radius=2"),
+    ("benchmarl", "algorithm=mappo task=uavrl/tiny_4x4 env.observation=local env.message_size=2"),
+    ("bench", "decentralised agent=random tasks=[dec_n6_10x10_r3]"),
+    ("bench", "decentralized agent=random"),
+]
+
+GROUPS = {"old": CASES, "new": NEW_CASES, "cities": CITY_CASES, "local": LOCAL_CASES}
 CACHE_RECOMPUTED = r"warning: the references' cache entry .* is damaged \(.*\): recomputed and rewritten"
 # cases whose documented answer is to go on and say so: the pattern its output must hold (else it is "accepted")
 HONOURED = {
@@ -906,7 +938,7 @@ def summary(results: list[tuple], options) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--group", choices=("old", "new", "cities", "all"), default="all", help="which cases (module doc)"
+        "--group", choices=("old", "new", "cities", "local", "all"), default="all", help="which cases (module doc)"
     )
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds before a case counts as a hang")
     parser.add_argument("--jobs", type=int, default=2, help="cases run at once")
