@@ -30,7 +30,7 @@ import numbers
 import sys
 
 from .physics import radio
-from .physics.sensing import LOCAL_NODE_FEATURES, PAIR_SLOT_ROWS, local_slot_features
+from .physics.sensing import LOCAL_NODE_FEATURES, local_slot_features
 
 NODE_NAMES = ("PT", "PR", "S", "E")
 OWN_FEATURES = 13  # a UAV's (x, y, task) and the contributions at its cell and its 4 neighbours
@@ -472,9 +472,10 @@ def world_bytes(cfg, batch_size: int) -> int:
         per_world += 120 * N
     pair_tables = (2 * C) ** 2 * 200 if N == 2 and layouts == 1 and (2 * C) ** 2 <= 1 << 16 and not cfg.local else 0
     local = 0
-    if cfg.local:  # the nodes heard by code per layout, the (position, code) slot table, a step's slots and messages
+    if cfg.local:  # the nodes heard by code per layout, the slots by displacement, a step's slots and messages
         slots = C + (cfg.energy != "none")
-        local = 2 * slots * 4 * LOCAL_NODE_FEATURES * 2 * layouts + 16 * min(2 * slots * slots, PAIR_SLOT_ROWS)
+        heard = 2 * (2 * cfg.grid[0] - 1) * (2 * cfg.grid[1] - 1) * cfg.num_levels**2 * (5 if slots > C else 1)
+        local = 2 * slots * 4 * LOCAL_NODE_FEATURES * 2 * layouts + 16 * heard
         per_world += 3 * 4 * N * (N - 1) * local_slot_features(cfg.energy != "none", cfg.num_levels > 1, 0)
         per_world += 3 * 4 * N * N * cfg.message_size
     return 500 * C + 520 * C * layouts + B * per_world + pair_tables + local

@@ -33,7 +33,6 @@ OBSERVATIONS = ("central", "local")
 NODE_SLOT = 4  # a node as a UAV hears it: (dx, dy, dz, heard)
 LOCAL_NODE_FEATURES = 4 * NODE_SLOT  # PT, PR, S, E
 MAX_MESSAGE_SIZE = 64  # numbers a UAV sends a step; a message is a few symbols of a control channel, not a stream
-PAIR_SLOT_ROWS = 1 << 22  # the World reads another UAV's slot from a table of at most this many rows (64 MB)
 MESSAGE_BOUND = 1.0  # a message's numbers are clipped to [-1, 1]: a radio's bounded symbols
 
 

@@ -120,12 +120,10 @@ class Observations:
         parts = [own, *([] if energy is None else [energy]), *([] if vertical is None else [vertical])]
         if N == 1:
             return torch.cat(parts, -1)
-        code_j = _others(code)
-        if self._pair_slot is None:
-            slot = self._uav_slots((code >> 1).unsqueeze(-1).expand(W, N, N - 1), code_j)
-        else:
-            rows = torch.add(code_j, (code >> 1).unsqueeze(-1), alpha=2 * self._slots).view(-1)
-            slot = self._pair_slot.view(-1, 4).index_select(0, rows).view(W, N, N - 1, 4)
+        send = self._send_key.index_select(0, code.view(-1)).view(W, N)
+        hear = self._hear_key.index_select(0, (code >> 1).view(-1)).view(W, N, 1)
+        rows = (_others(send) - hear).view(-1)
+        slot = self._heard_slot.index_select(0, rows).view(W, N, N - 1, 4)
         extra = [*([] if energy is None else [_others(energy)])]
         if level is not None:
             extra.append((_others(level) - level.unsqueeze(-1)).unsqueeze(-1))
@@ -135,20 +133,6 @@ class Observations:
             slot = torch.cat([slot, *extra], -1).where(slot[..., 3:] > 0, 0.0)
         parts.append(slot.flatten(-2))
         return torch.cat(parts, -1)
-
-    def _uav_slots(self, cell: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
-        """``[*, 4]`` what a UAV at position ``cell`` hears of another at ``code`` (``[*]`` each):
-        ``(dx / (L1 - 1), dy / (L2 - 1), task, 1)`` within ``comm_radius`` of each other (their points in cells, in
-        float64), zeros otherwise or when either is out of service."""
-        other = code >> 1
-        mine, theirs = self._slot_xyz[cell], self._slot_xyz[other]
-        apart = theirs - mine
-        heard = (apart.square().sum(-1) <= self.cfg.comm_radius_cells**2) & (cell < self.num_positions)
-        heard &= other < self.num_positions
-        slot = torch.cat(
-            [apart[..., :2] / self._grid_scale, (code & 1).unsqueeze(-1), torch.ones_like(apart[..., :1])], -1
-        )
-        return slot.where(heard.unsqueeze(-1), 0.0).float()
 
     def _node_slots(self, xyz: torch.Tensor, nodes: torch.Tensor) -> torch.Tensor:
         """``[*, 16]`` what UAVs at points ``xyz`` ``[*, 3]`` (cells, float64) hear of the nodes ``[*, 4, 3]``

@@ -18,7 +18,6 @@ from ..config import RELAYING, ModelConfig
 from ..physics.channel import direct_terms, link_gains, rates_from_sums, relay_contributions
 from ..physics.dynamics import Dynamics
 from ..physics.rewards import U_STAR_REWARDS
-from ..physics.sensing import PAIR_SLOT_ROWS
 from ..solvers.optimum import optimum as exact_optimum
 
 
@@ -45,7 +44,9 @@ GRID_TABLES = (
     "_code_task",
     "_code_xyt",
     "_slot_xyz",
-    "_pair_slot",
+    "_heard_slot",
+    "_send_key",
+    "_hear_key",
 )
 
 # what World._set_layout computes for a layout (and the two-UAV pair tables from them)
@@ -115,14 +116,43 @@ class LayoutTables:
         self._code_xyt = torch.cat(
             [self._cell_xy[self._code_cell] / self._grid_scale, self._code_task[:, None]], -1
         ).float()  # [2C, 3] as observed
-        self._pair_slot = None  # local observations on small grids: each other UAV's slot by (position, code)
-        if cfg.local and self._slots * 2 * self._slots <= PAIR_SLOT_ROWS:
-            cell = torch.arange(self._slots, device=dev)
-            code = torch.arange(2 * self._slots, device=dev)
-            self._pair_slot = self._uav_slots(cell[:, None].expand(-1, len(code)), code.expand(len(cell), -1))
+        self._heard_slot = self._send_key = self._hear_key = None  # with local observations: the others' slots
+        if cfg.local:
+            self._build_heard_slots(positions)
         self._code_level = None  # with altitude levels, each code's level as observed, 0 to 1 (no slot off the grid)
         if cfg.num_levels > 1:
             self._code_level = (positions.level[self._code_cell] / (cfg.num_levels - 1)).float()
+
+    def _build_heard_slots(self, positions):
+        """What a UAV hears of another (:mod:`uavrl.envs.physics.sensing`), by their displacement: ``_heard_slot``
+        ``[R, 4]`` float32 holds ``(dx / (L1 - 1), dy / (L2 - 1), task, 1)`` for every displacement in cells, pair of
+        levels (the hearer's, the sender's) and sender's task within ``comm_radius`` (their points in float64), zeros
+        otherwise; the UAV at position ``p`` hears the one of code ``c`` in row ``_send_key[c] - _hear_key[p]``.  A
+        UAV out of service (position C) hears and is heard in rows of zeros.  Its size follows the grid and the
+        levels, not the positions or the team: ``2 (2 L1 - 1) (2 L2 - 1) L^2`` rows."""
+        cfg, dev, f64 = self.cfg, self.device, torch.float64
+        (L1, L2), L, C = cfg.grid, cfg.num_levels, self.num_positions
+        X, Y = 2 * L1 - 1, 2 * L2 - 1
+        # every row: (the hearer's level, the sender's level, dy, dx, the sender's task), row-major
+        hear, send, dy, dx, task = torch.meshgrid(
+            *(torch.arange(n, device=dev) for n in (L, L, Y, X, 2)), indexing="ij"
+        )
+        heights = torch.tensor(cfg.level_heights, dtype=f64, device=dev)
+        apart = torch.stack([(dx - (L1 - 1)).to(f64), (dy - (L2 - 1)).to(f64), heights[send] - heights[hear]], -1)
+        heard = apart.square().sum(-1) <= cfg.comm_radius_cells**2
+        slot = torch.cat([apart[..., :2] / self._grid_scale, task.unsqueeze(-1), torch.ones_like(apart[..., :1])], -1)
+        slot = slot.where(heard.unsqueeze(-1), 0.0).float().view(-1, 4)
+        # the row of (p, c): send(c) - hear(p), a displacement in mixed radix (X, Y, L L) then the task
+        x, y, level = positions.cell % L1, positions.cell // L1, positions.level
+        send_key = 2 * (x + X * (y + Y * level))
+        hear_key = 2 * (x - (L1 - 1) + X * (y - (L2 - 1) - Y * L * level))
+        if self._slots > C:  # out of service: the hearer's rows after the table, the sender's after those
+            span = int(send_key.max() - send_key.min())
+            hear_key = torch.cat([hear_key, (send_key.min() - len(slot)).view(1)])
+            send_key = torch.cat([send_key, (hear_key[:C].max() + len(slot) + span + 1).view(1)])
+            slot = torch.cat([slot, slot.new_zeros(int(send_key.max() - hear_key.min()) + 1 - len(slot), 4)])
+        self._heard_slot, self._hear_key = slot, hear_key
+        self._send_key = torch.add(self._code_task, send_key[self._code_cell])  # by code: its cell's key, its task
 
     def _set_layout(self, worlds: torch.Tensor):
         """Recompute the per-cell and per-code tables of ``worlds`` (indices into the tables) from ``self._nodes``."""

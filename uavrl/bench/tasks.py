@@ -114,18 +114,21 @@ def _held_out_city(index: int, environment: str, num_uavs: int) -> Task:
     )
 
 
-def _decentralised(index: int, num_uavs: int, side: int, radius: float | None) -> Task:
+def _decentralised(index: int, num_uavs: int, side: int, radius: float | None, message_size: int = 0) -> Task:
     """``n6_10x10`` (N = 6) or ``large_20x20`` (N = 10) with local observations within ``radius`` cells (None: every
-    UAV and node heard)."""
-    shown = "full" if radius is None else f"r{radius:g}"
+    UAV and node heard), and messages of ``message_size`` numbers."""
+    shown = ("full" if radius is None else f"r{radius:g}") + (f"_m{message_size}" if message_size else "")
     heard = "every UAV and node" if radius is None else f"within {radius:g} cell{'' if radius == 1 else 's'}"
+    messages = {"message_size": message_size} if message_size else {}
     return _task(
         index,
         f"dec_n{num_uavs}_{side}x{side}_{shown}",
         "n6_10x10" if num_uavs == 6 else "large_20x20",
-        f"N = {num_uavs} on {side}x{side}, each UAV observing {heard}",
+        f"N = {num_uavs} on {side}x{side}, each UAV observing {heard}"
+        + (f", messages of {message_size}" if message_size else ""),
         observation="local",
         comm_radius=radius,
+        **messages,
     )
 
 
@@ -157,6 +160,8 @@ _ALL = [
     *(_held_out_city(23 + k, environment, 10) for k, environment in enumerate(CITY_ENVIRONMENTS)),
     *(_decentralised(27 + k, 6, 10, radius) for k, radius in enumerate(COMM_RADII)),
     *(_decentralised(32 + k, 10, 20, radius) for k, radius in enumerate(COMM_RADII)),
+    _decentralised(37, 6, 10, 2.0, message_size=4),
+    _decentralised(38, 10, 20, 2.0, message_size=4),
 ]
 TASKS = {task.name: task for task in _ALL}
 SUITES = {
