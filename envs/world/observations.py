@@ -130,7 +130,9 @@ class Observations:
         if messages is not None:
             extra.append(_others(messages))
         if extra:  # zeros where not heard (the slot's fourth entry), as the slot's own
-            slot = torch.cat([slot, *extra], -1).where(slot[..., 3:] > 0, 0.0)
+            unheard = slot[..., 3:] == 0
+            slot = torch.cat([slot, *extra], -1)
+            slot[..., 4:].masked_fill_(unheard, 0.0)
         parts.append(slot.flatten(-2))
         return torch.cat(parts, -1)
 
