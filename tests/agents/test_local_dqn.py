@@ -128,3 +128,24 @@ def test_kept_transitions_with_messages_rebuild_what_was_collected(compose_cfg):
     previous = rebuilt["agents", "previous"].view(*batch.shape, *rebuilt["agents", "previous"].shape[1:])
     assert torch.equal(previous[:, 1:], batch["agents", "observation"][:, :-1])
     assert torch.equal(rebuilt["next", "agents", "previous"], full["agents", "observation"])
+
+
+def test_a_local_policy_acts_at_any_radius_and_never_on_central_observations(compose_cfg):
+    """A policy trained on local observations acts on its model at another communication radius (the same features)
+    and is refused, in one line, on central observations or another message size (the benchmark's n/a)."""
+    from uavrl.agents.schema import network_refusal
+    from uavrl.envs import UAVSpectrumEnv
+
+    cfg = compose_cfg("agent=dqn", *LOCAL)
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    run = agent.env_cfg
+    assert network_refusal(cfg, run.replace(comm_radius=4.0), run) is None
+    assert network_refusal(cfg, run.replace(comm_radius=None), run) is None
+    assert "acts only in its run's model" in network_refusal(
+        cfg, run.replace(observation="central", comm_radius=None), run
+    )
+    assert network_refusal(cfg, run.replace(message_size=2), run) is not None
+    policy = agent.policies()[0]
+    policy.bind_env(UAVSpectrumEnv(batch_size=2, config=run.replace(comm_radius=1.0)))
+    with pytest.raises(ValueError, match="local observations\\); the environment has central observations"):
+        policy.bind_env(UAVSpectrumEnv(batch_size=2, config=run.replace(observation="central", comm_radius=None)))

@@ -113,6 +113,10 @@ def test_a_policy_that_cannot_act_is_not_applicable_not_failed(scored):
 
 def test_suites_hold_the_tasks_asked_for():
     assert [t.name for t in SUITES["paper"]] == ["paper_6x6", "reference_code"]
+    local = {t.name: dict(t.options) for t in SUITES["decentralised"]}
+    assert {o["comm_radius"] for o in local.values()} == {0.0, 1.0, 2.0, 4.0, None}
+    assert all(o["observation"] == "local" for o in local.values()) and len(local) == 12
+    assert local["dec_n10_20x20_r2_m4"]["message_size"] == 4
     assert {dict(t.options)["num_uavs"] for t in SUITES["zero_shot"]} == {2, 6, 10, 20, 50}
     assert {dict(t.options)["layout"] for t in SUITES["zero_shot"]} == {"line", "random"}
 
