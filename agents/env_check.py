@@ -197,8 +197,13 @@ class CheckedPolicy(TensorDictModuleBase):
         self.in_keys, self.out_keys = list(policy.in_keys), list(policy.out_keys)
 
     def bind_env(self, env) -> CheckedPolicy:
-        """Act in ``env``: a one-line ValueError unless it has the run's model (:class:`RunEnvironment`)."""
+        """Act in ``env``: a one-line ValueError unless it has the run's model (:class:`RunEnvironment`); the
+        policy's own random draws (a module's ``restart()``: the local DQN's coins) start again, so an evaluation
+        plays the same whatever the policy played before."""
         self.run_env.check_env(env)
+        for module in self.policy.modules():
+            if hasattr(module, "restart"):
+                module.restart()
         return self
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:

@@ -33,6 +33,7 @@ from .networks import (
     LocalQNet,
     TeamQNet,
     ValidGreedy,
+    YieldToContenders,
     position_numbers,
     q_inputs,
 )
@@ -167,11 +168,22 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
             out_keys=[("agents", "action")],
         )
     greedy = TensorDictSequential(q, greedy_action)
-    if env.cfg.message_size:  # then what each UAV sends, from its own observation
-        speak = TensorDictModule(
-            q.module.message, in_keys=[("agents", "observation")], out_keys=[("agents", "message")]
+    if env.cfg.local:  # then a coin for a move another UAV may contend, and what each UAV sends, from its observation
+        contend = TensorDictModule(
+            YieldToContenders(env),
+            in_keys=[("agents", "action"), ("agents", "observation")],
+            out_keys=[("agents", "action")],
         )
-        greedy = TensorDictSequential(q, greedy_action, speak)
+        speak = (
+            []
+            if not env.cfg.message_size
+            else [
+                TensorDictModule(
+                    q.module.message, in_keys=[("agents", "observation")], out_keys=[("agents", "message")]
+                )
+            ]
+        )
+        greedy = TensorDictSequential(q, greedy_action, contend, *speak)
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
     explore = TensorDictSequential(greedy, exploration)
     return Policies(greedy, explore, exploration, greedy, spec, [("agents", "action")])

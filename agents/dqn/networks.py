@@ -25,6 +25,7 @@ from uavrl.envs import (
     observation_with_nodes,
 )
 from uavrl.envs.config import CLIMB, RELAYING, SENSING
+from uavrl.envs.physics.dynamics import SENSE
 from uavrl.envs.physics.grid import MOVES, cells_or_away
 from uavrl.envs.physics.sensing import local_slot_features
 
@@ -201,11 +202,21 @@ class HeardMoves(nn.Module):
         self.register_buffer("moves", torch.tensor(moves, dtype=torch.float32))  # [M, 3]
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        offset, heard = self._heard(observation)
+        return ((offset.unsqueeze(-2) == self.moves).all(-1) & heard).any(-2)
+
+    def contenders(self, observation: torch.Tensor) -> torch.Tensor:
+        """``[*, N, M]`` which of the positions its moves reach another heard UAV could move into too (one move from
+        it: one cell or one level away)."""
+        offset, heard = self._heard(observation)
+        return (((offset.unsqueeze(-2) - self.moves).abs().sum(-1) == 1) & heard).any(-2)
+
+    def _heard(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``([*, N, N - 1, 3], [*, N, N - 1, 1])``: each slot's offset in cells and levels, and whether it is heard."""
         slots = observation[..., self.own :].unflatten(-1, (self.num_uavs - 1, self.slot))
         level = slots[..., self.level_entry : self.level_entry + 1] if self.levels else torch.zeros_like(slots[..., :1])
-        offset = (torch.cat([slots[..., :2], level], -1) * self.scale).round()  # [*, N, N - 1, 3] in cells, levels
-        at = (offset.unsqueeze(-2) == self.moves).all(-1) & (slots[..., 3:4] > 0)  # [*, N, N - 1, M]
-        return at.any(-2)
+        offset = (torch.cat([slots[..., :2], level], -1) * self.scale).round()  # in cells, levels
+        return offset, slots[..., 3:4] > 0
 
 
 class LocalQNet(nn.Module):
@@ -313,6 +324,43 @@ class LocalGreedy(nn.Module):
     def forward(self, values: torch.Tensor, mask: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
         blocked = torch.zeros_like(mask).index_copy(-1, self.move_actions, self.held(observation))
         return values.masked_fill(blocked | ~mask, -math.inf).argmax(-1)
+
+
+class YieldToContenders(nn.Module):
+    """Each UAV's action ``[*, N]``, kept, or with probability ``1/2`` replaced by staying (keeping its cell and task)
+    where it is a move into a position that another UAV it hears could move into too (one move from it).
+
+    Two UAVs that move into one free cell are both cancelled (docs/model.md), and UAVs acting on their own
+    observations with a deterministic policy would try again forever; a coin each (from the module's own seeded
+    generator, started again by :meth:`restart`) lets one of them go first.  Decentralised: it reads the UAV's own
+    action and observation only.
+
+    Args:
+        env: an environment of the model (``env.observation=local``).
+        seed: seeds the coins.
+    """
+
+    def __init__(self, env: UAVSpectrumEnv, seed: int = 0):
+        super().__init__()
+        self.held = HeardMoves(env)
+        moves = [0, 1, 2, 3] + ([CLIMB, CLIMB + 1] if env.cfg.num_levels > 1 else [])
+        lookup = torch.full((env.num_actions,), -1, dtype=torch.long)
+        lookup[moves] = torch.arange(len(moves))
+        self.register_buffer("move_of_action", lookup)  # an action's move, -1 for the others
+        self.seed, self.generator = seed, torch.Generator(device=env.device)
+        self.restart()
+
+    def restart(self) -> None:
+        """The coins from the first again (an evaluation binding the policy to its environment calls it)."""
+        self.generator.manual_seed(self.seed)
+
+    def forward(self, action: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+        contended = self.held.contenders(observation)  # [*, N, M]
+        move = self.move_of_action[action]
+        at = contended.gather(-1, move.clamp(min=0).unsqueeze(-1)).squeeze(-1) & (move >= 0)
+        coin = torch.rand(action.shape, generator=self.generator, device=action.device) < 0.5
+        stay = SENSE + observation[..., 2].round().long()  # sense (4) or relay (5): the action that keeps its task
+        return torch.where(at & coin, stay, action)
 
 
 class ValidGreedy(nn.Module):

@@ -44,6 +44,9 @@ def greedy_actions(agent: DQNAgent, code: torch.Tensor, messages=None) -> tuple:
         },
         [len(code)],
     )
+    for module in agent.groups[0].greedy.modules():  # the same coins for every call
+        if hasattr(module, "restart"):
+            module.restart()
     out = agent.groups[0].greedy(td)["agents"]
     return (out["action"], out["message"]) if messages is not None else (out["action"],)
 
