@@ -236,6 +236,12 @@ class NumpyWorlds:
     """
 
     def __init__(self, cfg: ModelConfig, num_worlds: int, device):
+        if cfg.local:  # each UAV's observation here carries the world's nodes (observation_with_nodes)
+            reason = (
+                "the Gymnasium and PettingZoo adapters give each UAV the central observation and the nodes; act on "
+                "local observations in UAVSpectrumEnv (TorchRL, BenchMARL)"
+            )
+            raise InvalidOption("observation", cfg.observation, reason)
         self.cfg = cfg
         self.world = World(cfg, num_worlds, resolve_device(device), seed=0)
         self.was_reset = False

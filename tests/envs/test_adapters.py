@@ -378,3 +378,10 @@ def test_bad_input_is_one_line(call, error, message):
 def _reset(env):
     env.reset(seed=0)
     return env
+
+
+@pytest.mark.parametrize("adapter", [UAVSpectrumGymEnv, UAVSpectrumParallelEnv])
+def test_local_observations_are_refused_in_one_line(adapter):
+    """The adapters hand each UAV the central observation and the nodes: local observations are the TorchRL env's."""
+    with pytest.raises(ValueError, match="observation='local' is invalid: the Gymnasium and PettingZoo adapters"):
+        adapter(grid=(4, 4), num_uavs=2, observation="local")
