@@ -97,7 +97,7 @@ def test_no_module_imports_upward():
 # envs/'s layers in import order (docs/architecture.md): a module imports only earlier layers, or its own subpackage
 ENVS_LAYERS = [
     {"_moved", "compat", "errors"},  # _moved, errors: standard library; compat: TorchRL only
-    {"physics.radio", "physics.power"},  # standard library and the one-line errors
+    {"physics.radio", "physics.power", "physics.sensing"},  # standard library and the one-line errors
     {"limits"},
     {"rules"},
     {"config"},

@@ -174,6 +174,9 @@ BAD_OPTIONS = {
     "num_spares": f"{ENERGY} env.recharge_steps=2 env.num_spares=-1",
     "slot_s": f"{ENERGY} env.slot_s=0",
     "circuit_power_w": f"{ENERGY} env.circuit_power_w=-1",
+    "observation": "env.observation=nearby",
+    "comm_radius": "env.observation=local env.comm_radius=-1",
+    "message_size": "env.observation=local env.message_size=65",
 }
 
 
