@@ -524,7 +524,7 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
     when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
     number of UAVs, layout and, trained in a city, any other city (its environment, seed, channel environment and
     altitudes) of the same model otherwise; neither with altitude levels where it was trained without, or the
-    reverse; a policy on local observations at any communication radius."""
+    reverse."""
     levels, trained = env_cfg.num_levels > 1, run_cfg.num_levels > 1
     if levels != trained:
         return (
@@ -539,9 +539,7 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
     if size_free and env_cfg.replace(**same) != run_cfg:
         cities = ", the city (env.city and its options, env.environment) and the levels" if "city" in same else ""
         return f"only env.grid, env.num_uavs, env.layout{cities} may differ from the saved run's"
-    # a policy on local observations acts at any communication radius: its observations have the same features
-    radius = {"comm_radius": run_cfg.comm_radius} if env_cfg.local and run_cfg.local else {}
-    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps, **radius) == run_cfg:
+    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
     return (

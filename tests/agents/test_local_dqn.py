@@ -134,16 +134,17 @@ def test_kept_transitions_with_messages_rebuild_what_was_collected(compose_cfg):
 
 
 def test_a_local_policy_acts_at_any_radius_and_never_on_central_observations(compose_cfg):
-    """A policy trained on local observations acts on its model at another communication radius (the same features)
-    and is refused, in one line, on central observations or another message size (the benchmark's n/a)."""
+    """A policy trained on local observations acts at another communication radius when a user binds it there (the
+    same features), is scored by the benchmark and the evaluation command only at its own (a per-size policy acts in
+    its run's model), and is refused, in one line, on central observations or another message size."""
     from uavrl.agents.schema import network_refusal
     from uavrl.envs import UAVSpectrumEnv
 
     cfg = compose_cfg("agent=dqn", *LOCAL)
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
     run = agent.env_cfg
-    assert network_refusal(cfg, run.replace(comm_radius=4.0), run) is None
-    assert network_refusal(cfg, run.replace(comm_radius=None), run) is None
+    assert network_refusal(cfg, run, run) is None
+    assert "acts only in its run's model" in network_refusal(cfg, run.replace(comm_radius=4.0), run)
     assert "acts only in its run's model" in network_refusal(
         cfg, run.replace(observation="central", comm_radius=None), run
     )

@@ -129,7 +129,10 @@ BAD_ARGUMENTS = [
     (dict(tasks=["nope"]), "tasks='nope' is invalid: suite tiny has tiny_3x3, tiny_energy"),
     (dict(progress="yes"), "progress='yes' is invalid: give a callable taking one line, or None"),
     (dict(cache_dir=""), "cache_dir='' is invalid: give a directory's path, or None to keep no cache"),
-    (dict(suite=["tiny"]), "suite=['tiny'] is invalid: give one of paper, core, energy, zero_shot, city, decentralised, tiny"),
+    (
+        dict(suite=["tiny"]),
+        "suite=['tiny'] is invalid: give one of paper, core, energy, zero_shot, city, decentralised, tiny",
+    ),
     (dict(policy_factory="oracle"), "policy_factory='oracle' is invalid: give a callable env -> policy (module doc)"),
 ]
 
