@@ -55,7 +55,7 @@ def check_lookahead_levels(depth: int, altitudes_m, observation: str = "central"
     searches the team's joint actions from the central state."""
     if depth and observation == "local":
         reason = "the lookahead searches the team's joint actions from the central state, not what each UAV hears"
-        raise InvalidOption("eval.lookahead", depth, f"{reason} (env.observation='local'): give eval.lookahead=0")
+        raise InvalidOption("eval.lookahead", depth, f"{reason} (observation='local'): give eval.lookahead=0")
     if depth and altitudes_m is not None and len(altitudes_m) > 1:
         raise InvalidOption(
             "eval.lookahead",

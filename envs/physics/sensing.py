@@ -54,7 +54,7 @@ def check_observation(observation, comm_radius, message_size, physical: bool) ->
             raise InvalidOption("comm_radius", comm_radius, "only observation='local' reads it, not 'central'")
         number = isinstance(comm_radius, numbers.Real) and not isinstance(comm_radius, bool)
         if not (number and math.isfinite(comm_radius) and comm_radius >= 0):
-            reason = f"give a finite distance >= 0 in {unit}, or None for every UAV and node"
+            reason = f"give a finite distance >= 0 in {unit}, or None (null on a command line) for every UAV and node"
             raise InvalidOption("comm_radius", comm_radius, reason)
     integral = isinstance(message_size, numbers.Integral) and not isinstance(message_size, bool)
     if not (integral and 0 <= message_size <= MAX_MESSAGE_SIZE):
