@@ -1,6 +1,7 @@
 """Hostile command lines against every command, each run as a whole process, and what each one got.
 
-    python benchmarks/hostile_cli.py [--group old|new|cities|local|all] [--timeout 60] [--jobs 2] [--only WORD] [--out X.json]
+    python benchmarks/hostile_cli.py [--group old|new|cities|local|all] [--timeout 60] [--jobs 2] [--only WORD]
+        [--out X.json]
 
 Every case is a mistake a user could type (sizes that cannot fit, settings that cannot go together, values of the
 wrong kind, paths that are no run, options a part does not read), on ``uavrl.train``, ``uavrl.evaluate``,
