@@ -200,16 +200,19 @@ class HeardMoves(nn.Module):
         self.register_buffer("scale", torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1), max(cfg.num_levels - 1, 1)]))
         moves = [(dx, dy, 0) for dx, dy in MOVES] + ([(0, 0, 1), (0, 0, -1)] if self.levels else [])
         self.register_buffer("moves", torch.tensor(moves, dtype=torch.float32))  # [M, 3]
+        # slot k of UAV i holds UAV (i + k + 1) mod N (physics.sensing): a lower id where i + k + 1 >= N
+        lower = (torch.arange(N)[:, None] + torch.arange(1, N) >= N).unsqueeze(-1)  # [N, N - 1, 1]
+        self.register_buffer("lower", lower, persistent=False)
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         offset, heard = self._heard(observation)
         return ((offset.unsqueeze(-2) == self.moves).all(-1) & heard).any(-2)
 
     def contenders(self, observation: torch.Tensor) -> torch.Tensor:
-        """``[*, N, M]`` which of the positions its moves reach another heard UAV could move into too (one move from
-        it: one cell or one level away)."""
+        """``[*, N, M]`` which of the positions its moves reach a heard UAV of a lower id could move into too (one
+        move from it: one cell or one level away)."""
         offset, heard = self._heard(observation)
-        return (((offset.unsqueeze(-2) - self.moves).abs().sum(-1) == 1) & heard).any(-2)
+        return (((offset.unsqueeze(-2) - self.moves).abs().sum(-1) == 1) & heard & self.lower).any(-2)
 
     def _heard(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``([*, N, N - 1, 3], [*, N, N - 1, 1])``: each slot's offset in cells and levels, and whether it is heard."""
@@ -328,12 +331,14 @@ class LocalGreedy(nn.Module):
 
 class YieldToContenders(nn.Module):
     """Each UAV's action ``[*, N]``, kept, or with probability ``1/2`` replaced by staying (keeping its cell and task)
-    where it is a move into a position that another UAV it hears could move into too (one move from it).
+    where it is a move into a position that a UAV of a lower id it hears could move into too (one move from it).
 
     Two UAVs that move into one free cell are both cancelled (docs/model.md), and UAVs acting on their own
-    observations with a deterministic policy would try again forever; a coin each (from the module's own seeded
-    generator, started again by :meth:`restart`) lets one of them go first.  Decentralised: it reads the UAV's own
-    action and observation only.
+    observations with a deterministic policy would try again forever; a coin (from the module's own seeded
+    generator, started again by :meth:`restart`) for the UAV of the higher id lets the other go first, and a UAV of
+    the lowest id among those contending never waits.  The coin, not a rule, because the other UAV may not want the
+    position at all: a UAV that always yielded would wait forever beside one parked there.  Decentralised: it reads
+    the UAV's own id, action and observation only.
 
     Args:
         env: an environment of the model (``env.observation=local``).

@@ -9,8 +9,11 @@ from tensordict import TensorDict
 
 from tests.envs.test_local import perturbed_out_of_range
 from uavrl.agents.dqn import DQNAgent
+from uavrl.agents.dqn.networks import YieldToContenders
 from uavrl.agents.evaluation import evaluate
 from uavrl.config import model_config
+from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs.physics.grid import MOVES
 
 LOCAL = [
     "env.grid=[6,6]",
@@ -153,3 +156,21 @@ def test_a_local_policy_acts_at_any_radius_and_never_on_central_observations(com
     policy.bind_env(UAVSpectrumEnv(batch_size=2, config=run.replace(comm_radius=1.0)))
     with pytest.raises(ValueError, match="local observations\\); the environment has central observations"):
         policy.bind_env(UAVSpectrumEnv(batch_size=2, config=run.replace(observation="central", comm_radius=None)))
+
+
+def test_of_two_uavs_moving_into_one_cell_the_higher_id_yields_half_the_time():
+    """UAVs 0 and 1 both move into the cell between them: UAV 0 (the lower id) always goes, UAV 1 stays (keeps its
+    cell and task) in about half the worlds; UAV 2, whom no one contends, always goes (an independent count)."""
+    worlds, width = 4000, 5
+    env = UAVSpectrumEnv(batch_size=worlds, grid=(width, width), num_uavs=3, observation="local")
+    cells = torch.tensor([1 + width * 1, 3 + width * 1, 0 + width * 4])  # (1, 1), (3, 1), (0, 4)
+    tasks = torch.tensor([0, 1, 0])
+    observation = env.world.configurations((2 * cells + tasks).repeat(worlds, 1))["observation"]
+    right, left, up = MOVES.index((1, 0)), MOVES.index((-1, 0)), MOVES.index((0, -1))
+    action = torch.tensor([right, left, up]).repeat(worlds, 1)
+    out = YieldToContenders(env, seed=5)(action, observation)
+    assert (out[:, 0] == right).all() and (out[:, 2] == up).all()
+    stay_relaying = 5  # UAV 1 relays (task 1): its staying action keeps that task
+    stayed = (out[:, 1] == stay_relaying).float().mean().item()
+    assert ((out[:, 1] == left) | (out[:, 1] == stay_relaying)).all()
+    assert 0.45 < stayed < 0.55, stayed
