@@ -542,10 +542,14 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
     if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
+    heard = ""
+    if run_cfg.local:  # a local policy's model includes what its UAVs hear
+        radius = "every UAV" if run_cfg.comm_radius is None else f"env.comm_radius={run_cfg.comm_radius:g}"
+        heard = f", local observations ({radius}, env.message_size={run_cfg.message_size})"
     return (
         f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
-        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}); only a size-free network "
-        "(agent=dqn agent.network=set) acts on any size"
+        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}{heard}); only a size-free "
+        "network (agent=dqn agent.network=set) acts on any size"
     )
 
 

@@ -147,7 +147,8 @@ def test_a_local_policy_acts_at_any_radius_and_never_on_central_observations(com
     agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
     run = agent.env_cfg
     assert network_refusal(cfg, run, run) is None
-    assert "acts only in its run's model" in network_refusal(cfg, run.replace(comm_radius=4.0), run)
+    refusal = network_refusal(cfg, run.replace(comm_radius=4.0), run)
+    assert "acts only in its run's model" in refusal and "local observations (env.comm_radius=2" in refusal
     assert "acts only in its run's model" in network_refusal(
         cfg, run.replace(observation="central", comm_radius=None), run
     )
