@@ -128,40 +128,43 @@ def table(results: list[dict]) -> None:
 
 
 def figure(results: list[dict], path: Path) -> None:
-    """The share of starts reaching 0.999 U* against the radius, one panel per team."""
+    """Per team (a column), the share of starts reaching 0.999 U* and the steps to it over the oracle's against the
+    radius: the mean over seeds joined, each seed a dot."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     teams = sorted({r["num_uavs"] for r in results})
-    fig, axes = plt.subplots(1, len(teams), figsize=(5.5 * len(teams), 4.2), squeeze=False)
+    fig, axes = plt.subplots(2, len(teams), figsize=(5.5 * len(teams), 7.6), squeeze=False, sharex=True)
     positions = {radius: k for k, radius in enumerate(RADII)}
-    for ax, num_uavs in zip(axes[0], teams, strict=True):
+    for column, num_uavs in enumerate(teams):
         mine = [r for r in results if r["num_uavs"] == num_uavs]
-        for messages, style in ((0, "o-"), (MESSAGE_SIZE, "s--")):
-            points = sorted(
-                (positions[r["radius"]], r["reach"])
-                for r in mine
-                if r.get("observation") == "local" and r["message_size"] == messages
-            )
-            label = f"local, messages of {messages}" if messages else "local, no messages"
-            if points:
-                ax.plot(*zip(*points, strict=True), style, label=label)
-        for r in mine:
-            if r.get("observation") == "central":
-                ax.axhline(r["reach"], color="tab:green", ls=":", label=f"central DQN (seed {r['seed']})")
-            elif r["row"].endswith("oracle"):
-                ax.axhline(r["reach"], color="black", lw=0.8, label="oracle planner")
-            elif r["row"].endswith("random"):
-                ax.axhline(r["reach"], color="tab:red", lw=0.8, label="random")
-        ax.set_xticks(range(len(RADII)), [("full" if r is None else f"{r:g}") for r in RADII])
-        ax.set_xlabel("communication radius (cells)")
-        ax.set_ylabel("share of 200 held-out starts reaching 0.999 U*")
-        ax.set_ylim(-0.02, 1.05)
-        ax.set_title(f"N = {num_uavs} on {SCENARIOS[num_uavs]}")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower right")
+        for ax, key in ((axes[0, column], "reach"), (axes[1, column], "oracle_ratio")):
+            for messages, style, colour in ((0, "o-", "tab:blue"), (MESSAGE_SIZE, "s--", "tab:orange")):
+                runs = [r for r in mine if r.get("observation") == "local" and r["message_size"] == messages]
+                radii = sorted({positions[r["radius"]] for r in runs})
+                means = [sum(r[key] for r in runs if positions[r["radius"]] == x) for x in radii]
+                means = [m / sum(positions[r["radius"]] == x for r in runs) for m, x in zip(means, radii, strict=True)]
+                label = f"local, messages of {messages}" if messages else "local, no messages"
+                if runs:
+                    ax.plot(radii, means, style, color=colour, label=label)
+                    ax.plot([positions[r["radius"]] for r in runs], [r[key] for r in runs], ".", color=colour, ms=4)
+            for r in mine:
+                if r.get("observation") == "central":
+                    ax.axhline(r[key], color="tab:green", ls=":", lw=2, label=f"central DQN (seed {r['seed']})")
+                elif r["row"].endswith("oracle"):
+                    ax.axhline(1.0, color="black", lw=0.8, label="oracle planner")
+                elif r["row"].endswith("random") and key == "reach":
+                    ax.axhline(r["reach"], color="tab:red", lw=0.8, label="random")
+            ax.grid(alpha=0.3)
+        axes[0, column].set_ylabel("share of 200 held-out starts reaching 0.999 U*")
+        axes[0, column].set_ylim(-0.02, 1.05)
+        axes[0, column].set_title(f"N = {num_uavs} on {SCENARIOS[num_uavs]}")
+        axes[0, column].legend(fontsize=8, loc="lower right")
+        axes[1, column].set_ylabel("steps to 0.999 U* / the oracle's (same starts)")
+        axes[1, column].set_xticks(range(len(RADII)), [("full" if r is None else f"{r:g}") for r in RADII])
+        axes[1, column].set_xlabel("communication radius (cells)")
     fig.suptitle("The price of decentralisation: the DQN acting on what each UAV hears")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
