@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -104,7 +105,18 @@ def collect(runs: Path, starts: int) -> list[dict]:
             ("random", steps_to_level(RandomPolicy(0), cfg, starts)[1]),
         ):
             results.append(dict(row=f"{team}{name}", num_uavs=num_uavs, reach=float(reached.float().mean())))
-    return results
+    # per team: its runs (central first, then by radius, messages and seed), then the oracle and random
+    return sorted(
+        results,
+        key=lambda r: (
+            r["num_uavs"],
+            "seed" not in r,
+            r.get("observation") != "central",
+            str(r.get("radius")),
+            r.get("message_size", 0),
+            r.get("seed", 0),
+        ),
+    )
 
 
 def table(results: list[dict]) -> None:
@@ -143,12 +155,18 @@ def figure(results: list[dict], path: Path) -> None:
         for ax, key in ((axes[0, column], "reach"), (axes[1, column], "oracle_ratio")):
             for messages, style, colour in ((0, "o-", "tab:blue"), (MESSAGE_SIZE, "s--", "tab:orange")):
                 runs = [r for r in mine if r.get("observation") == "local" and r["message_size"] == messages]
-                radii = sorted({positions[r["radius"]] for r in runs})
-                means = [sum(r[key] for r in runs if positions[r["radius"]] == x) for x in radii]
-                means = [m / sum(positions[r["radius"]] == x for r in runs) for m, x in zip(means, radii, strict=True)]
+                seeds = {}  # each radius's values over its seeds
+                for r in runs:
+                    seeds.setdefault(positions[r["radius"]], []).append(r[key])
                 label = f"local, messages of {messages}" if messages else "local, no messages"
                 if runs:
-                    ax.plot(radii, means, style, color=colour, label=label)
+                    ax.plot(
+                        sorted(seeds),
+                        [statistics.fmean(seeds[x]) for x in sorted(seeds)],
+                        style,
+                        color=colour,
+                        label=label,
+                    )
                     ax.plot([positions[r["radius"]] for r in runs], [r[key] for r in runs], ".", color=colour, ms=4)
             for r in mine:
                 if r.get("observation") == "central":
