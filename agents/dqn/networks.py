@@ -180,6 +180,12 @@ class TeamQNet(nn.Module):
         return nn.functional.linear(hidden, last["weight"], last["bias"])
 
 
+def heard_entry(slots: torch.Tensor) -> torch.Tensor:
+    """``[..., 1]`` whether each local observation slot ``[..., slot features]`` was heard (its fourth entry, a 1;
+    physics.sensing)."""
+    return slots[..., 3:4] > 0
+
+
 class HeardMoves(nn.Module):
     """``[*, N, M]`` which of the positions its moves reach (up, down, left, right; climb and descend with altitude
     levels) each UAV hears another UAV hold, from its local observation ``[*, N, F]`` alone: the slots' relative
@@ -191,18 +197,21 @@ class HeardMoves(nn.Module):
 
     def __init__(self, env: UAVSpectrumEnv):
         super().__init__()
-        cfg, N = env.cfg, env.num_uavs
+        cfg, N, dev = env.cfg, env.num_uavs, env.device
         self.num_uavs, self.levels = N, cfg.num_levels > 1
         self.slot = local_slot_features(cfg.energy != "none", self.levels, cfg.message_size)
         self.own = env.observation_size - (N - 1) * self.slot
         self.level_entry = 4 + 2 * (cfg.energy != "none")  # a slot's relative level, with altitude levels
         L1, L2 = cfg.grid
-        self.register_buffer("scale", torch.tensor([max(L1 - 1, 1), max(L2 - 1, 1), max(cfg.num_levels - 1, 1)]))
+        scale = [max(L1 - 1, 1), max(L2 - 1, 1), max(cfg.num_levels - 1, 1)]
+        self.register_buffer("scale", torch.tensor(scale, device=dev))
         moves = [(dx, dy, 0) for dx, dy in MOVES] + ([(0, 0, 1), (0, 0, -1)] if self.levels else [])
-        self.register_buffer("moves", torch.tensor(moves, dtype=torch.float32))  # [M, 3]
+        self.register_buffer("moves", torch.tensor(moves, dtype=torch.float32, device=dev))  # [M, 3]
+        actions = [0, 1, 2, 3] + ([CLIMB, CLIMB + 1] if self.levels else [])
+        self.register_buffer("move_actions", torch.tensor(actions, device=dev), persistent=False)  # each move's action
         # slot k of UAV i holds UAV (i + k + 1) mod N (physics.sensing): a lower id where i + k + 1 >= N
-        lower = (torch.arange(N)[:, None] + torch.arange(1, N) >= N).unsqueeze(-1)  # [N, N - 1, 1]
-        self.register_buffer("lower", lower, persistent=False)
+        lower = (torch.arange(N, device=dev)[:, None] + torch.arange(1, N, device=dev) >= N).unsqueeze(-1)
+        self.register_buffer("lower", lower, persistent=False)  # [N, N - 1, 1]
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         offset, heard = self._heard(observation)
@@ -219,7 +228,7 @@ class HeardMoves(nn.Module):
         slots = observation[..., self.own :].unflatten(-1, (self.num_uavs - 1, self.slot))
         level = slots[..., self.level_entry : self.level_entry + 1] if self.levels else torch.zeros_like(slots[..., :1])
         offset = (torch.cat([slots[..., :2], level], -1) * self.scale).round()  # in cells, levels
-        return offset, slots[..., 3:4] > 0
+        return offset, heard_entry(slots)
 
 
 class LocalQNet(nn.Module):
@@ -250,8 +259,7 @@ class LocalQNet(nn.Module):
         self.message_size = d = cfg.message_size
         self.speaker = nn.Linear(hidden, d, device=dev) if d else None
         # a local observation: its own part, then N - 1 slots ending with the sender's message (physics.sensing)
-        self.slot = local_slot_features(cfg.energy != "none", cfg.num_levels > 1, d)
-        self.own = env.observation_size - (N - 1) * self.slot
+        self.slot, self.own = self.held.slot, self.held.own
         self.register_buffer("others", (torch.arange(N, device=dev)[:, None] + torch.arange(1, N, device=dev)) % N)
         self.loss_keys = [("agents", "observation"), *([("agents", "previous"), "has_previous"] if d else [])]
         """What the loss reads: the observation, and with messages the previous observations they were sent from."""
@@ -304,7 +312,7 @@ class LocalQNet(nn.Module):
         d, N = self.message_size, len(self.ids)
         sent = self.message(previous, params)[..., self.others, :]  # [*, N, N - 1, d]: each UAV's senders, in order
         slots = observation[..., self.own :].unflatten(-1, (N - 1, self.slot))
-        heard = (slots[..., 3:4] > 0) & has_previous.view(*has_previous.shape, 1, 1, 1)
+        heard = heard_entry(slots) & has_previous.view(*has_previous.shape, 1, 1, 1)
         slots = torch.cat([slots[..., : self.slot - d], torch.where(heard, sent, slots[..., self.slot - d :])], -1)
         return torch.cat([observation[..., : self.own], slots.flatten(-2)], -1)
 
@@ -321,11 +329,9 @@ class LocalGreedy(nn.Module):
     def __init__(self, env: UAVSpectrumEnv):
         super().__init__()
         self.held = HeardMoves(env)
-        moves = [0, 1, 2, 3] + ([CLIMB, CLIMB + 1] if env.cfg.num_levels > 1 else [])
-        self.register_buffer("move_actions", torch.tensor(moves))
 
     def forward(self, values: torch.Tensor, mask: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
-        blocked = torch.zeros_like(mask).index_copy(-1, self.move_actions, self.held(observation))
+        blocked = torch.zeros_like(mask).index_copy(-1, self.held.move_actions, self.held(observation))
         return values.masked_fill(blocked | ~mask, -math.inf).argmax(-1)
 
 
@@ -348,9 +354,9 @@ class YieldToContenders(nn.Module):
     def __init__(self, env: UAVSpectrumEnv, seed: int = 0):
         super().__init__()
         self.held = HeardMoves(env)
-        moves = [0, 1, 2, 3] + ([CLIMB, CLIMB + 1] if env.cfg.num_levels > 1 else [])
-        lookup = torch.full((env.num_actions,), -1, dtype=torch.long)
-        lookup[moves] = torch.arange(len(moves))
+        moves = self.held.move_actions
+        lookup = torch.full((env.num_actions,), -1, dtype=torch.long, device=env.device)
+        lookup[moves] = torch.arange(len(moves), device=env.device)
         self.register_buffer("move_of_action", lookup)  # an action's move, -1 for the others
         self.seed, self.generator = seed, torch.Generator(device=env.device)
         self.restart()
