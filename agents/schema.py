@@ -519,12 +519,21 @@ def agent_rules(name: str) -> dict[str, Rule]:
 CITY_MODEL_OPTIONS = ("city", *CITY_OPTIONS, "environment", "altitudes_m", "altitude_m")
 
 
+def run_city(env_cfg: ModelConfig, run_cfg: ModelConfig) -> dict:
+    """The run's city settings (:data:`CITY_MODEL_OPTIONS`) where both models have a city, else none: what
+    ``env_cfg.replace(**run_city(env_cfg, run_cfg))`` takes back to the run's model when a policy acts in another
+    city of it (its buildings, channel environment and levels)."""
+    if env_cfg.city == "none" or run_cfg.city == "none":
+        return {}
+    return {name: getattr(run_cfg, name) for name in CITY_MODEL_OPTIONS}
+
+
 def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> str | None:
     """Why the policy of a run with config ``saved_cfg`` (its model ``run_cfg``) cannot act in ``env_cfg``; ``None``
     when it can: a per-size policy only in its run's model, a size-free one (which reads the nodes) in any grid,
-    number of UAVs, layout and, trained in a city, any other city (its environment, seed, channel environment and
-    altitudes) of the same model otherwise; neither with altitude levels where it was trained without, or the
-    reverse."""
+    number of UAVs and layout; either, trained in a city, in any other city (its environment, seed, channel
+    environment and altitudes) of the same model otherwise; neither with altitude levels where it was trained
+    without, or the reverse."""
     levels, trained = env_cfg.num_levels > 1, run_cfg.num_levels > 1
     if levels != trained:
         return (
@@ -533,13 +542,13 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
             f"actions {'at one altitude' if trained else 'with altitude levels'} differ"
         )
     size_free = saved_cfg.agent.name == "dqn" and saved_cfg.agent.get("network", "team") == "set"
-    same = dict(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, max_steps=run_cfg.max_steps)
-    if env_cfg.city != "none" and run_cfg.city != "none":  # one city for another: its buildings, channel and levels
-        same |= {name: getattr(run_cfg, name) for name in CITY_MODEL_OPTIONS}
-    if size_free and env_cfg.replace(**same) != run_cfg:
-        cities = ", the city (env.city and its options, env.environment) and the levels" if "city" in same else ""
-        return f"only env.grid, env.num_uavs, env.layout{cities} may differ from the saved run's"
-    if size_free or env_cfg.replace(max_steps=run_cfg.max_steps) == run_cfg:
+    same = dict(max_steps=run_cfg.max_steps, **run_city(env_cfg, run_cfg))
+    cities = ", the city (env.city and its options, env.environment) and the levels" if "city" in same else ""
+    if size_free:
+        if env_cfg.replace(grid=run_cfg.grid, num_uavs=run_cfg.num_uavs, layout=run_cfg.layout, **same) != run_cfg:
+            return f"only env.grid, env.num_uavs, env.layout{cities} may differ from the saved run's"
+        return None
+    if env_cfg.replace(**same) == run_cfg:
         return None
     network = f"agent.network={saved_cfg.agent.get('network', 'team')}" if saved_cfg.agent.name == "dqn" else "table"
     heard = ""
@@ -548,7 +557,8 @@ def network_refusal(saved_cfg, env_cfg: ModelConfig, run_cfg: ModelConfig) -> st
         heard = f", local observations ({radius}, env.message_size={run_cfg.message_size})"
     return (
         f"its {saved_cfg.agent.name} policy ({network}) acts only in its run's model ({run_cfg.grid[0]}x"
-        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}{heard}); only a size-free "
+        f"{run_cfg.grid[1]} grid, {run_cfg.num_uavs} UAVs, layout {run_cfg.layout!r}{heard}"
+        f"{'; of the city only' + cities.removeprefix(',') + ' may differ' if cities else ''}); only a size-free "
         "network (agent=dqn agent.network=set) acts on any size"
     )
 

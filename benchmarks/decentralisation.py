@@ -4,9 +4,10 @@ radius, with and without learned messages, beside the central DQN, the oracle pl
 Each row is ``python -m uavrl.train agent=dqn scenario=<n6_10x10|large_20x20> env.observation=local
 env.comm_radius=<r> [env.message_size=4] seed=<s> eval.num_starts=200`` run as a whole process (the scenario's DQN
 budget unchanged), or the central DQN (``env.observation=central``).  ``--collect`` reads the run directories and
-prints one markdown row per run: the share of the 200 held-out starts reaching 0.999 U*, the final U/U*, the steps
-to 0.999 U* against the oracle planner's from the same starts (those both reach, ``yardstick.py --paired``'s
-ratio) and the training CPU seconds; the oracle's and the random policy's rows are played here from the same starts.
+prints one markdown row per run: the share of the 200 held-out starts reaching 0.999 U*, the final U/U* (the
+saved greedy policy evaluated here, as the training command evaluates it at its end), the steps to 0.999 U* against
+the oracle planner's from the same starts (those both reach, ``yardstick.py --paired``'s ratio) and the training CPU
+seconds (the run's ``metrics.json``); the oracle's and the random policy's rows are played here from the same starts.
 ``--figure`` draws the share reaching 0.999 U* against the radius, per team.
 
 Usage::
@@ -71,12 +72,14 @@ def collect(runs: Path, starts: int) -> list[dict]:
 
     from uavrl import load_policy
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
+    from uavrl.agents.evaluation import evaluate
 
     results, models, oracles = [], {}, {}
     for run_dir in sorted(p for p in runs.iterdir() if (p / "metrics.json").is_file()):
         metrics = json.loads((run_dir / "metrics.json").read_text())
         env = yaml.safe_load((run_dir / "config.yaml").read_text())["env"]
         policy, cfg = load_policy(run_dir)
+        scores = evaluate(policy, cfg, num_starts=starts)
         mine, reached = steps_to_level(policy, cfg, starts)
         central = models.setdefault(cfg.num_uavs, cfg.replace(observation="central", comm_radius=None, message_size=0))
         if cfg.num_uavs not in oracles:  # the oracle reads positions and tasks alone: once per team
@@ -92,8 +95,8 @@ def collect(runs: Path, starts: int) -> list[dict]:
                 observation=env.get("observation", "central"),
                 radius=env.get("comm_radius"),
                 message_size=env.get("message_size") or 0,
-                reach=metrics["eval/reach_999"],
-                optimality=metrics["eval/optimality"],
+                reach=scores["eval/reach_999"],
+                optimality=scores["eval/optimality"],
                 oracle_ratio=float(mine[both].mean() / oracle[both].mean()) if both.any() else float("nan"),
                 train_cpu_seconds=metrics["train_cpu_seconds"],
             )

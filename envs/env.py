@@ -231,6 +231,8 @@ class UAVSpectrumEnv(EnvBase):
             shape=(N,),
             device=self.device,
         )
+        if self.cfg.local:  # whether each UAV's move at the last step was cancelled: what it knows of itself
+            agents["cancelled"] = Categorical(2, (N,), dtype=torch.bool, device=self.device)
         obs = Composite(
             agents=agents,
             state=Unbounded((self.state_size,), dtype=torch.float32, device=self.device),
@@ -285,6 +287,8 @@ class UAVSpectrumEnv(EnvBase):
         scalars ``[B, 1]``; with ``agent_rewards`` the team reward copied to every UAV."""
         B, N, dev = self.num_worlds, self.num_uavs, self.device
         group = {"observation": out.pop("observation"), "action_mask": out.pop("action_mask")}
+        if "cancelled" in out:
+            group["cancelled"] = out.pop("cancelled")
         for key in DIAGNOSTICS:  # the world's per-world outputs [B], [B, 1] as TorchRL has a per-world reward or done
             if key in out:
                 out[key] = out[key].unsqueeze(-1)

@@ -20,6 +20,7 @@ from torchrl.modules import EGreedyModule, QValueModule
 from torchrl.objectives import DQNLoss, LossModule, SoftUpdate
 
 from uavrl.agents.env_check import CheckedPolicy
+from uavrl.agents.schema import run_city
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.compat import make_collector
 
@@ -167,13 +168,8 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
             in_keys=[("agents", "action_value"), ("agents", "action_mask"), "positions", "tasks", *_levels(env)],
             out_keys=[("agents", "action")],
         )
-    greedy = TensorDictSequential(q, greedy_action)
+    greedy = behaviour = TensorDictSequential(q, greedy_action)
     if env.cfg.local:  # then a coin for a move another UAV may contend, and what each UAV sends, from its observation
-        contend = TensorDictModule(
-            YieldToContenders(env),
-            in_keys=[("agents", "action"), ("agents", "observation")],
-            out_keys=[("agents", "action")],
-        )
         speak = (
             []
             if not env.cfg.message_size
@@ -183,10 +179,24 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
                 )
             ]
         )
-        greedy = TensorDictSequential(q, greedy_action, contend, *speak)
+        greedy, behaviour = (
+            TensorDictSequential(q, greedy_action, _give_way(env, after_cancel), *speak)
+            for after_cancel in (True, False)
+        )
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
-    explore = TensorDictSequential(greedy, exploration)
-    return Policies(greedy, explore, exploration, greedy, spec, [("agents", "action")])
+    explore = TensorDictSequential(behaviour, exploration)
+    # the loss evaluates the behaviour chain: its coins drawn as the saved runs drew them
+    return Policies(greedy, explore, exploration, behaviour, spec, [("agents", "action")])
+
+
+def _give_way(env: UAVSpectrumEnv, after_cancel: bool) -> TensorDictModule:
+    """A local UAV's coin for a move another UAV may contend (:class:`YieldToContenders`): acting greedily only after a
+    clash, while training (``after_cancel=False``) before one, as the saved runs were trained."""
+    return TensorDictModule(
+        YieldToContenders(env, after_cancel=after_cancel),
+        in_keys=[("agents", "action"), ("agents", "observation"), *([("agents", "cancelled")] if after_cancel else [])],
+        out_keys=[("agents", "action")],
+    )
 
 
 def _joint_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> Policies:
@@ -341,8 +351,19 @@ class TeamNetwork(QNetwork):
         self.target_update.step()
 
     def policy_for(self, env_cfg: ModelConfig) -> CheckedPolicy:
-        """The run's greedy policy, in environments of the run's grid, number of UAVs and layout only."""
-        return CheckedPolicy(self.agent.greedy, self.agent.env_cfg)
+        """The run's greedy policy, in environments of the run's grid, number of UAVs and layout only; trained in a
+        city, in another city of the run's model too (:func:`~uavrl.agents.schema.network_refusal`): the same
+        weights on that city's positions, which the buildings number."""
+        run = self.agent.env_cfg
+        if env_cfg.replace(max_steps=run.max_steps) == run or env_cfg.replace(**run_city(env_cfg, run)) != run:
+            return CheckedPolicy(self.agent.greedy, run)  # refuses any other environment in one line
+        env = UAVSpectrumEnv(batch_size=1, config=env_cfg, device=self.agent.device)
+        q = build_q_network(env, self.settings)
+        with torch.no_grad():
+            for mine, trained in zip(q.parameters(), self.q.parameters(), strict=True):
+                mine.copy_(trained)
+        frames = exploration_schedule(self.settings, 1, self.agent.device)
+        return CheckedPolicy(build_policies(env, self.settings, q, frames).greedy, env_cfg)
 
     def experience_state(self, per_group: list[dict], curriculum: Curriculum) -> dict:
         return per_group[0]

@@ -30,6 +30,7 @@ from uavrl.envs.physics.grid import MOVES, cells_or_away
 from uavrl.envs.physics.sensing import local_slot_features
 
 Q_INPUTS = (("agents", "observation"), "positions", "state")  # what TeamQNet reads (the nodes are in the state)
+GIVE_WAY = 0.8  # a UAV's chance of staying after a clash (YieldToContenders), chosen on tuning starts (BENCHMARKS.md)
 LEVELS = "levels"  # with altitude levels, each UAV's level: the networks and the greedy rules read it after the rest
 
 
@@ -336,28 +337,35 @@ class LocalGreedy(nn.Module):
 
 
 class YieldToContenders(nn.Module):
-    """Each UAV's action ``[*, N]``, kept, or with probability ``1/2`` replaced by staying (keeping its cell and task)
-    where it is a move into a position that a UAV of a lower id it hears could move into too (one move from it).
+    """Each UAV's action ``[*, N]``, kept, or replaced by staying (keeping its cell and task) with probability
+    ``give_way`` where it is a move into a position that a UAV of a lower id it hears could move into too (one move
+    from it) and, with ``after_cancel``, its own move at the last step was cancelled.
 
     Two UAVs that move into one free cell are both cancelled (docs/model.md), and UAVs acting on their own
     observations with a deterministic policy would try again forever; a coin (from the module's own seeded
     generator, started again by :meth:`restart`) for the UAV of the higher id lets the other go first, and a UAV of
-    the lowest id among those contending never waits.  The coin, not a rule, because the other UAV may not want the
-    position at all: a UAV that always yielded would wait forever beside one parked there.  Decentralised: it reads
-    the UAV's own id, action and observation only.
+    the lowest id among those contending never waits.  A coin, not a rule, because the other UAV may not want the
+    position at all.  With ``after_cancel`` (the greedy policy) a UAV gives way only once a clash has happened, which
+    it knows without a message (``("agents", "cancelled")``; docs/model.md, Local observations and messages): a UAV
+    beside another that never meant to move there does not wait.  Without it (the behaviour policy while training,
+    whose data the saved runs were trained on) the coin of 1/2 comes before any clash.  Decentralised: it reads the
+    UAV's own id, action, observation and cancelled move only.
 
     Args:
         env: an environment of the model (``env.observation=local``).
         seed: seeds the coins.
+        after_cancel: give way only after the UAV's own move was cancelled, with probability :data:`GIVE_WAY`;
+            ``False``: before any clash, with probability 1/2.
     """
 
-    def __init__(self, env: UAVSpectrumEnv, seed: int = 0):
+    def __init__(self, env: UAVSpectrumEnv, seed: int = 0, after_cancel: bool = True):
         super().__init__()
         self.held = HeardMoves(env)
         moves = self.held.move_actions
         lookup = torch.full((env.num_actions,), -1, dtype=torch.long, device=env.device)
         lookup[moves] = torch.arange(len(moves), device=env.device)
         self.register_buffer("move_of_action", lookup)  # an action's move, -1 for the others
+        self.after_cancel, self.give_way = after_cancel, GIVE_WAY if after_cancel else 0.5
         self.seed, self.generator = seed, torch.Generator(device=env.device)
         self.restart()
 
@@ -365,11 +373,17 @@ class YieldToContenders(nn.Module):
         """The coins from the first again (an evaluation binding the policy to its environment calls it)."""
         self.generator.manual_seed(self.seed)
 
-    def forward(self, action: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, action: torch.Tensor, observation: torch.Tensor, cancelled: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """The actions after the coins; ``cancelled`` ``[*, N]``: whether each UAV's move at the last step was
+        cancelled (None: none was, as after a reset)."""
         contended = self.held.contenders(observation)  # [*, N, M]
         move = self.move_of_action[action]
         at = contended.gather(-1, move.clamp(min=0).unsqueeze(-1)).squeeze(-1) & (move >= 0)
-        coin = torch.rand(action.shape, generator=self.generator, device=action.device) < 0.5
+        if self.after_cancel:
+            at = at & cancelled if cancelled is not None else torch.zeros_like(at)
+        coin = torch.rand(action.shape, generator=self.generator, device=action.device) < self.give_way
         stay = SENSE + observation[..., 2].round().long()  # sense (4) or relay (5): the action that keeps its task
         return torch.where(at & coin, stay, action)
 

@@ -7,7 +7,8 @@ at one level; with altitude levels a (cell, level) position of :mod:`.positions`
 
 - ``start(keys, counters)``: the first values of ``k`` worlds at a reset, by name, from their random streams;
 - ``step(state, action)``: the values after the joint actions ``[B, N]`` (0..5; 6, ``return``, with recharging),
-  by name: a move off the grid stays, and clashing moves are cancelled (:meth:`Dynamics.resolve_moves`);
+  by name: a move off the grid stays, and clashing moves are cancelled (:meth:`Dynamics.resolve_moves`); under local
+  observations also ``cancelled``, whether each UAV's move was (what a UAV knows of itself without a message);
 - ``masks(cell)``: ``[B, N, A]`` the actions that keep each UAV on the grid (``A = cfg.num_actions``);
 - ``terminated(state)``: ``[B]`` whether a world's episode ends, or ``None`` when none can (the model's episodes
   are truncated after ``max_steps``).
@@ -106,10 +107,12 @@ class Dynamics:
         ``[B, N]`` variables as attributes)."""
         action = action.long()
         target = _lookup(self.move_to, torch.add(action, state.cell, alpha=self.num_actions))  # [B, N], unchecked
-        return {
-            "cell": self.resolve_moves(state.cell, target),
-            "task": _lookup(self.task_after, torch.add(state.task, action, alpha=2)),
-        }
+        asked = target != state.cell if self.cfg.local else None  # before resolve_moves rewrites target
+        cell = self.resolve_moves(state.cell, target)
+        out = {"cell": cell, "task": _lookup(self.task_after, torch.add(state.task, action, alpha=2))}
+        if asked is not None:
+            out["cancelled"] = asked & (cell == state.cell)
+        return out
 
     def masks(self, cell: torch.Tensor) -> torch.Tensor:
         """``[..., N, A]`` the actions that keep each UAV of ``cell`` ``[..., N]`` on the grid; on the cell off the grid

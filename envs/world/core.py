@@ -33,7 +33,8 @@ class WorldsState:
     whether the last step ended the episode (``None``: no world's); ``started`` whether a world has been reset;
     ``keys`` and ``counters`` the per-world random streams; ``was_reset`` whether every world has been reset at least
     once (then every UAV has a cell); ``messages`` ``[B, N, message_size]`` what each UAV sent at the last step (zeros
-    after a reset; ``None`` without messages).
+    after a reset; ``None`` without messages); ``cancelled`` ``[B, N]`` whether each UAV's move at the last step was
+    cancelled (``False`` after a reset; ``None`` without local observations).
     """
 
     __slots__ = (
@@ -48,6 +49,7 @@ class WorldsState:
         "keys",
         "was_reset",
         "messages",
+        "cancelled",
     )
 
     def __init__(self, **tensors):
@@ -155,6 +157,7 @@ class World(LayoutTables, Observations, SolverQueries):
             keys=streams.world_keys(0, B, dev),
             was_reset=False,  # a Python flag: stepping before every world was reset is an error, at no per-step cost
             messages=torch.zeros(B, N, cfg.message_size, device=dev) if cfg.message_size else None,
+            cancelled=torch.zeros(B, N, dtype=torch.bool, device=dev) if cfg.local else None,
         )
         if fixed is not None:
             self._share(LAYOUT_TABLES, lambda: self._set_layout(torch.zeros(1, dtype=long, device=dev)))
@@ -266,6 +269,8 @@ class World(LayoutTables, Observations, SolverQueries):
         s.best[worlds] = 0.0
         if s.messages is not None:
             s.messages[worlds] = 0.0
+        if s.cancelled is not None:  # a new tensor: the one a step published stays as it was
+            s.cancelled = s.cancelled.index_fill(0, worlds, False)
         if s.terminated is not None:  # a new tensor: the one a step published stays as it was
             s.terminated = s.terminated.index_fill(0, worlds, False)
         code = self.code
@@ -291,6 +296,8 @@ class World(LayoutTables, Observations, SolverQueries):
         s.best.zero_()
         if s.messages is not None:
             s.messages = torch.zeros_like(s.messages)
+        if s.cancelled is not None:
+            s.cancelled = torch.zeros_like(s.cancelled)
         s.terminated = None
         s.r = self._rates(s.cell, s.task, code)
         s.was_reset = True

@@ -216,6 +216,8 @@ class Observations:
         else:
             observation, state = self._assemble(code)
         out = self._outputs(observation, state, cell, task.clone())  # the state's own tensor stays the World's
+        if self._s.cancelled is not None:  # each UAV's own: was its move cancelled (docs/model.md, Local observations)
+            out["cancelled"] = self._s.cancelled
         if not self.diagnostics:
             return out
         r = self._s.r.float()

@@ -189,6 +189,37 @@ def test_a_size_free_run_trains_over_cities_and_acts_in_a_held_out_one(tmp_path,
     assert size_free_teams(cfg, model_config(cfg)).endswith("in 2 urban cities (env.city_seed 0, 1)")
 
 
+def test_a_per_size_run_in_a_city_acts_in_a_held_out_city_with_its_weights(tmp_path, compose_cfg):
+    """The per-size network trained in one city acts in another of the same model (the benchmark's held-out cities):
+    the same weights on that city's positions, every action allowed there; another grid is still refused."""
+    from uavrl.agents.evaluation import evaluate
+    from uavrl.experiment.saved import load_agent
+
+    run_dir = train(compose_cfg(*TINY, f"run_dir={tmp_path / 'run'}"))
+    agent, saved, _ = load_agent(run_dir)
+    held_out = model_config(saved).replace(city_seed=4611686018427387905)
+    policy = agent.policy_for(held_out)
+    trained, acting = (p.policy.module[0] for p in (agent.policies()[0], policy))
+    assert all(torch.equal(a, b) for a, b in zip(trained.parameters(), acting.parameters(), strict=True))
+    assert not torch.equal(trained.module.neighbours, acting.module.neighbours)  # the buildings differ
+    env = UAVSpectrumEnv(batch_size=16, config=held_out, seed=2)
+    policy.bind_env(env)
+    td = env.reset()
+    for _ in range(6):
+        td = policy(td)
+        mask = td["agents", "action_mask"]
+        assert mask.gather(-1, td["agents", "action"].unsqueeze(-1)).all()
+        td = env.step(td)["next"]
+    assert 0.0 <= evaluate(policy, held_out, num_starts=4)["eval/optimality"] <= 1.0
+    metrics = evaluate_checkpoint(
+        compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=4", f"env.city_seed={held_out.city_seed}"),
+        [f"env.city_seed={held_out.city_seed}"],
+    )
+    assert (run_dir / f"eval-2uav-4x4-urban{held_out.city_seed}.json").exists() and 0 <= metrics["eval/optimality"]
+    with pytest.raises(ValueError, match="acts only in its run's model"):
+        evaluate_checkpoint(compose_cfg(f"checkpoint={run_dir}", "env.grid=[5,5]"), ["env.grid=[5,5]"])
+
+
 @pytest.mark.parametrize(
     "overrides, message",
     [

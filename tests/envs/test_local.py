@@ -155,6 +155,49 @@ def test_a_message_reaches_those_within_range_at_the_next_step():
                 assert torch.equal(slot[-2:], sent if heard else torch.zeros(2))
 
 
+@pytest.mark.parametrize("model", ["paper", "levels", "energy"])
+def test_a_uav_knows_whether_its_move_was_cancelled(model):
+    """``("agents", "cancelled")`` is true exactly for a UAV that asked for a move to a position on the grid (and not
+    inside a building, nor out of service) and kept its position, by a loop over positions written here; false after
+    a reset; absent under central observations."""
+    kw = {k: v for k, v in MODELS[model].items() if k != "preset"}
+    env = UAVSpectrumEnv(batch_size=64, preset=MODELS[model]["preset"], observation="local", seed=3, **kw)
+    check_env_specs(env)
+    gen = torch.Generator().manual_seed(4)
+    levels = env.cfg.num_levels > 1
+    moves = [(0, -1, 0), (0, 1, 0), (-1, 0, 0), (1, 0, 0)] + ([(0, 0, 1), (0, 0, -1)] if levels else [])
+    move_actions = [0, 1, 2, 3] + ([6, 7] if levels else [])
+    td = env.reset()
+    assert not td["agents", "cancelled"].any()
+    cancelled = 0
+    for _ in range(6):
+        allowed = td["agents", "action_mask"].float().flatten(0, 1)  # and moves off the grid, which are no asks
+        allowed[:, :4] = 1.0
+        action = torch.multinomial(allowed, 1, generator=gen).view(64, env.num_uavs)
+        td["agents", "action"] = action
+        out = env.step(td)["next"]
+        before, after = (
+            [
+                (*t["positions"][b, i].tolist(), int(t["levels"][b, i]) if levels else 0)
+                for b in range(64)
+                for i in range(env.num_uavs)
+            ]
+            for t in (td, out)
+        )
+        for k, (a, p, q) in enumerate(zip(action.flatten().tolist(), before, after, strict=True)):
+            b, i = divmod(k, env.num_uavs)
+            asked = a in move_actions and bool(td["agents", "action_mask"][b, i, a])
+            if asked:
+                dx, dy, dz = moves[move_actions.index(a)]
+                asked = (p[0] + dx, p[1] + dy, p[2] + dz) != p
+            expected = asked and p == q
+            assert bool(out["agents", "cancelled"][b, i]) == expected, (b, i, a, p, q)
+            cancelled += expected
+        td = out
+    assert cancelled > 10
+    assert "cancelled" not in UAVSpectrumEnv(batch_size=2, grid=(4, 4), num_uavs=2).reset()["agents"].keys()
+
+
 @pytest.mark.parametrize(
     "bad, message",
     [
