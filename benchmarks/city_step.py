@@ -6,7 +6,8 @@ Models: ``a2g_urban`` (the flat model: no city, Al-Hourani urban), the same in t
 in the dense-urban one (``env.city=dense_urban env.environment=dense_urban``) and in the urban city with
 ``city_urban_10x10``'s five altitude levels (``env.altitudes_m=[30,60,100,200,300]``); layouts ``line`` (fixed: the
 per-cell tables are built once, with the World) and ``random`` (each reset draws the reset worlds' layouts and
-recomputes their tables, in a city their geometric line of sight).  ``B`` worlds (``--worlds``), N = 6, 10x10 cells
+recomputes their tables, in a city their geometric line of sight); and, for the steps, the flat model with those five
+levels (what the levels cost without a city).  ``B`` worlds (``--worlds``), N = 6, 10x10 cells
 of 50 m, UAVs at 100 m, one torch thread, wall-clock milliseconds:
 
 * ``step``: one ``env.step(td)`` of all ``B`` worlds (a masked uniform random action, drawn outside the timing);
@@ -49,6 +50,7 @@ MODELS = {
     "dense_urban city": {"city": "dense_urban", "environment": "dense_urban"},
     "urban city, 5 levels": {"city": "urban", "altitudes_m": [30, 60, 100, 200, 300]},  # city_urban_10x10's model
 }
+LEVELS_ONLY = {"flat (no city), 5 levels": {"altitudes_m": [30, 60, 100, 200, 300]}}  # the levels' own cost: steps only
 LAYOUTS = ("line", "random")
 FLAT = "flat (no city)"
 
@@ -102,7 +104,8 @@ class Probe:
 
 
 def step_table(args) -> None:
-    probes = {(m, layout): Probe(kw, layout, args.worlds) for m, kw in MODELS.items() for layout in LAYOUTS}
+    models = MODELS | LEVELS_ONLY
+    probes = {(m, layout): Probe(kw, layout, args.worlds) for m, kw in models.items() for layout in LAYOUTS}
     figures = {key: {"step": [], "step + resets": [], "reset (all B)": []} for key in probes}
     for round_ in range(args.rounds + 1):  # round 0 warms up
         for key, probe in probes.items():

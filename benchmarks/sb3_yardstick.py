@@ -10,7 +10,8 @@ Usage::
 
     python benchmarks/sb3_yardstick.py                                # N = 2 on 6x6, 50,000 steps, seed 0
     python benchmarks/sb3_yardstick.py --timesteps 200000 --seeds 0 1 2 --reward log_gap
-    python benchmarks/sb3_yardstick.py --save runs/sb3     # also keeps each model: runs/sb3/ppo_seed<k>.zip
+    python benchmarks/sb3_yardstick.py --save runs/sb3     # also keeps each model: runs/sb3/ppo_seed<k>.zip (.json:
+                                                           # the arguments of its model)
     python benchmarks/sb3_yardstick.py --city urban --altitudes 30 60 100 200 300   # a city with altitude levels
 
 A kept model is scored on a benchmark suite by ``python benchmarks/score_outside.py sb3 runs/sb3/ppo_seed0.zip``.
@@ -19,7 +20,9 @@ A kept model is scored on a benchmark suite by ``python benchmarks/score_outside
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from pathlib import Path
 
 
 def parse_args(argv=None):
@@ -37,6 +40,19 @@ def parse_args(argv=None):
     )
     p.add_argument("--altitudes", type=float, nargs="+", help="altitude levels in m (env.altitudes_m)")
     return p.parse_args(argv)
+
+
+MODEL_FLAGS = ("grid", "uavs", "max_steps", "city", "altitudes", "reward")  # the arguments that set the model
+
+
+def model_flags(args) -> list[str]:
+    """The command line's arguments that set the model (:data:`MODEL_FLAGS`), as this script takes them."""
+    flags = []
+    for name in MODEL_FLAGS:
+        value = getattr(args, name)
+        if value is not None:
+            flags += [f"--{name.replace('_', '-')}", *map(str, value if isinstance(value, list) else [value])]
+    return flags
 
 
 def model_options(args) -> dict:
@@ -87,8 +103,9 @@ def main(argv=None):
         model = PPO("MlpPolicy", env, seed=seed, device="cpu")
         model.learn(total_timesteps=args.timesteps)
         seconds = time.perf_counter() - started
-        if args.save:
+        if args.save:  # the model beside the flags of its model, which score_outside.py reads (JSON: nothing runs)
             model.save(f"{args.save}/ppo_seed{seed}.zip")
+            Path(args.save, f"ppo_seed{seed}.json").write_text(json.dumps(model_flags(args)))
         cfg = env.cfg.replace(reward="delta")  # the yardstick reads utilities, not the training reward
         policy = TeamActionPolicy(lambda obs, mask, model=model: model.predict(obs, deterministic=True)[0])
         name = f"SB3 PPO, defaults, {args.timesteps:,} steps (`UAVSpectrumGymEnv`, reward={args.reward})"

@@ -9,7 +9,10 @@ with its deterministic policy where it can (the model it trained on), n/a elsewh
 frames and its training CPU seconds (``metrics.json``).
 
 ``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
-through ``TeamActionPolicy`` on the paper's 6x6 model only.  The budget is its ``num_timesteps``.
+through ``TeamActionPolicy`` on the model it trained on only (the options ``sb3_yardstick.py`` keeps beside it in
+``ppo_seed<k>.json``; without that file the paper's 6x6 model).  The budget is its ``num_timesteps``.
+
+A policy trained in a city acts in the suite's other cities of its model too (``uavrl.agents.schema.run_city``).
 
 Each results file goes to ``DIR/<suite>-<name>.json`` (default ``benchmarks/results/leaderboard``) with its table
 and figure beside it; ``python -m uavrl.bench leaderboard`` then puts it on the site's page.
@@ -29,6 +32,7 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
     from omegaconf import OmegaConf
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+    from uavrl.agents.schema import run_city
     from uavrl.bench.run import NotApplicable, score_suite
     from uavrl.experiment.benchmarl import load_experiment
 
@@ -38,7 +42,7 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
     trained_on = experiment.task.model_config
 
     def factory(env):
-        if env.cfg.replace(max_steps=trained_on.max_steps) != trained_on:
+        if env.cfg.replace(max_steps=trained_on.max_steps, **run_city(env.cfg, trained_on)) != trained_on:
             raise NotApplicable("the experiment's networks act in its own model only")
         return experiment.policy
 
@@ -62,20 +66,40 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
     return results, f"{suite}-benchmarl-{algorithm}"
 
 
+def sb3_model(path: Path) -> list[str]:
+    """The model arguments of ``sb3_yardstick.py`` an SB3 model trained with, as ``sb3_yardstick.py --save`` wrote
+    them to ``path`` (JSON, read as data: a list of strings that the script's own parser checks); none (the paper's
+    6x6 model) without the file."""
+    from uavrl.experiment.io import read_small_text
+
+    if not path.exists():
+        return []
+    flags = json.loads(read_small_text(path, within=path.parent))
+    if not isinstance(flags, list) or not all(isinstance(flag, str) for flag in flags):
+        raise SystemExit(f"{path}: not the model arguments sb3_yardstick.py writes (a list of strings)")
+    return flags
+
+
 def sb3_submission(path: Path, suite: str) -> tuple[dict, str]:
     """The results of an SB3 model on ``suite``, and the file name they go under."""
+    from sb3_yardstick import model_options, parse_args
     from stable_baselines3 import PPO
 
+    from uavrl.agents.schema import run_city
     from uavrl.bench.run import NotApplicable, score_suite
     from uavrl.envs import make_config
     from uavrl.envs.adapters.gym_env import TeamActionPolicy
 
     model = PPO.load(str(path), device="cpu")
-    trained_on = make_config("paper", grid=(6, 6), num_uavs=2)  # sb3_yardstick.py's model
+    flags = sb3_model(path.with_suffix(".json"))
+    trained_on = make_config(**model_options(parse_args(flags)))
 
     def factory(env):
-        if env.cfg.replace(max_steps=trained_on.max_steps) != trained_on:
-            raise NotApplicable("trained on the paper's 6x6 model")
+        acting = env.cfg.replace(max_steps=trained_on.max_steps, reward=trained_on.reward)
+        if acting.replace(**run_city(acting, trained_on)) != trained_on:
+            raise NotApplicable(
+                f"trained on a {trained_on.grid[0]}x{trained_on.grid[1]} grid, {trained_on.num_uavs} UAVs"
+            )
         return TeamActionPolicy(lambda obs, mask: model.predict(obs, deterministic=True)[0])
 
     steps = int(model.num_timesteps)
@@ -85,7 +109,7 @@ def sb3_submission(path: Path, suite: str) -> tuple[dict, str]:
         name=f"SB3 PPO (Gymnasium adapter), {steps:,} steps",
         budget={"env_steps": steps},
         source=f"python benchmarks/score_outside.py sb3 runs/sb3/{path.name} --suite {suite}",
-        train_command=f"python benchmarks/sb3_yardstick.py --timesteps {steps} --save runs/sb3",
+        train_command=" ".join(["python benchmarks/sb3_yardstick.py", *flags, f"--timesteps {steps} --save runs/sb3"]),
         progress=print,
     )
     return results, f"{suite}-sb3-ppo"

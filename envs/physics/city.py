@@ -1,5 +1,5 @@
 """Cities of buildings: the statistical city of Recommendation ITU-R P.1410 and line of sight from its geometry
-(docs/model.md, Cities of buildings); numpy only, no torch.
+(docs/model.md, Cities of buildings); numpy (and numba for :func:`line_of_sight`'s loop), no torch.
 
 ITU-R P.1410 (Propagation data and prediction methods required for the design of terrestrial broadband radio access
 systems) describes a built-up area by three numbers: ``alpha``, the ratio of land covered by buildings; ``beta``, the
@@ -19,6 +19,7 @@ Example:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -28,8 +29,6 @@ from ..errors import InvalidOption
 from .radio import P1410 as P1410  # the standard environments, kept here beside the cities they describe
 
 MAX_BUILDINGS = 4_000_000  # 5 arrays of float64: 160 MB; a 10 km x 10 km suburban city has 75,000
-CHUNK_BYTES = 64 * 2**20  # the working memory of line_of_sight's link-by-building arrays
-_PAIR_BYTES = 8 * 12  # about 12 float64 temporaries live per (link, building) pair
 _ROOF_MARGIN = 1e-9  # relative and in m: a link's part this far above the tallest roof is above it after rounding
 
 
@@ -195,60 +194,91 @@ def inside_building(city: City, points) -> np.ndarray:
     return (0 < points[..., 2]) & (points[..., 2] < roof_height(city, points[..., :2]))
 
 
-def _slab(start, step, low, high):
-    """The open interval ``(enter, leave)`` of ``t`` where ``start + t step`` lies strictly between ``low`` and
-    ``high``, for links ``[L, 1]`` against buildings ``[L, M]`` (``(-inf, inf)`` or empty for ``step == 0``)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_low, t_high = (low - start) / step, (high - start) / step
-    enter, leave = np.minimum(t_low, t_high), np.maximum(t_low, t_high)
-    parallel = np.broadcast_to(step == 0, enter.shape)
-    if parallel.any():
-        within = (low < start) & (start < high)
-        enter = np.where(parallel, np.where(within, -np.inf, np.inf), enter)
-        leave = np.where(parallel, np.where(within, np.inf, -np.inf), leave)
-    return enter, leave
+def _clear_links(a, b, x0, y0, x1, y1, height, origin_x, origin_y, pitch, side, columns, rows, tallest):
+    """:func:`line_of_sight`'s loop over the links ``a -> b`` ``[L, 3]`` (metres), compiled by numba on first use
+    (:func:`_compiled`); ``x0, ..., height`` and the lattice are the city's, ``tallest`` its tallest roof."""
+    clear = np.ones(len(a), dtype=np.bool_)
+    for i in range(len(a)):
+        if min(a[i, 2], b[i, 2]) >= tallest:  # above every roof
+            continue
+        # the buildings a link may pass through lie under its part below the tallest roof (and a margin): the walk
+        # looks for them along that part only, from the link's lower end; the slab test takes the whole segment
+        lower, upper = (a[i], b[i]) if a[i, 2] <= b[i, 2] else (b[i], a[i])
+        rise = upper[2] - lower[2]
+        below = (tallest * (1 + _ROOF_MARGIN) + _ROOF_MARGIN - lower[2]) / rise if rise > 0 else 1.0
+        below = min(max(below, 0.0), 1.0)
+        walk_x, walk_y = (upper[0] - lower[0]) * below, (upper[1] - lower[1]) * below
+        # along its major ground axis u (the one it moves along more) the walk meets the sites first..last; a site is a
+        # building then a street, and the last site is a margin against rounding past a building it enters
+        x_major = abs(walk_x) >= abs(walk_y)
+        if x_major:
+            u, du, v, dv, u_origin, v_origin, u_sites, v_sites = (
+                lower[0],
+                walk_x,
+                lower[1],
+                walk_y,
+                origin_x,
+                origin_y,
+                columns,
+                rows,
+            )
+        else:
+            u, du, v, dv, u_origin, v_origin, u_sites, v_sites = (
+                lower[1],
+                walk_y,
+                lower[0],
+                walk_x,
+                origin_y,
+                origin_x,
+                rows,
+                columns,
+            )
+        first = int(math.floor((min(u, u + du) - u_origin) / pitch))
+        last = int(math.floor((max(u, u + du) - u_origin) / pitch)) + 1
+        start, step = a[i], b[i] - a[i]
+        blocked = False
+        for site in range(first, last + 1):
+            # over one building's extent in u the walk moves at most a side along v: it meets at most two rows, the
+            # row of its lowest v there and the next (a site ends in a street, so rounding v loses no building)
+            if du == 0.0:  # then dv == 0 too: a vertical link, its whole length over one point
+                t_low, t_high = 0.0, 1.0
+            else:
+                wall = u_origin + site * pitch
+                t_wall, t_far = (wall - u) / du, (wall + side - u) / du
+                t_low = min(max(min(t_wall, t_far), 0.0), 1.0)
+                t_high = min(max(max(t_wall, t_far), 0.0), 1.0)
+            row_first = int(math.floor((v + min(t_low * dv, t_high * dv) - v_origin) / pitch))
+            for row in (row_first, row_first + 1):
+                if blocked or site < 0 or site >= u_sites or row < 0 or row >= v_sites:
+                    continue
+                k = row * columns + site if x_major else site * columns + row
+                # the slab method: t in [0, 1] inside the three open slabs of the box is a non-empty interval
+                enter, leave = 0.0, 1.0
+                for low, high, s, d in (
+                    (x0[k], x1[k], start[0], step[0]),
+                    (y0[k], y1[k], start[1], step[1]),
+                    (0.0, height[k], start[2], step[2]),
+                ):
+                    if d == 0.0:
+                        inside = low < s < high
+                        enter, leave = (enter, leave) if inside else (math.inf, -math.inf)
+                    else:
+                        t_a, t_b = (low - s) / d, (high - s) / d
+                        enter, leave = max(enter, min(t_a, t_b)), min(leave, max(t_a, t_b))
+                blocked = enter < leave
+            if blocked:
+                break
+        clear[i] = not blocked
+    return clear
 
 
-def _sites_along(city: City, start: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For links ``[L, 3]``, the first and last lattice site (along each link's major ground axis, the one it moves
-    along more) whose building its ground track may meet.  A site is a building then a street, so the site of the
-    track's lowest ``u`` is the first (rounding that ``u`` down a site loses nothing); the last has a site of margin
-    against rounding its highest ``u`` down past a building it enters."""
-    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
-    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
-    u_origin = np.where(x_major, city.origin_x, city.origin_y)
-    first = np.floor((np.minimum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64)
-    last = np.floor((np.maximum(u, u + du) - u_origin) / city.pitch_m).astype(np.int64) + 1
-    return first, last
+@functools.cache
+def _compiled():
+    """:func:`_clear_links` compiled (numba, cached on disk): imported here, so that a model without a city, and the
+    refusals, do not import numba."""
+    import numba
 
-
-def _crossed_buildings(city: City, start: np.ndarray, step: np.ndarray, first: np.ndarray, count: int):
-    """The buildings that links ``[L, 3]`` may pass through: indices ``[L, 2 count]`` and whether each is one.
-
-    Along its major ground axis ``u`` a link meets the buildings of the sites ``first, ..., first + count - 1``; over
-    one building's extent in ``u`` it moves at most a building's side along the other axis ``v``, so it meets at most
-    two rows there: the site of its lowest ``v`` over that extent and the next (a site ends in a street, so rounding
-    ``v`` across a site's edge loses no building)."""
-    x_major = np.abs(step[:, 0]) >= np.abs(step[:, 1])
-    u, du = np.where(x_major, start[:, 0], start[:, 1]), np.where(x_major, step[:, 0], step[:, 1])
-    v, dv = np.where(x_major, start[:, 1], start[:, 0]), np.where(x_major, step[:, 1], step[:, 0])
-    u_origin = np.where(x_major, city.origin_x, city.origin_y)[:, None]
-    v_origin = np.where(x_major, city.origin_y, city.origin_x)[:, None]
-    u_sites = np.where(x_major, city.columns, city.rows)[:, None]
-    v_sites = np.where(x_major, city.rows, city.columns)[:, None]
-    site = first[:, None] + np.arange(count)  # [L, K]
-    wall = u_origin + site * city.pitch_m
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_wall, t_far = (wall - u[:, None]) / du[:, None], (wall + city.side_m - u[:, None]) / du[:, None]
-    still = (du == 0)[:, None]  # then dv == 0 too: a vertical link, its whole length over one point
-    t_low = np.where(still, 0.0, np.clip(np.minimum(t_wall, t_far), 0, 1))
-    t_high = np.where(still, 1.0, np.clip(np.maximum(t_wall, t_far), 0, 1))
-    lowest_v = v[:, None] + np.minimum(t_low * dv[:, None], t_high * dv[:, None])
-    row = np.floor((lowest_v - v_origin) / city.pitch_m).astype(np.int64)
-    site, row = np.repeat(site, 2, axis=1), np.repeat(row, 2, axis=1) + np.tile([0, 1], count)  # [L, 2K]
-    valid = (site >= 0) & (site < u_sites) & (row >= 0) & (row < v_sites)
-    index = np.where(x_major[:, None], row * city.columns + site, site * city.columns + row)
-    return np.where(valid, index, 0), valid
+    return numba.njit(cache=True, error_model="numpy")(_clear_links)
 
 
 def line_of_sight(city: City, a, b) -> np.ndarray:
@@ -261,8 +291,8 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     building (:func:`inside_building`) is blocked.
 
     Each link is tested only against the buildings its ground track may cross below the tallest roof, found by
-    walking the lattice along that part of it (about two per building pitch of its length), in chunks of about
-    ``CHUNK_BYTES`` of working memory; a link above every roof is not tested.
+    walking the lattice along that part of it (about two per building pitch of its length), and only until one
+    blocks it; a link above every roof is not tested.  A compiled loop (numba) over the links.
 
     Args:
         city: the city.
@@ -271,41 +301,11 @@ def line_of_sight(city: City, a, b) -> np.ndarray:
     """
     a, b = np.broadcast_arrays(_as_points(a, "a"), _as_points(b, "b"))
     shape = a.shape[:-1]
-    a, b = a.reshape(-1, 3), b.reshape(-1, 3)
-    clear = np.ones(len(a), dtype=bool)
+    a, b = np.ascontiguousarray(a.reshape(-1, 3)), np.ascontiguousarray(b.reshape(-1, 3))
+    lattice = (city.origin_x, city.origin_y, city.pitch_m, city.side_m, city.columns, city.rows)
     tallest = float(city.height.max(initial=0.0))
-    links = np.flatnonzero(np.minimum(a[:, 2], b[:, 2]) < tallest)
-    # the buildings a link may pass through lie under its part below the tallest roof (and a margin): the walk looks
-    # for them along that part only, from the link's lower end; the slab test below still takes the whole segment
-    lower = np.where((a[links, 2] <= b[links, 2])[:, None], a[links], b[links])
-    upper = np.where((a[links, 2] <= b[links, 2])[:, None], b[links], a[links])
-    rise = upper[:, 2] - lower[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        below = np.where(rise > 0, (tallest * (1 + _ROOF_MARGIN) + _ROOF_MARGIN - lower[:, 2]) / rise, 1.0)
-    walk = (upper - lower) * np.clip(below, 0.0, 1.0)[:, None]
-    first, last = _sites_along(city, lower, walk)
-    order = np.argsort(first - last, kind="stable")  # the links that cross the most sites first
-    links, first, counts = links[order], first[order], (last - first + 1)[order]
-    lower, walk = lower[order], walk[order]
-    low = (city.x0, city.y0, np.zeros_like(city.height))
-    high = (city.x1, city.y1, city.height)
-    begin = 0
-    while begin < len(links):
-        count = int(counts[begin])
-        end = begin + max(1, CHUNK_BYTES // (_PAIR_BYTES * 2 * count))
-        chunk = links[begin:end]
-        start, step = a[chunk], b[chunk] - a[chunk]
-        index, valid = _crossed_buildings(city, lower[begin:end], walk[begin:end], first[begin:end], count)
-        enter, leave = np.zeros(index.shape), np.ones(index.shape)
-        for axis in range(3):
-            axis_enter, axis_leave = _slab(
-                start[:, axis, None], step[:, axis, None], low[axis][index], high[axis][index]
-            )
-            np.maximum(enter, axis_enter, out=enter)
-            np.minimum(leave, axis_leave, out=leave)
-        clear[chunk] = ~(valid & (enter < leave)).any(axis=1)
-        begin = end
-    return clear.reshape(shape)
+    walls = (city.x0, city.y0, city.x1, city.y1, city.height)
+    return _compiled()(a, b, *walls, *lattice, tallest).reshape(shape)
 
 
 def p_los_p1410(alpha, beta, gamma, h_tx, h_rx, ground_distance_m) -> np.ndarray:

@@ -179,3 +179,35 @@ def test_the_command_line_refuses_an_empty_path_or_a_stray_argument(argv, messag
     with pytest.raises(ValueError) as refused:
         main(argv)
     assert str(refused.value) == message and not any(tmp_path.iterdir())
+
+
+def test_an_outside_policy_of_a_city_model_acts_in_that_models_held_out_cities_only(tmp_path):
+    """``benchmarks/score_outside.py``: the model arguments ``sb3_yardstick.py --save`` keeps beside an SB3 model
+    rebuild the model it trained on (read as data, checked by the script's parser); in a city, a policy acts in the
+    ``city`` suite's held-out cities of that model (another environment, seed or the high-rise task's S and E
+    height) and in no other team or grid (``run_city``)."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from uavrl.agents.schema import run_city
+    from uavrl.bench.run import model
+    from uavrl.envs import make_config
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        from sb3_yardstick import model_flags, model_options, parse_args
+        from score_outside import sb3_model
+    finally:
+        sys.path.pop(0)
+    flags = model_flags(parse_args("--grid 10 10 --uavs 6 --city urban --altitudes 30 60 100 200 300".split()))
+    (tmp_path / "ppo_seed0.json").write_text(json.dumps(flags))
+    trained_on = make_config(**model_options(parse_args(sb3_model(tmp_path / "ppo_seed0.json"))))
+    assert trained_on.city == "urban" and trained_on.num_levels == 5 and trained_on.num_uavs == 6
+    for name, acts in [("city_urban_n6", True), ("city_highrise_n6", True), ("city_urban_n10", False)]:
+        acting = model(TASKS[name]).replace(max_steps=trained_on.max_steps, reward=trained_on.reward)
+        assert (acting.replace(**run_city(acting, trained_on)) == trained_on) is acts, name
+    assert sb3_model(tmp_path / "missing.json") == []  # the paper's 6x6 model, as before the file
+    (tmp_path / "bad.json").write_text(json.dumps({"grid": [6, 6]}))
+    with pytest.raises(SystemExit, match="bad.json: not the model arguments sb3_yardstick.py writes"):
+        sb3_model(tmp_path / "bad.json")

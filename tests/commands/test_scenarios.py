@@ -146,7 +146,7 @@ def test_each_benchmarl_task_of_a_scenario_points_at_it(tmp_path):
 
     tasks = sorted((Path(config_dir()) / "task" / "uavrl").glob("*.yaml"))
     of_scenarios = [task.stem for task in tasks if task.stem in SCENARIOS]
-    assert of_scenarios == ["n6_10x10", "paper_6x6"]
+    assert of_scenarios == ["city_urban_10x10", "n6_10x10", "paper_6x6"]
     for name in of_scenarios:
         saved = OmegaConf.to_container(OmegaConf.load(Path(config_dir()) / "task" / "uavrl" / f"{name}.yaml"))
         assert saved == {"defaults": [{"/scenario": name}], "task": {"name": name}}
