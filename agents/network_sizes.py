@@ -14,6 +14,7 @@ from uavrl.envs.config import NUM_ACTIONS
 from uavrl.envs.limits import (
     NODE_FEATURES,
     PAIR_FEATURES,
+    local_set_sizes,
     model_observation_size,
     observation_size,
     set_input_size,
@@ -96,12 +97,33 @@ def set_parameters(num_actions: int, energy: bool, hidden: int, heads: int, dept
     return encoder + depth * layer + head
 
 
+def local_set_parameters(num_actions: int, energy: bool, hidden: int, depth: int, levels: bool = False) -> int:
+    """Parameters of ``LocalSetQCore``: the encoders of a UAV's own input and of each UAV it hears, ``depth`` rounds
+    of attention (query, key, value, out) and feed-forward layers, the head; no size in any shape."""
+    h = hidden
+    own, heard = local_set_sizes(energy, levels)
+    encoders = _linear(own, h) + _linear(heard, h) + 2 * _linear(h, h)
+    return encoders + depth * 6 * _linear(h, h) + _linear(2 * h, h) + _linear(h, num_actions)
+
+
+def size_free_parameters(model, a) -> int:
+    """Parameters of the size-free core of the settings ``a`` in the model ``model``: ``LocalSetQCore`` with local
+    observations, ``SetQCore`` otherwise."""
+    energy, levels, hidden, depth = model.energy != "none", model.num_levels > 1, int(a.hidden), int(a.depth)
+    if model.local:
+        return local_set_parameters(model.num_actions, energy, hidden, depth, levels)
+    return set_parameters(model.num_actions, energy, hidden, int(a.heads), depth, levels)
+
+
 def team_row_macs(num_uavs: int, num_actions: int, energy: bool, a, levels: bool = False, local: int = 0) -> int:
     """Multiply-adds of one world's forward pass: the network (and the QMIX mixer) for every UAV of it (``LocalQNet``
     with ``local`` inputs)."""
     N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
     embed = int(a.mixing_embed_dim)
     mixer = state_size(N, energy, levels) * embed * (N + 3) + embed * (N + 1) if a.mixer == "qmix" else 0
+    if local and a.get("network", "team") == "set":  # LocalSetQCore: its own input, each heard UAV, the rounds
+        own, heard = local_set_sizes(energy, levels)
+        return N * (own * h + h * h + (N - 1) * (heard * h + h * h + 2 * depth * h * h) + depth * 6 * h * h)
     if local:
         return N * (local * h + depth * h * h + h * num_actions) + mixer
     if a.get("network", "team") == "set":
@@ -120,6 +142,9 @@ def team_row_values(num_uavs: int, num_actions: int, energy: bool, a, levels: bo
     resident memory of gradient steps of 8 and of 4096 rows, N = 6 on 10x10 with QMIX: 28 KB a row against this
     count's 37 KB; of 8 and of 256 rows for the size-free network, N = 30 on 40x40: 3.2 MB a row, as counted)."""
     N, h, depth, F = num_uavs, int(a.hidden), int(a.depth), _team_input(num_uavs, energy, levels)
+    if local and a.get("network", "team") == "set":  # every UAV's and each heard UAV's layers, once
+        own, heard = local_set_sizes(energy, levels)
+        return N * (own + 2 * h + (N - 1) * (heard + 2 * h + 3 * depth * h) + depth * 8 * h + 4 * h + num_actions)
     if local:  # each layer's inputs and outputs for every UAV, twice (forward and backward), and the mixer's
         return 2 * (N * (local + 2 * (depth + 1) * h + num_actions) + _mixer_values(N, energy, a, levels))
     if a.get("network", "team") == "set":

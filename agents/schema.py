@@ -287,17 +287,17 @@ def _plain(value):
 
 def check_local_dqn(env_cfg: ModelConfig, a, network: str) -> None:
     """One-line errors for DQN settings that need the central observation (``env.observation=local`` is set): the
-    joint head (one value per joint action), the size-free network (not yet built for local observations) and n-step
-    returns with messages."""
+    joint head (one value per joint action), messages with the size-free network (not built: it learns none) and
+    n-step returns with messages."""
     if a.head == "joint":
         raise ValueError(
             "agent.head='joint' is invalid with env.observation='local': one value per joint action is a central "
             "controller's; use agent.head=factored (each UAV from its own observation)"
         )
-    if network == "set":
+    if network == "set" and env_cfg.message_size:
         raise ValueError(
-            "agent.network='set' is invalid with env.observation='local': the size-free network reads every UAV; "
-            "use agent.network=team"
+            f"agent.network='set' is invalid with env.message_size={env_cfg.message_size}: the size-free network on "
+            "local observations learns no messages; use agent.network=team, or env.message_size=0"
         )
     if env_cfg.message_size and int(a.get("n_step", 1)) > 1:
         raise ValueError(

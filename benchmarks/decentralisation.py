@@ -8,7 +8,8 @@ prints one markdown row per run: the share of the 200 held-out starts reaching 0
 saved greedy policy evaluated here, as the training command evaluates it at its end), the steps to 0.999 U* against
 the oracle planner's from the same starts (those both reach, ``yardstick.py --paired``'s ratio) and the training CPU
 seconds (the run's ``metrics.json``); the oracle's and the random policy's rows are played here from the same starts.
-``--figure`` draws the share reaching 0.999 U* against the radius, per team.
+``--figure`` draws the share reaching 0.999 U* against the radius, per team.  A size-free run (``agent.network=set``,
+``scenario=size_free``) is scored in both teams' models at its radius.
 
 Usage::
 
@@ -28,6 +29,7 @@ from pathlib import Path
 import yaml
 
 SCENARIOS = {6: "n6_10x10", 10: "large_20x20"}
+SIZE_FREE_TEAMS = ((6, (10, 10)), (10, (20, 20)))  # where a size-free run (agent.network=set) is scored
 RADII = (0.0, 1.0, 2.0, 4.0, None)  # cells; None: every UAV and node heard
 MESSAGE_SIZE = 4
 
@@ -77,30 +79,36 @@ def collect(runs: Path, starts: int) -> list[dict]:
     results, models, oracles = [], {}, {}
     for run_dir in sorted(p for p in runs.iterdir() if (p / "metrics.json").is_file()):
         metrics = json.loads((run_dir / "metrics.json").read_text())
-        env = yaml.safe_load((run_dir / "config.yaml").read_text())["env"]
-        policy, cfg = load_policy(run_dir)
-        scores = evaluate(policy, cfg, num_starts=starts)
-        mine, reached = steps_to_level(policy, cfg, starts)
-        central = models.setdefault(cfg.num_uavs, cfg.replace(observation="central", comm_radius=None, message_size=0))
-        if cfg.num_uavs not in oracles:  # the oracle reads positions and tasks alone: once per team
-            oracles[cfg.num_uavs] = steps_to_level(OraclePolicy(central), central, starts)
-        oracle, oracle_reached = oracles[cfg.num_uavs]
-        both = reached & oracle_reached
-        name, _, seed = run_dir.name.rpartition("_s")
-        results.append(
-            dict(
-                row=name,
-                seed=int(seed),
-                num_uavs=cfg.num_uavs,
-                observation=env.get("observation", "central"),
-                radius=env.get("comm_radius"),
-                message_size=env.get("message_size") or 0,
-                reach=scores["eval/reach_999"],
-                optimality=scores["eval/optimality"],
-                oracle_ratio=float(mine[both].mean() / oracle[both].mean()) if both.any() else float("nan"),
-                train_cpu_seconds=metrics["train_cpu_seconds"],
+        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        env, size_free = saved["env"], saved["agent"].get("network") == "set"
+        own = load_policy(run_dir)[1]
+        # a size-free run acts in both teams' models (SIZE_FREE_TEAMS), a per-size one in its own
+        teams = [own.replace(num_uavs=n, grid=g) for n, g in SIZE_FREE_TEAMS] if size_free else [own]
+        for team in teams:
+            policy, cfg = load_policy(run_dir, env_config=team)
+            scores = evaluate(policy, cfg, num_starts=starts)
+            mine, reached = steps_to_level(policy, cfg, starts)
+            central = cfg.replace(observation="central", comm_radius=None, message_size=0)
+            central = models.setdefault(cfg.num_uavs, central)
+            if cfg.num_uavs not in oracles:  # the oracle reads positions and tasks alone: once per team
+                oracles[cfg.num_uavs] = steps_to_level(OraclePolicy(central), central, starts)
+            oracle, oracle_reached = oracles[cfg.num_uavs]
+            both = reached & oracle_reached
+            name, _, seed = run_dir.name.rpartition("_s")
+            results.append(
+                dict(
+                    row=name,
+                    seed=int(seed),
+                    num_uavs=cfg.num_uavs,
+                    observation=env.get("observation", "central") + (", size-free" if size_free else ""),
+                    radius=env.get("comm_radius"),
+                    message_size=env.get("message_size") or 0,
+                    reach=scores["eval/reach_999"],
+                    optimality=scores["eval/optimality"],
+                    oracle_ratio=float(mine[both].mean() / oracle[both].mean()) if both.any() else float("nan"),
+                    train_cpu_seconds=metrics["train_cpu_seconds"],
+                )
             )
-        )
     for num_uavs, cfg in sorted(models.items()):
         team = "" if num_uavs == 6 else "n10_"
         for name, reached in (
@@ -134,7 +142,7 @@ def table(results: list[dict]) -> None:
             print(f"| N = {r['num_uavs']} | {r['row'].split('_')[-1]} | | | | {r['reach']:.3f} | | | |")
             continue
         radius = "full" if r["radius"] is None else f"{r['radius']:g}"
-        local = r["observation"] == "local"
+        local = r["observation"].startswith("local")
         print(
             f"| N = {r['num_uavs']} | {r['observation']} | {radius if local else ''} | "
             f"{r['message_size'] if local else ''} | {r['seed']} | {r['reach']:.3f} | {r['optimality']:.4f} | "
@@ -171,6 +179,10 @@ def figure(results: list[dict], path: Path) -> None:
                         label=label,
                     )
                     ax.plot([positions[r["radius"]] for r in runs], [r[key] for r in runs], ".", color=colour, ms=4)
+            size_free = [r for r in mine if r.get("observation") == "local, size-free"]
+            if size_free:
+                x = [positions[r["radius"]] for r in size_free]
+                ax.plot(x, [r[key] for r in size_free], "D", color="tab:purple", label="size-free network, local")
             for r in mine:
                 if r.get("observation") == "central":
                     ax.axhline(r[key], color="tab:green", ls=":", lw=2, label=f"central DQN (seed {r['seed']})")

@@ -569,7 +569,7 @@ LOCAL_CASES = [
     ("train", f"{L} env.message_size=1000000000000"),
     ("train", f"{L} env.message_size=true"),
     ("train", f"{L} agent.head=joint env.grid=[3,3]"),
-    ("train", f"{L} agent.network=set agent.mixer=mean"),
+    ("train", f"{L} agent.network=set agent.mixer=mean env.message_size=2"),
     ("train", f"{L} env.message_size=2 agent.n_step=3"),
     ("train", f"{L} eval.lookahead=1 agent.mixer=vdn"),
     ("train", "agent=tabular env.observation=local env.grid=[3,3]"),

@@ -450,6 +450,15 @@ def state_size(num_uavs: int, energy: bool, levels: bool = False) -> int:
 PAIR_FEATURES = 3  # the size-free network's view of another UAV: (dx, dy) by the grid's span, exp(-its distance)
 
 
+def local_set_sizes(energy: bool, levels: bool = False) -> tuple[int, int]:
+    """Entries of a UAV's own input and of each UAV it hears to the size-free network on local observations
+    (``LocalSetQCore``): its local observation's own part and node slots, and which of the positions its moves reach
+    it hears held; each heard UAV's (dx, dy) by the grid's span (and its level offset), ``exp(-its distance)``, its
+    task, under an energy model its battery and service flag.  Neither grows with N or the grid."""
+    own = observation_size(1, energy, levels, local=True) + (6 if levels else 4)
+    return own, PAIR_FEATURES + (1 if levels else 0) + 1 + (2 if energy else 0)
+
+
 def set_input_size(energy: bool, levels: bool = False) -> int:
     """Entries of a UAV's own input to the size-free network (``SetQCore``): its observation's own part, the nodes,
     which of its 4 next cells another UAV holds (6 positions with altitude levels: ``levels``), under an energy model

@@ -30,7 +30,7 @@ from uavrl.agents.network_sizes import (
     local_inputs,
     policy_row_bytes,
     qmix_parameters,
-    set_parameters,
+    size_free_parameters,
     team_parameters,
     team_row_macs,
 )
@@ -402,9 +402,7 @@ def dqn_costs(cfg: DictConfig, model, T: Factor) -> tuple[list[Cost], list[Cost]
     def network_bytes(low) -> int:
         s = agent(low)
         if size_free:
-            hidden, heads, depth = int(s.hidden), int(s.heads), int(s.depth)
-            params = set_parameters(model.num_actions, _e(model), hidden, heads, depth, _l(model))
-            return TRAINING_COPIES * FLOAT * params
+            return TRAINING_COPIES * FLOAT * size_free_parameters(model, s)
         m = models(low)[0]
         params = team_parameters(
             m.fleet_size,

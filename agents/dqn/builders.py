@@ -29,6 +29,7 @@ from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import (
     LEVELS,
     DecodeJointAction,
+    HeardMoves,
     JointActionMask,
     LocalGreedy,
     LocalQNet,
@@ -158,7 +159,7 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
     )
     if env.cfg.local:  # each UAV by its own values, mask and observation
         greedy_action = TensorDictModule(
-            LocalGreedy(env),
+            LocalGreedy(HeardMoves(env)),
             in_keys=[("agents", "action_value"), ("agents", "action_mask"), ("agents", "observation")],
             out_keys=[("agents", "action")],
         )

@@ -36,7 +36,7 @@ from uavrl.envs.rules import shown
 from .agent import DQNAgent, _Group
 from .builders import QNetwork, build_policies, exploration_schedule
 from .curriculum import Curriculum
-from .setnet import SetDoubleQLoss, SetQCore, SetQNet
+from .setnet import LocalSetQCore, LocalSetQNet, SetDoubleQLoss, SetQCore, SetQNet
 
 
 class SetNetwork(QNetwork):
@@ -52,12 +52,16 @@ class SetNetwork(QNetwork):
         super().__init__(agent, env)
         a, env_cfg = self.settings, agent.env_cfg
         energy, levels = env_cfg.energy != "none", env_cfg.num_levels > 1
-        core = SetQCore(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth), levels)
+        kind = LocalSetQCore if env_cfg.local else SetQCore  # each UAV from what it hears, or from the team
+        core = kind(env_cfg.num_actions, energy, int(a.hidden), int(a.heads), int(a.depth), levels)
         self.core = core.to(agent.device)
 
     def values(self, env: UAVSpectrumEnv) -> TensorDictModule:
-        positions = env.world.dynamics.positions if env.cfg.num_levels > 1 else None  # its moves, its buildings
-        net = SetQNet(self.core, env.cfg.grid, positions)
+        if env.cfg.local:
+            net = LocalSetQNet.of(self.core, env)
+        else:
+            positions = env.world.dynamics.positions if env.cfg.num_levels > 1 else None  # its moves, its buildings
+            net = SetQNet(self.core, env.cfg.grid, positions)
         return TensorDictModule(net, in_keys=net.in_keys, out_keys=[("agents", "action_value")])
 
     def build_loss(self, policies) -> SetDoubleQLoss:

@@ -324,12 +324,12 @@ class LocalGreedy(nn.Module):
     and a UAV that keeps trying it never moves again), and no UAV reads another's values.
 
     Args:
-        env: an environment of the model (``env.observation=local``).
+        held: the model's slot reader (``HeardMoves(env)``, ``env.observation=local``).
     """
 
-    def __init__(self, env: UAVSpectrumEnv):
+    def __init__(self, held: HeardMoves):
         super().__init__()
-        self.held = HeardMoves(env)
+        self.held = held
 
     def forward(self, values: torch.Tensor, mask: torch.Tensor, observation: torch.Tensor) -> torch.Tensor:
         blocked = torch.zeros_like(mask).index_copy(-1, self.held.move_actions, self.held(observation))

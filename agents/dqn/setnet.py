@@ -31,12 +31,20 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import nn
 
-from uavrl.envs.limits import NODE_FEATURES, OWN_FEATURES, PAIR_FEATURES, VERTICAL_FEATURES, set_input_size
+from uavrl.envs import UAVSpectrumEnv
+from uavrl.envs.limits import (
+    NODE_FEATURES,
+    OWN_FEATURES,
+    PAIR_FEATURES,
+    VERTICAL_FEATURES,
+    local_set_sizes,
+    set_input_size,
+)
 from uavrl.envs.physics.grid import grid_neighbours
 from uavrl.envs.physics.positions import Positions
 
 from .loss import discount
-from .networks import LEVELS, Q_INPUTS, PositionIndex, ValidGreedy
+from .networks import LEVELS, Q_INPUTS, HeardMoves, LocalGreedy, PositionIndex, ValidGreedy
 
 MIXERS = ("vdn", "mean")  # the size-free team values: the sum or the mean of the UAVs' chosen values
 
@@ -164,10 +172,99 @@ class SetQNet(nn.Module):
         """A view of ``core`` (the target's) in this one's grid and positions."""
         return SetQNet(core, self.grid, self.positions)
 
+    def greedy_rule(self, num_actions: int) -> tuple[ValidGreedy, list]:
+        """The loss's rule for the next greedy action and what it reads after the values and the mask."""
+        greedy = ValidGreedy(self.neighbours, self.grid[0], num_actions, self.position.numbers)
+        return greedy, ["positions", "tasks", *self.in_keys[len(Q_INPUTS) :]]  # and the levels
+
     @property
     def in_keys(self) -> list:
         """What it reads, in order: :data:`Q_INPUTS`, then the levels with altitude levels."""
         return [*Q_INPUTS, LEVELS] if self.positions is not None else list(Q_INPUTS)
+
+
+class LocalSetQCore(nn.Module):
+    """The size-free parameters on local observations (``env.observation=local``): an encoder of each UAV's own input
+    (what it senses and the nodes it hears, :func:`~uavrl.envs.limits.local_set_sizes`), ``depth`` rounds of
+    attention over the UAVs it hears, whose keys and values come from what it hears of each (never from another UAV's
+    own observation), and a head of ``num_actions`` values: a UAV's values change only with what it observes."""
+
+    def __init__(self, num_actions: int, energy: bool, hidden: int, heads: int, depth: int, levels: bool = False):
+        super().__init__()
+        self.energy, self.levels, self.heads, self.size = energy, levels, heads, hidden // heads
+        own, heard = local_set_sizes(energy, levels)
+        self.encode, self.heard = _mlp(own, hidden, hidden), _mlp(heard, hidden, hidden)
+        self.query, self.key, self.value, self.out = (
+            nn.ModuleList(nn.Linear(hidden, hidden) for _ in range(depth)) for _ in range(4)
+        )
+        self.feed = nn.ModuleList(_mlp(hidden, hidden, hidden) for _ in range(depth))
+        self.head = _mlp(2 * hidden, hidden, num_actions)  # the UAV's result and its own encoding
+
+    def forward(self, own: torch.Tensor, others: torch.Tensor, heard: torch.Tensor) -> torch.Tensor:
+        """``own`` ``[*, N, F]``, ``others`` ``[*, N, N - 1, G]`` and ``heard`` ``[*, N, N - 1]`` (row i: the UAVs
+        UAV i hears); ``[*, N, A]``."""
+        mine = h = self.encode(own)
+        if others.shape[-2]:  # a lone UAV hears no one
+            slots = self.heard(others)
+            unheard = ~heard.unsqueeze(-2)  # [*, N, 1, N - 1]
+            alone = ~heard.any(-1)[..., None, None]  # [*, N, 1, 1]: a UAV that hears no one attends to nothing
+            for query, key, value, out, feed in zip(self.query, self.key, self.value, self.out, self.feed, strict=True):
+                q = query(h).unflatten(-1, (self.heads, self.size))  # [*, N, heads, size]
+                k, v = (layer(slots).unflatten(-1, (self.heads, self.size)) for layer in (key, value))
+                logits = torch.einsum("...nhs,...nkhs->...nhk", q, k) / math.sqrt(self.size)
+                # finite logits where no one is heard, then zero weights: no NaN forward or backward
+                weights = (
+                    logits.masked_fill(unheard, -math.inf).masked_fill(alone, 0.0).softmax(-1).masked_fill(alone, 0)
+                )
+                h = h + torch.relu(out(torch.einsum("...nhk,...nkhs->...nhs", weights, v).flatten(-2)))
+                h = h + torch.relu(feed(h))
+        return self.head(torch.cat([h, mine], -1))
+
+
+class LocalSetQNet(nn.Module):
+    """:class:`LocalSetQCore` acting in one model's environment: reads each UAV's local observation ``[*, N, F]``
+    alone (the slots parsed by :class:`~.networks.HeardMoves`), returns ``[*, N, A]``.  Holds no parameters of its
+    own: views of one core in several grids share them.
+
+    Args:
+        core: the parameters.
+        held: the model's slot reader (``HeardMoves(env)``).
+    """
+
+    def __init__(self, core: LocalSetQCore, held: HeardMoves):
+        super().__init__()
+        self.core, self.held = core, held
+
+    @classmethod
+    def of(cls, core: LocalSetQCore, env: UAVSpectrumEnv) -> LocalSetQNet:
+        return cls(core, HeardMoves(env))
+
+    def features(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(own, others, heard)``: what the core reads, none of it sized by N or the grid."""
+        held, N = self.held, self.held.num_uavs
+        own = torch.cat([observation[..., : held.own], held(observation).to(observation.dtype)], -1)
+        slots = observation[..., held.own :].unflatten(-1, (N - 1, held.slot))
+        offset, heard = held._heard(observation)  # in cells and levels
+        span = [slots[..., :2]] + ([slots[..., held.level_entry : held.level_entry + 1]] if held.levels else [])
+        proximity = torch.exp(-offset.norm(dim=-1, keepdim=True))
+        energy = [slots[..., 4:6]] if self.core.energy else []  # its battery and service flag
+        others = torch.cat([*span, proximity, slots[..., 2:3], *energy], -1)
+        return own, others, heard.squeeze(-1)
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return self.core(*self.features(observation))
+
+    def acting(self, core: LocalSetQCore) -> LocalSetQNet:
+        """A view of ``core`` (the target's) in this one's model."""
+        return LocalSetQNet(core, self.held)
+
+    def greedy_rule(self, num_actions: int) -> tuple[LocalGreedy, list]:
+        """The loss's rule for the next greedy action (each UAV by its own values) and what it reads."""
+        return LocalGreedy(self.held), [("agents", "observation")]
+
+    @property
+    def in_keys(self) -> list:
+        return [("agents", "observation")]
 
 
 def team_value(chosen: torch.Tensor, mixer: str) -> torch.Tensor:
@@ -190,21 +287,19 @@ class SetDoubleQLoss(nn.Module):
         self.target = copy.deepcopy(core).requires_grad_(False)
         self._views: dict = {}
 
-    def _target_and_greedy(self, online: SetQNet) -> tuple[SetQNet, ValidGreedy]:
+    def _target_and_greedy(self, online: SetQNet | LocalSetQNet) -> tuple:
         if online not in self._views:
-            greedy = ValidGreedy(online.neighbours, online.grid[0], self.num_actions, online.position.numbers)
-            self._views[online] = (online.acting(self.target), greedy)
+            self._views[online] = (online.acting(self.target), *online.greedy_rule(self.num_actions))
         return self._views[online]
 
-    def forward(self, td: TensorDictBase, online: SetQNet) -> TensorDictBase:
-        target, greedy = self._target_and_greedy(online)
+    def forward(self, td: TensorDictBase, online: SetQNet | LocalSetQNet) -> TensorDictBase:
+        target, greedy, where = self._target_and_greedy(online)
         nxt, inputs = td.get("next"), online.in_keys
         chosen = online(*(td.get(k) for k in inputs)).gather(-1, td.get(("agents", "action")).unsqueeze(-1))
         value = team_value(chosen, self.mixer)
         with torch.no_grad():
             next_values = online(*(nxt.get(k) for k in inputs))
-            where = (nxt.get(k) for k in ["positions", "tasks", *inputs[len(Q_INPUTS) :]])  # and the levels
-            action = greedy(next_values, nxt.get(("agents", "action_mask")), *where)
+            action = greedy(next_values, nxt.get(("agents", "action_mask")), *(nxt.get(k) for k in where))
             next_value = team_value(target(*(nxt.get(k) for k in inputs)).gather(-1, action.unsqueeze(-1)), self.mixer)
             y = nxt.get("reward") + discount(td, self.gamma) * (~nxt.get("terminated")) * next_value
         return TensorDict({"loss": nn.functional.smooth_l1_loss(value, y)})

@@ -182,3 +182,36 @@ def test_of_two_uavs_moving_into_one_cell_the_higher_id_gives_way(after_cancel, 
     stayed = (out[:, 1] == stay_relaying).float().mean().item()
     assert ((out[:, 1] == left) | (out[:, 1] == stay_relaying)).all()
     assert chance - 0.05 <= stayed <= chance + 0.05, stayed
+
+
+def test_the_size_free_network_acts_on_what_each_uav_hears_at_any_size(compose_cfg):
+    """``agent.network=set`` on local observations (``LocalSetQCore``): it trains over two teams and grids, a UAV's
+    greedy action is the same whatever lies beyond its range (the per-size network's test, on the 4-UAV group), it
+    acts zero-shot in a team and grid it never saw, and with messages it is refused in one line."""
+    from uavrl.agents import agent_class
+    from uavrl.agents.dqn.setnet import LocalSetQNet
+
+    sizes = ["agent.network=set", "agent.mixer=vdn", "agent.heads=2", "agent.sizes=[[4,6,6],[3,5,5]]"]
+    cfg = compose_cfg("agent=dqn", *LOCAL, *sizes)
+    agent = agent_class("dqn", cfg.agent)(model_config(cfg), cfg, torch.device("cpu"), 0)
+    assert all(isinstance(group.values.module, LocalSetQNet) for group in agent.groups)
+    for _ in range(5):
+        agent.train_iteration()
+    gen = torch.Generator().manual_seed(5)
+    codes, moved = [], []
+    for _ in range(300):
+        code = 2 * torch.randperm(36, generator=gen)[:4] + torch.randint(0, 2, (4,), generator=gen)
+        codes.append(code)
+        moved.append(perturbed_out_of_range(code, torch.zeros(4, 0), (6, 6), 2.0, gen)[0])
+    before, after = (greedy_actions(agent, torch.stack(c))[0][:, 0] for c in (codes, moved))
+    assert torch.equal(before, after)
+    unseen = agent.env_cfg.replace(num_uavs=7, grid=(9, 9))
+    metrics = evaluate(agent.policy_for(unseen), unseen, num_starts=4, horizon=8)
+    assert 0.0 < metrics["eval/optimality"] <= 1.0 + 1e-9
+    with pytest.raises(ValueError, match="agent.network='set' is invalid with env.message_size=2: the size-free"):
+        agent_class("dqn", cfg.agent)(
+            model_config(compose_cfg(*[], "agent=dqn", *LOCAL, *sizes, "env.message_size=2")),
+            cfg,
+            torch.device("cpu"),
+            0,
+        )

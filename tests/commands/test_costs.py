@@ -35,7 +35,7 @@ def test_the_parameter_counts_are_the_networks_built(options):
     from torchrl.modules import QMixer
 
     from uavrl.agents.dqn.networks import LocalQNet, TeamQNet
-    from uavrl.agents.dqn.setnet import SetQCore
+    from uavrl.agents.dqn.setnet import LocalSetQCore, SetQCore
 
     env = UAVSpectrumEnv(batch_size=1, **options)
     energy, N, A = env.cfg.energy != "none", env.num_uavs, env.num_actions
@@ -49,6 +49,8 @@ def test_the_parameter_counts_are_the_networks_built(options):
         )
         built = parameters(SetQCore(A, energy, hidden, heads, depth))
         assert built == network_sizes.set_parameters(A, energy, hidden, heads, depth)
+        built = parameters(LocalSetQCore(A, energy, hidden, heads, depth))
+        assert built == network_sizes.local_set_parameters(A, energy, hidden, depth)
         local = UAVSpectrumEnv(batch_size=1, observation="local", comm_radius=1.0, message_size=heads, **options)
         inputs = network_sizes.local_inputs(local.cfg)
         assert inputs == local.observation_size + N + 4
