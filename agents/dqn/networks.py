@@ -215,18 +215,22 @@ class HeardMoves(nn.Module):
         self.register_buffer("lower", lower, persistent=False)  # [N, N - 1, 1]
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
-        offset, heard = self._heard(observation)
+        offset, heard = self.offsets(observation)
         return ((offset.unsqueeze(-2) == self.moves).all(-1) & heard).any(-2)
 
     def contenders(self, observation: torch.Tensor) -> torch.Tensor:
         """``[*, N, M]`` which of the positions its moves reach a heard UAV of a lower id could move into too (one
         move from it: one cell or one level away)."""
-        offset, heard = self._heard(observation)
+        offset, heard = self.offsets(observation)
         return (((offset.unsqueeze(-2) - self.moves).abs().sum(-1) == 1) & heard & self.lower).any(-2)
 
-    def _heard(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def slots(self, observation: torch.Tensor) -> torch.Tensor:
+        """``[*, N, N - 1, slot]``: each UAV's slots of the others, as it observes them (physics.sensing)."""
+        return observation[..., self.own :].unflatten(-1, (self.num_uavs - 1, self.slot))
+
+    def offsets(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``([*, N, N - 1, 3], [*, N, N - 1, 1])``: each slot's offset in cells and levels, and whether it is heard."""
-        slots = observation[..., self.own :].unflatten(-1, (self.num_uavs - 1, self.slot))
+        slots = self.slots(observation)
         level = slots[..., self.level_entry : self.level_entry + 1] if self.levels else torch.zeros_like(slots[..., :1])
         offset = (torch.cat([slots[..., :2], level], -1) * self.scale).round()  # in cells, levels
         return offset, heard_entry(slots)
@@ -310,9 +314,9 @@ class LocalQNet(nn.Module):
     def _heard(self, observation, previous, has_previous, params) -> torch.Tensor:
         """``observation`` with each slot's message (where the sender is heard, after a first step) replaced by what
         this network sends from the sender's ``previous`` observation."""
-        d, N = self.message_size, len(self.ids)
+        d = self.message_size
         sent = self.message(previous, params)[..., self.others, :]  # [*, N, N - 1, d]: each UAV's senders, in order
-        slots = observation[..., self.own :].unflatten(-1, (N - 1, self.slot))
+        slots = self.held.slots(observation)
         heard = heard_entry(slots) & has_previous.view(*has_previous.shape, 1, 1, 1)
         slots = torch.cat([slots[..., : self.slot - d], torch.where(heard, sent, slots[..., self.slot - d :])], -1)
         return torch.cat([observation[..., : self.own], slots.flatten(-2)], -1)

@@ -241,13 +241,12 @@ class LocalSetQNet(nn.Module):
 
     def features(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(own, others, heard)``: what the core reads, none of it sized by N or the grid."""
-        held, N = self.held, self.held.num_uavs
+        held = self.held
         own = torch.cat([observation[..., : held.own], held(observation).to(observation.dtype)], -1)
-        slots = observation[..., held.own :].unflatten(-1, (N - 1, held.slot))
-        offset, heard = held._heard(observation)  # in cells and levels
+        slots, (offset, heard) = held.slots(observation), held.offsets(observation)  # offsets in cells and levels
         span = [slots[..., :2]] + ([slots[..., held.level_entry : held.level_entry + 1]] if held.levels else [])
         proximity = torch.exp(-offset.norm(dim=-1, keepdim=True))
-        energy = [slots[..., 4:6]] if self.core.energy else []  # its battery and service flag
+        energy = [slots[..., 4:6]] if self.core.energy else []  # its battery and service flag: after (dx, dy, task, 1)
         others = torch.cat([*span, proximity, slots[..., 2:3], *energy], -1)
         return own, others, heard.squeeze(-1)
 
