@@ -154,7 +154,7 @@ class DQNSchema:
         "team",
         one_of("team", "set", what="networks"),
         "team: a torso over the joint observation, sized by N and the grid; set: size-free (attention over the "
-        "other UAVs, any N and grid: agents/dqn/setnet.py)",
+        "other UAVs, or with env.observation=local over those each UAV hears; any N and grid: agents/dqn/setnet.py)",
     )
     sizes: list[Any] = setting(
         rule=team_sizes_rule(),
