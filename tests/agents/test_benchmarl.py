@@ -174,7 +174,11 @@ def test_bad_settings_are_refused_in_one_line(override, message):
     [
         ("algorithm=masac_typo", "error: In 'benchmarl': Could not find 'algorithm/masac_typo'"),
         ("algorithm=iddpg", "error: algorithm=iddpg is invalid: it acts in continuous action spaces only"),
-        ("task=vmas/balance", "error: task=vmas/balance is invalid: allowed tasks are uavrl/city_urban_10x10, uavrl/n6_10x10, uavrl/paper"),
+        (
+            "task=vmas/balance",
+            "error: task=vmas/balance is invalid: allowed tasks are uavrl/city_urban_10x10, uavrl/n6_10x10, "
+            "uavrl/paper",
+        ),
     ],
 )
 def test_command_refuses_in_one_line(tmp_path, argument, message):
