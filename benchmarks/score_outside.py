@@ -9,8 +9,8 @@ with its deterministic policy where it can (the model it trained on), n/a elsewh
 frames and its training CPU seconds (``metrics.json``).
 
 ``sb3``: a Stable-Baselines3 model trained on the Gymnasium adapter (``benchmarks/sb3_yardstick.py --save``), acting
-through ``TeamActionPolicy`` on the model it trained on only (the options ``sb3_yardstick.py`` keeps beside it in
-``ppo_seed<k>.json``; without that file the paper's 6x6 model).  The budget is its ``num_timesteps``.
+through ``TeamActionPolicy`` on the model it trained on only (the model arguments ``sb3_yardstick.py`` keeps beside
+it in ``ppo_seed<k>.json``; without that file the paper's 6x6 model).  The budget is its ``num_timesteps``.
 
 A policy trained in a city acts in the suite's other cities of its model too (``uavrl.agents.schema.run_city``).
 
