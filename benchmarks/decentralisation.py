@@ -13,7 +13,7 @@ seconds (the run's ``metrics.json``); the oracle's and the random policy's rows 
 
 Usage::
 
-    python benchmarks/decentralisation.py --train runs/dec --seeds 0        # every row (about 2 CPU hours)
+    python benchmarks/decentralisation.py --train runs/dec --seeds 0        # every row (about 4 CPU hours)
     python benchmarks/decentralisation.py --collect runs/dec --figure docs/figures/decentralisation.png
 """
 
@@ -32,6 +32,7 @@ SCENARIOS = {6: "n6_10x10", 10: "large_20x20"}
 SIZE_FREE_TEAMS = ((6, (10, 10)), (10, (20, 20)))  # where a size-free run (agent.network=set) is scored
 RADII = (0.0, 1.0, 2.0, 4.0, None)  # cells; None: every UAV and node heard
 MESSAGE_SIZE = 4
+SIZE_FREE_RADII = (2.0, None)  # the size-free network's runs (scenario=size_free)
 
 
 def row_name(num_uavs: int, radius: float | None, messages: bool, central: bool = False) -> str:
@@ -54,6 +55,10 @@ def rows() -> dict[str, list[str]]:
                 overrides += [] if radius is None else [f"env.comm_radius={radius}"]
                 overrides += [f"env.message_size={MESSAGE_SIZE}"] if messages else []
                 out[row_name(num_uavs, radius, messages)] = overrides
+    for radius in SIZE_FREE_RADII:  # one size-free run per radius, scored in both teams
+        name = f"set_{'full' if radius is None else f'r{radius:g}'}"
+        out[name] = ["scenario=size_free", "env.observation=local"]
+        out[name] += [] if radius is None else [f"env.comm_radius={radius}"]
     return out
 
 
