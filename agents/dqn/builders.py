@@ -356,7 +356,8 @@ class TeamNetwork(QNetwork):
         city, in another city of the run's model too (:func:`~uavrl.agents.schema.network_refusal`): the same
         weights on that city's positions, which the buildings number."""
         run = self.agent.env_cfg
-        if env_cfg.replace(max_steps=run.max_steps) == run or env_cfg.replace(**run_city(env_cfg, run)) != run:
+        acting = env_cfg.replace(max_steps=run.max_steps)  # the episode length shapes training only
+        if acting == run or acting.replace(**run_city(acting, run)) != run:
             return CheckedPolicy(self.agent.greedy, run)  # refuses any other environment in one line
         env = UAVSpectrumEnv(batch_size=1, config=env_cfg, device=self.agent.device)
         q = build_q_network(env, self.settings)

@@ -215,7 +215,10 @@ class HeardMoves(nn.Module):
         self.register_buffer("lower", lower, persistent=False)  # [N, N - 1, 1]
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
-        offset, heard = self.offsets(observation)
+        return self.reached(*self.offsets(observation))
+
+    def reached(self, offset: torch.Tensor, heard: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` from the slots' :meth:`offsets`, for a caller that reads them too."""
         return ((offset.unsqueeze(-2) == self.moves).all(-1) & heard).any(-2)
 
     def contenders(self, observation: torch.Tensor) -> torch.Tensor:

@@ -242,8 +242,8 @@ class LocalSetQNet(nn.Module):
     def features(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(own, others, heard)``: what the core reads, none of it sized by N or the grid."""
         held = self.held
-        own = torch.cat([observation[..., : held.own], held(observation).to(observation.dtype)], -1)
         slots, (offset, heard) = held.slots(observation), held.offsets(observation)  # offsets in cells and levels
+        own = torch.cat([observation[..., : held.own], held.reached(offset, heard).to(observation.dtype)], -1)
         span = [slots[..., :2]] + ([slots[..., held.level_entry : held.level_entry + 1]] if held.levels else [])
         proximity = torch.exp(-offset.norm(dim=-1, keepdim=True))
         energy = [slots[..., 4:6]] if self.core.energy else []  # its battery and service flag: after (dx, dy, task, 1)

@@ -211,6 +211,8 @@ def test_a_per_size_run_in_a_city_acts_in_a_held_out_city_with_its_weights(tmp_p
         assert mask.gather(-1, td["agents", "action"].unsqueeze(-1)).all()
         td = env.step(td)["next"]
     assert 0.0 <= evaluate(policy, held_out, num_starts=4)["eval/optimality"] <= 1.0
+    longer = held_out.replace(max_steps=9)  # another episode length too: still the held-out city's positions
+    agent.policy_for(longer).bind_env(UAVSpectrumEnv(batch_size=2, config=longer))
     metrics = evaluate_checkpoint(
         compose_cfg(f"checkpoint={run_dir}", "eval.num_starts=4", f"env.city_seed={held_out.city_seed}"),
         [f"env.city_seed={held_out.city_seed}"],
