@@ -47,6 +47,7 @@ import torch
 from tensordict import TensorDictBase
 
 from uavrl.agents.baselines import SENSE, BaselineAgent, OraclePolicy
+from uavrl.agents.schema import check_planner_settings
 from uavrl.envs import ModelConfig
 from uavrl.envs.config import RETURN
 from uavrl.envs.physics.channel import rates
@@ -67,6 +68,7 @@ class PlannerPolicy(OraclePolicy):
     """
 
     def __init__(self, cfg: ModelConfig, env=None):
+        check_planner_settings(cfg, None)
         super().__init__(cfg, env)
         self.energy = None if cfg.energy == "none" else Energy(cfg)
         if self.energy is not None:

@@ -280,8 +280,8 @@ class ModelConfig:
             self._check_radio()
         self._check_city()
         self._check_physics()
+        self._check_levels()  # before the energy model, whose climbs cost what the levels' heights say
         self._check_energy()
-        self._check_levels()
         sensing.check_observation(self.observation, self.comm_radius, self.message_size, self.is_physical)
 
     def _resolve_channel(self):
@@ -329,7 +329,7 @@ class ModelConfig:
 
     def _check_levels(self):
         """Altitude levels: ascending distinct finite heights in m, each one where the channel holds and the rates are
-        finite, as the one height is checked; not beside an energy model (whose step costs know no climb)."""
+        finite, as the one height is checked."""
         if self.altitudes_m is None:
             return
         levels = self.altitudes_m
@@ -339,9 +339,6 @@ class ModelConfig:
         if not all(is_number(h) and h > 0 for h in levels) or list(levels) != sorted(set(levels)):
             raise InvalidOption("altitudes_m", list(levels), "give distinct finite heights above 0 m, ascending")
         object.__setattr__(self, "altitudes_m", tuple(float(h) for h in levels))
-        if self.energy != "none":
-            reason = "the energy models cost a move in the plane only: altitude levels need energy='none'"
-            raise InvalidOption("altitudes_m", list(levels), reason)
         for metres in self.altitudes_m:
             values = {name: getattr(self, name) for name in (*_PHYSICS_OPTIONS, "altitude_m")}
             values |= {"altitude": metres / self.cell_size, "altitude_m": metres}
@@ -465,6 +462,11 @@ class ModelConfig:
         if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
             reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
             raise InvalidOption("recharge_steps", self.recharge_steps, reason)
+        if self.recharge_steps is not None and self.num_levels > 1:
+            reason = (
+                "recharging with altitude levels is not modelled (return and climb would share action 6): give null"
+            )
+            raise InvalidOption("recharge_steps", self.recharge_steps, reason)
         if not _is_int(self.num_spares) or self.num_spares < 0:
             raise InvalidOption("num_spares", self.num_spares, "give the whole number >= 0 of UAVs waiting at the base")
         if self.num_spares > 0 and self.recharge_steps is None:
@@ -504,9 +506,9 @@ class ModelConfig:
     @property
     def steps_before_reserve(self) -> int | None:
         """Under an energy model, the most steps after which no battery can have reached its cell's reserve, however
-        the UAVs act (every step at the dearer of a move and a stay from the lowest start): within an episode of at
-        most that many steps no UAV leaves service, and the batteries change nothing else.  ``None`` under
-        ``energy=none``.
+        the UAVs act (every step at the dearest, a move, a stay, a climb or a descent, from the lowest start): within
+        an episode of at most that many steps no UAV leaves service, and the batteries change nothing else.
+        ``None`` under ``energy=none``.
 
         Example:
             >>> make_config("paper", grid=(3, 3), energy="follow_up", base=(-1, 0)).steps_before_reserve
@@ -518,7 +520,13 @@ class ModelConfig:
     def step_energies(self) -> power.StepEnergies:
         """What a step costs a UAV under ``energy`` (not ``none``): :func:`uavrl.envs.physics.power.step_energies`."""
         return power.step_energies(
-            self.energy, self.cell_size, self.slot_s, self.powers_w[2], self.circuit_power_w, self.battery_wh
+            self.energy,
+            self.cell_size,
+            self.slot_s,
+            self.powers_w[2],
+            self.circuit_power_w,
+            self.battery_wh,
+            self.altitudes_m if self.num_levels > 1 else None,
         )
 
     @property

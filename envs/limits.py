@@ -564,7 +564,7 @@ def mission_steps(cfg) -> int:
     energies, (L1, L2), (bx, by) = cfg.step_energies, cfg.grid, cfg.base
     nearest = max(0, -bx, bx - (L1 - 1)) + max(0, -by, by - (L2 - 1))
     farthest = max(abs(bx), abs(bx - (L1 - 1))) + max(abs(by), abs(by - (L2 - 1)))
-    cheapest = min(energies.move, energies.stay)
+    cheapest = energies.cheapest
     serving = math.floor((energies.capacity - cheapest - energies.flight(nearest)) / cheapest)
     return serving + 1 + farthest
 

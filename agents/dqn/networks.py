@@ -52,7 +52,7 @@ def position_numbers(world) -> torch.Tensor | None:
 class PositionIndex(nn.Module):
     """Position indices ``[*, N]`` of UAVs at ``(x, y)`` ``[*, N, 2]`` (and with altitude levels at levels ``[*, N]``):
     cells ``y L1 + x`` (``L1 L2`` for a UAV off the grid, out of service) with one level, the model's positions
-    (:func:`~uavrl.envs.physics.positions.model_positions`) with several.
+    (:func:`~uavrl.envs.physics.positions.model_positions`) with several (``P``, past them, out of service).
 
     Args:
         grid: ``(L1, L2)``.
@@ -62,7 +62,9 @@ class PositionIndex(nn.Module):
     def __init__(self, grid: tuple[int, int], numbers: torch.Tensor | None = None):
         super().__init__()
         self.grid = tuple(grid)
-        self.register_buffer("numbers", None if numbers is None else numbers.clone(), persistent=False)
+        if numbers is not None:  # a UAV out of service (cell L1 L2, any level) is at position P, past the model's
+            numbers = torch.cat([numbers, numbers.new_full((len(numbers), 1), int(numbers.max()) + 1)], -1)
+        self.register_buffer("numbers", numbers, persistent=False)
 
     def forward(self, positions: torch.Tensor, levels: torch.Tensor | None = None) -> torch.Tensor:
         cells = cells_or_away(positions, self.grid)

@@ -34,10 +34,10 @@ from __future__ import annotations
 
 import torch
 
-from ..config import RETURN, SENSING, ModelConfig
+from ..config import NUM_ACTIONS, RETURN, SENSING, ModelConfig
 from . import streams
 from .dynamics import NO_OP
-from .grid import grid_neighbours
+from .positions import model_positions
 from .power import UNIFORM_LOW
 
 ENERGY_STATE = ("battery", "status", "timer")  # per-UAV variables the part adds to the World's state, [B, N] each
@@ -57,16 +57,19 @@ class Energy:
         self.cfg = cfg
         self.energies = energies = cfg.step_energies
         self.capacity = energies.capacity
-        C, (L1, _), (bx, by) = cfg.num_cells, cfg.grid, cfg.base
-        self.away = C  # the cell of a UAV out of service
+        positions, (L1, _), (bx, by) = model_positions(cfg, device), cfg.grid, cfg.base
+        C = len(positions)
+        self.away = C  # the position of a UAV out of service
         self.num_serving, self.recharge_steps = cfg.num_uavs, cfg.recharge_steps
-        cell = torch.arange(C, device=device)
-        steps = (cell % L1 - bx).abs() + (cell // L1 - by).abs()
-        self.entry = int(steps.argmin())  # where a charged UAV enters: the cell nearest the base, the first of ties
+        # the flight home is flown at the UAV's level (docs/model.md, Energy and lifetime)
+        steps = (positions.cell % L1 - bx).abs() + (positions.cell // L1 - by).abs()
+        self.entry = int(steps.argmin())  # where a charged UAV enters: the position nearest the base, the first of ties
         flight = steps.double() * energies.fly + (steps > 0).double() * energies.arrive  # [C]
-        # the reserve of a cell: enough for its worst next step (stay, or move to a neighbour), then the flight home
-        neighbours = grid_neighbours(cfg.grid, device)
-        reach = torch.cat([cell[:, None], neighbours.where(neighbours >= 0, cell[:, None])], -1)
+        # the reserve of a position: enough for its worst next step (stay, move to a neighbour, climb or descend),
+        # then the flight home
+        planar = positions.neighbours[:, :4]
+        position = torch.arange(C, device=device)
+        reach = torch.cat([position[:, None], planar.where(planar >= 0, position[:, None])], -1)
         reserve = torch.maximum(energies.stay + flight, energies.move + flight[reach].amax(-1))
         # a step's costs as float64 scalars (where() of Python floats would give float32)
         self.move, self.stay, self.fly, self.fly_and_arrive, self.nothing = torch.tensor(
@@ -74,6 +77,15 @@ class Energy:
             dtype=torch.float64,
             device=device,
         ).unbind()
+        self.level = None  # with altitude levels: [C + 1] each position's level, the climb and descent from each
+        if cfg.num_levels > 1:
+            self.level = torch.cat([positions.level, positions.level.new_zeros(1)])
+            climb = torch.tensor([*energies.climb, 0.0], dtype=torch.float64, device=device)  # [L]: from level l
+            descend = torch.tensor([0.0, *energies.descend], dtype=torch.float64, device=device)
+            self.climb, self.descend = climb, descend
+            up, down = positions.neighbours[:, 4] >= 0, positions.neighbours[:, 5] >= 0
+            vertical = torch.maximum(climb[positions.level].where(up, 0.0), descend[positions.level].where(down, 0.0))
+            reserve = torch.maximum(reserve, vertical + flight)  # a climb or descent keeps the cell: the same flight
         self.steps_home = torch.cat([steps, steps.new_zeros(1)])  # [C + 1]
         self.reserve = torch.cat([reserve, reserve.new_full((1,), float("inf"))])  # [C + 1]: no one serves away
 
@@ -98,11 +110,11 @@ class Energy:
         e = self.energies
         status, timer = state.status, state.timer
         serving, returning = status == SERVING, status == RETURNING
-        moved = action < NO_OP if e.moves_by_action else state.cell != cell_before
+        moved = self._moves_asked(action) if e.moves_by_action else state.cell != cell_before
         arriving = returning & (timer == 1)
         cost = torch.where(
             serving,
-            torch.where(moved, self.move, self.stay),
+            torch.where(moved, self._moving(cell_before, state.cell), self.stay),
             torch.where(returning, torch.where(arriving, self.fly_and_arrive, self.fly), self.nothing),
         )
         battery = state.battery - cost
@@ -119,6 +131,22 @@ class Energy:
             "cell": torch.where(leaving, self.away, state.cell),
             "task": torch.where(leaving, SENSING, state.task),
         }
+
+    def _moves_asked(self, action: torch.Tensor) -> torch.Tensor:
+        """Which actions ask for a move: up, down, left, right, and with levels climb and descend (a follow-up's
+        move is charged by its action)."""
+        return (action < NO_OP) | (action >= NUM_ACTIONS) if self.level is not None else action < NO_OP
+
+    def _moving(self, before: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
+        """What a serving UAV's move from the positions ``before`` to ``after`` ``[B, N]`` costs: a move in the plane,
+        or with levels the climb or descent from its level (a cancelled one, no change of level, costs a move: its
+        cell did not change, so it is charged only where moves are charged by the action, the follow-up's, which
+        charges a climb as a move)."""
+        if self.level is None:
+            return self.move
+        low, high = self.level.index_select(0, before.view(-1)), self.level.index_select(0, after.view(-1))
+        vertical = torch.where(high > low, self.climb[low], self.descend[low])
+        return torch.where(high == low, self.move, vertical).view_as(before)
 
     def _step_recharging(self, state, battery, arriving, action) -> dict[str, torch.Tensor]:
         """:meth:`step` with ``recharge_steps``: an arriving UAV charges for ``recharge_steps`` steps, then waits

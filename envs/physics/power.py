@@ -5,7 +5,10 @@ Standard library only, like :mod:`.radio`: the rules of a battery's reach (:func
 torch is imported, and :mod:`.energy` (the World's part) builds its tables from the same numbers.
 
 - ``rotary_wing``: Zeng, Xu, Zhang, "Energy Minimization for Wireless Communication with Rotary-Wing UAV", IEEE
-  TWC 18(4):2329-2345, 2019, eq. (12) with their Table I; joules.
+  TWC 18(4):2329-2345, 2019, eq. (12) with their Table I; joules.  A climb or a descent between altitude levels:
+  Zeng, Wu, Zhang, "Accessing From the Sky: A Tutorial on UAV Communications for 5G and Beyond", Proc. IEEE
+  107(12):2327-2375, 2019, Section II-C's approximation for 3D flight (level-flight power at the speed flown, plus
+  the change of potential energy ``W dh``), a descent never below the blades' profile power (ours).
 - ``follow_up``: the accounting of Shamsoshoara et al., "An Autonomous Spectrum Management Scheme for Unmanned
   Aerial Vehicle Networks in Disaster Relief Operations", IEEE Access 8:58064-58079, 2020 (their code's
   ``config.py``, ``Config_Power``, and ``energy.py``); the follow-up's own units.
@@ -17,6 +20,7 @@ Example:
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -70,6 +74,15 @@ FOLLOW_UP_REGION_FLIGHT = 10.0
 FOLLOW_UP_TRANSMISSION = 0.5  # per step of transmission, whatever the task
 
 
+def vertical_propulsion(rise_m: float, slot_s: float) -> float:
+    """The propulsion energy in J of a climb (``rise_m > 0``) or a descent (``< 0``) of ``|rise_m|`` m in one step of
+    ``slot_s`` s: Zeng, Wu, Zhang's approximation for 3D flight, ``P(|dh| / slot_s) slot_s + W dh``; a descent at
+    least the blades' profile power over the step, ``P0 slot_s`` (the rotors keep turning: a battery never gains
+    from a descent; ours)."""
+    energy = propulsion_power(abs(rise_m) / slot_s) * slot_s + WEIGHT_N * rise_m
+    return energy if rise_m > 0 else max(energy, BLADE_PROFILE_POWER * slot_s)
+
+
 def propulsion_power(speed: float) -> float:
     """Zeng et al.'s eq. (12): the propulsion power in W of level flight at ``speed`` m/s (hover at 0)."""
     v2 = speed * speed
@@ -87,7 +100,8 @@ class StepEnergies:
     ``move`` and ``stay``: a serving UAV's step that moves or not (hovering, a task switch, a cancelled move);
     ``fly``: each step of the flight to the base; ``arrive``: once, on the step the flight reaches the base;
     ``capacity``: a full battery; ``moves_by_action``: a move is charged by the action (the follow-up's code), not by
-    the cell changing.
+    the cell changing; with altitude levels ``climb[l]`` and ``descend[l]``: a serving UAV's step from level ``l`` up
+    to ``l + 1``, and from ``l + 1`` down to ``l`` (empty at one level).
     """
 
     move: float
@@ -96,6 +110,18 @@ class StepEnergies:
     arrive: float
     capacity: float
     moves_by_action: bool
+    climb: tuple[float, ...] = ()
+    descend: tuple[float, ...] = ()
+
+    @property
+    def dearest(self) -> float:
+        """A serving UAV's dearest step: a move, a stay, or any climb or descent."""
+        return max(self.move, self.stay, *self.climb, *self.descend)
+
+    @property
+    def cheapest(self) -> float:
+        """A serving UAV's cheapest step."""
+        return min(self.move, self.stay, *self.climb, *self.descend)
 
     def flight(self, steps: int) -> float:
         """The energy of the flight to a base ``steps`` steps away."""
@@ -103,15 +129,23 @@ class StepEnergies:
 
     def reserve(self, steps: int) -> float:
         """The largest reserve at a cell ``steps`` from the base, where no neighbour lies farther (the farthest
-        cell): one more step, then the flight."""
-        return max(self.move, self.stay) + self.flight(steps)
+        cell): one more step, the dearest, then the flight."""
+        return self.dearest + self.flight(steps)
 
 
 def step_energies(
-    energy: str, cell_size: float, slot_s: float, comm_power_w: float, circuit_power_w: float, battery_wh: float
+    energy: str,
+    cell_size: float,
+    slot_s: float,
+    comm_power_w: float,
+    circuit_power_w: float,
+    battery_wh: float,
+    altitudes_m: tuple[float, ...] | None = None,
 ) -> StepEnergies:
     """The :class:`StepEnergies` of ``energy`` (``follow_up`` or ``rotary_wing``): a move flies one cell at
-    ``cell_size / slot_s`` m/s; a serving UAV also transmits at ``comm_power_w`` and runs its radio's circuit.
+    ``cell_size / slot_s`` m/s, a climb or descent the gap between two levels in a step (:func:`vertical_propulsion`;
+    the follow-up, which has no altitude, charges it as a move); a serving UAV also transmits at ``comm_power_w``
+    and runs its radio's circuit.
 
     Args:
         energy: ``"follow_up"`` (the follow-up paper's fixed costs; the other arguments unused) or ``"rotary_wing"``.
@@ -120,19 +154,24 @@ def step_energies(
         comm_power_w: a serving UAV's transmit power in W.
         circuit_power_w: its radio circuit's power in W.
         battery_wh: a full battery in Wh.
+        altitudes_m: the altitude levels' heights in m, ascending (``None``: one height, no climb).
 
     Returns:
         The energies: ``rotary_wing``'s in J (a full battery is ``battery_wh`` times 3600 J), ``follow_up``'s in
         the follow-up's own units (a full battery is 5000).
     """
+    rises = [high - low for low, high in itertools.pairwise(altitudes_m)] if altitudes_m else []
     if energy == "follow_up":
+        move = FOLLOW_UP_MOVE + FOLLOW_UP_TRANSMISSION
         return StepEnergies(
-            move=FOLLOW_UP_MOVE + FOLLOW_UP_TRANSMISSION,
+            move=move,
             stay=FOLLOW_UP_TRANSMISSION,
             fly=0.0,
             arrive=FOLLOW_UP_REGION_FLIGHT,
             capacity=FOLLOW_UP_CAPACITY,
             moves_by_action=True,
+            climb=(move,) * len(rises),
+            descend=(move,) * len(rises),
         )
     radio = comm_power_w + circuit_power_w
     flying = propulsion_power(cell_size / slot_s)
@@ -143,6 +182,8 @@ def step_energies(
         arrive=0.0,
         capacity=battery_wh * 3600.0,
         moves_by_action=False,
+        climb=tuple(vertical_propulsion(rise, slot_s) + radio * slot_s for rise in rises),
+        descend=tuple(vertical_propulsion(-rise, slot_s) + radio * slot_s for rise in rises),
     )
 
 
@@ -166,7 +207,7 @@ def lowest_start_and_largest_reserve(cfg, **changes) -> tuple[float, float, int]
     (L1, L2), (bx, by) = v["grid"], v["base"]
     farthest = max(abs(x - bx) for x in (0, L1 - 1)) + max(abs(y - by) for y in (0, L2 - 1))
     energies = step_energies(cfg.energy, v["cell_size"], v["slot_s"], cfg.powers_w[2], v["circuit_power_w"],
-                             v["battery_wh"])  # fmt: skip
+                             v["battery_wh"], cfg.altitudes_m)  # fmt: skip
     lowest = energies.capacity * (UNIFORM_LOW if v["battery_init"] == "uniform" else 1.0)
     return lowest, energies.reserve(farthest), farthest
 
@@ -189,10 +230,9 @@ def battery_blamed(cfg, preset: dict) -> str:
 
 def steps_before_reserve(cfg) -> int:
     """The most steps after which no battery of the model ``cfg`` (an energy model) can have reached its cell's
-    reserve, however the UAVs act: every step at the dearer of a move and a stay from the lowest start."""
+    reserve, however the UAVs act: every step at the dearest from the lowest start."""
     lowest, need, _ = lowest_start_and_largest_reserve(cfg)
-    energies = cfg.step_energies
-    return math.ceil((lowest - need) / max(energies.move, energies.stay)) - 1
+    return math.ceil((lowest - need) / cfg.step_energies.dearest) - 1
 
 
 def check_step_energies(cfg, default_slot_s: float) -> None:
@@ -201,7 +241,7 @@ def check_step_energies(cfg, default_slot_s: float) -> None:
     joules naming ``battery_wh``."""
     try:
         energies = cfg.step_energies
-        moving = (energies.move, energies.stay, energies.fly)
+        moving = (energies.move, energies.stay, energies.fly, *energies.climb, *energies.descend)
     except OverflowError:
         moving = (math.inf,)
     if not all(math.isfinite(value) for value in moving):

@@ -108,7 +108,7 @@ def check_world(world) -> None:
         world: the :class:`~uavrl.envs.World` whose starts would be solved, reset.
 
     Raises:
-        NotCovered: no energy model, a random channel, recharging or more than 2 UAVs.
+        NotCovered: no energy model, a random channel, recharging, altitude levels or more than 2 UAVs.
     """
     cfg = world.cfg
     if world.energy is None:
@@ -119,6 +119,11 @@ def check_world(world) -> None:
         raise NotCovered(
             f"the exact mission solver has no recharging: recharge_steps={cfg.recharge_steps} (a UAV out of service "
             "never serves again is what keeps its states few)"
+        )
+    if cfg.num_levels > 1:
+        raise NotCovered(
+            f"the exact mission solver counts moves and stays in the plane: altitudes_m={list(cfg.altitudes_m)} adds "
+            "climbs and descents, whose battery levels it does not enumerate"
         )
     if world.num_uavs > MAX_UAVS:
         raise NotCovered(f"num_uavs={world.num_uavs} is invalid for the exact mission solver: it takes 1 or 2 UAVs")

@@ -201,7 +201,7 @@ class Observations:
             "tasks": task,
         }
         if self._code_level is not None:  # with altitude levels, each UAV's level (0 the lowest)
-            out["levels"] = self.dynamics.positions.level.index_select(0, cell.view(-1)).view(W, N)
+            out["levels"] = self._slot_level.index_select(0, cell.view(-1)).view(W, N)
         return out
 
     def _observe(self, code: torch.Tensor, cell: torch.Tensor, task: torch.Tensor, moves, switches) -> dict:

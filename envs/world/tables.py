@@ -36,6 +36,7 @@ class SharedTables(dict):
 GRID_TABLES = (
     "_cell_xyz",
     "_code_level",
+    "_slot_level",
     "_state_base",
     "_grid_scale",
     "_node_scale",
@@ -119,9 +120,11 @@ class LayoutTables:
         self._heard_slot = self._send_key = self._hear_key = None  # with local observations: the others' slots
         if cfg.local:
             self._build_heard_slots(positions)
-        self._code_level = None  # with altitude levels, each code's level as observed, 0 to 1 (no slot off the grid)
+        # with altitude levels, each slot's level (0 off the grid, at the base) and each code's as observed, 0 to 1
+        self._slot_level = self._code_level = None
         if cfg.num_levels > 1:
-            self._code_level = (positions.level[self._code_cell] / (cfg.num_levels - 1)).float()
+            self._slot_level = torch.cat([positions.level, positions.level.new_zeros(self._slots - C)])
+            self._code_level = (self._slot_level[self._code_cell] / (cfg.num_levels - 1)).float()
 
     def _build_heard_slots(self, positions):
         """What a UAV hears of another (:mod:`uavrl.envs.physics.sensing`), by their displacement: ``_heard_slot``

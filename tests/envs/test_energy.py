@@ -179,14 +179,19 @@ def test_battery_over_a_rollout_is_the_sum_of_its_steps():
                         status[w][i], timer[w][i], where[w][i] = 1, steps_home(*new), BASE
                         left += 1
                 elif status[w][i] == 1:
-                    battery[w][i] -= fly
-                    timer[w][i] -= 1
-                    status[w][i] = 2 if timer[w][i] == 0 else 1
+                    fly_a_step_home(battery[w], status[w], timer[w], i, fly)
         assert world._s.battery.view(-1).tolist() == pytest.approx(sum(battery, []), rel=1e-12)
         assert world._s.status.tolist() == status
         assert out["positions"].tolist() == [[list(p) for p in ws] for ws in where]
         assert world.terminated.tolist() == [0 not in s for s in status]
     assert left == 2 * B and min(min(b) for b in battery) > 0  # every UAV left, none overdrew
+
+
+def fly_a_step_home(battery: list, status: list, timer: list, i: int, fly: float) -> None:
+    """UAV ``i`` of one world flies one step of its flight home: it pays ``fly``, and is out once the timer ends."""
+    battery[i] -= fly
+    timer[i] -= 1
+    status[i] = 2 if timer[i] == 0 else 1
 
 
 def test_batteries_are_drawn_per_seed():
@@ -346,18 +351,23 @@ def test_the_tabular_agent_refuses_an_energy_model():
     ],
 )
 def test_the_command_line_trains_and_evaluates_a_dqn_under_every_energy_model(energy, tmp_path):
+    train_a_small_dqn(f"{energy} env.base=[-1,0] env.grid=[3,3]", tmp_path)
+
+
+def train_a_small_dqn(model: str, run_dir) -> None:
+    """``python -m uavrl.train agent=dqn`` of a few steps on the model settings ``model``: it trains, evaluates and
+    writes its metrics."""
     settings = (
-        f"agent=dqn {energy} env.base=[-1,0] env.grid=[3,3] agent.iterations=3 "
-        "env.max_steps=8 agent.worlds=8 agent.hidden=16 agent.depth=1 agent.batch_size=32 agent.buffer_size=100 "
-        "agent.updates=2 agent.learning_starts=16 eval.num_starts=4"
+        f"agent=dqn {model} agent.iterations=3 env.max_steps=8 agent.worlds=8 agent.hidden=16 agent.depth=1 "
+        "agent.batch_size=32 agent.buffer_size=100 agent.updates=2 agent.learning_starts=16 eval.num_starts=4"
     )
     result = subprocess.run(
-        [sys.executable, "-m", "uavrl.train", *settings.split(), "progress=false", f"run_dir={tmp_path}"],
+        [sys.executable, "-m", "uavrl.train", *settings.split(), "progress=false", f"run_dir={run_dir}"],
         capture_output=True,
         text=True,
     )
     assert result.returncode == 0, result.stderr[-2000:]
-    assert "optimality" in result.stdout and list(tmp_path.rglob("metrics.json"))
+    assert "optimality" in result.stdout and list(run_dir.rglob("metrics.json"))
 
 
 def test_an_energy_setting_without_base_is_one_line_on_the_command_line(tmp_path):

@@ -1,0 +1,185 @@
+"""Energy with altitude levels (docs/model.md, Energy and lifetime): a climb and a descent cost what Zeng, Wu and
+Zhang's approximation for 3D flight says, written out here; a battery over a rollout in 3D against a per-step sum kept
+here, with each position's reserve found here by trying every next step; and what is refused in one line."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from tests.envs.test_energy import BASE, fly_a_step_home, per_step, steps_home, train_a_small_dqn, zeng_power
+from uavrl.envs import make_config
+from uavrl.envs.errors import InvalidOption
+from uavrl.envs.world import World
+
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
+
+LEVELS_M = (10.0, 20.0, 80.0)  # a climb of 10 m (its descent floored at the profile power) and one of 60 m
+WEIGHT_N = 20.0  # Zeng et al.'s W
+PROFILE_POWER = 0.012 / 8 * 1.225 * 0.05 * 0.503 * 300.0**3 * 0.4**3  # their P0 = delta/8 rho s A Omega^3 R^3
+MOVES = {0: (0, -1, 0), 1: (0, 1, 0), 2: (-1, 0, 0), 3: (1, 0, 0), 6: (0, 0, 1), 7: (0, 0, -1)}
+
+
+def leveled(energy="rotary_wing", **options):
+    return make_config(
+        "paper", grid=(3, 3), num_uavs=2, energy=energy, base=BASE, cell_size=10.0, altitudes_m=LEVELS_M, **options
+    )
+
+
+def vertical(cfg) -> tuple[list[float], list[float]]:
+    """The climb from each level and the descent to it, in J, of a serving UAV (radio included)."""
+    radio = (cfg.p_u + cfg.circuit_power_w) * cfg.slot_s
+    climbs, descents = [], []
+    for low, high in itertools.pairwise(LEVELS_M):
+        dh, slot = high - low, cfg.slot_s
+        level_flight = zeng_power(dh / slot) * slot
+        climbs.append(level_flight + WEIGHT_N * dh + radio)
+        descents.append(max(level_flight - WEIGHT_N * dh, PROFILE_POWER * slot) + radio)
+    return climbs, descents
+
+
+def test_a_climb_and_a_descent_cost_zeng_wu_zhangs_3d_approximation():
+    cfg = leveled(battery_wh=2.0)
+    e, (climbs, descents) = cfg.step_energies, vertical(cfg)
+    assert e.climb == pytest.approx(climbs, rel=1e-12) and e.descend == pytest.approx(descents, rel=1e-12)
+    radio = cfg.p_u + cfg.circuit_power_w
+    assert e.descend[0] == pytest.approx(PROFILE_POWER + radio, rel=1e-12)  # 10 m down: the floor holds
+    assert e.descend[1] > PROFILE_POWER + radio  # 60 m down in a second: level flight at 60 m/s outweighs W dh
+    assert e.dearest == max(e.climb) and e.cheapest == min(e.descend)
+    follow_up = leveled("follow_up").step_energies  # no altitude in the follow-up: a climb is a move action
+    assert follow_up.climb == follow_up.descend == (follow_up.move,) * 2
+
+
+def test_a_battery_over_a_3d_rollout_is_the_sum_of_its_steps():
+    """Two UAVs on 3 cells x 3 cells x 3 levels stepped here, independently of the World, under random valid
+    actions until both have flown home."""
+    cfg = leveled(battery_wh=3.0, battery_init="uniform", max_steps=400)
+    stay, move, fly = per_step(cfg)
+    climbs, descents = vertical(cfg)
+
+    def cost(before, after):
+        if before == after:
+            return stay
+        if after[2] != before[2]:
+            return climbs[before[2]] if after[2] > before[2] else descents[after[2]]
+        return move
+
+    def inside(x, y, z):
+        return 0 <= x < 3 and 0 <= y < 3 and 0 <= z < len(LEVELS_M)
+
+    def reserve(x, y, z):  # every next step a serving UAV may take, then the flight home from where it ends
+        ends = [(x + dx, y + dy, z + dz) for dx, dy, dz in MOVES.values() if inside(x + dx, y + dy, z + dz)]
+        return max(cost((x, y, z), end) + steps_home(end[0], end[1]) * fly for end in [(x, y, z), *ends])
+
+    B, gen = 8, torch.Generator().manual_seed(1)
+    world = World(cfg, B, seed=5)
+    out = world.reset()
+    battery = world._s.battery.clone().tolist()
+    where = [
+        [(*xy, z) for xy, z in zip(p, lv, strict=True)]
+        for p, lv in zip(out["positions"].tolist(), out["levels"].tolist(), strict=True)
+    ]
+    status = [[0, 0] for _ in range(B)]
+    timer = [[0, 0] for _ in range(B)]
+    climbed = descended = 0
+    for _ in range(400):
+        if all(s == [2, 2] for s in status):
+            break
+        action = torch.multinomial(out["action_mask"].view(-1, 8).float(), 1, generator=gen).view(B, 2)
+        out, _, _ = world.step(action)
+        for w in range(B):
+            target = []
+            for i in range(2):
+                x, y, z = where[w][i]
+                dx, dy, dz = MOVES.get(action[w, i].item(), (0, 0, 0)) if status[w][i] == 0 else (0, 0, 0)
+                target.append((x + dx, y + dy, z + dz))
+            clash = status[w] == [0, 0] and target[0] == target[1]
+            for i in range(2):
+                if status[w][i] == 0:
+                    new = where[w][i] if clash else target[i]
+                    battery[w][i] -= cost(where[w][i], new)
+                    climbed += new[2] > where[w][i][2]
+                    descended += new[2] < where[w][i][2]
+                    where[w][i] = new
+                    if battery[w][i] <= reserve(*new):
+                        status[w][i], timer[w][i], where[w][i] = 1, steps_home(*new[:2]), (*BASE, 0)
+                elif status[w][i] == 1:
+                    fly_a_step_home(battery[w], status[w], timer[w], i, fly)
+        assert world._s.battery.view(-1).tolist() == pytest.approx(sum(battery, []), rel=1e-12)
+        assert world._s.status.tolist() == status
+        shown = [
+            [(*xy, z) for xy, z in zip(p, lv, strict=True)]
+            for p, lv in zip(out["positions"].tolist(), out["levels"].tolist(), strict=True)
+        ]
+        assert shown == where
+    assert all(s == [2, 2] for s in status) and min(climbed, descended) >= 10
+    assert min(min(b) for b in battery) > 0  # every UAV flew home, none overdrew
+
+
+def test_no_uav_leaves_service_within_the_steps_before_reserve():
+    cfg = leveled(battery_wh=3.0, max_steps=400)
+    world, gen = World(cfg, 16, seed=0), torch.Generator().manual_seed(0)
+    out, first_leave = world.reset(), math.inf
+    for t in range(1, 200):
+        action = torch.multinomial(out["action_mask"].view(-1, 8).float(), 1, generator=gen).view(16, 2)
+        out, _, _ = world.step(action)
+        if (world._s.status != 0).any():
+            first_leave = t
+            break
+    assert cfg.steps_before_reserve < first_leave < math.inf
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"recharge_steps": 3}, "recharge_steps=3 is invalid: recharging with altitude levels is not modelled"),
+        ({"battery_wh": 0.05}, "battery_wh=0.05 is invalid: a UAV may start with 0.05 Wh (full) at the cell farthest"),
+    ],
+)
+def test_what_energy_with_levels_refuses_in_one_line(options, message):
+    with pytest.raises(InvalidOption) as refused:
+        leveled(**options)
+    assert str(refused.value).startswith(message) and "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        pytest.param("env.energy=rotary_wing env.battery_wh=3 env.altitudes_m=[10,20,80]", id="rotary_wing"),
+        pytest.param(
+            "env=a2g_urban env.city=urban env.energy=rotary_wing env.battery_wh=20 env.altitudes_m=[30,60,100]",
+            id="rotary_wing-city",
+            marks=pytest.mark.slow,
+        ),
+        pytest.param("env.energy=follow_up env.altitudes_m=[10,20,80]", id="follow_up", marks=pytest.mark.slow),
+    ],
+)
+def test_the_command_line_trains_and_evaluates_a_dqn_with_levels_under_an_energy_model(model, tmp_path):
+    train_a_small_dqn(f"{model} env.base=[-1,0] env.grid=[3,3] env.cell_size=10", tmp_path)
+
+
+def test_the_planner_refuses_levels_under_an_energy_model_in_one_line(tmp_path):
+    settings = "agent=planner env.energy=rotary_wing env.base=[-1,0] env.battery_wh=3 env.altitudes_m=[10,20,80]"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "uavrl.train",
+            *settings.split(),
+            "env.grid=[3,3]",
+            "env.cell_size=10",
+            f"run_dir={tmp_path}",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode != 0 and not list(tmp_path.rglob("*"))
+    assert result.stderr.strip().splitlines() == [
+        "error: agent=planner is invalid with env.altitudes_m=[10.0, 20.0, 80.0] under env.energy='rotary_wing': its "
+        "rules price moves in the plane only; use agent=oracle, or one level"
+    ]
