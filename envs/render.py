@@ -299,8 +299,10 @@ class WorldRenderer:
         panel.set_ylim(lines, -0.5)
         if self.energy is not None or self.levels:  # a fourth column, the battery or the height
             font *= 0.85
+        if self.energy is not None and self.levels:  # and a fifth, both
+            font *= 0.85
         head = "UAV task  c/Σc" if self.energy is None else "UAV task  c/Σc batt"
-        if self.levels:  # the height (altitude levels need energy='none')
+        if self.levels:  # the height
             head += "  alt"
             key += (("", "lN: level N, 0 lowest"),)
         panel.text(0.12, 0, head, fontsize=font, va="center", family="monospace", color="#404040")
@@ -470,8 +472,9 @@ class WorldRenderer:
             self._fit(nodes)
             self._fitted = nodes.tobytes()
         cells, tasks = state.cell[index].cpu().numpy(), state.task[index].cpu().numpy()  # cells: position indices
-        if self.levels:  # (x, y, level) of each position (altitude levels need energy='none': every UAV serves)
-            *xy, level = world.position_coordinates(state.cell[index]).cpu().numpy().T
+        if self.levels:  # (x, y, level) of each position; one out of service is drawn at the base below
+            serving_position = state.cell[index].clamp(max=world.num_positions - 1)
+            *xy, level = world.position_coordinates(serving_position).cpu().numpy().T
             xy = np.stack(xy, -1).astype(float)
         else:
             xy = np.stack([cells % cfg.grid[0], cells // cfg.grid[0]], -1).astype(float)
@@ -493,7 +496,7 @@ class WorldRenderer:
             self._uavs.set_sizes(self._disc_area * grow**2)
             for i, tag in enumerate(self._level_tags):  # at the disc's upper right (y grows downwards)
                 tag.set_position((xy[i, 0] + 0.25 * grow[i], xy[i, 1] - 0.25 * grow[i]))
-                tag.set_text(f"l{int(level[i])}")
+                tag.set_text("" if away[i] else f"l{int(level[i])}")
         self._focus.set_visible(focus is not None)
         if focus is not None:
             self._focus.set_offsets(xy[focus : focus + 1])
@@ -540,7 +543,7 @@ class WorldRenderer:
                     steps_left = f" {int(state.timer[index, i])}" if status[i] in (RETURNING, CHARGING) else ""
                     text = f"{i:>3} {STATUS_NAMES[int(status[i])] + steps_left:<10}"
                 text += f" {battery[i]:4.0%}"
-            if self.levels:
+            if self.levels and not away[i]:
                 text += f" {cfg.altitudes_m[int(level[i])]:>4g}m"
             row.set_text(text)
         self._row_dots.set_facecolors(colours)

@@ -183,3 +183,19 @@ def test_the_planner_refuses_levels_under_an_energy_model_in_one_line(tmp_path):
         "error: agent=planner is invalid with env.altitudes_m=[10.0, 20.0, 80.0] under env.energy='rotary_wing': its "
         "rules price moves in the plane only; use agent=oracle, or one level"
     ]
+
+
+def test_a_world_with_levels_and_uavs_out_of_service_renders_each_row():
+    from uavrl.envs.render import WorldRenderer
+
+    world = World(leveled(battery_wh=3.0), 1, seed=0)
+    world.reset()
+    while world._s.status[0, 0] == 0:  # UAV 0 climbs and descends until it leaves; UAV 1 stays where it is
+        level = int(world.dynamics.positions.level[world._s.cell[0, 0]])
+        world.step(torch.tensor([[6 if level == 0 else 7, 4]]))
+    renderer = WorldRenderer(world)
+    frame = renderer.frame(0)
+    rows = [row.get_text() for row in renderer._rows]
+    assert frame.shape[-1] == 3 and frame.std() > 0
+    assert rows[0].split()[1] in ("return", "out") and not rows[0].endswith("m")  # at the base: no height
+    assert rows[1].endswith(f"{LEVELS_M[int(world.dynamics.positions.level[world._s.cell[0, 1]])]:g}m")
