@@ -496,9 +496,13 @@ class ModelConfig:
             name = power.battery_blamed(self, preset)
             unit = "Wh" if self.energy == "rotary_wing" else "units"
             scale = 3600.0 if self.energy == "rotary_wing" else 1.0
+            climbs, step = self.step_energies.climb, "one step"
+            if climbs and max(climbs) == self.step_energies.dearest:  # a climb decides it: say which
+                k = climbs.index(max(climbs))
+                step = f"its dearest step (a climb of {self.altitudes_m[k + 1] - self.altitudes_m[k]:g} m)"
             reason = (
                 f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
-                f"the base {list(base)}, {farthest} steps away, where one step and the flight to the base take "
+                f"the base {list(base)}, {farthest} steps away, where {step} and the flight to the base take "
                 f"{need / scale:.4g} {unit}: {power.BATTERY_ADVICE[name]}"
             )
             raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)

@@ -138,7 +138,11 @@ def test_no_uav_leaves_service_within_the_steps_before_reserve():
     ("options", "message"),
     [
         ({"recharge_steps": 3}, "recharge_steps=3 is invalid: recharging with altitude levels is not modelled"),
-        ({"battery_wh": 0.05}, "battery_wh=0.05 is invalid: a UAV may start with 0.05 Wh (full) at the cell farthest"),
+        (
+            {"battery_wh": 0.05},
+            "battery_wh=0.05 is invalid: a UAV may start with 0.05 Wh (full) at the cell farthest from the base "
+            "[-1, 0], 5 steps away, where its dearest step (a climb of 60 m) and the flight",
+        ),
     ],
 )
 def test_what_energy_with_levels_refuses_in_one_line(options, message):
