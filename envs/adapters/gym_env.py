@@ -179,7 +179,7 @@ def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
     """``[5 N + 12]`` bounds of the state: per UAV (x, y, task) and its contributions at its cell, all in [0, 1],
     then the nodes; under an energy model ``[7 N + 12]``: a UAV out of service at the base with contributions -1,
     then each UAV's battery and service flag in [0, 1], then the nodes; with altitude levels each UAV's level in
-    [0, 1] before the nodes.
+    [0, 1] before the nodes (after the batteries under an energy model).
 
     Args:
         cfg: the model.
@@ -188,14 +188,15 @@ def state_bounds(cfg: ModelConfig) -> tuple[np.ndarray, np.ndarray]:
         The lower and the upper bounds, float32.
     """
     node_low, node_high = _node_bounds(cfg)
-    if cfg.energy == "none":  # altitude levels need energy='none'
-        per_uav = (5 + (cfg.num_levels > 1)) * cfg.fleet_size
+    levels = cfg.fleet_size * (cfg.num_levels > 1)
+    if cfg.energy == "none":
+        per_uav = 5 * cfg.fleet_size + levels
         return np.concatenate([np.zeros(per_uav, np.float32), node_low]), np.concatenate(
             [np.ones(per_uav, np.float32), node_high]
         )
     N, (position_low, position_high) = cfg.fleet_size, _position_bounds(cfg)
-    low = [np.tile(np.concatenate([position_low, [-1.0, -1.0]]), N), np.zeros(2 * N), node_low]
-    high = [np.tile(np.concatenate([position_high, [1.0, 1.0]]), N), np.ones(2 * N), node_high]
+    low = [np.tile(np.concatenate([position_low, [-1.0, -1.0]]), N), np.zeros(2 * N + levels), node_low]
+    high = [np.tile(np.concatenate([position_high, [1.0, 1.0]]), N), np.ones(2 * N + levels), node_high]
     return np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32)
 
 

@@ -203,3 +203,26 @@ def test_a_world_with_levels_and_uavs_out_of_service_renders_each_row():
     assert frame.shape[-1] == 3 and frame.std() > 0
     assert rows[0].split()[1] in ("return", "out") and not rows[0].endswith("m")  # at the base: no height
     assert rows[1].endswith(f"{LEVELS_M[int(world.dynamics.positions.level[world._s.cell[0, 1]])]:g}m")
+
+
+@pytest.mark.gym  # .ci/leg-gym runs it (-m gym), where a skip fails
+def test_the_pettingzoo_state_and_the_gymnasium_observation_stay_in_their_spaces_to_the_missions_end():
+    pytest.importorskip("gymnasium")
+    pytest.importorskip("pettingzoo")
+    import numpy as np
+
+    from uavrl.envs.adapters.gym_env import UAVSpectrumGymEnv
+    from uavrl.envs.adapters.pettingzoo_env import UAVSpectrumParallelEnv
+
+    cfg = leveled(battery_wh=3.0, max_steps=200)
+    zoo, single, rng = UAVSpectrumParallelEnv(config=cfg), UAVSpectrumGymEnv(config=cfg), np.random.default_rng(0)
+    observations, _ = zoo.reset(seed=1)
+    obs, info = single.reset(seed=1)
+    for _ in range(200):
+        assert zoo.state_space.contains(zoo.state()) and single.observation_space.contains(obs)
+        actions = [rng.choice(np.flatnonzero(mask)) for mask in info["action_mask"]]
+        observations, *_, truncations, _ = zoo.step(dict(zip(zoo.agents, actions, strict=True)))
+        obs, _, terminated, truncated, info = single.step(np.array(actions))
+        if terminated or truncated:
+            break
+    assert terminated and zoo.state_space.contains(zoo.state()) and len(zoo.state()) == 7 * 2 + 2 + 12
