@@ -14,16 +14,19 @@ here.  What the solver adds is the state space:
 - UAVs are interchangeable: a state lists its UAVs in a canonical order;
 - a battery is its float64 value rounded to a multiple of ``q``, a power of two near ``2^-30`` of the largest
   battery.  From one start a UAV's battery after ``t`` steps is ``b0 - m move - (t - m) stay`` for the ``m`` moves
-  it made, so the reachable batteries are finitely many, but the float64 running sum depends on the order of the
-  steps in its last bits (hundreds of distinct floats per ``(t, m)`` on a 2 Wh battery); those differ by about
-  ``1e-15`` of the battery and fall into one bucket.  The solver is exact as long as no leaving test (``battery <=
-  reserve``) is decided within the rounding this can cause: it checks every battery it reaches against every
-  cell's reserve and refuses (one line) if one falls within ``(t + 1) (q / 2 + ulp)``.  Where every energy and
-  start battery is a multiple of ``q`` (the follow-up's units) the arithmetic is exact and no check is needed.
+  it made (with altitude levels, less each climb and descent it made), so the reachable batteries are finitely
+  many, but the float64 running sum depends on the order of the steps in its last bits (hundreds of distinct floats
+  per ``(t, m)`` on a 2 Wh battery); those differ by about ``1e-15`` of the battery and fall into one bucket.  The
+  solver is exact as long as no leaving test (``battery <= reserve``) is decided within the rounding this can
+  cause: it checks every battery it reaches against every position's reserve and refuses (one line) if one falls
+  within ``(t + 1) (q / 2 + ulp)``.  Where every energy and start battery is a multiple of ``q`` (the follow-up's
+  units) the arithmetic is exact and no check is needed.
 
-Sizes: the states of a step are about ``(2 C n_t)^N / N!`` for ``n_t`` battery levels a UAV can have after ``t``
-steps (up to ``t + 1``), each with ``6^N`` joint actions; :func:`mission_size` estimates them and
-:func:`optimal_mission` refuses, in one line before any work, what would take more than ``memory_budget``.
+Sizes: the states of a step are about ``(2 C n_t)^N / N!`` for ``C`` positions and ``n_t`` battery levels a UAV
+can have after ``t`` steps (up to ``t + 1``; with altitude levels, whose climbs and descents cost more kinds of
+step, up to the multisets of ``t`` steps), each with ``A^N`` joint actions (``A`` 6, 8 with levels);
+:func:`mission_size` estimates them and :func:`optimal_mission` refuses, in one line before any work, what would
+take more than ``memory_budget``.
 BENCHMARKS.md times it (``benchmarks/mission_exact.py``).
 
 Example:
@@ -87,6 +90,7 @@ class MissionOptimum:
     transitions: int
     seconds: float
     start_index: torch.Tensor  # [B] each start's state among the first step's
+    num_actions: int  # a UAV's actions within a joint action: 6, 8 with altitude levels
     _cells: list = field(repr=False)  # per step [S_t, N] the canonical cells of its states
     _best: list = field(repr=False)  # per step [S_t] an optimal joint action (canonical UAV order)
     _next: list = field(repr=False)  # per step [S_t] the state it leads to
@@ -95,7 +99,7 @@ class MissionOptimum:
         """An optimal joint action ``[B, N]`` (the World's UAV order) at ``step`` from the states ``index`` ``[B]``
         whose UAVs are on ``cells`` ``[B, N]`` (the World's), and the states it leads to."""
         canonical = self._cells[step][index]  # [B, N]
-        joint = decode_joint_actions(canonical.shape[1], index.device)[self._best[step][index].long()]  # [B, N]
+        joint = decode_joint_actions(canonical.shape[1], index.device, self.num_actions)[self._best[step][index].long()]
         same = cells.unsqueeze(-1) == canonical.unsqueeze(-2)  # [B, N world, N canonical]
         which = same.long().argmax(-1)  # the canonical UAV on each world UAV's cell (one out of service: any)
         return joint.gather(1, which), self._next[step][index].long()
@@ -108,7 +112,7 @@ def check_world(world) -> None:
         world: the :class:`~uavrl.envs.World` whose starts would be solved, reset.
 
     Raises:
-        NotCovered: no energy model, a random channel, recharging, altitude levels or more than 2 UAVs.
+        NotCovered: no energy model, a random channel, recharging or more than 2 UAVs.
     """
     cfg = world.cfg
     if world.energy is None:
@@ -119,11 +123,6 @@ def check_world(world) -> None:
         raise NotCovered(
             f"the exact mission solver has no recharging: recharge_steps={cfg.recharge_steps} (a UAV out of service "
             "never serves again is what keeps its states few)"
-        )
-    if cfg.num_levels > 1:
-        raise NotCovered(
-            f"the exact mission solver counts moves and stays in the plane: altitudes_m={list(cfg.altitudes_m)} adds "
-            "climbs and descents, whose battery levels it does not enumerate"
         )
     if world.num_uavs > MAX_UAVS:
         raise NotCovered(f"num_uavs={world.num_uavs} is invalid for the exact mission solver: it takes 1 or 2 UAVs")
@@ -151,18 +150,43 @@ def _levels(battery: float, horizon: int, move: float, stay: float, least_reserv
     return (most + 1).clamp(min=0).long()
 
 
+def _vertical_levels(battery: float, horizon: int, cheapest: float, least_reserve: float, num_levels: int):
+    """``[H + 1]`` an upper bound on the battery levels a serving UAV can have after each step ``t`` with altitude
+    levels, whose climbs and descents cost what a move and a stay do not: a path that ends ``d`` levels from where it
+    began crossed each gap between levels up and down equally often but for ``d`` of them, so its battery is set by
+    its moves ``m``, stays ``s`` and round trips ``k_g`` per gap ``g`` with ``m + s + 2 sum k = t - d``; at most two
+    ends lie ``d`` levels away.  Zero once ``t`` of the cheapest steps leave the battery at ``least_reserve``."""
+    gaps = num_levels - 1
+
+    def paths(steps: int) -> int:  # the (m, s, k_1..k_G) of m + s + 2 sum k = steps
+        return sum(math.comb(j + gaps - 1, gaps - 1) * (steps - 2 * j + 1) for j in range(steps // 2 + 1))
+
+    counts = [
+        paths(t) + 2 * sum(paths(t - d) for d in range(1, min(t, gaps) + 1))
+        if battery - t * cheapest > least_reserve
+        else 0
+        for t in range(horizon + 1)
+    ]
+    return torch.tensor(counts, dtype=torch.long)
+
+
 def mission_size(world, horizon: int) -> tuple[int, int, int]:
     """``(states, transitions, bytes)`` the solver would need for ``world``'s starts over ``horizon`` steps: an
-    estimate from the battery levels each UAV can reach (every cell, task and level combined; an upper bound on the
-    states reachable but for the rounding of batteries), per distinct start (layout and batteries)."""
+    estimate from the battery levels each UAV can reach (every position, task and level combined; an upper bound on
+    the states reachable but for the rounding of batteries), per distinct start (layout and batteries)."""
     energy, cfg, N = world.energy, world.cfg, world.num_uavs
-    C, A = cfg.num_cells, 6**N
+    C, A = energy.away, cfg.joint_action_base**N
     move, stay = float(energy.move), float(energy.stay)
     least_reserve = float(energy.reserve[:C].min())
     keys = torch.cat([_layout_rows(world)[:, None].double(), world.battery.sort(-1).values], -1).unique(dim=0)
+    vertical = len({move, stay, *energy.energies.climb, *energy.energies.descend}) > 2  # the follow-up's: a move
     states = largest = 0
     for key in keys.tolist():
-        levels = [_levels(b, horizon, move, stay, least_reserve) for b in key[1:]]
+        if vertical:
+            cheapest = energy.energies.cheapest
+            levels = [_vertical_levels(b, horizon, cheapest, least_reserve, cfg.num_levels) for b in key[1:]]
+        else:
+            levels = [_levels(b, horizon, move, stay, least_reserve) for b in key[1:]]
         if N == 1:
             per_step = 2 * C * levels[0] + 1
         else:
@@ -185,11 +209,13 @@ def _exact_arithmetic(world, quantum: float) -> bool:
     """Whether every battery the solver reaches is exact in float64: the start batteries, the step's energies and
     the reserves all multiples of ``quantum`` (then every difference of them is, and no rounding happens)."""
     e = world.energy
+    vertical = [torch.tensor([*e.energies.climb, *e.energies.descend], dtype=torch.float64, device=e.move.device)]
     values = torch.cat(
         [
             world.battery.flatten(),
             torch.stack([e.move, e.stay, e.fly, e.fly_and_arrive]),
-            e.reserve[: world.cfg.num_cells],
+            *vertical,
+            e.reserve[: e.away],
         ]
     )
     scaled = values / quantum
@@ -258,8 +284,9 @@ def _check_margin(world, battery: torch.Tensor, tolerance: float) -> None:
     values = battery[battery > 0].unique()
     if not len(values):
         return
-    after = torch.stack([values - e.move, values - e.stay], -1)  # what the energy part computes
-    gap = (after[..., None] - e.reserve[None, None, : world.cfg.num_cells]).abs().min()
+    costs = [e.move, e.stay, *e.energies.climb, *e.energies.descend]
+    after = torch.stack([values - cost for cost in costs], -1)  # what the energy part computes
+    gap = (after[..., None] - e.reserve[None, None, : e.away]).abs().min()
     if gap <= tolerance:
         raise NotCovered(
             f"a battery the mission reaches lies {gap.item():.3g} J from a reserve, within the float64 rounding "
@@ -271,7 +298,7 @@ def _step_layer(world, state, rows, per_world, joint, quantum, away, codes):
     """Every valid (state, joint action) of a step ``[P, 2]``, and their canonical successors: packed as one number
     each (:func:`_pack`, with the step's battery levels, also returned) and their rates ``[P]`` (bit/Hz)."""
     S, N = state["cell"].shape
-    masks = world.dynamics.masks(state["cell"])  # [S, N, 6]: the environment's per-UAV masks
+    masks = world.dynamics.masks(state["cell"])  # [S, N, A]: the environment's per-UAV masks
     valid = masks[:, 0, joint[:, 0]]
     for i in range(1, N):
         valid = valid & masks[:, i, joint[:, i]]
@@ -310,7 +337,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
         cfg = world.cfg
         raise MissionTooLarge(
             f"the exact mission solver for {world.num_uavs} UAVs on {cfg.grid[0]}x{cfg.grid[1]} over {horizon} "
-            f"steps needs about {gib(need)} for ~{states_guess:,} states x {6**world.num_uavs} joint actions, over "
+            f"steps needs about {gib(need)} for ~{states_guess:,} states x {cfg.num_joint_actions} joint actions, over "
             f"its budget of {int(memory_budget):,} bytes: the evaluation uses the bound there"
         )
     began = time.perf_counter()
@@ -320,7 +347,7 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
     exact_arithmetic = _exact_arithmetic(world, quantum)
     rounding = 0.0 if exact_arithmetic else 2.0**-52 * max(float(world.battery.max()), world.energy.capacity)
     per_world = world.layouts.fixed is None
-    joint = decode_joint_actions(N, dev)
+    joint = decode_joint_actions(N, dev, world.cfg.joint_action_base)
     s = world.state
     _, start_key = _canonical({"cell": s.cell, "task": s.task, "battery": s.battery, "status": s.status}, quantum, away)
     levels = start_key[start_key >= 0].div(codes, rounding_mode="floor").unique()
@@ -350,13 +377,14 @@ def optimal_mission(world, horizon: int, memory_budget: int = MEMORY_BUDGET) -> 
         worth, table = rates[t] + values, tables[t]
         values = torch.empty(len(table), dtype=torch.float64, device=dev)
         choice = torch.empty(len(table), dtype=torch.long, device=dev)
-        for begin in range(0, len(table), _CHUNK // len(joint)):  # chunks of rows: [rows, 6^N] temporaries
+        for begin in range(0, len(table), _CHUNK // len(joint)):  # chunks of rows: [rows, A^N] temporaries
             rows_table = table[begin : begin + _CHUNK // len(joint)]
             q = worth[rows_table.clamp(min=0).long()].masked_fill(rows_table < 0, -math.inf)
             values[begin : begin + len(q)], choice[begin : begin + len(q)] = q.max(-1)
         best[t], following[t] = choice.to(torch.int16), table.gather(1, choice[:, None]).squeeze(1)
         tables[t] = None  # freed as the induction goes back
     optimum = MissionOptimum(
+        num_actions=world.cfg.joint_action_base,
         value=values[start_index],
         first_action=torch.empty(0),
         horizon=horizon,

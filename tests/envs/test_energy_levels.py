@@ -13,8 +13,10 @@ import pytest
 import torch
 
 from tests.envs.test_energy import BASE, fly_a_step_home, per_step, steps_home, train_a_small_dqn, zeng_power
+from tests.envs.test_mission import Mission
 from uavrl.envs import make_config
 from uavrl.envs.errors import InvalidOption
+from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -22,7 +24,7 @@ pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 LEVELS_M = (10.0, 20.0, 80.0)  # a climb of 10 m (its descent floored at the profile power) and one of 60 m
 WEIGHT_N = 20.0  # Zeng et al.'s W
 PROFILE_POWER = 0.012 / 8 * 1.225 * 0.05 * 0.503 * 300.0**3 * 0.4**3  # their P0 = delta/8 rho s A Omega^3 R^3
-MOVES = {0: (0, -1, 0), 1: (0, 1, 0), 2: (-1, 0, 0), 3: (1, 0, 0), 6: (0, 0, 1), 7: (0, 0, -1)}
+MOVES = {0: (0, -1, 0), 1: (0, 1, 0), 2: (-1, 0, 0), 3: (1, 0, 0), 6: (0, 0, 1), 7: (0, 0, -1)}  # (dx, dy, dlevel)
 
 
 def leveled(energy="rotary_wing", **options):
@@ -226,3 +228,95 @@ def test_the_pettingzoo_state_and_the_gymnasium_observation_stay_in_their_spaces
         if terminated or truncated:
             break
     assert terminated and zoo.state_space.contains(zoo.state()) and len(zoo.state()) == 7 * 2 + 2 + 12
+
+
+class Mission3D(Mission):
+    """tests/envs/test_mission.py's brute force with altitude levels, written out here: a UAV ``(x, y, z, task,
+    battery)`` also climbs (6) and descends (7), at the costs of :func:`vertical`; its reserve is its dearest next
+    step (stay, a move, a climb, a descent), then the flight home from where that step ends."""
+
+    def __init__(self, cfg, contributions):
+        super().__init__(cfg, contributions)
+        self.levels = cfg.num_levels
+        self.climbs, self.descents = vertical(cfg) if cfg.energy == "rotary_wing" else ([self.move] * 2,) * 2
+
+    def inside(self, x, y, z):
+        return self.on_grid(x, y) and 0 <= z < self.levels
+
+    def cost(self, before, after, action):
+        if self.by_action:  # the follow-up: a move action, climbs and descents among them, costs a move
+            return self.move if action in MOVES else self.stay
+        if after == before:
+            return self.stay
+        if after[2] != before[2]:
+            return self.climbs[before[2]] if after[2] > before[2] else self.descents[after[2]]
+        return self.move
+
+    def reserve(self, x, y, z):
+        ends = [
+            ((x + dx, y + dy, z + dz), a) for a, (dx, dy, dz) in MOVES.items() if self.inside(x + dx, y + dy, z + dz)
+        ]
+        return max(self.cost((x, y, z), end, a) + self.flight(*end[:2]) for end, a in [((x, y, z), 4), *ends])
+
+    def utility(self, serving):
+        C = self.L1 * self.L2
+        position = [z * C + y * self.L1 + x for x, y, z, _, _ in serving]
+        pu = sum(self.contributions[p][0] for p, (*_, task, _) in zip(position, serving, strict=True) if task == 1)
+        se = sum(self.contributions[p][1] for p, (*_, task, _) in zip(position, serving, strict=True) if task == 0)
+        relays = any(task == 1 for *_, task, _ in serving)
+        return 0.5 * math.log2(1 + pu) + (0.5 * math.log2(1 + se) if relays else 0.0)
+
+    def actions(self, uav):
+        x, y, z = uav[:3]
+        return [a for a in range(8) if a in (4, 5) or self.inside(x + MOVES[a][0], y + MOVES[a][1], z + MOVES[a][2])]
+
+    def step(self, serving, joint):
+        targets = [
+            tuple(c + d for c, d in zip(uav[:3], MOVES[a], strict=True)) if a in MOVES else uav[:3]
+            for uav, a in zip(serving, joint, strict=True)
+        ]
+        clash = len(targets) == 2 and targets[0] == targets[1]
+        after = []
+        for (x, y, z, task, battery), a, target in zip(serving, joint, targets, strict=True):
+            position = (x, y, z) if clash else target
+            left = battery - self.cost((x, y, z), position, a)
+            if left > self.reserve(*position):
+                after.append((*position, {4: 0, 5: 1}.get(a, task), left))
+        return tuple(after)
+
+
+MISSION_CASES = [  # (model, start batteries or None, horizon): a 2x2 grid at two or three levels
+    (dict(grid=(2, 2), num_uavs=1, battery_wh=1.2), None, 10),
+    (dict(grid=(2, 2), num_uavs=1, battery_wh=1.5, altitudes_m=(10.0, 20.0), battery_init="uniform"), None, 12),
+    (dict(grid=(2, 1), num_uavs=2, battery_wh=1.2, altitudes_m=(10.0, 40.0)), None, 7),
+    (dict(grid=(2, 1), num_uavs=2, energy="follow_up", altitudes_m=(10.0, 20.0)), [13.0, 15.5], 10),
+]
+
+
+@pytest.mark.parametrize("case", range(len(MISSION_CASES)))
+def test_the_exact_mission_solver_with_levels_is_brute_force_optimal_control(case):
+    options, batteries, horizon = MISSION_CASES[case]
+    options = {"altitudes_m": LEVELS_M, "energy": "rotary_wing", **options}
+    cfg = make_config("paper", base=BASE, cell_size=10.0, **options)
+    world = World(cfg, 3, seed=case)
+    world.reset()
+    if batteries is not None:  # the follow-up's 5000 would take thousands of steps: a few steps' worth by hand
+        world._s.battery = torch.tensor([batteries] * 3, dtype=torch.float64)
+    best = optimal_mission(world, horizon)
+    C, L1 = cfg.num_cells, cfg.grid[0]
+    cells, tasks, start_battery = world._s.cell.tolist(), world._s.task.tolist(), world.battery.tolist()
+    for w in range(3):
+        serving = tuple(
+            (p % C % L1, p % C // L1, p // C, t, b)
+            for p, t, b in zip(cells[w], tasks[w], start_battery[w], strict=True)
+        )
+        brute, _ = Mission3D(cfg, world.cell_contributions[w]).best(serving, horizon)
+        assert best.value[w].item() == pytest.approx(brute * cfg.slot_s, rel=1e-12, abs=1e-12), w
+    assert 0 < best.states <= mission_size(world, horizon)[0]
+    index, delivered = best.start_index, torch.zeros(3, dtype=torch.float64)
+    for step in range(horizon):  # its policy played in the World delivers it
+        action, index = best.actions(step, index, world._s.cell)
+        out, _, _ = world.step(action)
+        positions = torch.cat([out["positions"], out["levels"].unsqueeze(-1)], -1)
+        delivered += world.utility(positions, out["tasks"])[2] * cfg.slot_s
+    torch.testing.assert_close(delivered, best.value, rtol=1e-12, atol=1e-12)
