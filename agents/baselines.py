@@ -218,14 +218,22 @@ class OraclePolicy(TensorDictModuleBase):
         u_star = float(optimum(contributions[None], direct[None], self.cfg)[0][0])
         return optimal_configurations(contributions, direct, self.cfg, u_star)
 
+    def _serving(self, td: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(positions, serving, tasks)`` ``[W, N]`` of the UAVs of ``td``'s worlds (on the CPU): each UAV's position
+        index (its cell with one level; past the model's positions out of service), whether it serves, its task."""
+        fleet = self.cfg.fleet_size
+        cells = cells_or_away(td.get("positions").cpu(), self.cfg.grid).reshape(-1, fleet)  # L1 L2: out of service
+        serving, tasks = cells < self.cfg.num_cells, td.get("tasks").cpu().reshape(-1, fleet)
+        if self.cfg.num_levels > 1:  # the position of (cell, level)
+            levels = td.get("levels").cpu().reshape(-1, fleet)
+            number = self.positions.number[cells.clamp(max=self.cfg.num_cells - 1) + self.cfg.num_cells * levels]
+            cells = torch.where(serving, number, len(self.positions))
+        return cells, serving, tasks
+
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
-        fleet = self.cfg.fleet_size
-        cells = cells_or_away(positions.cpu(), self.cfg.grid).reshape(-1, fleet)  # L1 L2: out of service
-        serving, tasks_of = cells < self.cfg.num_cells, tasks.cpu().reshape(-1, fleet)
-        if self.cfg.num_levels > 1:  # the position of (cell, level); no energy model: every UAV serves
-            cells = self.positions.number[cells + self.cfg.num_cells * td.get("levels").cpu().reshape(-1, fleet)]
+        cells, serving, tasks_of = self._serving(td)
         nodes = self._nodes(td)
         # a UAV out of service has only the no-op; the oracle plans for those in service and never sends one home
         actions = torch.full(cells.shape, SENSE, dtype=torch.long)

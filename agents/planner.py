@@ -6,7 +6,8 @@ It is :class:`~uavrl.agents.baselines.OraclePolicy` (it drives the UAVs in servi
 model's numbers, never learnt:
 
 1. **Move rather than hover, where that delivers more per joule.**  ``B`` is the configuration that moves every UAV
-   of ``A`` to a neighbouring cell, keeping its task (cells off ``A`` and distinct), of the largest utility ``U_B``.
+   of ``A`` to a neighbouring cell (at its level, with altitude levels), keeping its task (cells off ``A`` and
+   distinct), of the largest utility ``U_B``.
    Once the team holds ``A`` it cycles ``A, B, A, ...`` (every UAV moves every step) when that delivers more per
    joule than hovering: ``(U_A + U_B) / 2 / e_move > U_A / e_stay``, i.e. ``U_B > (2 e_move / e_stay - 1) U_A``
    (``e_move``, ``e_stay``: a serving UAV's step that moves or not).  Under ``rotary_wing`` (132.8 J and 175.3 J
@@ -47,12 +48,11 @@ import torch
 from tensordict import TensorDictBase
 
 from uavrl.agents.baselines import SENSE, BaselineAgent, OraclePolicy
-from uavrl.agents.schema import check_planner_settings
 from uavrl.envs import ModelConfig
 from uavrl.envs.config import RETURN
 from uavrl.envs.physics.channel import rates
 from uavrl.envs.physics.energy import Energy
-from uavrl.envs.physics.grid import cells_or_away, manhattan
+from uavrl.envs.physics.grid import manhattan
 from uavrl.envs.solvers.bounds import assignment_costs, best_assignment
 
 MAX_CYCLE_UAVS = 7  # B is searched over 4^n neighbour combinations: 16,384 at 7 UAVs in service
@@ -68,7 +68,6 @@ class PlannerPolicy(OraclePolicy):
     """
 
     def __init__(self, cfg: ModelConfig, env=None):
-        check_planner_settings(cfg, None)
         super().__init__(cfg, env)
         self.energy = None if cfg.energy == "none" else Energy(cfg)
         if self.energy is not None:
@@ -86,7 +85,10 @@ class PlannerPolicy(OraclePolicy):
         n = len(cells)
         found = (cells, False)
         if n <= MAX_CYCLE_UAVS:
-            options = [[c for c in self.neighbours[cell] if c >= 0 and c not in set(cells.tolist())] for cell in cells]
+            # B moves each UAV in the plane (a step of e_move; a climb or a descent costs otherwise)
+            options = [
+                [c for c in self.neighbours[cell][:4] if c >= 0 and c not in set(cells.tolist())] for cell in cells
+            ]
             combos = torch.tensor([c for c in itertools.product(*options) if len(set(c)) == n], dtype=torch.long)
             if len(combos):
                 here = sum(rates(contributions[cells][None], tasks[None], direct[None], self.cfg))[0]
@@ -109,8 +111,7 @@ class PlannerPolicy(OraclePolicy):
         self.run_env.check(td)
         positions, tasks = td.get("positions"), td.get("tasks")
         fleet = self.cfg.fleet_size
-        cells = cells_or_away(positions.cpu(), self.cfg.grid).reshape(-1, fleet)
-        serving, tasks_of = cells < self.cfg.num_cells, tasks.cpu().reshape(-1, fleet)
+        cells, serving, tasks_of = self._serving(td)
         state = td.get("state").cpu().reshape(len(cells), -1)
         battery = state[:, 5 * fleet : 7 * fleet : 2].double() * self.energy.capacity  # the World's state layout
         nodes = self._nodes(td)
@@ -143,7 +144,7 @@ class PlannerPolicy(OraclePolicy):
         cfg, energy = self.cfg, self.energy
         if cfg.recharge_steps is None or cfg.num_spares == 0 or len(uavs) < cfg.num_uavs:
             return None
-        away = cells >= cfg.num_cells
+        away = cells >= energy.away
         spare_ready = (away & (battery >= energy.capacity)).any()
         if not spare_ready or bool((here == energy.entry).any()):
             return None

@@ -276,16 +276,6 @@ class BaselineSchema:
     memory_budget: REAL = setting(DEFAULT_MEMORY_BUDGET, MEMORY_BUDGET, "bytes of the evaluation; more is refused")
 
 
-def check_planner_settings(env_cfg: ModelConfig, settings) -> None:
-    """The planner's rules read the energy model in the plane: with altitude levels under an energy model, refused
-    in one line."""
-    if env_cfg.energy != "none" and env_cfg.num_levels > 1:
-        raise ValueError(
-            f"agent=planner is invalid with env.altitudes_m={list(env_cfg.altitudes_m)} under "
-            f"env.energy={env_cfg.energy!r}: its rules price moves in the plane only; use agent=oracle, or one level"
-        )
-
-
 MAX_JOINT_UAVS = 4  # the joint head's 6^N outputs are for small teams
 MAX_JOINT_ACTIONS = NUM_ACTIONS**MAX_JOINT_UAVS  # the joint head is for small teams: N <= 4
 
@@ -514,7 +504,7 @@ AGENTS: dict[str, AgentConfig] = {
     ),
     "random": AgentConfig(BaselineSchema, "baselines:RandomAgent"),
     "oracle": AgentConfig(BaselineSchema, "baselines:OracleAgent"),
-    "planner": AgentConfig(BaselineSchema, "planner:PlannerAgent", together=check_planner_settings),
+    "planner": AgentConfig(BaselineSchema, "planner:PlannerAgent"),
 }
 # the schema of each agent, by name (read from AGENTS)
 AGENT_SCHEMAS: Mapping[str, type] = MappingProxyType({name: config.schema for name, config in AGENTS.items()})
