@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass, field
 
 from .errors import InvalidOption
-from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_problem
+from .limits import PHYSICAL, allowed_range, is_number, is_pair, is_whole, physics_problem, radio_problem
 from .physics import power, radio, sensing
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")
@@ -230,18 +229,18 @@ class ModelConfig:
     preset: str = field(default="paper", compare=False)
 
     def __post_init__(self):
-        grid = tuple(int(g) for g in self.grid) if _is_pair(self.grid) else None
+        grid = tuple(int(g) for g in self.grid) if is_pair(self.grid) else None
         if grid is None or min(grid) < 1:
             raise InvalidOption("grid", self.grid, "give two integers L1, L2 >= 1, e.g. grid=(6, 6)")
         object.__setattr__(self, "grid", grid)
         cells = grid[0] * grid[1]
-        if not _is_int(self.num_uavs) or not 1 <= self.num_uavs <= cells:
+        if not is_whole(self.num_uavs) or not 1 <= self.num_uavs <= cells:
             reason = f"a {grid[0]}x{grid[1]} grid holds 1 to {cells} UAVs (one per cell)"
-            if _is_int(self.num_uavs) and self.num_uavs == _DEFAULTS["num_uavs"] and grid != _DEFAULTS["grid"]:
+            if is_whole(self.num_uavs) and self.num_uavs == _DEFAULTS["num_uavs"] and grid != _DEFAULTS["grid"]:
                 # the team left as it was: the grid is what was changed
                 raise InvalidOption("grid", self.grid, f"{reason}, and num_uavs is {self.num_uavs}")
             raise InvalidOption("num_uavs", self.num_uavs, reason)
-        if not _is_int(self.max_steps) or self.max_steps < 1:
+        if not is_whole(self.max_steps) or self.max_steps < 1:
             raise InvalidOption("max_steps", self.max_steps, "an episode needs a whole number of steps >= 1")
         object.__setattr__(self, "num_uavs", int(self.num_uavs))
         object.__setattr__(self, "max_steps", int(self.max_steps))
@@ -390,7 +389,7 @@ class ModelConfig:
             if value is not None and not (is_number(value) and 0 < value < high):
                 bound = " and below 1" if high == 1.0 else ""
                 raise InvalidOption(name, value, f"it must be a finite number above 0{bound}, or None for the city's")
-        if not _is_int(self.city_seed) or not 0 <= self.city_seed < CITY_SEED_LIMIT:
+        if not is_whole(self.city_seed) or not 0 <= self.city_seed < CITY_SEED_LIMIT:
             raise InvalidOption("city_seed", self.city_seed, "give a whole number from 0 to 2**63 - 1")
         object.__setattr__(self, "city_seed", int(self.city_seed))
 
@@ -457,55 +456,8 @@ class ModelConfig:
                 raise InvalidOption(name, getattr(self, name), f"only {reads} reads it, not energy={self.energy!r}")
         if self.energy == "none":
             return
-        if self.energy == "rotary_wing":
-            power.check_step_energies(self, _DEFAULTS["slot_s"])
-        if self.recharge_steps is not None and not (_is_int(self.recharge_steps) and self.recharge_steps >= 1):
-            reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
-            raise InvalidOption("recharge_steps", self.recharge_steps, reason)
-        if self.recharge_steps is not None and self.num_levels > 1:
-            reason = (
-                "recharging with altitude levels is not modelled (return and climb would share action 6): give null"
-            )
-            raise InvalidOption("recharge_steps", self.recharge_steps, reason)
-        if not _is_int(self.num_spares) or self.num_spares < 0:
-            raise InvalidOption("num_spares", self.num_spares, "give the whole number >= 0 of UAVs waiting at the base")
-        if self.num_spares > 0 and self.recharge_steps is None:
-            reason = "a spare enters when a UAV leaves for the base and recharges there: give recharge_steps too"
-            raise InvalidOption("num_spares", self.num_spares, reason)
-        if self.base is None:
-            reason = "a UAV leaves service for its base: give base=[x, y], a cell off the grid"
-            raise InvalidOption("energy", self.energy, reason)
-        if not _is_pair(self.base):
-            raise InvalidOption("base", self.base, "give two integers x, y (cells; off the grid too), e.g. [-1, 0]")
-        base = tuple(int(b) for b in self.base)
-        object.__setattr__(self, "base", base)
-        L1, L2 = self.grid
-        if 0 <= base[0] < L1 and 0 <= base[1] < L2:  # a UAV shown at the base is then never one serving there
-            reason = f"a UAV out of service is shown at the base, off the grid: give a cell off the {L1}x{L2} grid"
-            raise InvalidOption("base", list(base), reason)
-        if self.rate_model == "reference_code":
-            reason = "the authors' both-tasks rule counts every UAV, in service or not: use rate_model='af'"
-            raise InvalidOption("energy", self.energy, reason)
-        if self.reset_positions == "keep":
-            reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
-            raise InvalidOption("energy", self.energy, reason)
-        power.check_step_energies(self, _DEFAULTS["slot_s"])
-        lowest, need, farthest = power.lowest_start_and_largest_reserve(self)
-        if lowest <= need:
-            preset = {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)}  # a base next to the grid
-            name = power.battery_blamed(self, preset)
-            unit = "Wh" if self.energy == "rotary_wing" else "units"
-            scale = 3600.0 if self.energy == "rotary_wing" else 1.0
-            climbs, step = self.step_energies.climb, "one step"
-            if climbs and max(climbs) == self.step_energies.dearest:  # a climb decides it: say which
-                k = climbs.index(max(climbs))
-                step = f"its dearest step (a climb of {self.altitudes_m[k + 1] - self.altitudes_m[k]:g} m)"
-            reason = (
-                f"a UAV may start with {lowest / scale:.4g} {unit} ({self.battery_init}) at the cell farthest from "
-                f"the base {list(base)}, {farthest} steps away, where {step} and the flight to the base take "
-                f"{need / scale:.4g} {unit}: {power.BATTERY_ADVICE[name]}"
-            )
-            raise InvalidOption(name, list(base) if name == "base" else getattr(self, name), reason)
+        object.__setattr__(self, "base", power.check_energy_options(self, _DEFAULTS["slot_s"]))
+        power.check_battery_reach(self, {**_DEFAULTS, **_PRESETS.get(self.preset, {}), "base": (-1, 0)})
 
     @property
     def steps_before_reserve(self) -> int | None:
@@ -661,14 +613,3 @@ def preset_options(preset: str) -> dict:
 def _choice(name, value, allowed):
     if value not in allowed:
         raise InvalidOption(name, value, f"allowed values are {', '.join(map(repr, allowed))}")
-
-
-def _is_int(value) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_pair(value) -> bool:
-    try:
-        return len(value) == 2 and all(int(v) == v for v in value)
-    except (TypeError, ValueError):
-        return False

@@ -1,7 +1,7 @@
 """The energy models' constants, their sources and the energy of one step (docs/model.md, Energy and lifetime).
 
-Standard library only, like :mod:`.radio`: the rules of a battery's reach (:func:`lowest_start_and_largest_reserve`,
-:func:`battery_blamed`, :func:`check_step_energies`), which :class:`~uavrl.envs.config.ModelConfig` applies before
+Standard library only, like :mod:`.radio`: an energy model's rules (:func:`check_energy_options`,
+:func:`check_battery_reach`, :func:`check_step_energies`), which :class:`~uavrl.envs.config.ModelConfig` applies before
 torch is imported, and :mod:`.energy` (the World's part) builds its tables from the same numbers.
 
 - ``rotary_wing``: Zeng, Xu, Zhang, "Energy Minimization for Wireless Communication with Rotary-Wing UAV", IEEE
@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import InvalidOption
+from ..limits import is_pair, is_whole
 
 ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.physics.energy: one part each, none for "none"
 BATTERY_INITS = ("full", "uniform")
@@ -253,3 +254,60 @@ def check_step_energies(cfg, default_slot_s: float) -> None:
         raise InvalidOption("slot_s", cfg.slot_s, reason)
     if not math.isfinite(energies.capacity):
         raise InvalidOption("battery_wh", cfg.battery_wh, "in joules it overflows a float: give a smaller battery")
+
+
+def check_energy_options(cfg, default_slot_s: float) -> tuple[int, ...]:
+    """An energy model's options (``cfg.energy`` not ``none``) that go with it, each refused in one line: finite step
+    energies, recharging (a whole number of steps; not with altitude levels), spares (only with recharging), a base
+    off the grid, the AF rate model, random positions at a reset.  Returns the base as a pair of ints."""
+    if cfg.energy == "rotary_wing":
+        check_step_energies(cfg, default_slot_s)
+    if cfg.recharge_steps is not None and not (is_whole(cfg.recharge_steps) and cfg.recharge_steps >= 1):
+        reason = "give the whole number of steps >= 1 a battery takes to charge, or null for no recharging"
+        raise InvalidOption("recharge_steps", cfg.recharge_steps, reason)
+    if cfg.recharge_steps is not None and cfg.num_levels > 1:
+        reason = "recharging with altitude levels is not modelled (return and climb would share action 6): give null"
+        raise InvalidOption("recharge_steps", cfg.recharge_steps, reason)
+    if not is_whole(cfg.num_spares) or cfg.num_spares < 0:
+        raise InvalidOption("num_spares", cfg.num_spares, "give the whole number >= 0 of UAVs waiting at the base")
+    if cfg.num_spares > 0 and cfg.recharge_steps is None:
+        reason = "a spare enters when a UAV leaves for the base and recharges there: give recharge_steps too"
+        raise InvalidOption("num_spares", cfg.num_spares, reason)
+    if cfg.base is None:
+        reason = "a UAV leaves service for its base: give base=[x, y], a cell off the grid"
+        raise InvalidOption("energy", cfg.energy, reason)
+    if not is_pair(cfg.base):
+        raise InvalidOption("base", cfg.base, "give two integers x, y (cells; off the grid too), e.g. [-1, 0]")
+    base = tuple(int(b) for b in cfg.base)
+    L1, L2 = cfg.grid
+    if 0 <= base[0] < L1 and 0 <= base[1] < L2:  # a UAV shown at the base is then never one serving there
+        reason = f"a UAV out of service is shown at the base, off the grid: give a cell off the {L1}x{L2} grid"
+        raise InvalidOption("base", list(base), reason)
+    if cfg.rate_model == "reference_code":
+        reason = "the authors' both-tasks rule counts every UAV, in service or not: use rate_model='af'"
+        raise InvalidOption("energy", cfg.energy, reason)
+    if cfg.reset_positions == "keep":
+        reason = "a UAV that left service has no cell to keep: use reset_positions='random'"
+        raise InvalidOption("energy", cfg.energy, reason)
+    return base
+
+
+def check_battery_reach(cfg, preset: dict) -> None:
+    """A battery of the model ``cfg`` (its options checked) that starts above the largest reserve, else one line
+    naming the option to change (:func:`battery_blamed` against ``preset``'s values) and, where a climb is the dearest
+    step, the climb."""
+    lowest, need, farthest = lowest_start_and_largest_reserve(cfg)
+    if lowest > need:
+        return
+    name = battery_blamed(cfg, preset)
+    unit, scale = ("Wh", 3600.0) if cfg.energy == "rotary_wing" else ("units", 1.0)
+    climbs, step = cfg.step_energies.climb, "one step"
+    if climbs and max(climbs) == cfg.step_energies.dearest:  # a climb decides it: say which
+        k = climbs.index(max(climbs))
+        step = f"its dearest step (a climb of {cfg.altitudes_m[k + 1] - cfg.altitudes_m[k]:g} m)"
+    reason = (
+        f"a UAV may start with {lowest / scale:.4g} {unit} ({cfg.battery_init}) at the cell farthest from the base "
+        f"{list(cfg.base)}, {farthest} steps away, where {step} and the flight to the base take {need / scale:.4g} "
+        f"{unit}: {BATTERY_ADVICE[name]}"
+    )
+    raise InvalidOption(name, list(cfg.base) if name == "base" else getattr(cfg, name), reason)
