@@ -9,9 +9,14 @@ without the solver (what an evaluation costs before the optimum is added).
 ``--compare``: the evaluation's delivered data of the random policy and the energy-unaware oracle on one case,
 beside the exact optimum and the proved bound (the same starts for all).
 
+``--levels H1 H2 ...``: the UAVs at those altitude levels (m; cells of 10 m), with climbs and descents
+(docs/model.md, Energy and lifetime), for the cases of ``--time`` (then its smaller cases: 2x2 and 3x3) and
+``--compare``.
+
 Usage::
 
     python benchmarks/mission_exact.py --time                      # 3x3 and 4x4, N = 1, 2; 1, 1.5 and 2 Wh
+    python benchmarks/mission_exact.py --time --levels 10 20 40    # 2x2 and 3x3 at three levels
     python benchmarks/mission_exact.py --compare --grid 4 4 --battery-wh 1.0
 """
 
@@ -27,7 +32,7 @@ import time
 
 import torch
 
-from uavrl import evaluation
+from uavrl.agents import references
 from uavrl.agents.evaluation import EVAL_SEED, evaluate
 from uavrl.envs import make_config
 from uavrl.envs.limits import evaluation_horizon
@@ -35,20 +40,27 @@ from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
 
 CASES = [(grid, n, wh) for grid in ((3, 3), (4, 4)) for n in (1, 2) for wh in (1.0, 1.5, 2.0)]
+LEVEL_CASES = [(grid, n, wh) for grid in ((2, 2), (3, 3)) for n in (1, 2) for wh in (1.0, 1.5)]
 NUM_STARTS = 64
 
 
-def config(grid, num_uavs, battery_wh):
+def config(grid, num_uavs, battery_wh, levels=None):
     return make_config(
-        "paper", grid=tuple(grid), num_uavs=num_uavs, energy="rotary_wing", base=(-1, 0), battery_wh=battery_wh
+        "paper",
+        grid=tuple(grid),
+        num_uavs=num_uavs,
+        energy="rotary_wing",
+        base=(-1, 0),
+        battery_wh=battery_wh,
+        altitudes_m=levels,
     )
 
 
-def time_case(grid, num_uavs, battery_wh) -> dict:
+def time_case(grid, num_uavs, battery_wh, levels=None) -> dict:
     """One case, in this process: the solver's figures and the random policy's evaluation beside it."""
     from uavrl.agents.baselines import RandomPolicy
 
-    cfg = config(grid, num_uavs, battery_wh)
+    cfg = config(grid, num_uavs, battery_wh, levels)
     horizon = evaluation_horizon(cfg)
     began, began_cpu = time.perf_counter(), time.process_time()
     with _without_optimum():
@@ -61,6 +73,7 @@ def time_case(grid, num_uavs, battery_wh) -> dict:
     best = optimal_mission(world, horizon, memory_budget=2**34)
     return {
         "grid": f"{grid[0]}x{grid[1]}",
+        "levels": levels,
         "N": num_uavs,
         "battery_wh": battery_wh,
         "horizon": horizon,
@@ -79,18 +92,18 @@ def time_case(grid, num_uavs, battery_wh) -> dict:
 @contextlib.contextmanager
 def _without_optimum():
     """The evaluation without the exact optimum (the baseline): its references' solver call answers ``None``."""
-    saved = evaluation.mission_optimum
-    evaluation.mission_optimum = lambda world, horizon: None
+    saved = references.mission_optimum
+    references.mission_optimum = lambda world, horizon: None
     try:
         yield
     finally:
-        evaluation.mission_optimum = saved
+        references.mission_optimum = saved
 
 
-def compare(grid, num_uavs, battery_wh) -> None:
+def compare(grid, num_uavs, battery_wh, levels=None) -> None:
     from uavrl.agents.baselines import OraclePolicy, RandomPolicy
 
-    cfg = config(grid, num_uavs, battery_wh)
+    cfg = config(grid, num_uavs, battery_wh, levels)
     print(f"{grid[0]}x{grid[1]}, N = {num_uavs}, rotary_wing, battery_wh = {battery_wh}, {NUM_STARTS} starts")
     for name, policy in (("random", RandomPolicy(seed=0)), ("oracle", OraclePolicy(cfg))):
         began = time.perf_counter()
@@ -107,22 +120,26 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--time", action="store_true")
     parser.add_argument("--compare", action="store_true")
-    parser.add_argument("--case", type=json.loads, help="one --time case as JSON [grid, N, battery_wh] (internal)")
+    parser.add_argument("--case", type=json.loads, help="one --time case as JSON [grid, N, battery_wh, levels]")
     parser.add_argument("--grid", type=int, nargs=2, default=(4, 4))
     parser.add_argument("--num-uavs", type=int, default=2)
     parser.add_argument("--battery-wh", type=float, default=1.0)
+    parser.add_argument("--levels", type=float, nargs="+", default=None, help="altitude levels in m (default: one)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     if args.case is not None:
         print(json.dumps(time_case(*args.case)))
     if args.time:
-        for case in CASES:
+        for case in CASES if args.levels is None else LEVEL_CASES:
             out = subprocess.run(
-                [sys.executable, __file__, "--case", json.dumps(case)], capture_output=True, text=True, check=True
+                [sys.executable, __file__, "--case", json.dumps([*case, args.levels])],
+                capture_output=True,
+                text=True,
+                check=True,
             )
             print(out.stdout.strip(), flush=True)
     if args.compare:
-        compare(args.grid, args.num_uavs, args.battery_wh)
+        compare(args.grid, args.num_uavs, args.battery_wh, args.levels)
 
 
 if __name__ == "__main__":

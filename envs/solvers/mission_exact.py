@@ -150,24 +150,27 @@ def _levels(battery: float, horizon: int, move: float, stay: float, least_reserv
     return (most + 1).clamp(min=0).long()
 
 
-def _vertical_levels(battery: float, horizon: int, cheapest: float, least_reserve: float, num_levels: int):
+def _vertical_levels(battery: float, horizon: int, energies, least_reserve: float, num_levels: int) -> torch.Tensor:
     """``[H + 1]`` an upper bound on the battery levels a serving UAV can have after each step ``t`` with altitude
-    levels, whose climbs and descents cost what a move and a stay do not: a path that ends ``d`` levels from where it
-    began crossed each gap between levels up and down equally often but for ``d`` of them, so its battery is set by
-    its moves ``m``, stays ``s`` and round trips ``k_g`` per gap ``g`` with ``m + s + 2 sum k = t - d``; at most two
-    ends lie ``d`` levels away.  Zero once ``t`` of the cheapest steps leave the battery at ``least_reserve``."""
-    gaps = num_levels - 1
+    levels, whose climbs and descents (``energies``: :class:`~uavrl.envs.physics.power.StepEnergies`) cost what a
+    move and a stay do not.  A path that ends ``d`` levels from where it began crossed each gap between levels up and
+    down equally often but for ``d`` of them, so its battery is set by its moves ``m``, stays ``s`` and round trips
+    ``k_g`` per gap ``g`` with ``m + s + 2 sum k = t - d`` (at most two ends lie ``d`` levels away); only those whose
+    cheapest cost leaves the battery above ``least_reserve`` count."""
+    gaps, spare = num_levels - 1, battery - least_reserve
+    planar = min(energies.move, energies.stay)
+    round_trip = min(c + d for c, d in zip(energies.climb, energies.descend, strict=True))
+    crossing = min(*energies.climb, *energies.descend)
 
-    def paths(steps: int) -> int:  # the (m, s, k_1..k_G) of m + s + 2 sum k = steps
-        return sum(math.comb(j + gaps - 1, gaps - 1) * (steps - 2 * j + 1) for j in range(steps // 2 + 1))
+    def count(t: int) -> int:
+        total = 0
+        for d in range(min(t, gaps) + 1):
+            for j in range((t - d) // 2 + 1):  # j = sum k round trips, C(j + G - 1, G - 1) ways over the gaps
+                if (t - d - 2 * j) * planar + j * round_trip + d * crossing < spare:
+                    total += (1 if d == 0 else 2) * math.comb(j + gaps - 1, gaps - 1) * (t - d - 2 * j + 1)
+        return total
 
-    counts = [
-        paths(t) + 2 * sum(paths(t - d) for d in range(1, min(t, gaps) + 1))
-        if battery - t * cheapest > least_reserve
-        else 0
-        for t in range(horizon + 1)
-    ]
-    return torch.tensor(counts, dtype=torch.long)
+    return torch.tensor([count(t) for t in range(horizon + 1)], dtype=torch.long)
 
 
 def mission_size(world, horizon: int) -> tuple[int, int, int]:
@@ -183,8 +186,7 @@ def mission_size(world, horizon: int) -> tuple[int, int, int]:
     states = largest = 0
     for key in keys.tolist():
         if vertical:
-            cheapest = energy.energies.cheapest
-            levels = [_vertical_levels(b, horizon, cheapest, least_reserve, cfg.num_levels) for b in key[1:]]
+            levels = [_vertical_levels(b, horizon, energy.energies, least_reserve, cfg.num_levels) for b in key[1:]]
         else:
             levels = [_levels(b, horizon, move, stay, least_reserve) for b in key[1:]]
         if N == 1:
