@@ -10,13 +10,13 @@ without the solver (what an evaluation costs before the optimum is added).
 beside the exact optimum and the proved bound (the same starts for all).
 
 ``--levels H1 H2 ...``: the UAVs at those altitude levels (m; cells of 10 m), with climbs and descents
-(docs/model.md, Energy and lifetime), for the cases of ``--time`` (then its smaller cases: 2x2 and 3x3) and
+(docs/model.md, Energy and lifetime), for the cases of ``--time`` (then one UAV on 2x2 and 3x3) and
 ``--compare``.
 
 Usage::
 
     python benchmarks/mission_exact.py --time                      # 3x3 and 4x4, N = 1, 2; 1, 1.5 and 2 Wh
-    python benchmarks/mission_exact.py --time --levels 10 20 40    # 2x2 and 3x3 at three levels
+    python benchmarks/mission_exact.py --time --levels 10 20 40    # N = 1 on 2x2 and 3x3 at three levels
     python benchmarks/mission_exact.py --compare --grid 4 4 --battery-wh 1.0
 """
 
@@ -40,7 +40,7 @@ from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
 from uavrl.envs.world import World
 
 CASES = [(grid, n, wh) for grid in ((3, 3), (4, 4)) for n in (1, 2) for wh in (1.0, 1.5, 2.0)]
-LEVEL_CASES = [(grid, n, wh) for grid in ((2, 2), (3, 3)) for n in (1, 2) for wh in (1.0, 1.5)]
+LEVEL_CASES = [(grid, 1, wh) for grid in ((2, 2), (3, 3)) for wh in (1.0, 1.5, 2.0)]  # two UAVs: short horizons only
 NUM_STARTS = 64
 
 
