@@ -642,8 +642,8 @@ CITY_CASES = [
     ("cities", "altitudes_m=torch.tensor([30., 100.])", "altitudes_m",
      f"UAVSpectrumEnv({A2G}, altitudes_m=torch.tensor([30.0, 100.0]))"),
     ("cities", "altitudes_m={30, 100} (a set)", "altitudes_m", f"UAVSpectrumEnv({A2G}, altitudes_m={{30, 100}})"),
-    ("cities", "altitudes_m with energy", "altitudes_m",
-     "UAVSpectrumEnv(grid=(4, 4), altitudes_m=[30, 100], energy='follow_up', base=(-1, 0))"),
+    ("cities", "altitudes_m with recharging", "recharge_steps",
+     "UAVSpectrumEnv(grid=(4, 4), altitudes_m=[30, 100], energy='follow_up', base=(-1, 0), recharge_steps=3)"),
     ("cities", "action 8 at levels", "action",
      f"e = UAVSpectrumEnv({A2G}, altitudes_m=[30, 100]); td = e.reset(); "
      "td['agents', 'action'] = torch.full((1, 2), 8); e.step(td)"),
