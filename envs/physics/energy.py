@@ -6,9 +6,10 @@ or ``rotary_wing``, whose per-step energies come from :mod:`.power`.  :class:`En
 
 - ``start(keys, counters)``: full batteries, or ``U[lo, 1]`` of the capacity from each world's stream
   (``battery_init=uniform``), every UAV serving;
-- ``step(state, cell_before, action)``: after the dynamics part moved the UAVs, what the step cost each battery,
-  and who leaves service: a serving UAV whose battery is at or below the reserve of its cell (one more step, then
-  the flight to the base) flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
+- ``step(state, cell_before, action)``: after the dynamics part moved the UAVs, what the step cost each battery (a
+  move, a stay, or with altitude levels a climb or a descent), and who leaves service: a serving UAV whose battery is
+  at or below the reserve of its position (its dearest next step, then the flight to the base, flown at its level)
+  flies to the base over ``|x - bx| + |y - by|`` steps (``RETURNING``, ``timer`` the steps
   left), then is ``OUT``; with ``recharge_steps`` it also leaves on ``return`` (:data:`~.config.RETURN`), is
   ``CHARGING`` at the base for that many steps, then ``WAITING`` charged, and the first waiting UAV enters at
   :attr:`Energy.entry` while fewer than ``num_uavs`` serve (spares start waiting).  A UAV out of service sits on

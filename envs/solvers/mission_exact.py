@@ -79,7 +79,8 @@ class MissionOptimum:
     ``first_action`` ``[B, N]``: an optimal joint action there (the UAVs in the World's order); ``states``,
     ``transitions``: how many states and (state, joint action) pairs were solved; ``seconds``: the time it took.
     :meth:`actions` plays the optimal policy step by step.  ``start_index`` ``[B]``: each start's state among the
-    first step's.  The fields ``_cells``, ``_best`` and ``_next`` are the solver's per-step tables that
+    first step's; ``num_actions``: a UAV's actions within a joint action (6, 8 with altitude levels).  The fields
+    ``_cells``, ``_best`` and ``_next`` are the solver's per-step tables that
     :meth:`actions` reads (the solver fills them; not for users).
     """
 
