@@ -17,8 +17,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from .errors import InvalidOption
-from .limits import PHYSICAL, allowed_range, is_number, is_pair, is_whole, physics_problem, radio_problem
+from .errors import InvalidOption, is_pair, is_whole
+from .limits import PHYSICAL, allowed_range, is_number, physics_problem, radio_problem
 from .physics import power, radio, sensing
 
 ACTION_NAMES = ("up", "down", "left", "right", "sense", "relay")

@@ -1,8 +1,9 @@
-"""The one-line refusals of a model option or an argument, shared by the model's config and its physics (standard
-library only, so a refusal needs neither torch nor numpy)."""
+"""The one-line refusals of a model option or an argument, shared by the model's config and its physics, and the
+kinds of value they test (standard library only, so a refusal needs neither torch nor numpy)."""
 
 from __future__ import annotations
 
+import numbers
 import re
 
 
@@ -29,3 +30,16 @@ class InvalidOption(ValueError):
 class InvalidType(InvalidOption, TypeError):
     """An argument of the wrong type (a ``TypeError`` too): ``option=value is invalid: reason``; ``message`` the
     whole line in their place (arguments as :class:`InvalidOption`'s)."""
+
+
+def is_whole(value) -> bool:
+    """A whole number, not a bool: what a count or a seed must be."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def is_pair(value) -> bool:
+    """Two whole numbers (of any type that converts exactly: ``[1, 2.0]`` is a pair, ``[1, 2.5]`` not)."""
+    try:
+        return len(value) == 2 and all(int(v) == v for v in value)
+    except (TypeError, ValueError):
+        return False

@@ -203,18 +203,6 @@ def is_number(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def is_whole(value) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def is_pair(value) -> bool:
-    """Two whole numbers (of any type that converts exactly: ``[1, 2.0]`` is a pair, ``[1, 2.5]`` not)."""
-    try:
-        return len(value) == 2 and all(int(v) == v for v in value)
-    except (TypeError, ValueError):
-        return False
-
-
 def radio_problem(values: dict) -> tuple[str, str] | None:
     """The option of a physical channel outside where its model holds (:mod:`uavrl.envs.physics.radio`), and why;
     ``None`` when every one lies inside.  ``values`` as :func:`physics_problem` reads them, with ``altitude_m``."""

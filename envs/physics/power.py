@@ -24,8 +24,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from ..errors import InvalidOption
-from ..limits import is_pair, is_whole
+from ..errors import InvalidOption, is_pair, is_whole
 
 ENERGIES = ("none", "follow_up", "rotary_wing")  # uavrl.envs.physics.energy: one part each, none for "none"
 BATTERY_INITS = ("full", "uniform")
