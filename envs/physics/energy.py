@@ -140,9 +140,8 @@ class Energy:
 
     def _moving(self, before: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
         """What a serving UAV's move from the positions ``before`` to ``after`` ``[B, N]`` costs: a move in the plane,
-        or with levels the climb or descent from its level (a cancelled one, no change of level, costs a move: its
-        cell did not change, so it is charged only where moves are charged by the action, the follow-up's, which
-        charges a climb as a move)."""
+        or with levels the climb or the descent from its level.  A cancelled move keeps the position: it is charged
+        as a move, and only where a move is charged by its action (the follow-up's, whose climb is a move too)."""
         if self.level is None:
             return self.move
         low, high = self.level.index_select(0, before.view(-1)), self.level.index_select(0, after.view(-1))
