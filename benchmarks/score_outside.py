@@ -48,22 +48,38 @@ def benchmarl_submission(run_dir: Path, suite: str) -> tuple[dict, str]:
 
     algorithm = metrics["agent"].removeprefix("benchmarl_")
     frames = saved.experiment.max_n_frames
+    heard, label, run = _local(trained_on)
+    run = f"runs/benchmarl-{algorithm}{run}"
     train_command = (  # as benchmarks/benchmarl_comparison.py runs it: its evaluations draw on BenchMARL's seeds too
-        f"python -m uavrl.benchmarl algorithm={algorithm} task={metrics['task']} seed={saved.seed} "
+        f"python -m uavrl.benchmarl algorithm={algorithm} task={metrics['task']}{heard} seed={saved.seed} "
         f"experiment.max_n_frames={frames} experiment.evaluation_interval={saved.experiment.evaluation_interval} "
-        f"eval.num_starts={saved.eval.num_starts} run_dir=runs/benchmarl-{algorithm}"
+        f"eval.num_starts={saved.eval.num_starts} run_dir={run}"
     )
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         results = score_suite(
             suite,
             factory,
-            name=f"BenchMARL {algorithm.upper()}, {frames:,} frames",
+            name=f"BenchMARL {algorithm.upper()}{label or f', {frames:,} frames'}",
             budget={"env_steps": int(experiment.total_frames), "cpu_seconds": round(metrics["train_cpu_seconds"])},
-            source=f"python benchmarks/score_outside.py benchmarl runs/benchmarl-{algorithm} --suite {suite}",
+            source=f"python benchmarks/score_outside.py benchmarl {run} --suite {suite}",
             train_command=train_command,
             progress=print,
         )
-    return results, f"{suite}-benchmarl-{algorithm}"
+    return results, f"{suite}-{run.removeprefix('runs/')}"
+
+
+def _local(model) -> tuple[str, str, str]:
+    """What sets a model of local observations apart (``env.observation=local``): its overrides as typed, its label
+    as the DQN's rows name theirs, and its run directory's suffix (``" env.observation=local env.comm_radius=4"``,
+    ``" local (n6-r4)"``, ``"-local-r4"``; the radius, ``full`` where every UAV is heard, and ``-m<d>`` with
+    messages); nothing for the central observation."""
+    if not model.local:
+        return "", "", ""
+    radius = "" if model.comm_radius is None else f"{model.comm_radius:g}"
+    overrides = " env.observation=local" + (f" env.comm_radius={radius}" if radius else "")
+    overrides += f" env.message_size={model.message_size}" if model.message_size else ""
+    heard = f"{'r' + radius if radius else 'full'}{'-m' + str(model.message_size) if model.message_size else ''}"
+    return overrides, f" local (n{model.num_uavs}-{heard})", f"-local-{heard}"
 
 
 def sb3_model(path: Path) -> list[str]:

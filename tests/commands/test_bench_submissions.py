@@ -211,3 +211,37 @@ def test_an_outside_policy_of_a_city_model_acts_in_that_models_held_out_cities_o
     (tmp_path / "bad.json").write_text(json.dumps({"grid": [6, 6]}))
     with pytest.raises(SystemExit, match="bad.json: not the model arguments sb3_yardstick.py writes"):
         sb3_model(tmp_path / "bad.json")
+
+
+def test_an_outside_run_on_local_observations_is_named_and_reproduced_by_what_it_heard():
+    """``benchmarks/score_outside.py``: BenchMARL runs of one algorithm at different radii get their own results files
+    and names (as the DQN's rows name theirs), and their command trains on the same local observations; a central run
+    keeps the name it had."""
+    import sys
+    from pathlib import Path
+
+    from uavrl.envs import make_config
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        from score_outside import _local
+    finally:
+        sys.path.pop(0)
+    n6 = {"grid": (10, 10), "num_uavs": 6}
+    assert _local(make_config("paper", **n6)) == ("", "", "")
+    assert _local(make_config("paper", **n6, observation="local", comm_radius=4)) == (
+        " env.observation=local env.comm_radius=4",
+        " local (n6-r4)",
+        "-local-r4",
+    )
+    assert _local(make_config("paper", **n6, observation="local")) == (
+        " env.observation=local",
+        " local (n6-full)",
+        "-local-full",
+    )
+    messages = make_config("paper", grid=(20, 20), num_uavs=10, observation="local", comm_radius=2, message_size=4)
+    assert _local(messages) == (
+        " env.observation=local env.comm_radius=2 env.message_size=4",
+        " local (n10-r2-m4)",
+        "-local-r2-m4",
+    )

@@ -435,7 +435,8 @@ def figure(results_list: list[dict], path) -> None:
     profile.tick_params(labelsize=7)
     profile.set_title(f"suite {_figure_label(ranked[0]['suite'])}: performance profiles (95% CI)", fontsize=9)
     if profile.lines:
-        profile.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7, frameon=False, ncol=1 + count // 9)
+        columns = min(2, 1 + count // 9)  # a third column would squeeze the profiles to a sliver
+        profile.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7, frameon=False, ncol=columns)
     else:
         profile.text(0.5, 0.5, "no task scored", ha="center", va="center", transform=profile.transAxes)
     save_figure(fig, Path(path))
