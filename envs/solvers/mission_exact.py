@@ -24,9 +24,9 @@ here.  What the solver adds is the state space:
 
 Sizes: the states of a step are about ``(2 C n_t)^N / N!`` for ``C`` positions and ``n_t`` battery levels a UAV
 can have after ``t`` steps (up to ``t + 1``; with altitude levels, whose climbs and descents cost more kinds of
-step, up to the multisets of ``t`` steps), each with ``A^N`` joint actions (``A`` 6, 8 with levels);
-:func:`mission_size` estimates them and :func:`optimal_mission` refuses, in one line before any work, what would
-take more than ``memory_budget``.
+step, up to the moves, stays and round trips between levels a battery can pay for), each with ``A^N`` joint actions
+(``A`` 6, 8 with levels); :func:`mission_size` estimates them and :func:`optimal_mission` refuses, in one line
+before any work, what would take more than ``memory_budget``.
 BENCHMARKS.md times it (``benchmarks/mission_exact.py``).
 
 Example:
