@@ -78,7 +78,14 @@ def vertical_propulsion(rise_m: float, slot_s: float) -> float:
     """The propulsion energy in J of a climb (``rise_m > 0``) or a descent (``< 0``) of ``|rise_m|`` m in one step of
     ``slot_s`` s: Zeng, Wu, Zhang's approximation for 3D flight, ``P(|dh| / slot_s) slot_s + W dh``; a descent at
     least the blades' profile power over the step, ``P0 slot_s`` (the rotors keep turning: a battery never gains
-    from a descent; ours)."""
+    from a descent; ours).
+
+    Example:
+        >>> round(vertical_propulsion(10.0, 1.0), 1), round(vertical_propulsion(-10.0, 1.0), 1)  # 10 m up, down
+        (326.0, 79.9)
+        >>> round(vertical_propulsion(-60.0, 1.0), 1)  # 60 m down in a second: level flight at 60 m/s less W dh
+        942.1
+    """
     energy = propulsion_power(abs(rise_m) / slot_s) * slot_s + WEIGHT_N * rise_m
     return energy if rise_m > 0 else max(energy, BLADE_PROFILE_POWER * slot_s)
 
