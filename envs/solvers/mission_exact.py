@@ -157,21 +157,21 @@ def _vertical_levels(battery: float, horizon: int, energies, least_reserve: floa
     move and a stay do not.  A path that ends ``d`` levels from where it began crossed each gap between levels up and
     down equally often but for ``d`` of them, so its battery is set by its moves ``m``, stays ``s`` and round trips
     ``k_g`` per gap ``g`` with ``m + s + 2 sum k = t - d`` (at most two ends lie ``d`` levels away); only those whose
-    cheapest cost leaves the battery above ``least_reserve`` count."""
+    cheapest cost leaves the battery above ``least_reserve`` count.  Float64, as :func:`mission_size` multiplies
+    them past int64's range."""
     gaps, spare = num_levels - 1, battery - least_reserve
     planar = min(energies.move, energies.stay)
     round_trip = min(c + d for c, d in zip(energies.climb, energies.descend, strict=True))
     crossing = min(*energies.climb, *energies.descend)
-
-    def count(t: int) -> int:
-        total = 0
-        for d in range(min(t, gaps) + 1):
-            for j in range((t - d) // 2 + 1):  # j = sum k round trips, C(j + G - 1, G - 1) ways over the gaps
-                if (t - d - 2 * j) * planar + j * round_trip + d * crossing < spare:
-                    total += (1 if d == 0 else 2) * math.comb(j + gaps - 1, gaps - 1) * (t - d - 2 * j + 1)
-        return total
-
-    return torch.tensor([count(t) for t in range(horizon + 1)], dtype=torch.long)
+    # every (t, d, j): t steps, d levels between the path's ends, j = sum k round trips over the gaps
+    t = torch.arange(horizon + 1, dtype=torch.float64)[:, None, None]
+    d = torch.arange(gaps + 1, dtype=torch.float64)[None, :, None]
+    j = torch.arange(horizon // 2 + 1, dtype=torch.float64)[None, None, :]
+    rest = t - d - 2 * j  # the moves and stays
+    ways = torch.tensor([math.comb(k + gaps - 1, gaps - 1) for k in range(horizon // 2 + 1)], dtype=torch.float64)
+    ways = ways * (rest + 1) * torch.where(d == 0, 1.0, 2.0)  # the round trips over the gaps, m + s = rest, two ends
+    affordable = (rest >= 0) & (rest * planar + j * round_trip + d * crossing < spare)
+    return (ways * affordable).sum((1, 2))
 
 
 def mission_size(world, horizon: int) -> tuple[int, int, int]:
@@ -190,6 +190,7 @@ def mission_size(world, horizon: int) -> tuple[int, int, int]:
             levels = [_vertical_levels(b, horizon, energy.energies, least_reserve, cfg.num_levels) for b in key[1:]]
         else:
             levels = [_levels(b, horizon, move, stay, least_reserve) for b in key[1:]]
+        levels = [count.double() for count in levels]  # with levels, products past int64's range
         if N == 1:
             per_step = 2 * C * levels[0] + 1
         else:
@@ -212,14 +213,9 @@ def _exact_arithmetic(world, quantum: float) -> bool:
     """Whether every battery the solver reaches is exact in float64: the start batteries, the step's energies and
     the reserves all multiples of ``quantum`` (then every difference of them is, and no rounding happens)."""
     e = world.energy
-    vertical = [torch.tensor([*e.energies.climb, *e.energies.descend], dtype=torch.float64, device=e.move.device)]
+    vertical = torch.tensor([*e.energies.climb, *e.energies.descend], dtype=torch.float64, device=e.move.device)
     values = torch.cat(
-        [
-            world.battery.flatten(),
-            torch.stack([e.move, e.stay, e.fly, e.fly_and_arrive]),
-            *vertical,
-            e.reserve[: e.away],
-        ]
+        [world.battery.flatten(), torch.stack([e.move, e.stay, e.fly, e.fly_and_arrive]), vertical, e.reserve[: e.away]]
     )
     scaled = values / quantum
     return bool((scaled == scaled.round()).all() and (scaled.abs() < 2.0**50).all())

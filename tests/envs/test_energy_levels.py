@@ -14,7 +14,7 @@ from tests.envs.test_energy import BASE, fly_a_step_home, per_step, steps_home, 
 from tests.envs.test_mission import Mission
 from uavrl.envs import make_config
 from uavrl.envs.errors import InvalidOption
-from uavrl.envs.solvers.mission_exact import mission_size, optimal_mission
+from uavrl.envs.solvers.mission_exact import MissionTooLarge, mission_size, optimal_mission
 from uavrl.envs.world import World
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -309,3 +309,15 @@ def test_the_exact_mission_solver_with_levels_is_brute_force_optimal_control(cas
         positions = torch.cat([out["positions"], out["levels"].unsqueeze(-1)], -1)
         delivered += world.utility(positions, out["tasks"])[2] * cfg.slot_s
     torch.testing.assert_close(delivered, best.value, rtol=1e-12, atol=1e-12)
+
+
+def test_a_mission_past_int64_states_is_estimated_and_refused_before_any_work():
+    """Two UAVs on 10x10 cells at three levels over 400 steps: more states than an int64 holds, counted without
+    wrapping round, and refused in one line."""
+    world = World(make_config("paper", grid=(10, 10), num_uavs=2, energy="rotary_wing", base=BASE, battery_wh=20.0,
+                              altitudes_m=LEVELS_M), 2, seed=0)  # fmt: skip
+    world.reset()
+    states, transitions, need = mission_size(world, 400)
+    assert states > 2**63 and transitions == 64 * states and need > transitions
+    with pytest.raises(MissionTooLarge, match=r"^the exact mission solver for 2 UAVs on 10x10 over 400 steps needs"):
+        optimal_mission(world, 400)
