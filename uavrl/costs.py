@@ -5,9 +5,9 @@ It reads the validated configs: the model (:class:`~uavrl.envs.ModelConfig`, its
 agent's settings and the budgets.  The byte counts of the World, a transition, the Q tables, the exact solver and the
 bounds are :mod:`uavrl.envs.limits`' (the World's own memory check reads them too); the DQN's networks' parameters,
 multiply-adds and float32 values are :mod:`uavrl.agents.network_sizes`' (counted layer by layer beside the
-networks they count).  :func:`check_run_costs`,
-:func:`check_evaluation_costs`, :func:`check_benchmarl_costs` and :func:`check_reproduce_costs` refuse, in one line,
-a command over its budgets, naming the setting typed that grows the part and the changes that would fit it::
+networks they count).  :func:`check_run_costs`, :func:`check_evaluation_costs`,
+:func:`check_benchmarl_costs` and :func:`check_reproduce_costs` refuse, in one line (:mod:`uavrl.budgets`), a
+command over its budgets, naming the setting typed that grows the part and the changes that would fit it::
 
     agent.hidden=100000000 is invalid: the networks ... needs about ..., over agent.memory_budget=...: ...
 
@@ -17,10 +17,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
-from typing import Callable
 
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from uavrl.agents.lookahead_rules import WIDTH, candidates_per_node, deepest_level_bytes
 from uavrl.agents.network_sizes import (
@@ -35,6 +33,7 @@ from uavrl.agents.network_sizes import (
     team_row_macs,
 )
 from uavrl.agents.schema import START_BLOCK, TabularSchema, training_models
+from uavrl.budgets import Cost, Factor, Typed, count, product, refuse_over, total
 from uavrl.envs.config import ModelConfig, make_config
 from uavrl.envs.limits import (
     DEFAULT_MEMORY_BUDGET,
@@ -42,12 +41,10 @@ from uavrl.envs.limits import (
     evaluation_bytes,
     evaluation_horizon,
     frame_bytes,
-    gib,
     stored_transition_bytes,
     table_bytes,
     world_bytes,
 )
-from uavrl.envs.rules import shown
 from uavrl.schema import TrainSchema
 
 PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer at its default size
@@ -62,166 +59,10 @@ PANEL_BYTES = 480 * 360 * 3  # one world drawn by envs/render.py's WorldRenderer
 # 0.86 loaded (0.82).
 STEP_SECONDS, UPDATE_SECONDS, UAV_SECONDS = 2e-3, 3e-3, 0.5e-3
 MACS_PER_SECOND, CELLS_PER_SECOND = 1.5e10, 8e8
-GROUPS = ("scenario", "env", "agent")  # config groups: a setting of one may come from the group's choice
 MODEL_NAMES = ("env.grid", "env.num_uavs")  # how the grid and the team are typed: uavrl.train, uavrl.evaluate
 REPRODUCE_NAMES = ("grids", "num_uavs")  # uavrl.reproduce
 TABLE_FREE = "or use agent=dqn, which keeps no table"
 LEVELS = "env.altitudes_m"  # how the altitude levels are typed
-
-
-class Typed:
-    """The settings a command line typed, ``{name: value as typed}`` (``+`` and ``~`` dropped; a group choice such
-    as ``env=a2g_urban`` under its group's name).  ``overrides=None`` (the Python API): every setting counts as
-    given."""
-
-    def __init__(self, cfg: DictConfig, overrides=None):
-        self.cfg = cfg
-        self.given = None if overrides is None else {}
-        for override in overrides or ():
-            key, _, value = str(override).partition("=")
-            self.given[key.lstrip("+~")] = value
-
-    def __contains__(self, name: str) -> bool:
-        return self.given is None or name in self.given
-
-    def shown(self, name: str) -> str:
-        """``name=<value>``: as typed, else the config's value and the choice it came from."""
-        if self.given is not None and name in self.given:
-            return f"{name}={self.given[name]}"
-        value = OmegaConf.select(self.cfg, name, default=None)
-        if isinstance(value, (DictConfig, ListConfig)):
-            value = OmegaConf.to_container(value, resolve=True)
-        text = f"{name}={shown(value, label=True)}"
-        if self.given is None:
-            return text
-        chosen = [g for g in GROUPS if g in self.given and (name.startswith(f"{g}.") or g == "scenario")]
-        if "agent" in self.given and name == "env.max_steps":  # an agent's yaml sets its training episode length
-            chosen.append("agent")
-        return f"{text} ({'from ' + self.shown(chosen[0]) if chosen else 'the default'})"
-
-
-@dataclass(frozen=True)
-class Factor:
-    """A number a cost grows with: ``name`` the setting as typed (words, ``fixed``, for what no setting sets),
-    ``size`` how much of the cost it makes (a grid: its cells), ``least`` the size its smallest value gives;
-    ``origin``: for a setting left null, the settings its value follows from; ``label`` names it in the formula."""
-
-    name: str
-    size: int
-    least: int = 1
-    origin: tuple[str, ...] = ()
-    label: str = ""
-    fixed: bool = False
-    multiplies: bool = True  # the cost is proportional to it (else it grows with it some other way)
-
-    def at(self, lowered: frozenset) -> int:
-        """Its size, or its least where ``lowered`` names it."""
-        return self.least if self.name in lowered else self.size
-
-
-@dataclass(frozen=True)
-class Cost:
-    """What one part of a command needs (bytes, team steps or CPU seconds): ``estimate(lowered)`` is the amount with
-    the factors named in ``lowered`` at their least, so a refusal advises only the settings that would help."""
-
-    what: str
-    factors: tuple[Factor, ...]
-    estimate: Callable[[frozenset], int]
-    hint: str = ""  # another change that helps, in words
-    summed: bool = False  # parts added up: the formula of no single part describes it
-
-    @property
-    def amount(self) -> int:
-        return self.estimate(frozenset())
-
-    def formula(self) -> str:
-        """``what (a x b = 2 x 3; with c 4)``: the factors it is proportional to, then the others."""
-        if self.summed:
-            return self.what
-        product = [f for f in self.factors if f.multiplies and (f.size != 1 or not f.fixed)]
-        names = " x ".join(f.label or f.name for f in product)
-        parts = [f"{names} = {' x '.join(count(f.size) for f in product)}"] if product else []
-        others = [f"{f.label or f.name} {count(f.size)}" for f in self.factors if not f.multiplies]
-        parts += [f"with {', '.join(others)}"] if others else []
-        return f"{self.what} ({'; '.join(parts)})"
-
-
-def product(what: str, factors, scale: int = 1) -> Cost:
-    """A cost of ``scale`` times the product of the factors' sizes."""
-    factors = tuple(factors)
-    return Cost(what, factors, lambda low: scale * math.prod(f.at(low) for f in factors))
-
-
-def count(value) -> str:
-    """A whole number with thousands separators, or ``2.7e+296`` beyond 15 digits."""
-    value = int(value)
-    if abs(value) < 10**15:
-        return f"{value:,}"
-    digits = len(str(abs(value))) - 1
-    return f"{int(str(abs(value))[:3]) / 100:.3g}e+{digits:02d}" if digits > 300 else f"{float(value):.3g}"
-
-
-UNITS = {"bytes": "<bytes>", "steps": "<steps>", "seconds": "<hours>"}
-
-
-def refuse_over(costs: list[Cost], budget, budget_name: str, unit: str, typed: Typed) -> None:
-    """A one-line ValueError for the first part over ``budget``, or for the parts together (they are held at once):
-    the setting typed that grows it, the estimate and the changes that would bring it within the budget."""
-    for cost in [*costs, *([total(costs, held=True)] if len(costs) > 1 else [])]:
-        amount = cost.amount
-        limit = budget * 3600 if unit == "seconds" else budget
-        if amount > limit:
-            raise ValueError(over_budget(cost, amount, limit, budget_name, unit, typed))
-
-
-def _listed(changes: list[str]) -> str:
-    """``lower a, lower b, use c``: the changes, the ``lower`` ones run together (``lower a or b``)."""
-    lowered = [c.removeprefix("lower ") for c in changes if c.startswith("lower ")]
-    rest = [c for c in changes if not c.startswith("lower ")]
-    joined = ([f"lower {' or '.join(lowered)}"] if lowered else []) + rest
-    return ", ".join(joined)
-
-
-def over_budget(cost: Cost, amount: int, limit, budget_name: str, unit: str, typed: Typed) -> str:
-    settings = [f for f in cost.factors if not f.fixed and f.size > f.least]
-
-    def lowered(f: Factor) -> frozenset:  # a setting lowered, and the null settings whose value follows from it alone
-        return frozenset({f.name, *(g.name for g in cost.factors if g.origin == (f.name,))})
-
-    helps = [f for f in settings if cost.estimate(lowered(f)) <= limit]
-
-    def given(f: Factor) -> bool:
-        return f.name in typed or any(name in typed for name in f.origin)
-
-    pool = helps or settings or [f for f in cost.factors if not f.fixed] or list(cost.factors)
-
-    def saving(f: Factor) -> float:  # how many times less the part needs with the setting at its least
-        return math.log10(amount + 1) - math.log10(cost.estimate(lowered(f)) + 1)
-
-    blamed = max(pool, key=lambda f: (given(f), saving(f)))
-    name = blamed.name if blamed.name in typed else next((o for o in blamed.origin if o in typed), blamed.name)
-    changes = []
-    for f in sorted(helps, key=lambda f: not given(f)):
-        if f.origin and name in f.origin and name not in {h.name for h in helps}:
-            changes.append(f"change {name}")
-        changes.append(f"give {f.name}={UNITS.get(f.name, '<smaller>')}" if f.origin else f"lower {f.name}")
-    advice = _listed(list(dict.fromkeys(changes))[:3])
-    advice = ", ".join(filter(None, [advice, cost.hint.removeprefix("or ") if not advice else cost.hint]))
-    raise_it = f"raise {budget_name}={UNITS[unit]}"
-    if unit == "bytes":
-        estimate = gib(amount)
-    elif unit == "steps":
-        estimate = f"{count(amount)} team steps"
-    else:
-        estimate = f"{amount / 3600:.3g} hours of one CPU core"
-    if budget_name in typed:
-        budget_text = typed.shown(budget_name)
-    else:
-        budget_text = f"{budget_name}={limit / 3600:g}" if unit == "seconds" else f"{budget_name}={int(limit)}"
-    return (
-        f"{typed.shown(name)} is invalid: {cost.formula()} needs about {estimate}, over {budget_text}: "
-        f"{advice + ', or ' if advice else ''}{raise_it}"
-    )
 
 
 class _Resized:
@@ -598,21 +439,6 @@ def q_tables(model, tables: Factor, names=MODEL_NAMES, hint: str = "") -> Cost:
         return table_bytes(_Resized(model, low, *names), n)
 
     return Cost(what, factors, estimate, hint)
-
-
-def total(parts: list[Cost], held: bool = False) -> Cost:
-    """The parts added up, named by the factors of the largest part; ``held``: the parts held at once, with every
-    part's factors."""
-    largest = max(parts, key=lambda part: part.amount)
-
-    def estimate(low):
-        return sum(part.estimate(low) for part in parts)
-
-    if not held:
-        return Cost(largest.what, largest.factors, estimate)
-    factors = {f.name: f for part in sorted(parts, key=lambda part: part is not largest) for f in part.factors}
-    what = f"{len(parts)} parts held at once ({largest.what} the largest)"
-    return Cost(what, tuple(factors.values()), estimate, summed=True)
 
 
 def check_benchmarl_costs(cfg: DictConfig, model, overrides=None) -> None:
