@@ -24,6 +24,7 @@ from uavrl.agents.schema import run_city
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.compat import make_collector
 
+from .common_knowledge import CommonKnowledgeGreedy, common_knowledge
 from .curriculum import Curriculum
 from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import (
@@ -184,6 +185,11 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
             TensorDictSequential(q, greedy_action, _give_way(env, after_cancel), *speak)
             for after_cancel in (True, False)
         )
+        if common_knowledge(env.cfg):  # every UAV knows the team's configuration: no clash to give way after
+            agreed = CommonKnowledgeGreedy(q.module, env)
+            greedy = TensorDictSequential(
+                q, TensorDictModule(agreed, in_keys=[("agents", "observation")], out_keys=[("agents", "action")])
+            )
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
     explore = TensorDictSequential(behaviour, exploration)
     # the loss evaluates the behaviour chain: its coins drawn as the saved runs drew them

@@ -215,3 +215,59 @@ def test_the_size_free_network_acts_on_what_each_uav_hears_at_any_size(compose_c
             torch.device("cpu"),
             0,
         )
+
+
+def test_with_every_uav_heard_each_uav_plays_its_part_of_one_joint_action(compose_cfg):
+    """With every UAV heard and no messages, UAV i's greedy action is its entry of the joint action the central greedy
+    rule picks from the team's local values (ValidGreedy over every UAV's actual observation, computed here); it
+    depends on UAV i's own observation alone (every other row replaced by another configuration's changes no UAV's
+    action but theirs), and no move is ever cancelled in greedy rollouts."""
+    from uavrl.agents.dqn.common_knowledge import CommonKnowledgeGreedy
+    from uavrl.agents.dqn.networks import ValidGreedy
+
+    cfg = compose_cfg("agent=dqn", *[o for o in LOCAL if not o.startswith("env.comm_radius")])
+    agent = DQNAgent(model_config(cfg), cfg, torch.device("cpu"), 0)
+    for _ in range(3):
+        agent.train_iteration()
+    group = agent.groups[0]
+    agreed = [m for m in group.greedy.modules() if isinstance(m, CommonKnowledgeGreedy)]
+    assert len(agreed) == 1 and not any(isinstance(m, YieldToContenders) for m in group.greedy.modules())
+    gen = torch.Generator().manual_seed(11)
+    codes = torch.stack(
+        [2 * torch.randperm(36, generator=gen)[:4] + torch.randint(0, 2, (4,), generator=gen) for _ in range(300)]
+    )
+    out = group.env.world.configurations(codes)
+    observation = out["observation"]
+    actions = agreed[0](observation)
+    values = group.values.module(observation)
+    central = ValidGreedy(group.env.neighbours, 6)(values, out["action_mask"], out["positions"], out["tasks"])
+    assert torch.equal(actions, central)
+    others = group.env.world.configurations(codes[torch.randperm(300, generator=gen)])["observation"]
+    for i in range(4):
+        mixed = others.clone()
+        mixed[:, i] = observation[:, i]
+        assert torch.equal(agreed[0](mixed)[:, i], actions[:, i])
+    env = UAVSpectrumEnv(batch_size=64, config=agent.env_cfg.replace(max_steps=12), seed=3)
+    rollout = env.rollout(12, group.greedy, break_when_any_done=False)
+    assert not rollout["next", "agents", "cancelled"].any()
+
+
+@pytest.mark.parametrize(
+    "options, agreed",
+    [
+        (dict(), True),
+        (dict(comm_radius=20.0), False),
+        (dict(message_size=2), False),
+        (dict(layout="random"), False),
+        (dict(energy="follow_up", base=(-1, 0)), False),
+        (dict(altitudes_m=[10.0, 20.0]), False),
+        (dict(observation="central"), False),
+    ],
+)
+def test_common_knowledge_only_where_every_uav_rebuilds_the_same_team(options, agreed):
+    from uavrl.agents.dqn.common_knowledge import common_knowledge
+    from uavrl.envs import make_config
+
+    local = dict(observation="local") if options.get("observation") != "central" else {}
+    cfg = make_config("paper", grid=(6, 6), num_uavs=3, **{**local, **options})
+    assert common_knowledge(cfg) is agreed

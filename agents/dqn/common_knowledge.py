@@ -1,0 +1,101 @@
+"""Coordination on common knowledge: where every UAV hears every other UAV and node, each one plays its own part of
+the one valid joint action that every UAV computes alike from what it hears (docs/model.md, Local observations and
+messages).
+
+UAVs acting on their own greedy values clash: two that move into one free cell are both cancelled, and each
+clash costs the team a step (:class:`~uavrl.agents.dqn.networks.YieldToContenders` breaks the tie after it).  With
+``env.comm_radius`` null and no messages, a UAV's local observation holds its own cell and task and every other
+UAV's, relative to it: the team's configuration, which every UAV therefore knows, and knows that the others know.
+From its own observation alone, UAV ``i`` rebuilds every UAV's local observation (the model's observation of that
+configuration, :meth:`~uavrl.envs.world.World.configurations`: a fixed layout's nodes and mean channels are part of
+the model), values each with the team's shared network, and picks the valid joint action the central greedy rule
+would (:class:`~uavrl.agents.dqn.networks.ValidGreedy`, UAV by UAV in id order).  Every UAV computes the same joint
+action, so no two moves clash, and each plays its own entry.  This is how MACKRL (Schroeder de Witt et al., NeurIPS
+2019) coordinates a team's actions: on what every member knows that every member knows.
+
+The rule needs no message and reads nothing but the UAV's own observation (a test perturbs every other UAV's
+observation and checks that a UAV's action does not change).  It costs ``N`` times the central greedy step: each UAV
+values the whole team.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from uavrl.envs import UAVSpectrumEnv, World
+from uavrl.envs.config import ModelConfig
+from uavrl.envs.limits import OWN_FEATURES
+from uavrl.envs.physics.sensing import LOCAL_NODE_FEATURES
+
+from .networks import ValidGreedy, position_numbers
+
+
+def common_knowledge(cfg: ModelConfig) -> bool:
+    """Whether every UAV of the model ``cfg`` knows the team's configuration from its own observation and the model:
+    local observations heard from every UAV and node (``comm_radius`` null), no messages (a UAV cannot rebuild what
+    the others heard), one altitude level, no energy model and a fixed layout (the batteries, the levels and a random
+    layout's nodes are heard as float32 numbers that two UAVs could round apart)."""
+    return (
+        cfg.local
+        and cfg.comm_radius is None
+        and cfg.message_size == 0
+        and cfg.num_levels == 1
+        and cfg.energy == "none"
+        and cfg.layout != "random"
+    )
+
+
+class CommonKnowledgeGreedy(nn.Module):
+    """Each UAV's part ``[*, N]`` of the valid joint action every UAV computes from its own local observation
+    ``[*, N, F]`` (the model's :func:`common_knowledge` holds): the team's configuration rebuilt from it, every UAV's
+    observation and values (``q``: the team's shared network, observations ``[W, N, F]`` to values ``[W, N, A]``) and
+    :class:`~uavrl.agents.dqn.networks.ValidGreedy` over them.
+
+    Args:
+        q: the local network (``LocalQNet``), read at each call.
+        env: an environment of the model.
+
+    Example:
+        >>> from uavrl.envs import UAVSpectrumEnv
+        >>> env = UAVSpectrumEnv(batch_size=1, grid=(3, 1), num_uavs=2, observation="local", seed=0)
+        >>> everyone_right = lambda observation: torch.tensor([0, 0, 0, 9.0, 0, 0]).expand(*observation.shape[:-1], 6)
+        >>> greedy = CommonKnowledgeGreedy(everyone_right, env)
+        >>> out = env.reset()
+        >>> out["positions"].tolist(), greedy(out["agents", "observation"]).tolist()
+        ([[[1, 0], [0, 0]]], [[3, 3]])
+    """
+
+    def __init__(self, q, env: UAVSpectrumEnv):
+        super().__init__()
+        cfg = env.cfg
+        if not common_knowledge(cfg):
+            raise ValueError(f"CommonKnowledgeGreedy needs a model whose configuration every UAV hears, not {cfg}")
+        object.__setattr__(self, "q", q)  # read, not owned: its parameters are the Q network's, saved there
+        self.num_uavs, self.width = env.num_uavs, cfg.grid[0]
+        self.world = World(cfg, 1, env.device)  # the model's observations of any configuration
+        self.greedy = ValidGreedy(env.neighbours, cfg.grid[0], env.num_actions, position_numbers(env.world))
+        N = self.num_uavs
+        self.own = OWN_FEATURES + LOCAL_NODE_FEATURES  # then a slot (dx, dy, task, heard) per other UAV
+        self.register_buffer(
+            "scale", torch.tensor([max(cfg.grid[0] - 1, 1), max(cfg.grid[1] - 1, 1)], device=env.device)
+        )
+        # slot k of UAV i holds UAV (i + k + 1) mod N (physics.sensing): UAV i's view of the team in id order
+        ids = torch.arange(N, device=env.device)
+        order = (ids - ids[:, None]) % N  # [N, N]
+        self.register_buffer("order", order, persistent=False)  # order[i, j]: UAV j's entry in UAV i's view
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        *batch, N, _ = observation.shape
+        view = observation.reshape(-1, N, observation.shape[-1])  # [W, N, F]: row i is UAV i's observation
+        own = view[..., :3]
+        slots = view[..., self.own :].unflatten(-1, (N - 1, 4))
+        # each UAV's view of the team, itself first, then the others in slot order: (x, y) in cells and task
+        xy = torch.cat([own[..., None, :2], own[..., None, :2] + slots[..., :2]], -2) * self.scale
+        task = torch.cat([own[..., None, 2], slots[..., 2]], -1)
+        code = 2 * (xy[..., 0].round() + self.width * xy[..., 1].round()) + task.round()  # [W, N, N], its view
+        team = code.long().gather(-1, self.order.expand(len(view), N, N))  # [W, i, j]: UAV j as UAV i sees it
+        rebuilt = self.world.configurations(team.view(-1, N))  # [W N, N, ...]: the team as each UAV sees it
+        values = self.q(rebuilt["observation"])
+        joint = self.greedy(values, rebuilt["action_mask"], rebuilt["positions"], rebuilt["tasks"]).view(-1, N, N)
+        return joint.diagonal(dim1=-2, dim2=-1).reshape(*batch, N)  # UAV i plays its own entry of its joint action
