@@ -20,6 +20,7 @@ from uavrl.envs.limits import (
     set_input_size,
     state_size,
 )
+from uavrl.envs.physics.sensing import common_knowledge
 
 TRAINING_COPIES = 5  # the online parameters, their target copy, their gradients and Adam's two moments
 FLOAT = 4  # bytes of a float32
@@ -179,3 +180,18 @@ def policy_row_bytes(model, a) -> int:
     energy, levels = model.energy != "none", model.num_levels > 1
     values = team_row_values(model.fleet_size, model.num_actions, energy, a, levels, local_inputs(model))
     return FLOAT * values + greedy_cells(model)
+
+
+def greedy_row_bytes(model, a) -> int:
+    """Bytes of one world's row when the greedy policy of settings ``a`` acts: :func:`policy_row_bytes`, or where the
+    team is common knowledge (:func:`~uavrl.envs.physics.sensing.common_knowledge`) each UAV's rebuilt team
+    (``CommonKnowledgeGreedy``): ``N`` rows of every UAV's observation, mask, position and task, valued by the
+    network and picked by the central greedy rule with its occupancy table (measured by the peak resident memory of
+    a greedy pass over 4,000 worlds, N = 10 on 20x20: 0.19 MB a world against this count's 0.72 MB; the size-free
+    network's over 1,000 worlds: 1.4 MB against 2.5 MB)."""
+    if not common_knowledge(model):
+        return policy_row_bytes(model, a)
+    N, P, A = model.fleet_size, model.num_positions, model.num_actions
+    rebuilt = N * (FLOAT * model_observation_size(model) + A + 8 * 3)  # observation, mask, (x, y) and task
+    central = P + 2 if P + 2 <= N * N * A else 0  # ValidGreedy's occupancy table (greedy_cells, central)
+    return N * (policy_row_bytes(model, a) + rebuilt + central)

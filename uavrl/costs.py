@@ -25,6 +25,7 @@ from uavrl.agents.network_sizes import (
     FLOAT,
     TRAINING_COPIES,
     greedy_cells,
+    greedy_row_bytes,
     local_inputs,
     policy_row_bytes,
     qmix_parameters,
@@ -330,11 +331,12 @@ def _l(model) -> bool:
 
 def policy_pass(model, a, starts: Factor) -> Cost:
     """The DQN policy's forward pass over the evaluation's starts: its activations and the greedy action's
-    occupancy table (:func:`~uavrl.agents.network_sizes.policy_row_bytes`)."""
+    occupancy table, and where the team is common knowledge every UAV's rebuilt team
+    (:func:`~uavrl.agents.network_sizes.greedy_row_bytes`)."""
     settings = _Agent.of(a)
 
     def estimate(low):
-        return starts.at(low) * policy_row_bytes(_Resized(model, low), settings)
+        return starts.at(low) * greedy_row_bytes(_Resized(model, low), settings)
 
     return Cost("the policy's pass over the evaluation's starts", (starts, *model_factors(model)), estimate)
 

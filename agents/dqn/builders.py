@@ -23,8 +23,9 @@ from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.schema import run_city
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.compat import make_collector
+from uavrl.envs.physics.sensing import common_knowledge
 
-from .common_knowledge import CommonKnowledgeGreedy, common_knowledge
+from .common_knowledge import CommonKnowledgeGreedy
 from .curriculum import Curriculum
 from .loss import DoubleQMixerLoss, QMix, VDNMix
 from .networks import (

@@ -24,33 +24,17 @@ import torch
 from torch import nn
 
 from uavrl.envs import UAVSpectrumEnv, World
-from uavrl.envs.config import ModelConfig
 from uavrl.envs.limits import OWN_FEATURES
-from uavrl.envs.physics.sensing import LOCAL_NODE_FEATURES
+from uavrl.envs.physics.sensing import LOCAL_NODE_FEATURES, common_knowledge
 
 from .networks import ValidGreedy, position_numbers
 
 
-def common_knowledge(cfg: ModelConfig) -> bool:
-    """Whether every UAV of the model ``cfg`` knows the team's configuration from its own observation and the model:
-    local observations heard from every UAV and node (``comm_radius`` null), no messages (a UAV cannot rebuild what
-    the others heard), one altitude level, no energy model and a fixed layout (the batteries, the levels and a random
-    layout's nodes are heard as float32 numbers that two UAVs could round apart)."""
-    return (
-        cfg.local
-        and cfg.comm_radius is None
-        and cfg.message_size == 0
-        and cfg.num_levels == 1
-        and cfg.energy == "none"
-        and cfg.layout != "random"
-    )
-
-
 class CommonKnowledgeGreedy(nn.Module):
     """Each UAV's part ``[*, N]`` of the valid joint action every UAV computes from its own local observation
-    ``[*, N, F]`` (the model's :func:`common_knowledge` holds): the team's configuration rebuilt from it, every UAV's
-    observation and values (``q``: the team's shared network, observations ``[W, N, F]`` to values ``[W, N, A]``) and
-    :class:`~uavrl.agents.dqn.networks.ValidGreedy` over them.
+    ``[*, N, F]`` (where the model's :func:`~uavrl.envs.physics.sensing.common_knowledge` holds): the team's
+    configuration rebuilt from it, every UAV's observation and values (``q``: the team's shared network, observations
+    ``[W, N, F]`` to values ``[W, N, A]``) and :class:`~uavrl.agents.dqn.networks.ValidGreedy` over them.
 
     Args:
         q: the local network (``LocalQNet``), read at each call.

@@ -62,3 +62,19 @@ def check_observation(observation, comm_radius, message_size, physical: bool) ->
         raise InvalidOption("message_size", message_size, reason)
     if message_size and observation == "central":
         raise InvalidOption("message_size", message_size, "only observation='local' reads it, not 'central'")
+
+
+def common_knowledge(cfg) -> bool:
+    """Whether every UAV of the model ``cfg`` (a :class:`~uavrl.envs.config.ModelConfig`) can rebuild every UAV's
+    local observation from its own: every UAV and node heard (``comm_radius`` None), no messages (the others hear the
+    message a UAV sent, which its own observation does not hold), one altitude level, no energy model and a fixed
+    layout (the batteries, the levels and a random layout's nodes are heard as float32 numbers that two UAVs could
+    round apart).  The greedy local DQN coordinates on it there (:mod:`uavrl.agents.dqn.common_knowledge`)."""
+    return (
+        cfg.observation == "local"
+        and cfg.comm_radius is None
+        and cfg.message_size == 0
+        and cfg.num_levels == 1
+        and cfg.energy == "none"
+        and cfg.layout != "random"
+    )

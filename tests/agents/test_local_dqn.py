@@ -265,8 +265,8 @@ def test_with_every_uav_heard_each_uav_plays_its_part_of_one_joint_action(compos
     ],
 )
 def test_common_knowledge_only_where_every_uav_rebuilds_the_same_team(options, agreed):
-    from uavrl.agents.dqn.common_knowledge import common_knowledge
     from uavrl.envs import make_config
+    from uavrl.envs.physics.sensing import common_knowledge
 
     local = dict(observation="local") if options.get("observation") != "central" else {}
     cfg = make_config("paper", grid=(6, 6), num_uavs=3, **{**local, **options})
