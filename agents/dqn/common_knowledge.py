@@ -1,17 +1,18 @@
-"""Coordination on common knowledge: where every UAV hears every other UAV and node, each one plays its own part of
+"""Coordination on common knowledge: where every UAV hears every other UAV, each one plays its own part of
 the one valid joint action that every UAV computes alike from what it hears (docs/model.md, Local observations and
 messages).
 
-UAVs acting on their own greedy values clash: two that move into one free cell are both cancelled, and each
-clash costs the team a step (:class:`~uavrl.agents.dqn.networks.YieldToContenders` breaks the tie after it).  With
-``env.comm_radius`` null and no messages, a UAV's local observation holds its own cell and task and every other
-UAV's, relative to it: the team's configuration, which every UAV therefore knows, and knows that the others know.
-From its own observation alone, UAV ``i`` rebuilds every UAV's local observation (the model's observation of that
-configuration, :meth:`~uavrl.envs.world.World.configurations`: a fixed layout's nodes and mean channels are part of
-the model), values each with the team's shared network, and picks the valid joint action the central greedy rule
-would (:class:`~uavrl.agents.dqn.networks.ValidGreedy`, UAV by UAV in id order).  Every UAV computes the same joint
-action, so no two moves clash, and each plays its own entry.  This is how MACKRL (Schroeder de Witt et al., NeurIPS
-2019) coordinates a team's actions: on what every member knows that every member knows.
+UAVs acting on their own greedy values clash: two that move into one free cell are both cancelled, and each clash
+costs the team a step (:class:`~uavrl.agents.dqn.networks.YieldToContenders` breaks the tie after it). Where every
+UAV hears every other (``env.comm_radius`` null, or at least the grid's diagonal) and without messages, a UAV's
+local observation holds its own cell and task and every other UAV's, relative to it: the team's configuration, which
+every UAV therefore knows, and knows that the others know. From its own observation alone, UAV ``i`` rebuilds every
+UAV's local observation (the model's observation of that configuration,
+:meth:`~uavrl.envs.world.World.configurations`: a fixed layout's nodes and mean channels are part of the model),
+values each with the team's shared network, and picks the valid joint action the central greedy rule would
+(:class:`~uavrl.agents.dqn.networks.ValidGreedy`, UAV by UAV in id order). Every UAV computes the same joint action,
+so no two moves clash, and each plays its own entry. This is how MACKRL (Schroeder de Witt et al., NeurIPS 2019)
+coordinates a team's actions: on what every member knows that every member knows.
 
 The rule needs no message and reads nothing but the UAV's own observation (a test perturbs every other UAV's
 observation and checks that a UAV's action does not change).  It costs ``N`` times the central greedy step: each UAV

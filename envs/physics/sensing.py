@@ -66,13 +66,23 @@ def check_observation(observation, comm_radius, message_size, physical: bool) ->
 
 def common_knowledge(cfg) -> bool:
     """Whether every UAV of the model ``cfg`` (a :class:`~uavrl.envs.config.ModelConfig`) can rebuild every UAV's
-    local observation from its own: every UAV and node heard (``comm_radius`` None), no messages (the others hear the
-    message a UAV sent, which its own observation does not hold), one altitude level, no energy model and a fixed
-    layout (the batteries, the levels and a random layout's nodes are heard as float32 numbers that two UAVs could
-    round apart).  The greedy local DQN coordinates on it there (:mod:`uavrl.agents.dqn.common_knowledge`)."""
+    local observation from its own: every UAV hears every other wherever they are (``comm_radius`` None, or at least
+    the grid's diagonal), no messages (the others hear the message a UAV sent, which its own observation does not
+    hold), one altitude level, no energy model and a fixed layout (the batteries, the levels and a random layout's
+    nodes are heard as float32 numbers that two UAVs could round apart).  The greedy local DQN coordinates on it there
+    (:mod:`uavrl.agents.dqn.common_knowledge`).
+
+    Example:
+        >>> from uavrl.envs import make_config
+        >>> common_knowledge(make_config("paper", grid=(6, 6), observation="local", comm_radius=7.1))
+        True
+        >>> common_knowledge(make_config("paper", grid=(6, 6), observation="local", comm_radius=7.0))
+        False
+    """
+    (L1, L2) = cfg.grid
     return (
         cfg.observation == "local"
-        and cfg.comm_radius is None
+        and cfg.comm_radius_cells >= math.hypot(L1 - 1, L2 - 1)
         and cfg.message_size == 0
         and cfg.num_levels == 1
         and cfg.energy == "none"

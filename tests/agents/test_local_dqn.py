@@ -256,7 +256,8 @@ def test_with_every_uav_heard_each_uav_plays_its_part_of_one_joint_action(compos
     "options, agreed",
     [
         (dict(), True),
-        (dict(comm_radius=20.0), False),
+        (dict(comm_radius=7.1), True),  # the 6x6 grid's diagonal: 7.07 cells
+        (dict(comm_radius=7.0), False),
         (dict(message_size=2), False),
         (dict(layout="random"), False),
         (dict(energy="follow_up", base=(-1, 0)), False),
