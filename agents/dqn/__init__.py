@@ -34,6 +34,8 @@ The package, one job a module, each read top to bottom:
 
 - :mod:`.networks`: :class:`TeamQNet` and the modules that turn its values into valid actions (:class:`ValidGreedy`);
 - :mod:`.loss`: :class:`VDNMix`, :class:`QMix` and :class:`DoubleQMixerLoss`, the factored head's double-DQN loss;
+- :mod:`.common_knowledge`: with local observations where every UAV hears every other, each UAV's part of one joint
+  action every UAV computes alike (``CommonKnowledgeGreedy``);
 - :mod:`.transitions`: :class:`CompactTransitions`, the replay buffer's transitions kept as configurations;
 - :mod:`.builders`: the Q network, policies, mixer, loss, replay buffer and collector built from the settings;
 - :mod:`.migration`: replay buffers of earlier checkpoints, loaded as the current agent would have saved them;
