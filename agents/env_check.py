@@ -199,11 +199,14 @@ class CheckedPolicy(TensorDictModuleBase):
     def bind_env(self, env) -> CheckedPolicy:
         """Act in ``env``: a one-line ValueError unless it has the run's model (:class:`RunEnvironment`); the
         policy's own random draws (a module's ``restart()``: the local DQN's coins) start again, so an evaluation
-        plays the same whatever the policy played before."""
+        plays the same whatever the policy played before, and a module that reads the environment is bound to it
+        (``bind(env)``: whether the local DQN's team is common knowledge there)."""
         self.run_env.check_env(env)
         for module in self.policy.modules():
             if hasattr(module, "restart"):
                 module.restart()
+            if hasattr(module, "bind"):  # what a module reads of the environment (the local DQN's common knowledge)
+                module.bind(env)
         return self
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:

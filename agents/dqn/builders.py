@@ -23,7 +23,6 @@ from uavrl.agents.env_check import CheckedPolicy
 from uavrl.agents.schema import run_city
 from uavrl.envs import ModelConfig, UAVSpectrumEnv
 from uavrl.envs.compat import make_collector
-from uavrl.envs.physics.sensing import common_knowledge
 
 from .common_knowledge import CommonKnowledgeGreedy
 from .curriculum import Curriculum
@@ -182,15 +181,10 @@ def _factored_policies(env: UAVSpectrumEnv, q: TensorDictModule, eps: dict) -> P
                 )
             ]
         )
-        greedy, behaviour = (
-            TensorDictSequential(q, greedy_action, _give_way(env, after_cancel), *speak)
-            for after_cancel in (True, False)
-        )
-        if common_knowledge(env.cfg):  # every UAV knows the team's configuration: no clash to give way after
-            agreed = CommonKnowledgeGreedy(q.module, env)
-            greedy = TensorDictSequential(
-                q, TensorDictModule(agreed, in_keys=[("agents", "observation")], out_keys=[("agents", "action")])
-            )
+        # where every UAV knows the team's configuration (in the environment the policy is bound to), no clash
+        agreed = [] if env.cfg.message_size else [_agreed(env, q)]
+        greedy = TensorDictSequential(q, greedy_action, _give_way(env, after_cancel=True), *agreed, *speak)
+        behaviour = TensorDictSequential(q, greedy_action, _give_way(env, after_cancel=False), *speak)
     exploration = EpsilonGreedy(spec, action_key=("agents", "action"), action_mask_key=("agents", "action_mask"), **eps)
     explore = TensorDictSequential(behaviour, exploration)
     # the loss evaluates the behaviour chain: its coins drawn as the saved runs drew them
@@ -203,6 +197,16 @@ def _give_way(env: UAVSpectrumEnv, after_cancel: bool) -> TensorDictModule:
     return TensorDictModule(
         YieldToContenders(env, after_cancel=after_cancel),
         in_keys=[("agents", "action"), ("agents", "observation"), *([("agents", "cancelled")] if after_cancel else [])],
+        out_keys=[("agents", "action")],
+    )
+
+
+def _agreed(env: UAVSpectrumEnv, q: TensorDictModule) -> TensorDictModule:
+    """A local UAV's part of the joint action every UAV computes alike where the team is common knowledge
+    (:class:`CommonKnowledgeGreedy`), its coin's action elsewhere."""
+    return TensorDictModule(
+        CommonKnowledgeGreedy(q.module, env),
+        in_keys=[("agents", "observation"), ("agents", "action")],
         out_keys=[("agents", "action")],
     )
 

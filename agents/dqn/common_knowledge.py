@@ -33,13 +33,14 @@ from .networks import ValidGreedy, position_numbers
 
 class CommonKnowledgeGreedy(nn.Module):
     """Each UAV's part ``[*, N]`` of the valid joint action every UAV computes from its own local observation
-    ``[*, N, F]`` (where the model's :func:`~uavrl.envs.physics.sensing.common_knowledge` holds): the team's
+    ``[*, N, F]`` where the model's :func:`~uavrl.envs.physics.sensing.common_knowledge` holds: the team's
     configuration rebuilt from it, every UAV's observation and values (``q``: the team's shared network, observations
-    ``[W, N, F]`` to values ``[W, N, A]``) and :class:`~uavrl.agents.dqn.networks.ValidGreedy` over them.
+    ``[W, N, F]`` to values ``[W, N, A]``) and :class:`~uavrl.agents.dqn.networks.ValidGreedy` over them.  Elsewhere
+    (a policy bound to an environment where it does not hold: :meth:`bind`) the actions it is handed pass through.
 
     Args:
         q: the local network (``LocalQNet``), read at each call.
-        env: an environment of the model.
+        env: the environment it acts in (:meth:`bind`).
 
     Example:
         >>> from uavrl.envs import UAVSpectrumEnv
@@ -47,30 +48,33 @@ class CommonKnowledgeGreedy(nn.Module):
         >>> everyone_right = lambda observation: torch.tensor([0, 0, 0, 9.0, 0, 0]).expand(*observation.shape[:-1], 6)
         >>> greedy = CommonKnowledgeGreedy(everyone_right, env)
         >>> out = env.reset()
-        >>> out["positions"].tolist(), greedy(out["agents", "observation"]).tolist()
+        >>> stay = torch.tensor([[4, 4]])  # what a UAV would do on its own values
+        >>> out["positions"].tolist(), greedy(out["agents", "observation"], stay).tolist()
         ([[[1, 0], [0, 0]]], [[3, 3]])
     """
 
     def __init__(self, q, env: UAVSpectrumEnv):
         super().__init__()
-        cfg = env.cfg
-        if not common_knowledge(cfg):
-            raise ValueError(f"CommonKnowledgeGreedy needs a model whose configuration every UAV hears, not {cfg}")
         object.__setattr__(self, "q", q)  # read, not owned: its parameters are the Q network's, saved there
-        self.num_uavs, self.width = env.num_uavs, cfg.grid[0]
-        self.world = World(cfg, 1, env.device)  # the model's observations of any configuration
-        self.greedy = ValidGreedy(env.neighbours, cfg.grid[0], env.num_actions, position_numbers(env.world))
-        N = self.num_uavs
-        self.own = OWN_FEATURES + LOCAL_NODE_FEATURES  # then a slot (dx, dy, task, heard) per other UAV
-        self.register_buffer(
-            "scale", torch.tensor([max(cfg.grid[0] - 1, 1), max(cfg.grid[1] - 1, 1)], device=env.device)
-        )
-        # slot k of UAV i holds UAV (i + k + 1) mod N (physics.sensing): UAV i's view of the team in id order
-        ids = torch.arange(N, device=env.device)
-        order = (ids - ids[:, None]) % N  # [N, N]
-        self.register_buffer("order", order, persistent=False)  # order[i, j]: UAV j's entry in UAV i's view
+        self.bind(env)
 
-    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+    def bind(self, env: UAVSpectrumEnv) -> None:
+        """Act in ``env``: where its model is common knowledge, the model's observations of any configuration (a
+        World of it), its greedy rule and the layout of a local observation; elsewhere, pass the actions through."""
+        cfg, N, device = env.cfg, env.num_uavs, env.device
+        self.world = World(cfg, 1, device) if common_knowledge(cfg) else None
+        if self.world is None:
+            return
+        self.greedy = ValidGreedy(env.neighbours, cfg.grid[0], env.num_actions, position_numbers(env.world))
+        self.width, self.own = cfg.grid[0], OWN_FEATURES + LOCAL_NODE_FEATURES  # then (dx, dy, task, heard) per UAV
+        self.scale = torch.tensor([max(cfg.grid[0] - 1, 1), max(cfg.grid[1] - 1, 1)], device=device)
+        # slot k of UAV i holds UAV (i + k + 1) mod N (physics.sensing): order[i, j] is UAV j's entry in UAV i's view
+        ids = torch.arange(N, device=device)
+        self.order = (ids - ids[:, None]) % N
+
+    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        if self.world is None:
+            return action
         *batch, N, _ = observation.shape
         view = observation.reshape(-1, N, observation.shape[-1])  # [W, N, F]: row i is UAV i's observation
         own = view[..., :3]

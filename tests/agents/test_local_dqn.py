@@ -221,7 +221,8 @@ def test_with_every_uav_heard_each_uav_plays_its_part_of_one_joint_action(compos
     """With every UAV heard and no messages, UAV i's greedy action is its entry of the joint action the central greedy
     rule picks from the team's local values (ValidGreedy over every UAV's actual observation, computed here); it
     depends on UAV i's own observation alone (every other row replaced by another configuration's changes no UAV's
-    action but theirs), and no move is ever cancelled in greedy rollouts."""
+    action but theirs), and no move is ever cancelled in greedy rollouts.  Bound to an environment at a radius that
+    does not reach across the grid, the policy tosses its coins again."""
     from uavrl.agents.dqn.common_knowledge import CommonKnowledgeGreedy
     from uavrl.agents.dqn.networks import ValidGreedy
 
@@ -230,26 +231,28 @@ def test_with_every_uav_heard_each_uav_plays_its_part_of_one_joint_action(compos
     for _ in range(3):
         agent.train_iteration()
     group = agent.groups[0]
-    agreed = [m for m in group.greedy.modules() if isinstance(m, CommonKnowledgeGreedy)]
-    assert len(agreed) == 1 and not any(isinstance(m, YieldToContenders) for m in group.greedy.modules())
+    (agreed,) = [m for m in group.greedy.modules() if isinstance(m, CommonKnowledgeGreedy)]
     gen = torch.Generator().manual_seed(11)
-    codes = torch.stack(
-        [2 * torch.randperm(36, generator=gen)[:4] + torch.randint(0, 2, (4,), generator=gen) for _ in range(300)]
-    )
-    out = group.env.world.configurations(codes)
-    observation = out["observation"]
-    actions = agreed[0](observation)
+    codes = [2 * torch.randperm(36, generator=gen)[:4] + torch.randint(0, 2, (4,), generator=gen) for _ in range(300)]
+    out = group.env.world.configurations(torch.stack(codes))
+    observation, coins = out["observation"], torch.full((300, 4), 4)
+    actions = agreed(observation, coins)
     values = group.values.module(observation)
     central = ValidGreedy(group.env.neighbours, 6)(values, out["action_mask"], out["positions"], out["tasks"])
     assert torch.equal(actions, central)
-    others = group.env.world.configurations(codes[torch.randperm(300, generator=gen)])["observation"]
+    others = group.env.world.configurations(torch.stack(codes)[torch.randperm(300, generator=gen)])["observation"]
     for i in range(4):
         mixed = others.clone()
         mixed[:, i] = observation[:, i]
-        assert torch.equal(agreed[0](mixed)[:, i], actions[:, i])
+        assert torch.equal(agreed(mixed, coins)[:, i], actions[:, i])
+    policy = agent.policies()[0]
     env = UAVSpectrumEnv(batch_size=64, config=agent.env_cfg.replace(max_steps=12), seed=3)
-    rollout = env.rollout(12, group.greedy, break_when_any_done=False)
+    rollout = env.rollout(12, policy.bind_env(env), break_when_any_done=False)
     assert not rollout["next", "agents", "cancelled"].any()
+    near = UAVSpectrumEnv(batch_size=64, config=agent.env_cfg.replace(max_steps=12, comm_radius=2.0), seed=3)
+    policy.bind_env(near)
+    assert agreed.world is None and torch.equal(agreed(observation, coins), coins)
+    assert near.rollout(12, policy, break_when_any_done=False)["next", "agents", "cancelled"].any()
 
 
 @pytest.mark.parametrize(
