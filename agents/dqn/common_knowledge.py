@@ -15,8 +15,8 @@ so no two moves clash, and each plays its own entry. This is how MACKRL (Schroed
 coordinates a team's actions: on what every member knows that every member knows.
 
 The rule needs no message and reads nothing but the UAV's own observation (a test perturbs every other UAV's
-observation and checks that a UAV's action does not change).  It costs ``N`` times the central greedy step: each UAV
-values the whole team.
+observation and checks that a UAV's action does not change).  Each UAV values the whole team it rebuilds, ``N``
+times the central greedy step's valuations (BENCHMARKS.md, The price of decentralisation, times a greedy pass).
 """
 
 from __future__ import annotations
