@@ -3,13 +3,13 @@ radius, with and without learned messages, beside the central DQN, the oracle pl
 
 Each row is ``python -m uavrl.train agent=dqn scenario=<n6_10x10|large_20x20> env.observation=local
 env.comm_radius=<r> [env.message_size=4] seed=<s> eval.num_starts=200`` run as a whole process (the scenario's DQN
-budget unchanged), or the central DQN (``env.observation=central``). ``--collect`` reads the run directories and
-prints one markdown row per run: the share of the 200 held-out starts reaching 0.999 U*, the return ratio and the
-final U/U* (the saved greedy policy evaluated here, as the training command evaluates it at its end), the steps to
-0.999 U* against the oracle planner's from the same starts (those both reach, ``yardstick.py --paired``'s ratio) and
-the training CPU seconds (the run's ``metrics.json``); the oracle's and the random policy's rows are played here
-from the same starts. ``--figure`` draws the share reaching 0.999 U* against the radius, per team. A size-free run
-(``agent.network=set``, ``scenario=size_free``) is scored in both teams' models at its radius.
+budget unchanged), or the central DQN (``env.observation=central``).  ``--collect`` reads the run directories and
+prints one markdown row per run: the share of the 200 held-out starts reaching 0.999 U*, the final U/U* (the
+saved greedy policy evaluated here, as the training command evaluates it at its end), the steps to 0.999 U* against
+the oracle planner's from the same starts (those both reach, ``yardstick.py --paired``'s ratio) and the training CPU
+seconds (the run's ``metrics.json``); the oracle's and the random policy's rows are played here from the same starts.
+``--figure`` draws the share reaching 0.999 U* against the radius, per team.  A size-free run (``agent.network=set``,
+``scenario=size_free``) is scored in both teams' models at its radius.
 
 Usage::
 
@@ -110,29 +110,26 @@ def collect(runs: Path, starts: int) -> list[dict]:
                     message_size=env.get("message_size") or 0,
                     reach=scores["eval/reach_999"],
                     optimality=scores["eval/optimality"],
-                    return_ratio=scores["eval/return_ratio"],
                     oracle_ratio=float(mine[both].mean() / oracle[both].mean()) if both.any() else float("nan"),
                     train_cpu_seconds=metrics["train_cpu_seconds"],
                 )
             )
     for num_uavs, cfg in sorted(models.items()):
         team = "" if num_uavs == 6 else "n10_"
-        for name, policy, reached in (
-            ("oracle", OraclePolicy(cfg), oracles[num_uavs][1]),
-            ("random", RandomPolicy(0), steps_to_level(RandomPolicy(0), cfg, starts)[1]),
+        for name, reached in (
+            ("oracle", oracles[num_uavs][1]),
+            ("random", steps_to_level(RandomPolicy(0), cfg, starts)[1]),
         ):
-            ratio = evaluate(policy, cfg, num_starts=starts)["eval/return_ratio"]
-            results.append(
-                dict(row=f"{team}{name}", num_uavs=num_uavs, reach=float(reached.float().mean()), return_ratio=ratio)
-            )
-    # per team: its runs (central first, then by radius, messages and seed), then the oracle and random
+            results.append(dict(row=f"{team}{name}", num_uavs=num_uavs, reach=float(reached.float().mean())))
+    # per team: its runs (central first, then by radius, network, messages and seed), then the oracle and random
     return sorted(
         results,
         key=lambda r: (
             r["num_uavs"],
             "seed" not in r,
             r.get("observation") != "central",
-            str(r.get("radius")),
+            float("inf") if r.get("radius") is None else float(r["radius"]),  # typed 1 or 1.0: one radius
+            r.get("observation", ""),  # the per-size network's rows, then the size-free one's
             r.get("message_size", 0),
             r.get("seed", 0),
         ),
@@ -141,41 +138,38 @@ def collect(runs: Path, starts: int) -> list[dict]:
 
 def table(results: list[dict]) -> None:
     print(
-        "| team | observation | radius (cells) | messages | seed | reach 0.999 U* | return ratio | final U/U* "
-        "| steps / oracle's ",
+        "| team | observation | radius (cells) | messages | seed | reach 0.999 U* | final U/U* | steps / oracle's ",
         end="",
     )
     print("| train CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in results:
         if "seed" not in r:
-            name, reach, ratio = r["row"].split("_")[-1], r["reach"], r["return_ratio"]
-            print(f"| N = {r['num_uavs']} | {name} | | | | {reach:.3f} | {ratio:.4f} | | | |")
+            print(f"| N = {r['num_uavs']} | {r['row'].split('_')[-1]} | | | | {r['reach']:.3f} | | | |")
             continue
         radius = "full" if r["radius"] is None else f"{r['radius']:g}"
         local = r["observation"].startswith("local")
         print(
             f"| N = {r['num_uavs']} | {r['observation']} | {radius if local else ''} | "
-            f"{r['message_size'] if local else ''} | {r['seed']} | {r['reach']:.3f} | {r['return_ratio']:.4f} | "
-            f"{r['optimality']:.4f} | "
+            f"{r['message_size'] if local else ''} | {r['seed']} | {r['reach']:.3f} | {r['optimality']:.4f} | "
             f"{r['oracle_ratio']:.3f} | {r['train_cpu_seconds']:.0f} |"
         )
 
 
 def figure(results: list[dict], path: Path) -> None:
-    """Per team (a column), the share of starts reaching 0.999 U*, the return ratio and the steps to 0.999 U* over the
-    oracle's against the radius: the mean over seeds joined, each seed a dot."""
+    """Per team (a column), the share of starts reaching 0.999 U* and the steps to it over the oracle's against the
+    radius: the mean over seeds joined, each seed a dot."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     teams = sorted({r["num_uavs"] for r in results})
-    fig, axes = plt.subplots(3, len(teams), figsize=(5.5 * len(teams), 10.4), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(2, len(teams), figsize=(5.5 * len(teams), 7.6), squeeze=False, sharex=True)
     positions = {radius: k for k, radius in enumerate(RADII)}
     for column, num_uavs in enumerate(teams):
         mine = [r for r in results if r["num_uavs"] == num_uavs]
-        for ax, key in zip(axes[:, column], ("reach", "return_ratio", "oracle_ratio"), strict=True):
+        for ax, key in ((axes[0, column], "reach"), (axes[1, column], "oracle_ratio")):
             for messages, style, colour in ((0, "o-", "tab:blue"), (MESSAGE_SIZE, "s--", "tab:orange")):
                 runs = [r for r in mine if r.get("observation") == "local" and r["message_size"] == messages]
                 seeds = {}  # each radius's values over its seeds
@@ -198,19 +192,18 @@ def figure(results: list[dict], path: Path) -> None:
             for r in mine:
                 if r.get("observation") == "central":
                     ax.axhline(r[key], color="tab:green", ls=":", lw=2, label=f"central DQN (seed {r['seed']})")
-                elif r["row"].endswith("oracle"):  # the yardstick of the steps, its own reach and return
-                    ax.axhline(r.get(key, 1.0), color="black", lw=0.8, label="oracle planner")
-                elif r["row"].endswith("random") and key != "oracle_ratio":
-                    ax.axhline(r[key], color="tab:red", lw=0.8, label="random")
+                elif r["row"].endswith("oracle"):
+                    ax.axhline(1.0, color="black", lw=0.8, label="oracle planner")
+                elif r["row"].endswith("random") and key == "reach":
+                    ax.axhline(r["reach"], color="tab:red", lw=0.8, label="random")
             ax.grid(alpha=0.3)
         axes[0, column].set_ylabel("share of 200 held-out starts reaching 0.999 U*")
         axes[0, column].set_ylim(-0.02, 1.05)
         axes[0, column].set_title(f"N = {num_uavs} on {SCENARIOS[num_uavs]}")
         axes[0, column].legend(fontsize=8, loc="lower right")
-        axes[1, column].set_ylabel("return ratio (discounted return / the best)")
-        axes[2, column].set_ylabel("steps to 0.999 U* / the oracle's (same starts)")
-        axes[2, column].set_xticks(range(len(RADII)), [("full" if r is None else f"{r:g}") for r in RADII])
-        axes[2, column].set_xlabel("communication radius (cells)")
+        axes[1, column].set_ylabel("steps to 0.999 U* / the oracle's (same starts)")
+        axes[1, column].set_xticks(range(len(RADII)), [("full" if r is None else f"{r:g}") for r in RADII])
+        axes[1, column].set_xlabel("communication radius (cells)")
     fig.suptitle("The price of decentralisation: the DQN acting on what each UAV hears")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
