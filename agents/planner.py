@@ -86,9 +86,8 @@ class PlannerPolicy(OraclePolicy):
         found = (cells, False)
         if n <= MAX_CYCLE_UAVS:
             # B moves each UAV in the plane (a step of e_move; a climb or a descent costs otherwise)
-            options = [
-                [c for c in self.neighbours[cell][:4] if c >= 0 and c not in set(cells.tolist())] for cell in cells
-            ]
+            held = set(cells.tolist())
+            options = [[c for c in self.neighbours[cell][:4] if c >= 0 and c not in held] for cell in cells]
             combos = torch.tensor([c for c in itertools.product(*options) if len(set(c)) == n], dtype=torch.long)
             if len(combos):
                 here = sum(rates(contributions[cells][None], tasks[None], direct[None], self.cfg))[0]

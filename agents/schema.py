@@ -436,7 +436,7 @@ class AgentConfig:
                 path = variant  # run configs saved before the setting existed: its default
                 break
         module, _, cls = path.partition(":")
-        return getattr(importlib.import_module(f"uavrl.agents.{module}"), cls)
+        return getattr(importlib.import_module(f"uavrl.agents.{module}"), cls)  # naming an agent imports no torch
 
     def rules(self) -> dict[str, Rule]:
         """Each setting's rule, as typed (``agent.alpha``)."""

@@ -62,7 +62,7 @@ MOVED = {
 def __getattr__(name):
     if name not in _LAZY:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)  # torch only when asked for
     globals()[name] = value
     return value
 
@@ -82,7 +82,7 @@ class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
     def create_module(self, spec):
         name = spec.name.rpartition(".")[2]
-        module = importlib.import_module(f"{__name__}.{MOVED[name]}.{name}")
+        module = importlib.import_module(f"{__name__}.{MOVED[name]}.{name}")  # a 0.2 path, for one release
         spec.loader_state = module.__spec__  # the import system sets the alias's spec on the module next
         return module
 

@@ -11,7 +11,7 @@ import warnings
 def alias(old: str, new: str) -> None:
     """Make ``import old`` give module ``new`` (one module object under both names), warning once per import."""
     warnings.warn(f"{old} moved to {new} in uavrl 0.3; the old path goes in 0.4", DeprecationWarning, stacklevel=3)
-    sys.modules[old] = importlib.import_module(new)
+    sys.modules[old] = importlib.import_module(new)  # a 0.2 path, kept for one release
 
 
 def moved_names(old: str, *new: str):
@@ -20,7 +20,7 @@ def moved_names(old: str, *new: str):
 
     def __getattr__(name: str):
         for module in new if not name.startswith("__") else ():
-            value = getattr(importlib.import_module(module), name, __getattr__)
+            value = getattr(importlib.import_module(module), name, __getattr__)  # a 0.2 name, for one release
             if value is not __getattr__:
                 message = f"{old}.{name} moved to {module}.{name} in uavrl 0.3; the old path goes in 0.4"
                 warnings.warn(message, DeprecationWarning, stacklevel=2)

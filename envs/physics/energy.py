@@ -144,9 +144,9 @@ class Energy:
         as a move, and only where a move is charged by its action (the follow-up's, whose climb is a move too)."""
         if self.level is None:
             return self.move
-        low, high = self.level.index_select(0, before.view(-1)), self.level.index_select(0, after.view(-1))
-        vertical = torch.where(high > low, self.climb[low], self.descend[low])
-        return torch.where(high == low, self.move, vertical).view_as(before)
+        start, end = self.level.index_select(0, before.view(-1)), self.level.index_select(0, after.view(-1))
+        vertical = torch.where(end > start, self.climb[start], self.descend[start])  # from the level it left
+        return torch.where(end == start, self.move, vertical).view_as(before)
 
     def _step_recharging(self, state, battery, arriving, action) -> dict[str, torch.Tensor]:
         """:meth:`step` with ``recharge_steps``: an arriving UAV charges for ``recharge_steps`` steps, then waits
